@@ -1,0 +1,102 @@
+"""Arithmetic on design parameters: the one place scenario strings become numbers.
+
+Any numeric field of a scenario file may hold a string instead of a number: the name of a
+design parameter (``"mu"``), or a small arithmetic expression over parameters
+(``"-v1"``, ``"2 * r + 0.5"``, ``"0.05 * sin(radians(slope_deg))"``). Allowed: numbers,
+parameter names, the constant ``pi``, ``+ - * / **``, unary minus, parentheses and the
+functions in `FUNCTIONS`. Nothing else is evaluated: no attributes, no other calls.
+"""
+
+from __future__ import annotations
+
+import ast
+import math
+import operator
+from collections.abc import Mapping
+
+_BINARY = {
+    ast.Add: operator.add,
+    ast.Sub: operator.sub,
+    ast.Mult: operator.mul,
+    ast.Div: operator.truediv,
+    ast.Pow: operator.pow,
+}
+_UNARY = {ast.USub: operator.neg, ast.UAdd: operator.pos}
+#: Functions an expression may call (one argument each).
+FUNCTIONS = {
+    "sin": math.sin,
+    "cos": math.cos,
+    "tan": math.tan,
+    "sqrt": math.sqrt,
+    "exp": math.exp,
+    "log": math.log,
+    "radians": math.radians,
+    "degrees": math.degrees,
+    "abs": abs,
+}
+CONSTANTS = {"pi": math.pi}
+
+
+class ExpressionError(ValueError):
+    """An expression that cannot be evaluated; the message says why."""
+
+
+def evaluate(text: str, parameters: Mapping[str, float]) -> float:
+    """Evaluate ``text`` with ``parameters`` bound; raise ExpressionError on any problem."""
+    try:
+        tree = ast.parse(text.strip(), mode="eval")
+    except SyntaxError:
+        raise ExpressionError(f"{text!r} is neither a number nor a parameter expression") from None
+    value = _eval(tree.body, text, parameters)
+    if not math.isfinite(value):
+        raise ExpressionError(f"{text!r} evaluates to {value}, not a finite number")
+    return value
+
+
+def names_in(text: str) -> set[str]:
+    """Parameter names an expression refers to (empty if it does not parse)."""
+    try:
+        tree = ast.parse(text.strip(), mode="eval")
+    except SyntaxError:
+        return set()
+    called = {n.func.id for n in ast.walk(tree) if isinstance(n, ast.Call) and isinstance(n.func, ast.Name)}
+    return {n.id for n in ast.walk(tree) if isinstance(n, ast.Name)} - called - set(CONSTANTS)
+
+
+def _eval(node: ast.AST, text: str, parameters: Mapping[str, float]) -> float:
+    if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(
+        node.value, bool
+    ):
+        return float(node.value)
+    if isinstance(node, ast.Name):
+        if node.id in CONSTANTS and node.id not in parameters:
+            return CONSTANTS[node.id]
+        if node.id not in parameters:
+            known = ", ".join(sorted(parameters)) or "none defined"
+            raise ExpressionError(f"unknown parameter {node.id!r} (parameters: {known})")
+        return float(parameters[node.id])
+    if isinstance(node, ast.BinOp) and type(node.op) in _BINARY:
+        left = _eval(node.left, text, parameters)
+        right = _eval(node.right, text, parameters)
+        try:
+            return float(_BINARY[type(node.op)](left, right))
+        except (ZeroDivisionError, OverflowError) as exc:
+            raise ExpressionError(f"{text!r}: {exc}") from None
+    if isinstance(node, ast.UnaryOp) and type(node.op) in _UNARY:
+        return float(_UNARY[type(node.op)](_eval(node.operand, text, parameters)))
+    if (
+        isinstance(node, ast.Call)
+        and isinstance(node.func, ast.Name)
+        and node.func.id in FUNCTIONS
+        and len(node.args) == 1
+        and not node.keywords
+    ):
+        argument = _eval(node.args[0], text, parameters)
+        try:
+            return float(FUNCTIONS[node.func.id](argument))
+        except (ValueError, OverflowError) as exc:
+            raise ExpressionError(f"{text!r}: {node.func.id}({argument:g}): {exc}") from None
+    raise ExpressionError(
+        f"{text!r}: only numbers, parameter names, pi, + - * / **, parentheses and "
+        f"the functions {', '.join(FUNCTIONS)} (one argument each) are allowed"
+    )

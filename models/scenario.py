@@ -1,0 +1,628 @@
+"""Read a scenario file into a frozen, fully checked `Scenario`.
+
+`load_scenario(path, overrides)` is the only entry point. It reads TOML with the standard
+library, resolves design parameters (with ``--param`` overrides), validates the structure
+(`models.schema`), then runs the checks that span tables: unique names, DOF names, shapes
+valid for the dimension, geometry (degenerate or non-convex polygons, meshes), predicates
+naming real coordinates and bodies, ladder order, and bodies that start in penetration.
+
+Every problem found is reported, not only the first, as a `ScenarioError` whose lines read
+``FILE: KEY.PATH: reason``. Nothing is written anywhere.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+from pydantic import ValidationError
+
+from models import geometry as geo
+from models.expressions import ExpressionError, evaluate
+from models.schema import (
+    DOF_NAMES,
+    PREDICATE_KEYS,
+    RUNGS,
+    SHAPES_2D,
+    SHAPES_3D,
+    BodySpec,
+    Predicate,
+    ScenarioSpec,
+)
+
+#: A body may start this far inside another (m) without being reported as penetrating.
+PENETRATION_TOLERANCE = 1e-9
+#: How far from 1 a quaternion's norm may be.
+QUATERNION_NORM_TOLERANCE = 1e-6
+#: Most problems listed in one error.
+MAX_PROBLEMS = 20
+
+ROTATIONAL_DOFS = ("theta", "yaw", "rotation")
+GEOMETRIC_PLANNERS = ("RRTConnect", "RRT", "RRTstar", "PRM", "KPIECE1", "EST")
+CONTROL_PLANNERS = ("RRT", "KPIECE1", "EST")
+
+
+@dataclass(frozen=True)
+class Problem:
+    key: str
+    reason: str
+
+
+class ScenarioError(ValueError):
+    """Bad scenario input. ``problems`` lists (key path, reason); str() has one line each."""
+
+    def __init__(self, file: str | Path, problems: list[Problem]):
+        self.file = str(file)
+        self.problems = problems[:MAX_PROBLEMS]
+        more = len(problems) - len(self.problems)
+        lines = [f"{self.file}: {p.key}: {p.reason}" if p.key else f"{self.file}: {p.reason}" for p in self.problems]
+        if more > 0:
+            lines.append(f"{self.file}: ... and {more} more problems")
+        super().__init__("\n".join(lines))
+
+
+@dataclass(frozen=True)
+class ContactPair:
+    """Two bodies that may touch, with their resolved material."""
+
+    body_a: str
+    body_b: str
+    mu: float
+    K: float
+    C: float
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A validated scenario: the spec plus everything derived from it.
+
+    coordinates: generalized coordinate names q in stacking order (body order of the file,
+    then x, y, z, theta/yaw, qw..qz within a body); velocities: names of nu (rotation: wx..wz);
+    actuated: the coordinates driven by a robot's actuators; start: q at the start (read-only).
+    """
+
+    path: Path
+    spec: ScenarioSpec
+    parameters: Mapping[str, float]
+    coordinates: tuple[str, ...]
+    velocities: tuple[str, ...]
+    actuated: tuple[str, ...]
+    start: np.ndarray
+    geometries: Mapping[str, geo.Geometry]
+    pairs: tuple[ContactPair, ...]
+    base_placements: Mapping[str, geo.Placement] = field(repr=False)
+
+    @property
+    def dimension(self) -> int:
+        return self.spec.scene.dimension
+
+    def body(self, name: str) -> BodySpec:
+        return next(b for b in self.spec.bodies if b.name == name)
+
+    def placements(self, q: np.ndarray) -> dict[str, geo.Placement]:
+        """World placement of every body at configuration q."""
+        values = dict(zip(self.coordinates, q))
+        return {b.name: _placement(b, self.dimension, values, self.base_placements[b.name]) for b in self.spec.bodies}
+
+    def summary(self) -> dict[str, Any]:
+        """A JSON-ready description (what ``ladder check --json`` prints)."""
+        spec = self.spec
+        return {
+            "file": str(self.path),
+            "name": spec.scenario.name,
+            "description": spec.scenario.description,
+            "dimension": spec.scene.dimension,
+            "gravity": list(spec.scene.gravity),
+            "coordinates": list(self.coordinates),
+            "velocities": list(self.velocities),
+            "actuated": list(self.actuated),
+            "start": {n: float(v) for n, v in zip(self.coordinates, self.start)},
+            "parameters": dict(self.parameters),
+            "bodies": [
+                {
+                    "name": b.name,
+                    "role": b.role,
+                    "shape": b.shape.type,
+                    "dofs": list(b.dofs),
+                    "mass": b.mass,
+                    "actuated": sorted(b.actuators),
+                }
+                for b in spec.bodies
+            ],
+            "contact_pairs": [
+                {"bodies": [p.body_a, p.body_b], "mu": p.mu, "K": p.K, "C": p.C} for p in self.pairs
+            ],
+            "ladder": {
+                "rungs": [r.model for r in spec.ladder.rungs],
+                "steps": {r.model: r.h for r in spec.ladder.rungs},
+                "planner": spec.ladder.planner,
+                "seed": spec.ladder.seed,
+                "time_limit": spec.ladder.time_limit,
+            },
+        }
+
+
+# ----------------------------------------------------------------------------- entry point
+
+
+def parse_overrides(items: list[str] | None) -> dict[str, float]:
+    """``["mu=0.3", "v1=2"]`` -> ``{"mu": 0.3, "v1": 2.0}``; raise ScenarioError on bad items."""
+    result: dict[str, float] = {}
+    problems = []
+    for item in items or []:
+        name, sep, value = item.partition("=")
+        try:
+            number = float(value)
+        except ValueError:
+            number = math.nan
+        if not sep or not name.strip() or not math.isfinite(number):
+            problems.append(Problem(f"--param {item}", "expected NAME=NUMBER with a finite number"))
+            continue
+        result[name.strip()] = number
+    if problems:
+        raise ScenarioError("command line", problems)
+    return result
+
+
+def load_scenario(path: str | Path, overrides: Mapping[str, float] | None = None) -> Scenario:
+    """Read, validate and derive a scenario; raise ScenarioError listing every problem."""
+    path = Path(path)
+    try:
+        raw = tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ScenarioError(path, [Problem("", "no such file")]) from None
+    except IsADirectoryError:
+        raise ScenarioError(path, [Problem("", "is a directory, not a scenario file")]) from None
+    except UnicodeDecodeError as exc:
+        raise ScenarioError(path, [Problem("", f"not UTF-8 text ({exc.reason})")]) from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(path, [Problem("", f"not valid TOML: {exc}")]) from None
+    except OSError as exc:
+        raise ScenarioError(path, [Problem("", f"cannot read: {exc.strerror}")]) from None
+
+    parameters = _parameters(raw, overrides or {}, path)
+    try:
+        spec = ScenarioSpec.model_validate(raw, context={"parameters": parameters})
+    except ValidationError as exc:
+        raise ScenarioError(path, _pydantic_problems(exc, parameters)) from None
+    return _derive(spec, MappingProxyType(parameters), path)
+
+
+def _parameters(raw: dict, overrides: Mapping[str, float], path: Path) -> dict[str, float]:
+    table = raw.get("parameters", {})
+    if not isinstance(table, dict):
+        raise ScenarioError(path, [Problem("parameters", "must be a table of name = number")])
+    params = {k: v for k, v in table.items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
+    unknown = [name for name in overrides if name not in table]
+    if unknown:
+        known = ", ".join(sorted(table)) or "none defined"
+        raise ScenarioError(
+            path, [Problem(f"--param {name}", f"the file has no parameter {name!r} (parameters: {known})") for name in unknown]
+        )
+    params.update({k: float(v) for k, v in overrides.items()})
+    return params
+
+
+# ----------------------------------------------------------------------------- error paths
+
+
+def key_path(loc: tuple) -> str:
+    """('bodies', 1, 'pose', 'x') -> 'bodies[1].pose.x'; keys with dots are quoted."""
+    out = ""
+    for part in loc:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        elif part.replace("_", "a").isalnum():
+            out += f".{part}" if out else part
+        else:
+            out += f'."{part}"' if out else f'"{part}"'
+    return out
+
+
+def _clean_loc(loc: tuple) -> tuple:
+    """Drop pydantic's union bookkeeping (tags, member types) from an error location."""
+    cleaned: list = []
+    for i, part in enumerate(loc):
+        if isinstance(part, str):
+            if i > 0 and loc[i - 1] == "shape" and part in SHAPES_2D + SHAPES_3D:
+                continue  # discriminated-union tag of a shape
+            if part in PREDICATE_KEYS and i + 1 < len(loc) and loc[i + 1] == part:
+                continue  # tag of a predicate, followed by the field of the same name
+            if any(c in part for c in "[]()") or part in ("float", "int", "none", "tuple", "is-instance"):
+                continue  # union member names
+        cleaned.append(part)
+    return tuple(cleaned)
+
+
+def _shown(value: Any, parameters: Mapping[str, float]) -> str:
+    """How a rejected input is quoted: parameter expressions also show their value."""
+    if isinstance(value, str):
+        try:
+            return f"{evaluate(value, parameters):g} from {value!r}"
+        except ExpressionError:
+            pass
+    return repr(value)
+
+
+def _pydantic_problems(exc: ValidationError, parameters: Mapping[str, float]) -> list[Problem]:
+    problems: list[Problem] = []
+    seen: set[str] = set()
+    for err in exc.errors():
+        key = key_path(_clean_loc(err["loc"]))
+        if key in seen:
+            continue  # a union reports each member's complaint; one per key is clearer
+        seen.add(key)
+        reason = err["msg"]
+        if reason.startswith("Value error, "):
+            reason = reason[len("Value error, ") :]
+        if err["type"] == "extra_forbidden":
+            reason = "unknown key (check the spelling; see the scenario format in README)"
+        elif err["type"] == "missing":
+            reason = "required key is missing"
+        elif "input" in err and not isinstance(err["input"], (dict, list)) and err["type"] not in ("value_error",):
+            reason += f" (got {_shown(err['input'], parameters)})"
+        problems.append(Problem(key, reason))
+    return problems
+
+
+# ----------------------------------------------------------------------------- derivation
+
+
+def _coordinate_names(body: BodySpec, dimension: int) -> tuple[list[str], list[str]]:
+    q_names: list[str] = []
+    v_names: list[str] = []
+    for dof in DOF_NAMES[dimension]:
+        if dof not in body.dofs:
+            continue
+        if dof == "rotation":
+            q_names += [f"{body.name}.q{c}" for c in "wxyz"]
+            v_names += [f"{body.name}.w{c}" for c in "xyz"]
+        else:
+            q_names.append(f"{body.name}.{dof}")
+            v_names.append(f"{body.name}.{dof}")
+    return q_names, v_names
+
+
+def _base_placement(body: BodySpec, dimension: int) -> geo.Placement:
+    p = body.pose
+    if dimension == 2:
+        return geo.Placement(geo.rotation_2d(p.theta or 0.0), np.array([p.x, p.y]))
+    if p.quaternion is not None:
+        quat = np.array(p.quaternion) / np.linalg.norm(p.quaternion)
+    elif p.rpy is not None:
+        quat = geo.rpy_quaternion(*p.rpy)
+    else:
+        quat = np.array([1.0, 0.0, 0.0, 0.0])
+    return geo.Placement(geo.quaternion_matrix(quat), np.array([p.x, p.y, p.z or 0.0]))
+
+
+def _placement(body: BodySpec, dimension: int, values: Mapping[str, float], base: geo.Placement) -> geo.Placement:
+    t = base.translation.copy()
+    for axis, name in enumerate("xyz"[:dimension]):
+        t[axis] = values.get(f"{body.name}.{name}", t[axis])
+    rotation = base.rotation
+    if dimension == 2 and f"{body.name}.theta" in values:
+        rotation = geo.rotation_2d(values[f"{body.name}.theta"])
+    elif dimension == 3 and f"{body.name}.yaw" in values:
+        rotation = geo.quaternion_matrix(geo.rpy_quaternion(0.0, 0.0, values[f"{body.name}.yaw"]))
+    elif dimension == 3 and f"{body.name}.qw" in values:
+        quat = np.array([values[f"{body.name}.q{c}"] for c in "wxyz"])
+        rotation = geo.quaternion_matrix(quat / np.linalg.norm(quat))
+    return geo.Placement(rotation, t)
+
+
+def _start_values(body: BodySpec, dimension: int) -> dict[str, float]:
+    p = body.pose
+    values = {"x": p.x, "y": p.y, "z": p.z or 0.0, "theta": p.theta or 0.0}
+    values["yaw"] = p.rpy[2] if p.rpy is not None else 0.0
+    quat = np.array(p.quaternion) / np.linalg.norm(p.quaternion) if p.quaternion else (
+        geo.rpy_quaternion(*p.rpy) if p.rpy else np.array([1.0, 0.0, 0.0, 0.0])
+    )
+    values.update({f"q{c}": float(v) for c, v in zip("wxyz", quat)})
+    return values
+
+
+def _derive(spec: ScenarioSpec, parameters: Mapping[str, float], path: Path) -> Scenario:
+    problems: list[Problem] = []
+    dim = spec.scene.dimension
+    if len(spec.scene.gravity) != dim:
+        problems.append(Problem("scene.gravity", f"needs {dim} entries for a {dim}D scene, got {len(spec.scene.gravity)}"))
+
+    names = [b.name for b in spec.bodies]
+    geometries: dict[str, geo.Geometry] = {}
+    for i, body in enumerate(spec.bodies):
+        if names.index(body.name) != i:
+            problems.append(Problem(f"bodies[{i}].name", f"body name {body.name!r} is used twice"))
+        problems += _check_body(body, f"bodies[{i}]", dim)
+        if not any(p.key.startswith(f"bodies[{i}].shape") for p in problems):
+            try:
+                geometries[body.name] = geo.make_geometry(body.shape, dim, path.parent)
+            except geo.GeometryError as exc:
+                sub = {"polygon": ".vertices", "mesh": ".file", "halfplane": ".normal", "plane": ".normal"}
+                problems.append(Problem(f"bodies[{i}].shape{sub.get(body.shape.type, '')}", str(exc)))
+
+    coordinates: list[str] = []
+    velocities: list[str] = []
+    actuated: list[str] = []
+    start: list[float] = []
+    for body in spec.bodies:
+        if set(body.dofs) <= set(DOF_NAMES[dim]):
+            q_names, v_names = _coordinate_names(body, dim)
+            coordinates += q_names
+            velocities += v_names
+            actuated += [f"{body.name}.{d}" for d in DOF_NAMES[dim] if d in body.actuators and d in body.dofs]
+            values = _start_values(body, dim)
+            start += [values[n.split(".", 1)[1]] for n in q_names]
+
+    start_overridden: set[str] = set()
+    for name, value in spec.task.start.items():
+        if name not in coordinates:
+            problems.append(Problem(key_path(("task", "start", name)), _unknown_coordinate(name, coordinates)))
+        else:
+            start[coordinates.index(name)] = value
+            start_overridden.add(name.split(".", 1)[0])
+
+    problems += _check_contacts(spec, names)
+    problems += _check_task(spec, coordinates, actuated, names)
+    problems += _check_ladder(spec)
+    problems += _check_limits(spec, coordinates, start)
+    if problems:
+        raise ScenarioError(path, problems)
+
+    pairs = _contact_pairs(spec)
+    base = {b.name: _base_placement(b, dim) for b in spec.bodies}
+    scenario = Scenario(
+        path=path,
+        spec=spec,
+        parameters=parameters,
+        coordinates=tuple(coordinates),
+        velocities=tuple(velocities),
+        actuated=tuple(actuated),
+        start=_frozen(np.array(start, dtype=float)),
+        geometries=MappingProxyType(geometries),
+        pairs=pairs,
+        base_placements=MappingProxyType(base),
+    )
+    problems = _check_penetration(scenario, start_overridden)
+    if problems:
+        raise ScenarioError(path, problems)
+    return scenario
+
+
+def _frozen(a: np.ndarray) -> np.ndarray:
+    a.setflags(write=False)
+    return a
+
+
+def _unknown_coordinate(name: str, coordinates: list[str]) -> str:
+    return f"no coordinate {name!r}; the coordinates are: {', '.join(coordinates) or 'none (nothing moves)'}"
+
+
+def _check_body(body: BodySpec, key: str, dim: int) -> list[Problem]:
+    out: list[Problem] = []
+    allowed_shapes = SHAPES_2D if dim == 2 else SHAPES_3D
+    if body.shape.type not in allowed_shapes:
+        out.append(Problem(f"{key}.shape.type", f"{body.shape.type!r} is not a {dim}D shape; use one of {', '.join(allowed_shapes)}"))
+    elif body.shape.type == "box" and len(body.shape.size) != dim:
+        out.append(Problem(f"{key}.shape.size", f"a {dim}D box needs {dim} edge lengths, got {len(body.shape.size)}"))
+    if body.shape.type in ("halfplane", "plane") and body.role != "obstacle":
+        out.append(Problem(f"{key}.shape.type", f"a {body.shape.type} is unbounded: only obstacles may have it"))
+
+    pose = body.pose
+    if dim == 2:
+        for name in ("z", "quaternion", "rpy"):
+            if getattr(pose, name) is not None:
+                out.append(Problem(f"{key}.pose.{name}", "planar poses have only x, y, theta"))
+    else:
+        if pose.theta is not None:
+            out.append(Problem(f"{key}.pose.theta", "spatial poses use quaternion or rpy, not theta"))
+        if pose.quaternion is not None and pose.rpy is not None:
+            out.append(Problem(f"{key}.pose", "give either quaternion or rpy, not both"))
+        if pose.quaternion is not None and abs(np.linalg.norm(pose.quaternion) - 1.0) > QUATERNION_NORM_TOLERANCE:
+            out.append(Problem(f"{key}.pose.quaternion", f"not a unit quaternion (norm {np.linalg.norm(pose.quaternion):.6g})"))
+        if "yaw" in body.dofs and pose.quaternion is not None:
+            out.append(Problem(f"{key}.pose.quaternion", "a body with a free yaw takes its orientation from rpy = [0, 0, yaw]"))
+        if "yaw" in body.dofs and pose.rpy is not None and (pose.rpy[0] or pose.rpy[1]):
+            out.append(Problem(f"{key}.pose.rpy", "a body with a free yaw must start with zero roll and pitch"))
+
+    valid = DOF_NAMES[dim]
+    for j, dof in enumerate(body.dofs):
+        if dof not in valid:
+            out.append(Problem(f"{key}.dofs[{j}]", f"no DOF {dof!r}; {'planar' if dim == 2 else 'spatial'} bodies have {', '.join(valid)}"))
+        elif body.dofs.index(dof) != j:
+            out.append(Problem(f"{key}.dofs[{j}]", f"DOF {dof!r} is listed twice"))
+    if "yaw" in body.dofs and "rotation" in body.dofs:
+        out.append(Problem(f"{key}.dofs", "yaw and rotation exclude each other (rotation includes yaw)"))
+
+    if body.role == "obstacle":
+        if body.dofs:
+            out.append(Problem(f"{key}.dofs", "an obstacle is fixed or scripted and has no free DOFs; use role = 'object' for a passive body"))
+        if body.actuators:
+            out.append(Problem(f"{key}.actuators", "only robots have actuators"))
+    else:
+        if body.velocity:
+            out.append(Problem(f"{key}.velocity", "only obstacles have a scripted velocity"))
+        if body.dofs and body.mass is None:
+            out.append(Problem(f"{key}.mass", "required: a body with free DOFs needs a mass > 0"))
+        if any(d in ROTATIONAL_DOFS for d in body.dofs) and body.inertia is None:
+            out.append(Problem(f"{key}.inertia", "required: a body with a free rotation needs its rotational inertia"))
+        if body.inertia is not None and dim == 2 and len(body.inertia) != 1:
+            out.append(Problem(f"{key}.inertia", "a planar body's inertia is one number (about the z axis)"))
+        if body.inertia is not None and dim == 3 and len(body.inertia) not in (1, 3):
+            out.append(Problem(f"{key}.inertia", "a spatial body's inertia is one number or three principal moments"))
+    if body.role == "object" and body.actuators:
+        out.append(Problem(f"{key}.actuators", "only robots have actuators; an object's DOFs are passive"))
+    if body.role == "robot" and not body.actuators:
+        out.append(Problem(f"{key}.actuators", "a robot needs at least one actuated DOF (or make it an obstacle)"))
+    for dof, drive in body.actuators.items():
+        akey = f"{key}.actuators.{dof}"
+        if dof not in body.dofs:
+            out.append(Problem(akey, f"{dof!r} is not a free DOF of {body.name!r} (dofs: {', '.join(body.dofs) or 'none'})"))
+        elif dof == "rotation":
+            out.append(Problem(akey, "a free 3D rotation cannot be actuated as one DOF; actuate yaw instead"))
+        if drive.lower is not None and drive.upper is not None and drive.lower >= drive.upper:
+            out.append(Problem(f"{akey}.lower", f"lower limit {drive.lower} is not below upper limit {drive.upper}"))
+    pose_coordinates = ("x", "y", "theta") if dim == 2 else ("x", "y", "z")
+    for name in body.velocity:
+        if name not in pose_coordinates:
+            out.append(Problem(key_path((*_split(key), "velocity", name)), f"scripted velocities are for {', '.join(pose_coordinates)}"))
+    return out
+
+
+def _split(key: str) -> tuple:
+    head, index = key.split("[")
+    return (head, int(index.rstrip("]")))
+
+
+def _check_contacts(spec: ScenarioSpec, names: list[str]) -> list[Problem]:
+    out = []
+    seen = set()
+    for k, pair in enumerate(spec.contact.pairs):
+        key = f"contact.pairs[{k}].bodies"
+        for name in pair.bodies:
+            if name not in names:
+                out.append(Problem(key, f"no body named {name!r} (bodies: {', '.join(names)})"))
+        if pair.bodies[0] == pair.bodies[1]:
+            out.append(Problem(key, "a pair needs two different bodies"))
+        frozen = frozenset(pair.bodies)
+        if frozen in seen:
+            out.append(Problem(key, f"the pair {pair.bodies[0]}-{pair.bodies[1]} is given twice"))
+        seen.add(frozen)
+    return out
+
+
+def _check_predicate(pred: Predicate, key: str, coordinates: list[str], names: list[str]) -> list[Problem]:
+    kind = type(pred).__name__
+    out: list[Problem] = []
+    if kind == "BoxPredicate":
+        for name, (lo, hi) in pred.box.items():
+            sub = key_path((*_parse_key(key), "box", name))
+            if name not in coordinates:
+                out.append(Problem(sub, _unknown_coordinate(name, coordinates)))
+            elif lo > hi:
+                out.append(Problem(sub, f"empty interval [{lo}, {hi}]"))
+    elif kind == "TouchPredicate":
+        for name in pred.touch:
+            if name not in names:
+                out.append(Problem(f"{key}.touch", f"no body named {name!r} (bodies: {', '.join(names)})"))
+        if pred.touch[0] == pred.touch[1]:
+            out.append(Problem(f"{key}.touch", "a body always touches itself; name two bodies"))
+    elif kind in ("AllPredicate", "AnyPredicate"):
+        word = "all" if kind == "AllPredicate" else "any"
+        for i, sub in enumerate(getattr(pred, word)):
+            out += _check_predicate(sub, f"{key}.{word}[{i}]", coordinates, names)
+    else:
+        out += _check_predicate(pred.not_, f"{key}.not", coordinates, names)
+    return out
+
+
+def _parse_key(key: str) -> tuple:
+    """Inverse of key_path for the simple keys built here (no quoted parts)."""
+    parts: list = []
+    for token in key.split("."):
+        while "[" in token:
+            head, rest = token.split("[", 1)
+            if head:
+                parts.append(head)
+            index, token = rest.split("]", 1)
+            parts.append(int(index))
+        if token:
+            parts.append(token)
+    return tuple(parts)
+
+
+def _check_task(spec: ScenarioSpec, coordinates: list[str], actuated: list[str], names: list[str]) -> list[Problem]:
+    task = spec.task
+    out = _check_predicate(task.goal, "task.goal", coordinates, names)
+    if task.unsafe is not None:
+        out += _check_predicate(task.unsafe, "task.unsafe", coordinates, names)
+    for name, (lo, hi) in task.control_bounds.items():
+        key = key_path(("task", "control_bounds", name))
+        if name not in actuated:
+            out.append(Problem(key, f"{name!r} is not an actuated coordinate (actuated: {', '.join(actuated) or 'none'})"))
+        elif lo >= hi:
+            out.append(Problem(key, f"lower bound {lo} is not below upper bound {hi}"))
+    if task.policy is not None:
+        for name in task.policy.speeds:
+            if name not in actuated:
+                out.append(Problem(key_path(("task", "policy", "speeds", name)), f"{name!r} is not an actuated coordinate (actuated: {', '.join(actuated) or 'none'})"))
+    return out
+
+
+def _check_ladder(spec: ScenarioSpec) -> list[Problem]:
+    out = []
+    ladder = spec.ladder
+    order = [RUNGS.index(r.model) for r in ladder.rungs]
+    for i, rung in enumerate(ladder.rungs):
+        key = f"ladder.rungs[{i}]"
+        if i > 0 and order[i] <= order[i - 1]:
+            out.append(Problem(f"{key}.model", f"{rung.model!r} after {ladder.rungs[i - 1].model!r}: rungs go from low to high fidelity ({' < '.join(RUNGS)}), each once"))
+        if rung.model == "geometric":
+            if rung.h is not None:
+                out.append(Problem(f"{key}.h", "the geometric rung has no time step"))
+            if rung.planner is not None and rung.planner not in GEOMETRIC_PLANNERS:
+                out.append(Problem(f"{key}.planner", f"geometric planners: {', '.join(GEOMETRIC_PLANNERS)}"))
+            continue
+        if rung.h is None:
+            out.append(Problem(f"{key}.h", f"required: the {rung.model} rung needs a time step h > 0"))
+        planner = rung.planner or ladder.planner
+        if planner not in CONTROL_PLANNERS:
+            which = f"{key}.planner" if rung.planner else "ladder.planner"
+            out.append(Problem(which, f"{planner!r} is not a control planner; use one of {', '.join(CONTROL_PLANNERS)}"))
+        period = rung.control_period or ladder.control_period
+        if rung.h is not None and rung.h > period:
+            out.append(Problem(f"{key}.h", f"time step {rung.h} exceeds the control period {period}"))
+    return out
+
+
+def _check_limits(spec: ScenarioSpec, coordinates: list[str], start: list[float]) -> list[Problem]:
+    out = []
+    for i, body in enumerate(spec.bodies):
+        for dof, drive in body.actuators.items():
+            name = f"{body.name}.{dof}"
+            if name not in coordinates:
+                continue
+            value = start[coordinates.index(name)]
+            if drive.lower is not None and value < drive.lower:
+                out.append(Problem(f"bodies[{i}].actuators.{dof}.lower", f"{name} starts at {value}, below its lower limit {drive.lower}"))
+            if drive.upper is not None and value > drive.upper:
+                out.append(Problem(f"bodies[{i}].actuators.{dof}.upper", f"{name} starts at {value}, above its upper limit {drive.upper}"))
+    return out
+
+
+def _contact_pairs(spec: ScenarioSpec) -> tuple[ContactPair, ...]:
+    overrides = {frozenset(p.bodies): p for p in spec.contact.pairs}
+    pairs = []
+    bodies = spec.bodies
+    for i, a in enumerate(bodies):
+        for b in bodies[i + 1 :]:
+            if not a.dofs and not b.dofs and not a.velocity and not b.velocity:
+                continue  # two bodies that never move never meet anew
+            o = overrides.get(frozenset((a.name, b.name)))
+            if o is not None and not o.enabled:
+                continue
+            mu = o.mu if o is not None and o.mu is not None else spec.contact.mu
+            K = o.K if o is not None and o.K is not None else spec.contact.K
+            C = o.C if o is not None and o.C is not None else spec.contact.C
+            pairs.append(ContactPair(a.name, b.name, mu, K, C))
+    return tuple(pairs)
+
+
+def _check_penetration(scenario: Scenario, start_overridden: set[str]) -> list[Problem]:
+    placements = scenario.placements(scenario.start)
+    index = {b.name: i for i, b in enumerate(scenario.spec.bodies)}
+    out = []
+    for pair in scenario.pairs:
+        ga, gb = scenario.geometries[pair.body_a], scenario.geometries[pair.body_b]
+        psi = geo.signed_distance(ga, placements[pair.body_a], gb, placements[pair.body_b])
+        if psi < -PENETRATION_TOLERANCE:
+            mover = pair.body_b if scenario.body(pair.body_b).dofs else pair.body_a
+            key = "task.start" if mover in start_overridden else f"bodies[{index[mover]}].pose"
+            out.append(Problem(key, f"{pair.body_a!r} and {pair.body_b!r} start in penetration (depth {-psi:.6g} m)"))
+    return out

@@ -1,0 +1,1 @@
+"""ladder's planning side: OMPL adapters, the ladder pipeline, sweeps and the CLI."""
