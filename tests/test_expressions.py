@@ -1,0 +1,37 @@
+import math
+
+import pytest
+
+from models.expressions import ExpressionError, evaluate, names_in
+
+
+@pytest.mark.parametrize(
+    "text, value",
+    [("1.5", 1.5), ("-v1", -2.0), ("2 * v1 + 1", 5.0), ("v1 ** 2 / 4", 1.0), ("sin(radians(30))", 0.5), ("pi", math.pi), ("(1 - v1) * 3", -3.0)],
+)
+def test_evaluates(text, value):
+    assert evaluate(text, {"v1": 2.0}) == pytest.approx(value)
+
+
+@pytest.mark.parametrize(
+    "text, fragment",
+    [
+        ("v2", "unknown parameter 'v2'"),
+        ("v1 +", "neither a number"),
+        ("__import__('os')", "only numbers"),
+        ("v1.real", "only numbers"),
+        ("[1]", "only numbers"),
+        ("1 / 0", "division by zero"),
+        ("sqrt(-1)", "domain"),
+        ("exp(1000)", "range"),
+        ("1e308 * 10", "not a finite number"),
+        ("True", "only numbers"),
+    ],
+)
+def test_rejects(text, fragment):
+    with pytest.raises(ExpressionError, match=fragment.replace("(", r"\(").replace("[", r"\[")):
+        evaluate(text, {"v1": 2.0})
+
+
+def test_names_in():
+    assert names_in("2 * sin(alpha) + beta - pi") == {"alpha", "beta"}

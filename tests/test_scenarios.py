@@ -1,0 +1,188 @@
+"""Scenario files: every shipped scenario loads; the paper's scene is what the issue says;
+parameters and overrides resolve; every bad file is rejected with its key and reason."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from models.scenario import ScenarioError, load_scenario, parse_overrides
+from tests.conftest import DATA, SCENARIOS
+
+SHIPPED = sorted(SCENARIOS.glob("*.toml"))
+BAD = sorted((DATA / "bad").glob("*.toml"))
+
+
+def expectation(path: Path) -> tuple[str, str]:
+    lines = path.read_text().splitlines()
+    key = next(l for l in lines if l.startswith("# expect-key:")).split(":", 1)[1].strip()
+    reason = next(l for l in lines if l.startswith("# expect-reason:")).split(":", 1)[1].strip()
+    return key, reason
+
+
+def test_all_five_scenarios_ship():
+    names = {p.stem for p in SHIPPED}
+    assert {"two_finger_triangle", "four_finger_grasp", "incline_block", "free_transfer", "box_push_3d"} <= names
+
+
+@pytest.mark.parametrize("path", SHIPPED, ids=lambda p: p.stem)
+def test_shipped_scenarios_load(path):
+    scenario = load_scenario(path)
+    assert len(scenario.start) == len(scenario.coordinates)
+    assert set(scenario.actuated) <= set(scenario.coordinates)
+    assert not scenario.start.flags.writeable
+
+
+def test_paper_scene_as_the_issue_reads_it(triangle_file):
+    s = load_scenario(triangle_file)
+    assert s.dimension == 2
+    assert s.coordinates == ("triangle.x", "finger1.y", "finger2.y")
+    assert s.actuated == ("finger1.y", "finger2.y")
+    np.testing.assert_allclose(s.start, [0.0, 2.05, 2.05])
+    tri = s.body("triangle")
+    assert tri.mass == 1.0 and tri.dofs == ("x",)
+    np.testing.assert_allclose(s.geometries["triangle"].core, [[-1, 0], [1, 0], [0, 1]])
+    for name, x in (("finger1", -0.5), ("finger2", 0.5)):
+        finger = s.body(name)
+        assert finger.shape.radius == 0.05 and finger.pose.x == x and finger.dofs == ("y",)
+        # lowest point 2 above the palm: the paper's depth x = 0
+        assert finger.pose.y - finger.shape.radius == pytest.approx(2.0)
+    materials = {frozenset((p.body_a, p.body_b)): p for p in s.pairs}
+    assert materials[frozenset(("palm", "triangle"))].mu == 0.0  # frictionless palm
+    finger_pair = materials[frozenset(("finger1", "triangle"))]
+    assert (finger_pair.mu, finger_pair.K, finger_pair.C) == (0.5, 1e6, 1e4)
+    assert s.parameters["v1"] == 1.0 and s.parameters["v2"] == 1.0
+    assert s.spec.task.policy.speeds == {"finger1.y": -1.0, "finger2.y": -1.0}
+
+
+def test_overrides_reach_every_reference(triangle_file):
+    s = load_scenario(triangle_file, {"mu": 1.2, "v1": 0.7, "C": 0.0})
+    materials = {frozenset((p.body_a, p.body_b)): p for p in s.pairs}
+    assert materials[frozenset(("finger2", "triangle"))].mu == 1.2
+    assert materials[frozenset(("palm", "triangle"))].C == 0.0
+    assert s.spec.task.policy.speeds["finger1.y"] == pytest.approx(-0.7)
+    assert s.parameters["mu"] == 1.2
+
+
+def test_expressions_in_the_incline():
+    s = load_scenario(SCENARIOS / "incline_block.toml", {"slope_deg": 20.0})
+    alpha = math.radians(20.0)
+    block = s.body("block")
+    assert block.pose.theta == pytest.approx(alpha)
+    assert block.pose.x == pytest.approx(-0.05 * math.sin(alpha))
+    assert block.pose.y == pytest.approx(0.05 * math.cos(alpha))
+
+
+def test_unknown_override_is_rejected(triangle_file):
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(triangle_file, {"nope": 1.0})
+    assert info.value.problems[0].key == "--param nope"
+    assert "no parameter 'nope'" in info.value.problems[0].reason
+
+
+@pytest.mark.parametrize("item", ["mu", "mu=", "=1", "mu=abc", "mu=inf", "mu=nan"])
+def test_malformed_override_items(item):
+    with pytest.raises(ScenarioError):
+        parse_overrides([item])
+
+
+def test_override_items_parse():
+    assert parse_overrides(["mu=0.3", " v1 = 2"]) == {"mu": 0.3, "v1": 2.0}
+
+
+def test_at_least_twenty_distinct_bad_files():
+    assert len(BAD) >= 20
+    assert len({expectation(p) for p in BAD}) == len(BAD)
+
+
+@pytest.mark.parametrize("path", BAD, ids=lambda p: p.stem)
+def test_bad_file_is_rejected_with_key_and_reason(path):
+    key, reason = expectation(path)
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    first = info.value.problems[0]
+    assert first.key == key
+    assert reason in first.reason
+    assert str(info.value).splitlines()[0].startswith(f"{path}: ")
+
+
+def test_missing_file_is_an_error(tmp_path):
+    with pytest.raises(ScenarioError, match="no such file"):
+        load_scenario(tmp_path / "nope.toml")
+
+
+def test_not_utf8_is_an_error(tmp_path):
+    bad = tmp_path / "latin1.toml"
+    bad.write_bytes(b"name = '\xe9'\n")
+    with pytest.raises(ScenarioError, match="not UTF-8"):
+        load_scenario(bad)
+
+
+def test_every_problem_is_reported_not_only_the_first(tmp_path):
+    text = (DATA / "good" / "minimal_triangle.toml").read_text()
+    text = text.replace("mass = 1.0", "mass = -1.0").replace("h = 1e-4", "h = 0.0")
+    path = tmp_path / "two_problems.toml"
+    path.write_text(text)
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    keys = [p.key for p in info.value.problems]
+    assert "bodies[1].mass" in keys and "ladder.rungs[1].h" in keys
+
+
+def test_missing_mesh_names_the_file(tmp_path):
+    text = (SCENARIOS / "box_push_3d.toml").read_text().replace("meshes/wedge.obj", "meshes/nowhere.obj")
+    path = tmp_path / "box.toml"
+    path.write_text(text)
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    assert info.value.problems[0].key == "bodies[4].shape.file"
+    assert "nowhere.obj" in info.value.problems[0].reason
+
+
+def test_non_convex_mesh_is_rejected(tmp_path):
+    (tmp_path / "meshes").mkdir()
+    # a cube with one vertex pushed inwards: a dent
+    cube = [(x, y, z) for x in (0, 1) for y in (0, 1) for z in (0, 1)]
+    cube[7] = (0.4, 0.4, 0.4)
+    faces = [(1, 3, 4, 2), (5, 6, 8, 7), (1, 2, 6, 5), (3, 7, 8, 4), (1, 5, 7, 3), (2, 4, 8, 6)]
+    obj = "".join(f"v {x} {y} {z}\n" for x, y, z in cube) + "".join("f " + " ".join(map(str, f)) + "\n" for f in faces)
+    (tmp_path / "meshes" / "wedge.obj").write_text(obj)
+    path = tmp_path / "box.toml"
+    path.write_text((SCENARIOS / "box_push_3d.toml").read_text())
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    assert info.value.problems[0].key == "bodies[4].shape.file"
+    assert "not convex" in info.value.problems[0].reason
+
+
+def test_spatial_pose_checks(tmp_path):
+    text = (SCENARIOS / "box_push_3d.toml").read_text()
+    text = text.replace("pose = { x = 0.0, y = 0.0, z = 0.05 }", "pose = { x = 0.0, y = 0.0, z = 0.05, quaternion = [1.0, 0.1, 0.0, 0.0] }")
+    path = tmp_path / "box.toml"
+    path.write_text(text)
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    assert info.value.problems[0].key == "bodies[1].pose.quaternion"
+    assert "unit quaternion" in info.value.problems[0].reason
+
+
+def test_box_sunk_into_the_table_reports_its_depth(tmp_path):
+    text = (SCENARIOS / "box_push_3d.toml").read_text().replace("z = 0.05 }\ndofs", "z = 0.02 }\ndofs")
+    text = text.replace("meshes/wedge.obj", str(SCENARIOS / "meshes" / "wedge.obj"))
+    path = tmp_path / "box.toml"
+    path.write_text(text)
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    assert info.value.problems[0].key == "bodies[1].pose"
+    assert "depth 0.03 m" in info.value.problems[0].reason
+
+
+def test_spatial_rotation_coordinates():
+    s = load_scenario(SCENARIOS / "box_push_3d.toml")
+    assert s.coordinates[:7] == ("box.x", "box.y", "box.z", "box.qw", "box.qx", "box.qy", "box.qz")
+    assert s.velocities[:6] == ("box.x", "box.y", "box.z", "box.wx", "box.wy", "box.wz")
+    assert s.actuated == ("pusher.x", "pusher.y")
+    np.testing.assert_allclose(s.start[3:7], [1, 0, 0, 0])
