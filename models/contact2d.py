@@ -1,0 +1,361 @@
+"""Planar narrowphase, compiled: contacts between rounded convex shapes and half-planes.
+
+Every planar shape is a rounded convex core (point, segment or counter-clockwise polygon,
+see `models.geometry`), so one kernel covers disc, capsule, box and polygon pairs:
+
+1. the cores' signed distance and direction n (A to B): closest features when apart, the
+   separating-axis test (edge normals of both cores, plus segment directions) when they
+   overlap;
+2. a *contact manifold*: a disc makes one contact; two cores with edges make up to two, by
+   clipping the incident edge against the reference edge (the face whose normal is n), as
+   in Box2D. Where the closest features are two vertices (n is no face normal), one contact.
+3. a half-plane makes one contact per core vertex, which is exact for polygons.
+
+Outputs follow `models.kinematics`: normal from A to B, pa on A, pb on B, psi = (pb - pa).n,
+written into caller-owned buffers with 3 columns (z = 0). Only contacts with psi <= margin.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from models.kinematics import SHAPE_HALFSPACE, body_pose_2d
+
+#: Below this core distance two cores count as touching (their witness direction is unreliable).
+TINY = 1e-14
+#: A face is the reference face when its normal is this aligned with the witness direction.
+FACE_ALIGNMENT = 1.0 - 1e-9
+#: Relative preference for A's face over B's when both are aligned (keeps manifolds stable).
+REFERENCE_BIAS = 1e-9
+
+
+@numba.njit(cache=True)
+def _world_core(S, q, b):
+    px, py, c, s = body_pose_2d(S, q, b)
+    k = S.vcount[b]
+    out = np.empty((k, 2))
+    for i in range(k):
+        vx = S.verts[S.vstart[b] + i, 0]
+        vy = S.verts[S.vstart[b] + i, 1]
+        out[i, 0] = px + c * vx - s * vy
+        out[i, 1] = py + s * vx + c * vy
+    return out
+
+
+@numba.njit(cache=True)
+def _closest_on_segment(px, py, ax, ay, bx, by):
+    dx, dy = bx - ax, by - ay
+    den = dx * dx + dy * dy
+    t = 0.0
+    if den > 0.0:
+        t = ((px - ax) * dx + (py - ay) * dy) / den
+        t = min(1.0, max(0.0, t))
+    return ax + t * dx, ay + t * dy
+
+
+@numba.njit(cache=True)
+def _n_edges(k):
+    if k == 1:
+        return 0
+    if k == 2:
+        return 1
+    return k
+
+
+@numba.njit(cache=True)
+def _inside(px, py, P):
+    k = P.shape[0]
+    if k < 3:
+        return False
+    for i in range(k):
+        j = (i + 1) % k
+        ex, ey = P[j, 0] - P[i, 0], P[j, 1] - P[i, 1]
+        if ex * (py - P[i, 1]) - ey * (px - P[i, 0]) < 0.0:
+            return False
+    return True
+
+
+@numba.njit(cache=True)
+def _orient(ax, ay, bx, by, cx, cy):
+    return (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
+
+
+@numba.njit(cache=True)
+def _segments_cross(P, i0, i1, Q, j0, j1):
+    o1 = _orient(P[i0, 0], P[i0, 1], P[i1, 0], P[i1, 1], Q[j0, 0], Q[j0, 1])
+    o2 = _orient(P[i0, 0], P[i0, 1], P[i1, 0], P[i1, 1], Q[j1, 0], Q[j1, 1])
+    o3 = _orient(Q[j0, 0], Q[j0, 1], Q[j1, 0], Q[j1, 1], P[i0, 0], P[i0, 1])
+    o4 = _orient(Q[j0, 0], Q[j0, 1], Q[j1, 0], Q[j1, 1], P[i1, 0], P[i1, 1])
+    if o1 == 0.0 and o2 == 0.0 and o3 == 0.0 and o4 == 0.0:
+        return False
+    return o1 * o2 <= 0.0 and o3 * o4 <= 0.0
+
+
+@numba.njit(cache=True)
+def _closest_features(P, Q):
+    """Distance between two convex cores and witness points (cp on P, cq on Q)."""
+    best = np.inf
+    cpx = cpy = cqx = cqy = 0.0
+    kp, kq = P.shape[0], Q.shape[0]
+    for swap in range(2):
+        A = P if swap == 0 else Q
+        B = Q if swap == 0 else P
+        ka, kb = A.shape[0], B.shape[0]
+        ne = _n_edges(kb)
+        for i in range(ka):
+            ax, ay = A[i, 0], A[i, 1]
+            if ne == 0:
+                cx, cy = B[0, 0], B[0, 1]
+                d = np.hypot(ax - cx, ay - cy)
+                if d < best:
+                    best = d
+                    if swap == 0:
+                        cpx, cpy, cqx, cqy = ax, ay, cx, cy
+                    else:
+                        cpx, cpy, cqx, cqy = cx, cy, ax, ay
+                continue
+            for e in range(ne):
+                j = (e + 1) % kb
+                cx, cy = _closest_on_segment(ax, ay, B[e, 0], B[e, 1], B[j, 0], B[j, 1])
+                d = np.hypot(ax - cx, ay - cy)
+                if d < best:
+                    best = d
+                    if swap == 0:
+                        cpx, cpy, cqx, cqy = ax, ay, cx, cy
+                    else:
+                        cpx, cpy, cqx, cqy = cx, cy, ax, ay
+    return best, cpx, cpy, cqx, cqy
+
+
+@numba.njit(cache=True)
+def _overlap(P, Q, dist):
+    if dist <= TINY:
+        return True
+    for i in range(P.shape[0]):
+        if _inside(P[i, 0], P[i, 1], Q):
+            return True
+    for i in range(Q.shape[0]):
+        if _inside(Q[i, 0], Q[i, 1], P):
+            return True
+    nep, neq = _n_edges(P.shape[0]), _n_edges(Q.shape[0])
+    for e in range(nep):
+        for f in range(neq):
+            if _segments_cross(P, e, (e + 1) % P.shape[0], Q, f, (f + 1) % Q.shape[0]):
+                return True
+    return False
+
+
+@numba.njit(cache=True)
+def _project_range(P, ax, ay):
+    lo, hi = np.inf, -np.inf
+    for i in range(P.shape[0]):
+        v = P[i, 0] * ax + P[i, 1] * ay
+        lo = min(lo, v)
+        hi = max(hi, v)
+    return lo, hi
+
+
+@numba.njit(cache=True)
+def _sat_axis(P, Q, best_depth, bnx, bny, ax, ay):
+    """Update the minimum-penetration axis (oriented from P to Q) with candidate axis a."""
+    plo, phi = _project_range(P, ax, ay)
+    qlo, qhi = _project_range(Q, ax, ay)
+    d1 = phi - qlo  # Q on the +a side of P
+    d2 = qhi - plo  # Q on the -a side of P
+    if d1 < best_depth:
+        best_depth, bnx, bny = d1, ax, ay
+    if d2 < best_depth:
+        best_depth, bnx, bny = d2, -ax, -ay
+    return best_depth, bnx, bny
+
+
+@numba.njit(cache=True)
+def _penetration(P, Q):
+    """Penetration depth of overlapping cores and its direction from P to Q (unit)."""
+    depth, nx, ny = np.inf, 0.0, 1.0
+    for which in range(2):
+        A = P if which == 0 else Q
+        k = A.shape[0]
+        for e in range(_n_edges(k)):
+            j = (e + 1) % k
+            dx, dy = A[j, 0] - A[e, 0], A[j, 1] - A[e, 1]
+            L = np.hypot(dx, dy)
+            depth, nx, ny = _sat_axis(P, Q, depth, nx, ny, dy / L, -dx / L)
+            if k == 2:
+                depth, nx, ny = _sat_axis(P, Q, depth, nx, ny, dx / L, dy / L)
+    if depth == np.inf:  # two points at the same place
+        depth = 0.0
+    return max(depth, 0.0), nx, ny
+
+
+@numba.njit(cache=True)
+def core_distance(P, Q):
+    """Signed distance of two cores, unit direction n (P to Q) and witness points.
+
+    Returns (psi_core, nx, ny, cpx, cpy, cqx, cqy) with cq - cp = psi_core * n.
+    """
+    dist, cpx, cpy, cqx, cqy = _closest_features(P, Q)
+    if not _overlap(P, Q, dist):
+        return dist, (cqx - cpx) / dist, (cqy - cpy) / dist, cpx, cpy, cqx, cqy
+    depth, nx, ny = _penetration(P, Q)
+    # witness points: the deepest point of the core that is a single point, else the
+    # support points along n (refined by the manifold for polygon pairs)
+    if Q.shape[0] == 1:
+        cqx, cqy = Q[0, 0], Q[0, 1]
+        return -depth, nx, ny, cqx + depth * nx, cqy + depth * ny, cqx, cqy
+    if P.shape[0] == 1:
+        cpx, cpy = P[0, 0], P[0, 1]
+        return -depth, nx, ny, cpx, cpy, cpx - depth * nx, cpy - depth * ny
+    best = np.inf
+    for i in range(Q.shape[0]):
+        v = Q[i, 0] * nx + Q[i, 1] * ny
+        if v < best:
+            best = v
+            cqx, cqy = Q[i, 0], Q[i, 1]
+    return -depth, nx, ny, cqx + depth * nx, cqy + depth * ny, cqx, cqy
+
+
+@numba.njit(cache=True)
+def _write(c_psi, c_n, c_pa, c_pb, idx, psi, nx, ny, pax, pay, pbx, pby):
+    c_psi[idx] = psi
+    c_n[idx, 0], c_n[idx, 1], c_n[idx, 2] = nx, ny, 0.0
+    c_pa[idx, 0], c_pa[idx, 1], c_pa[idx, 2] = pax, pay, 0.0
+    c_pb[idx, 0], c_pb[idx, 1], c_pb[idx, 2] = pbx, pby, 0.0
+
+
+@numba.njit(cache=True)
+def _best_face(A, nx, ny):
+    """Index and alignment of A's face whose outward normal best matches (nx, ny)."""
+    k = A.shape[0]
+    best, index, sign = -np.inf, -1, 1.0
+    for e in range(_n_edges(k)):
+        j = (e + 1) % k
+        dx, dy = A[j, 0] - A[e, 0], A[j, 1] - A[e, 1]
+        L = np.hypot(dx, dy)
+        mx, my = dy / L, -dx / L
+        a = mx * nx + my * ny
+        if a > best:
+            best, index, sign = a, e, 1.0
+        if k == 2 and -a > best:  # a segment has two sides
+            best, index, sign = -a, e, -1.0
+    return index, sign, best
+
+
+@numba.njit(cache=True)
+def _halfspace_vs_core(S, q, h, b, h_is_a, margin, c_psi, c_n, c_pa, c_pb, start):
+    px, py, c, s = body_pose_2d(S, q, h)
+    lnx, lny = S.hs_normal[h, 0], S.hs_normal[h, 1]
+    mx, my = c * lnx - s * lny, s * lnx + c * lny
+    off = S.hs_offset[h] + mx * px + my * py
+    V = _world_core(S, q, b)
+    r = S.radius[b]
+    count = 0
+    for i in range(V.shape[0]):
+        sep = V[i, 0] * mx + V[i, 1] * my - off - r
+        if sep > margin:
+            continue
+        bx, by = V[i, 0] - r * mx, V[i, 1] - r * my  # on the shape's surface
+        hx, hy = bx - sep * mx, by - sep * my  # on the boundary line
+        if h_is_a:
+            _write(c_psi, c_n, c_pa, c_pb, start + count, sep, mx, my, hx, hy, bx, by)
+        else:
+            _write(c_psi, c_n, c_pa, c_pb, start + count, sep, -mx, -my, bx, by, hx, hy)
+        count += 1
+    return count
+
+
+@numba.njit(cache=True)
+def _core_vs_core(S, q, a, b, margin, c_psi, c_n, c_pa, c_pb, start):
+    P = _world_core(S, q, a)
+    Q = _world_core(S, q, b)
+    ra, rb = S.radius[a], S.radius[b]
+    psi_core, nx, ny, cpx, cpy, cqx, cqy = core_distance(P, Q)
+    if psi_core - ra - rb > margin:
+        return 0
+    single = P.shape[0] == 1 or Q.shape[0] == 1
+    if not single:
+        fa, sa, al_a = _best_face(P, nx, ny)
+        fb, sb, al_b = _best_face(Q, -nx, -ny)
+        if max(al_a, al_b) < FACE_ALIGNMENT:
+            single = True
+    if single:
+        _write(c_psi, c_n, c_pa, c_pb, start, psi_core - ra - rb, nx, ny,
+               cpx + ra * nx, cpy + ra * ny, cqx - rb * nx, cqy - rb * ny)
+        return 1
+    # reference face on A (normal m = its outward normal) or on B
+    ref_is_a = al_a + REFERENCE_BIAS >= al_b
+    R = P if ref_is_a else Q
+    I = Q if ref_is_a else P
+    f = fa if ref_is_a else fb
+    sgn = sa if ref_is_a else sb
+    r_ref = ra if ref_is_a else rb
+    r_inc = rb if ref_is_a else ra
+    kr = R.shape[0]
+    r0x, r0y = R[f, 0], R[f, 1]
+    r1x, r1y = R[(f + 1) % kr, 0], R[(f + 1) % kr, 1]
+    ux, uy = r1x - r0x, r1y - r0y
+    L = np.hypot(ux, uy)
+    ux, uy = ux / L, uy / L
+    mx, my = sgn * uy, -sgn * ux
+    # incident face: the face of I most anti-parallel to m
+    g, _, _ = _best_face(I, -mx, -my)
+    ki = I.shape[0]
+    i0x, i0y = I[g, 0], I[g, 1]
+    i1x, i1y = I[(g + 1) % ki, 0], I[(g + 1) % ki, 1]
+    # clip the incident segment to the reference face's extent [0, L] along u
+    t0 = (i0x - r0x) * ux + (i0y - r0y) * uy
+    t1 = (i1x - r0x) * ux + (i1y - r0y) * uy
+    count = 0
+    for end in range(2):
+        bound = 0.0 if end == 0 else L
+        # point of the incident segment at u-coordinate clamp
+        if t0 == t1:
+            if end == 1:
+                break
+            cx, cy = i0x, i0y
+            tc = t0
+            if tc < 0.0 or tc > L:
+                continue
+        else:
+            lo, hi = min(t0, t1), max(t0, t1)
+            tc = min(max(bound, lo), hi)
+            if tc < 0.0 or tc > L:
+                continue
+            w = (tc - t0) / (t1 - t0)
+            cx, cy = i0x + w * (i1x - i0x), i0y + w * (i1y - i0y)
+        sep_core = (cx - r0x) * mx + (cy - r0y) * my
+        sep = sep_core - r_ref - r_inc
+        if sep > margin:
+            continue
+        incx, incy = cx - r_inc * mx, cy - r_inc * my
+        refx, refy = cx - sep_core * mx + r_ref * mx, cy - sep_core * my + r_ref * my
+        if count == 1:
+            prev = start
+            dx = (incx - (c_pb[prev, 0] if ref_is_a else c_pa[prev, 0]))
+            dy = (incy - (c_pb[prev, 1] if ref_is_a else c_pa[prev, 1]))
+            if dx * dx + dy * dy <= TINY * TINY:
+                continue  # both clip bounds landed on one point
+        if ref_is_a:
+            _write(c_psi, c_n, c_pa, c_pb, start + count, sep, mx, my, refx, refy, incx, incy)
+        else:
+            _write(c_psi, c_n, c_pa, c_pb, start + count, sep, -mx, -my, incx, incy, refx, refy)
+        count += 1
+    if count == 0:
+        _write(c_psi, c_n, c_pa, c_pb, start, psi_core - ra - rb, nx, ny,
+               cpx + ra * nx, cpy + ra * ny, cqx - rb * nx, cqy - rb * ny)
+        count = 1
+    return count
+
+
+@numba.njit(cache=True)
+def collide_pair_2d(S, q, p, margin, c_psi, c_n, c_pa, c_pb, start):
+    """Contacts of pair p with psi <= margin, written from index start; returns how many."""
+    a, b = S.pair_a[p], S.pair_b[p]
+    if S.kind[a] == SHAPE_HALFSPACE and S.kind[b] == SHAPE_HALFSPACE:
+        return 0
+    if S.kind[a] == SHAPE_HALFSPACE:
+        return _halfspace_vs_core(S, q, a, b, True, margin, c_psi, c_n, c_pa, c_pb, start)
+    if S.kind[b] == SHAPE_HALFSPACE:
+        return _halfspace_vs_core(S, q, b, a, False, margin, c_psi, c_n, c_pa, c_pb, start)
+    return _core_vs_core(S, q, a, b, margin, c_psi, c_n, c_pa, c_pb, start)

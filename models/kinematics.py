@@ -1,0 +1,316 @@
+"""Body kinematics in arrays: generalized coordinates q, velocities nu, G(q), body poses.
+
+`compile_scene(scenario)` packs a validated `Scenario` into `SceneData`, a namedtuple of
+numpy arrays that compiled (numba) kernels take as one argument. Conventions:
+
+- q stacks each body's free DOFs in the scenario's coordinate order; nu likewise
+  (`Scenario.coordinates`, `Scenario.velocities`).
+- Planar bodies: q = nu components (x, y, theta); G = I.
+- Spatial bodies: translations x, y, z; ``yaw`` (rotation about world z) is one coordinate
+  with rate = its velocity; ``rotation`` is a unit quaternion (w, x, y, z) in q and a
+  **world-frame** angular velocity (wx, wy, wz) in nu, with q_dot = 1/2 [0, w] (x) quat,
+  so G(q) is 4x3 for that block and the identity elsewhere.
+- Contact convention (shared by the 2D and 3D kernels): a contact of pair (A, B) has a
+  world normal n pointing from A to B, points pa on A's surface and pb on B's surface, and
+  psi = (pb - pa) . n, the signed distance (negative: penetration depth).
+
+Index maps: ``qmap[b]`` = q indices of (x, y, z, angle, qw, qx, qy, qz) and
+``vmap[b]`` = nu indices of (vx, vy, vz, angle rate, wx, wy, wz), -1 where not free.
+``angle`` is theta in the plane, yaw in space.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numba
+import numpy as np
+
+from models.scenario import Scenario
+
+SHAPE_HALFSPACE = 0  # half-plane / plane: hs_normal, hs_offset (body frame)
+SHAPE_POINTS = 1  # planar rounded convex core: point, segment or CCW polygon, plus radius
+SHAPE_SPHERE = 2  # spatial: one core point + radius
+SHAPE_CAPSULE = 3  # spatial: segment along body x + radius
+SHAPE_BOX = 4  # spatial: half_extents; verts hold its 8 corners
+SHAPE_MESH = 5  # spatial convex mesh: verts (faces only in the python-fcl fallback)
+
+Q_X, Q_Y, Q_Z, Q_ANGLE, Q_QW = 0, 1, 2, 3, 4
+V_X, V_Y, V_Z, V_ANGLE, V_WX = 0, 1, 2, 3, 4
+
+
+class SceneData(NamedTuple):
+    """Arrays describing a scene for compiled kernels (see module docstring)."""
+
+    dimension: int
+    nq: int
+    nv: int
+    kind: np.ndarray  # int64[nb]
+    vstart: np.ndarray  # int64[nb]
+    vcount: np.ndarray  # int64[nb]
+    verts: np.ndarray  # float64[total, dim] core points in body frames
+    radius: np.ndarray  # float64[nb]
+    half_extents: np.ndarray  # float64[nb, 3] (spatial boxes)
+    hs_normal: np.ndarray  # float64[nb, dim] unit normals (half-spaces)
+    hs_offset: np.ndarray  # float64[nb]
+    base_pos: np.ndarray  # float64[nb, 3] (planar: z = 0)
+    base_quat: np.ndarray  # float64[nb, 4] (planar: rotation about z by theta)
+    qmap: np.ndarray  # int64[nb, 8]
+    vmap: np.ndarray  # int64[nb, 7]
+    mass: np.ndarray  # float64[nb] (0 for obstacles)
+    inertia: np.ndarray  # float64[nb, 3] principal moments (planar: [0, 0, Izz])
+    bound_radius: np.ndarray  # float64[nb] radius of a ball around the body origin holding the shape (inf: unbounded)
+    pair_a: np.ndarray  # int64[np]
+    pair_b: np.ndarray  # int64[np]
+    pair_mu: np.ndarray  # float64[np]
+    pair_K: np.ndarray  # float64[np]
+    pair_C: np.ndarray  # float64[np]
+    pair_max_contacts: np.ndarray  # int64[np] most contacts the pair can produce at once
+
+
+def _quat_z(theta: float) -> np.ndarray:
+    return np.array([np.cos(theta / 2), 0.0, 0.0, np.sin(theta / 2)])
+
+
+def _max_contacts(kind_a: int, count_a: int, kind_b: int, count_b: int, dimension: int) -> int:
+    if kind_a == SHAPE_HALFSPACE:
+        return count_b
+    if kind_b == SHAPE_HALFSPACE:
+        return count_a
+    if dimension == 2:
+        return 1 if min(count_a, count_b) == 1 else 2
+    if SHAPE_SPHERE in (kind_a, kind_b):
+        return 1
+    if kind_a == SHAPE_CAPSULE and kind_b == SHAPE_CAPSULE:
+        return 2
+    return 4
+
+
+def compile_scene(scenario: Scenario) -> SceneData:
+    """Pack a validated scenario into arrays for the compiled kernels."""
+    dim = scenario.dimension
+    bodies = scenario.spec.bodies
+    nb = len(bodies)
+    kind = np.zeros(nb, np.int64)
+    vstart = np.zeros(nb, np.int64)
+    vcount = np.zeros(nb, np.int64)
+    verts_list: list[np.ndarray] = []
+    radius = np.zeros(nb)
+    half_extents = np.zeros((nb, 3))
+    hs_normal = np.zeros((nb, dim))
+    hs_offset = np.zeros(nb)
+    base_pos = np.zeros((nb, 3))
+    base_quat = np.zeros((nb, 4))
+    qmap = -np.ones((nb, 8), np.int64)
+    vmap = -np.ones((nb, 7), np.int64)
+    mass = np.zeros(nb)
+    inertia = np.zeros((nb, 3))
+    bound = np.zeros(nb)
+    q_index = {name: i for i, name in enumerate(scenario.coordinates)}
+    v_index = {name: i for i, name in enumerate(scenario.velocities)}
+    offset = 0
+    for b, body in enumerate(bodies):
+        g = scenario.geometries[body.name]
+        core = np.asarray(g.core, float).reshape(-1, dim)
+        if g.kind == "halfspace":
+            kind[b] = SHAPE_HALFSPACE
+            hs_normal[b] = g.normal
+            hs_offset[b] = g.offset
+            bound[b] = np.inf
+        elif dim == 2:
+            kind[b] = SHAPE_POINTS
+        else:
+            kind[b] = {"sphere": SHAPE_SPHERE, "capsule": SHAPE_CAPSULE, "box": SHAPE_BOX, "mesh": SHAPE_MESH}[body.shape.type]
+            if body.shape.type == "box":
+                half_extents[b] = 0.5 * np.asarray(body.shape.size)
+        radius[b] = g.radius
+        vstart[b], vcount[b] = offset, len(core)
+        verts_list.append(core)
+        offset += len(core)
+        if g.kind != "halfspace":
+            bound[b] = (np.max(np.linalg.norm(core, axis=1)) if len(core) else 0.0) + g.radius
+
+        placement = scenario.base_placements[body.name]
+        base_pos[b, :dim] = placement.translation
+        if dim == 2:
+            base_quat[b] = _quat_z(float(body.pose.theta or 0.0))
+        else:
+            base_quat[b] = _rotation_to_quat(placement.rotation)
+        for col, name in enumerate(("x", "y", "z")):
+            key = f"{body.name}.{name}"
+            if key in q_index:
+                qmap[b, col] = q_index[key]
+                vmap[b, col] = v_index[key]
+        angle = f"{body.name}.{'theta' if dim == 2 else 'yaw'}"
+        if angle in q_index:
+            qmap[b, Q_ANGLE] = q_index[angle]
+            vmap[b, V_ANGLE] = v_index[angle]
+        if f"{body.name}.qw" in q_index:
+            for k, c in enumerate("wxyz"):
+                qmap[b, Q_QW + k] = q_index[f"{body.name}.q{c}"]
+            for k, c in enumerate("xyz"):
+                vmap[b, V_WX + k] = v_index[f"{body.name}.w{c}"]
+        if body.dofs:
+            mass[b] = body.mass
+            if body.inertia is not None:
+                inertia[b] = [0.0, 0.0, body.inertia[0]] if dim == 2 else (
+                    body.inertia * 3 if len(body.inertia) == 1 else body.inertia
+                )
+
+    names = [b.name for b in bodies]
+    pairs = scenario.pairs
+    pair_a = np.array([names.index(p.body_a) for p in pairs], np.int64)
+    pair_b = np.array([names.index(p.body_b) for p in pairs], np.int64)
+    max_contacts = np.array(
+        [_max_contacts(kind[a], vcount[a], kind[b], vcount[b], dim) for a, b in zip(pair_a, pair_b)], np.int64
+    )
+    verts = np.concatenate(verts_list) if verts_list else np.zeros((0, dim))
+    return SceneData(
+        dimension=dim,
+        nq=len(scenario.coordinates),
+        nv=len(scenario.velocities),
+        kind=kind,
+        vstart=vstart,
+        vcount=vcount,
+        verts=np.ascontiguousarray(verts, dtype=np.float64),
+        radius=radius,
+        half_extents=half_extents,
+        hs_normal=hs_normal,
+        hs_offset=hs_offset,
+        base_pos=base_pos,
+        base_quat=base_quat,
+        qmap=qmap,
+        vmap=vmap,
+        mass=mass,
+        inertia=inertia,
+        bound_radius=bound,
+        pair_a=pair_a,
+        pair_b=pair_b,
+        pair_mu=np.array([p.mu for p in pairs], float),
+        pair_K=np.array([p.K for p in pairs], float),
+        pair_C=np.array([p.C for p in pairs], float),
+        pair_max_contacts=max_contacts,
+    )
+
+
+def _rotation_to_quat(R: np.ndarray) -> np.ndarray:
+    """Unit quaternion (w, x, y, z) of a rotation matrix (Shepperd's method)."""
+    t = np.trace(R)
+    if t > 0:
+        s = 2.0 * np.sqrt(1.0 + t)
+        q = [0.25 * s, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s]
+    elif R[0, 0] > R[1, 1] and R[0, 0] > R[2, 2]:
+        s = 2.0 * np.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2])
+        q = [(R[2, 1] - R[1, 2]) / s, 0.25 * s, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s]
+    elif R[1, 1] > R[2, 2]:
+        s = 2.0 * np.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2])
+        q = [(R[0, 2] - R[2, 0]) / s, (R[0, 1] + R[1, 0]) / s, 0.25 * s, (R[1, 2] + R[2, 1]) / s]
+    else:
+        s = 2.0 * np.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1])
+        q = [(R[1, 0] - R[0, 1]) / s, (R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s]
+    q = np.array(q)
+    return q / np.linalg.norm(q)
+
+
+# ----------------------------------------------------------------------------- compiled helpers
+
+
+@numba.njit(cache=True)
+def quat_mul(a, b):
+    """Hamilton product of (w, x, y, z) quaternions."""
+    return np.array(
+        [
+            a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3],
+            a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2],
+            a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1],
+            a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0],
+        ]
+    )
+
+
+@numba.njit(cache=True)
+def quat_to_matrix(q):
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    R = np.empty((3, 3))
+    R[0, 0] = 1 - 2 * (y * y + z * z)
+    R[0, 1] = 2 * (x * y - w * z)
+    R[0, 2] = 2 * (x * z + w * y)
+    R[1, 0] = 2 * (x * y + w * z)
+    R[1, 1] = 1 - 2 * (x * x + z * z)
+    R[1, 2] = 2 * (y * z - w * x)
+    R[2, 0] = 2 * (x * z - w * y)
+    R[2, 1] = 2 * (y * z + w * x)
+    R[2, 2] = 1 - 2 * (x * x + y * y)
+    return R
+
+
+@numba.njit(cache=True)
+def body_pose_2d(S, q, b):
+    """(px, py, cos theta, sin theta) of planar body b at configuration q."""
+    px = S.base_pos[b, 0] if S.qmap[b, Q_X] < 0 else q[S.qmap[b, Q_X]]
+    py = S.base_pos[b, 1] if S.qmap[b, Q_Y] < 0 else q[S.qmap[b, Q_Y]]
+    if S.qmap[b, Q_ANGLE] < 0:
+        # base_quat holds a rotation about z: theta = 2 atan2(z, w)
+        theta = 2.0 * np.arctan2(S.base_quat[b, 3], S.base_quat[b, 0])
+    else:
+        theta = q[S.qmap[b, Q_ANGLE]]
+    return px, py, np.cos(theta), np.sin(theta)
+
+
+@numba.njit(cache=True)
+def body_pose_3d(S, q, b):
+    """(position (3,), rotation matrix (3, 3)) of spatial body b at configuration q."""
+    p = S.base_pos[b].copy()
+    for k in range(3):
+        if S.qmap[b, k] >= 0:
+            p[k] = q[S.qmap[b, k]]
+    if S.qmap[b, Q_QW] >= 0:
+        quat = np.empty(4)
+        for k in range(4):
+            quat[k] = q[S.qmap[b, Q_QW + k]]
+        quat /= np.sqrt(np.sum(quat * quat))
+    elif S.qmap[b, Q_ANGLE] >= 0:
+        yaw = q[S.qmap[b, Q_ANGLE]]
+        quat = np.array([np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)])
+    else:
+        quat = S.base_quat[b].copy()
+    return p, quat_to_matrix(quat)
+
+
+@numba.njit(cache=True)
+def integrate_positions(S, q, nu, h):
+    """q + h G(q) nu, renormalising quaternions (the paper's q^{l+1} = q^l + h G nu^{l+1})."""
+    out = q.copy()
+    for b in range(S.kind.shape[0]):
+        for k in range(4):  # translations and the planar/yaw angle: G = identity
+            if S.qmap[b, k] >= 0:
+                out[S.qmap[b, k]] = q[S.qmap[b, k]] + h * nu[S.vmap[b, k]]
+        if S.qmap[b, Q_QW] >= 0:
+            quat = np.empty(4)
+            for k in range(4):
+                quat[k] = q[S.qmap[b, Q_QW + k]]
+            omega = np.array([0.0, nu[S.vmap[b, V_WX]], nu[S.vmap[b, V_WX + 1]], nu[S.vmap[b, V_WX + 2]]])
+            dq = quat_mul(omega, quat)
+            for k in range(4):
+                quat[k] += 0.5 * h * dq[k]
+            quat /= np.sqrt(np.sum(quat * quat))
+            for k in range(4):
+                out[S.qmap[b, Q_QW + k]] = quat[k]
+    return out
+
+
+def G_matrix(S: SceneData, q: np.ndarray) -> np.ndarray:
+    """G(q), (nq, nv): q_dot = G(q) nu. Identity except 1/2 [0, w] (x) quat blocks."""
+    G = np.zeros((S.nq, S.nv))
+    for b in range(len(S.kind)):
+        for k in range(4):
+            if S.qmap[b, k] >= 0:
+                G[S.qmap[b, k], S.vmap[b, k]] = 1.0
+        if S.qmap[b, Q_QW] >= 0:
+            w, x, y, z = (q[S.qmap[b, Q_QW + k]] for k in range(4))
+            # d quat / dt = 1/2 [0, omega] (x) quat, omega in the world frame
+            block = 0.5 * np.array([[-x, -y, -z], [w, z, -y], [-z, w, x], [y, -x, w]])
+            for r in range(4):
+                for c in range(3):
+                    G[S.qmap[b, Q_QW + r], S.vmap[b, V_WX + c]] = block[r, c]
+    return G
