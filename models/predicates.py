@@ -1,0 +1,118 @@
+"""Task predicates (goal and unsafe sets) compiled to a small postfix program for numba.
+
+A predicate tree from the scenario (`box`, `touch`, `all`, `any`, `not`) becomes arrays of
+instructions evaluated with a stack of booleans, so a rollout checks the goal and unsafe
+sets every step without returning to Python:
+
+    OP_BOX    coordinate index, [lo, hi]        -> q[index] in [lo, hi]
+    OP_TOUCH  pair index, tol                    -> min psi of the pair's contacts <= tol
+    OP_AND n / OP_OR n                           -> pops n values
+    OP_NOT                                       -> pops one value
+
+`touch` needs the pair's signed distance; the rollout passes the per-pair minimum psi of
+the contacts it detected (pairs beyond the detection margin count as apart), so the margin
+must be at least the largest touch tolerance: `max_touch_tolerance` says how large.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numba
+import numpy as np
+
+from models.scenario import Scenario
+
+OP_BOX, OP_TOUCH, OP_AND, OP_OR, OP_NOT, OP_TRUE = 0, 1, 2, 3, 4, 5
+
+
+class Program(NamedTuple):
+    op: np.ndarray  # int64[k]
+    index: np.ndarray  # int64[k]: coordinate (box), pair (touch) or operand count (and/or)
+    lo: np.ndarray  # float64[k]: interval low, or touch tolerance
+    hi: np.ndarray  # float64[k]
+
+
+def _pair_index(scenario: Scenario, a: str, b: str) -> int:
+    for i, pair in enumerate(scenario.pairs):
+        if {pair.body_a, pair.body_b} == {a, b}:
+            return i
+    raise ValueError(
+        f"touch predicate on {a!r} and {b!r}: these bodies are not a contact pair "
+        "(both fixed, or the pair is disabled in [contact.pairs])"
+    )
+
+
+def compile_predicate(scenario: Scenario, predicate) -> Program:
+    """Compile a predicate of `scenario` (None: never true)."""
+    ops: list[tuple[int, int, float, float]] = []
+    default_tol = scenario.spec.contact.touch_tolerance
+
+    def emit(node) -> None:
+        kind = type(node).__name__
+        if kind == "BoxPredicate":
+            for name, (lo, hi) in node.box.items():
+                ops.append((OP_BOX, scenario.coordinates.index(name), lo, hi))
+            if len(node.box) > 1:
+                ops.append((OP_AND, len(node.box), 0.0, 0.0))
+        elif kind == "TouchPredicate":
+            tol = node.tol if node.tol is not None else default_tol
+            ops.append((OP_TOUCH, _pair_index(scenario, *node.touch), tol, 0.0))
+        elif kind in ("AllPredicate", "AnyPredicate"):
+            children = node.all if kind == "AllPredicate" else node.any
+            for child in children:
+                emit(child)
+            ops.append((OP_AND if kind == "AllPredicate" else OP_OR, len(children), 0.0, 0.0))
+        else:
+            emit(node.not_)
+            ops.append((OP_NOT, 0, 0.0, 0.0))
+
+    if predicate is None:
+        ops.append((OP_NOT, 0, 0.0, 0.0))
+        ops.insert(0, (OP_TRUE, 0, 0.0, 0.0))
+    else:
+        emit(predicate)
+    return Program(
+        op=np.array([o[0] for o in ops], np.int64),
+        index=np.array([o[1] for o in ops], np.int64),
+        lo=np.array([o[2] for o in ops], float),
+        hi=np.array([o[3] for o in ops], float),
+    )
+
+
+def max_touch_tolerance(*programs: Program) -> float:
+    tols = [float(p.lo[i]) for p in programs for i in range(len(p.op)) if p.op[i] == OP_TOUCH]
+    return max(tols, default=0.0)
+
+
+@numba.njit(cache=True)
+def evaluate(P, q, pair_psi):
+    """Evaluate program P at configuration q with per-pair minimum distances pair_psi."""
+    stack = np.zeros(P.op.shape[0] + 1, np.bool_)
+    top = 0
+    for k in range(P.op.shape[0]):
+        op = P.op[k]
+        if op == OP_BOX:
+            v = q[P.index[k]]
+            stack[top] = P.lo[k] <= v <= P.hi[k]
+            top += 1
+        elif op == OP_TOUCH:
+            stack[top] = pair_psi[P.index[k]] <= P.lo[k]
+            top += 1
+        elif op == OP_TRUE:
+            stack[top] = True
+            top += 1
+        elif op == OP_NOT:
+            stack[top - 1] = not stack[top - 1]
+        else:
+            n = P.index[k]
+            result = op == OP_AND
+            for j in range(top - n, top):
+                if op == OP_AND:
+                    result = result and stack[j]
+                else:
+                    result = result or stack[j]
+            top -= n
+            stack[top] = result
+            top += 1
+    return stack[0]
