@@ -20,7 +20,18 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from models.kinematics import SHAPE_HALFSPACE, body_pose_2d
+from models.kinematics import (
+    BF_HSN,
+    BF_HSO,
+    BF_RADIUS,
+    BI_KIND,
+    BI_VCOUNT,
+    BI_VSTART,
+    PI_A,
+    PI_B,
+    SHAPE_HALFSPACE,
+    planar_poses,
+)
 
 #: Below this core distance two cores count as touching (their witness direction is unreliable).
 TINY = 1e-14
@@ -31,13 +42,14 @@ REFERENCE_BIAS = 1e-9
 
 
 @numba.njit(cache=True)
-def _world_core(S, q, b):
-    px, py, c, s = body_pose_2d(S, q, b)
-    k = S.vcount[b]
+def _world_core(bi, verts, poses, b):
+    px, py, c, s = poses[b, 0], poses[b, 1], poses[b, 2], poses[b, 3]
+    k = bi[b, BI_VCOUNT]
+    v0 = bi[b, BI_VSTART]
     out = np.empty((k, 2))
     for i in range(k):
-        vx = S.verts[S.vstart[b] + i, 0]
-        vy = S.verts[S.vstart[b] + i, 1]
+        vx = verts[v0 + i, 0]
+        vy = verts[v0 + i, 1]
         out[i, 0] = px + c * vx - s * vy
         out[i, 1] = py + s * vx + c * vy
     return out
@@ -243,13 +255,13 @@ def _best_face(A, nx, ny):
 
 
 @numba.njit(cache=True)
-def _halfspace_vs_core(S, q, h, b, h_is_a, margin, c_psi, c_n, c_pa, c_pb, start):
-    px, py, c, s = body_pose_2d(S, q, h)
-    lnx, lny = S.hs_normal[h, 0], S.hs_normal[h, 1]
+def _halfspace_vs_core(bi, bf, verts, poses, h, b, h_is_a, margin, c_psi, c_n, c_pa, c_pb, start):
+    px, py, c, s = poses[h, 0], poses[h, 1], poses[h, 2], poses[h, 3]
+    lnx, lny = bf[h, BF_HSN], bf[h, BF_HSN + 1]
     mx, my = c * lnx - s * lny, s * lnx + c * lny
-    off = S.hs_offset[h] + mx * px + my * py
-    V = _world_core(S, q, b)
-    r = S.radius[b]
+    off = bf[h, BF_HSO] + mx * px + my * py
+    V = _world_core(bi, verts, poses, b)
+    r = bf[b, BF_RADIUS]
     count = 0
     for i in range(V.shape[0]):
         sep = V[i, 0] * mx + V[i, 1] * my - off - r
@@ -266,10 +278,10 @@ def _halfspace_vs_core(S, q, h, b, h_is_a, margin, c_psi, c_n, c_pa, c_pb, start
 
 
 @numba.njit(cache=True)
-def _core_vs_core(S, q, a, b, margin, c_psi, c_n, c_pa, c_pb, start):
-    P = _world_core(S, q, a)
-    Q = _world_core(S, q, b)
-    ra, rb = S.radius[a], S.radius[b]
+def _core_vs_core(bi, bf, verts, poses, a, b, margin, c_psi, c_n, c_pa, c_pb, start):
+    P = _world_core(bi, verts, poses, a)
+    Q = _world_core(bi, verts, poses, b)
+    ra, rb = bf[a, BF_RADIUS], bf[b, BF_RADIUS]
     psi_core, nx, ny, cpx, cpy, cqx, cqy = core_distance(P, Q)
     if psi_core - ra - rb > margin:
         return 0
@@ -349,13 +361,25 @@ def _core_vs_core(S, q, a, b, margin, c_psi, c_n, c_pa, c_pb, start):
 
 
 @numba.njit(cache=True)
+def collide_2d(bi, bf, verts, poses, a, b, margin, c_psi, c_n, c_pa, c_pb, start):
+    """Contacts between bodies a and b with psi <= margin, written from index start; returns how many.
+
+    poses: (nb, 4) rows (x, y, cos theta, sin theta) from `models.kinematics.planar_poses`.
+    """
+    count = 0
+    ka, kb = bi[a, BI_KIND], bi[b, BI_KIND]
+    if ka == SHAPE_HALFSPACE and kb != SHAPE_HALFSPACE:
+        count = _halfspace_vs_core(bi, bf, verts, poses, a, b, True, margin, c_psi, c_n, c_pa, c_pb, start)
+    elif kb == SHAPE_HALFSPACE and ka != SHAPE_HALFSPACE:
+        count = _halfspace_vs_core(bi, bf, verts, poses, b, a, False, margin, c_psi, c_n, c_pa, c_pb, start)
+    elif ka != SHAPE_HALFSPACE:
+        count = _core_vs_core(bi, bf, verts, poses, a, b, margin, c_psi, c_n, c_pa, c_pb, start)
+    return count
+
+
+@numba.njit(cache=True)
 def collide_pair_2d(S, q, p, margin, c_psi, c_n, c_pa, c_pb, start):
-    """Contacts of pair p with psi <= margin, written from index start; returns how many."""
-    a, b = S.pair_a[p], S.pair_b[p]
-    if S.kind[a] == SHAPE_HALFSPACE and S.kind[b] == SHAPE_HALFSPACE:
-        return 0
-    if S.kind[a] == SHAPE_HALFSPACE:
-        return _halfspace_vs_core(S, q, a, b, True, margin, c_psi, c_n, c_pa, c_pb, start)
-    if S.kind[b] == SHAPE_HALFSPACE:
-        return _halfspace_vs_core(S, q, b, a, False, margin, c_psi, c_n, c_pa, c_pb, start)
-    return _core_vs_core(S, q, a, b, margin, c_psi, c_n, c_pa, c_pb, start)
+    """Contacts of pair p at configuration q (convenience entry; the rollout uses collide_2d)."""
+    poses = np.zeros((S.bi.shape[0], 4))
+    planar_poses(S.bi, S.bf, q, poses)
+    return collide_2d(S.bi, S.bf, S.verts, poses, S.pi[p, PI_A], S.pi[p, PI_B], margin, c_psi, c_n, c_pa, c_pb, start)

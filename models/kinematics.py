@@ -38,6 +38,12 @@ SHAPE_MESH = 5  # spatial convex mesh: verts (faces only in the python-fcl fallb
 Q_X, Q_Y, Q_Z, Q_ANGLE, Q_QW = 0, 1, 2, 3, 4
 V_X, V_Y, V_Z, V_ANGLE, V_WX = 0, 1, 2, 3, 4
 
+# columns of the packed tables (see SceneData.bi, .bf, .pi, .pf)
+BI_KIND, BI_VSTART, BI_VCOUNT, BI_QMAP, BI_VMAP, BI_COLUMNS = 0, 1, 2, 3, 11, 18
+BF_RADIUS, BF_HALF, BF_HSN, BF_HSO, BF_POS, BF_QUAT, BF_MASS, BF_INERTIA, BF_BOUND, BF_COLUMNS = 0, 1, 4, 7, 8, 11, 15, 16, 19, 20
+PI_A, PI_B, PI_MAX = 0, 1, 2
+PF_MU, PF_K, PF_C = 0, 1, 2
+
 
 class SceneData(NamedTuple):
     """Arrays describing a scene for compiled kernels (see module docstring)."""
@@ -66,6 +72,12 @@ class SceneData(NamedTuple):
     pair_K: np.ndarray  # float64[np]
     pair_C: np.ndarray  # float64[np]
     pair_max_contacts: np.ndarray  # int64[np] most contacts the pair can produce at once
+    # The same data packed into four tables for the hot paths: numba increfs every array of
+    # a tuple that crosses a function boundary, so hot code passes these few instead of S.
+    bi: np.ndarray  # int64[nb, BI_COLUMNS]: kind, vstart, vcount, qmap (8), vmap (7)
+    bf: np.ndarray  # float64[nb, BF_COLUMNS]: radius, half extents, hs normal, hs offset, base pos, base quat, mass, inertia, bound
+    pi: np.ndarray  # int64[np, 3]: a, b, max contacts
+    pf: np.ndarray  # float64[np, 3]: mu, K, C
 
 
 def _quat_z(theta: float) -> np.ndarray:
@@ -165,6 +177,14 @@ def compile_scene(scenario: Scenario) -> SceneData:
         [_max_contacts(kind[a], vcount[a], kind[b], vcount[b], dim) for a, b in zip(pair_a, pair_b)], np.int64
     )
     verts = np.concatenate(verts_list) if verts_list else np.zeros((0, dim))
+    bi = np.concatenate([kind[:, None], vstart[:, None], vcount[:, None], qmap, vmap], axis=1).astype(np.int64)
+    normals3 = np.zeros((nb, 3))
+    normals3[:, :dim] = hs_normal
+    bf = np.concatenate(
+        [radius[:, None], half_extents, normals3, hs_offset[:, None], base_pos, base_quat, mass[:, None], inertia, bound[:, None]], axis=1
+    )
+    assert bi.shape[1] == BI_COLUMNS and bf.shape[1] == BF_COLUMNS
+    pf = np.array([[p.mu, p.K, p.C] for p in pairs], float).reshape(-1, 3)
     return SceneData(
         dimension=dim,
         nq=len(scenario.coordinates),
@@ -190,6 +210,10 @@ def compile_scene(scenario: Scenario) -> SceneData:
         pair_K=np.array([p.K for p in pairs], float),
         pair_C=np.array([p.C for p in pairs], float),
         pair_max_contacts=max_contacts,
+        bi=np.ascontiguousarray(bi),
+        bf=np.ascontiguousarray(bf),
+        pi=np.ascontiguousarray(np.stack([pair_a, pair_b, max_contacts], axis=1).reshape(-1, 3).astype(np.int64)),
+        pf=np.ascontiguousarray(pf),
     )
 
 
@@ -246,13 +270,16 @@ def quat_to_matrix(q):
 
 @numba.njit(cache=True)
 def body_pose_2d(S, q, b):
-    """(px, py, cos theta, sin theta) of planar body b at configuration q."""
-    px = S.base_pos[b, 0] if S.qmap[b, Q_X] < 0 else q[S.qmap[b, Q_X]]
-    py = S.base_pos[b, 1] if S.qmap[b, Q_Y] < 0 else q[S.qmap[b, Q_Y]]
-    if S.qmap[b, Q_ANGLE] < 0:
-        # base_quat holds a rotation about z: theta = 2 atan2(z, w)
-        theta = 2.0 * np.arctan2(S.base_quat[b, 3], S.base_quat[b, 0])
-    else:
+    """(px, py, cos theta, sin theta) of planar body b at configuration q (single exit: hot path)."""
+    px = S.base_pos[b, 0]
+    py = S.base_pos[b, 1]
+    # base_quat holds a rotation about z: theta = 2 atan2(z, w)
+    theta = 2.0 * np.arctan2(S.base_quat[b, 3], S.base_quat[b, 0])
+    if S.qmap[b, Q_X] >= 0:
+        px = q[S.qmap[b, Q_X]]
+    if S.qmap[b, Q_Y] >= 0:
+        py = q[S.qmap[b, Q_Y]]
+    if S.qmap[b, Q_ANGLE] >= 0:
         theta = q[S.qmap[b, Q_ANGLE]]
     return px, py, np.cos(theta), np.sin(theta)
 
@@ -314,3 +341,32 @@ def G_matrix(S: SceneData, q: np.ndarray) -> np.ndarray:
                 for c in range(3):
                     G[S.qmap[b, Q_QW + r], S.vmap[b, V_WX + c]] = block[r, c]
     return G
+
+
+@numba.njit(cache=True)
+def planar_poses(bi, bf, q, poses):
+    """Fill poses (nb, 4) with (x, y, cos theta, sin theta) of every planar body at q."""
+    for b in range(bi.shape[0]):
+        x = bf[b, BF_POS]
+        y = bf[b, BF_POS + 1]
+        theta = 2.0 * np.arctan2(bf[b, BF_QUAT + 3], bf[b, BF_QUAT])
+        if bi[b, BI_QMAP + Q_X] >= 0:
+            x = q[bi[b, BI_QMAP + Q_X]]
+        if bi[b, BI_QMAP + Q_Y] >= 0:
+            y = q[bi[b, BI_QMAP + Q_Y]]
+        if bi[b, BI_QMAP + Q_ANGLE] >= 0:
+            theta = q[bi[b, BI_QMAP + Q_ANGLE]]
+        poses[b, 0] = x
+        poses[b, 1] = y
+        poses[b, 2] = np.cos(theta)
+        poses[b, 3] = np.sin(theta)
+
+
+@numba.njit(cache=True)
+def positions(bi, bf, q, out):
+    """Fill out (nb, 3) with every body's origin at q (planar: z = 0)."""
+    for b in range(bi.shape[0]):
+        for k in range(3):
+            out[b, k] = bf[b, BF_POS + k]
+            if bi[b, BI_QMAP + k] >= 0:
+                out[b, k] = q[bi[b, BI_QMAP + k]]

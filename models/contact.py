@@ -1,0 +1,256 @@
+"""Contact detection and contact Jacobians, compiled: broadphase -> narrowphase -> W_n, W_t, W_o.
+
+The paper's Section 3.1: for every candidate pair, the signed distance psi_i(q), the contact
+frame (normal n, tangents t and, in space, o), and the Jacobians
+W_{n,t,o} = G(q)^T (d psi_{n,t,o} / d q)^T, here assembled directly in velocity space: the
+column of contact i holds, for each free DOF, the rate at which that DOF moves B's contact
+point relative to A's along the direction (translation: the direction itself; rotation:
+r x direction, r from the body's origin to its contact point). Only free DOFs have rows.
+
+Broadphase: a pair is skipped when its bounding spheres stay apart by more than one step
+can close: ``margin + h * (speed bound of A + speed bound of B)``, with a body's speed bound
+|v| + |w| * (its bounding radius). Two bodies that never move are never pairs.
+
+Everything here runs in numba; `contact_frames` is the Python-facing convenience.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from models.contact2d import collide_2d
+from models.contact3d import collide_pair_3d, tangent_basis
+from models.kinematics import (
+    BF_BOUND,
+    BF_HSN,
+    BF_HSO,
+    BF_QUAT,
+    BI_KIND,
+    BI_QMAP,
+    BI_VMAP,
+    PI_A,
+    PI_B,
+    Q_ANGLE,
+    SHAPE_HALFSPACE,
+    V_ANGLE,
+    V_WX,
+    SceneData,
+    planar_poses,
+    positions,
+)
+
+#: Contacts are kept while psi <= this plus what one step can close (m).
+DEFAULT_MARGIN = 1e-3
+#: The step-closing margin is multiplied by this for safety against curved motion.
+MARGIN_SAFETY = 2.0
+
+
+@numba.njit(cache=True)
+def body_origin(S, q, b):
+    out = np.zeros((S.bi.shape[0], 3))
+    positions(S.bi, S.bf, q, out)
+    return out[b].copy()
+
+
+@numba.njit(cache=True)
+def _speed_bound(bi, bf, nu, b):
+    """Upper bound of the speed of any point of body b (0 for fixed bodies)."""
+    v2 = 0.0
+    w2 = 0.0
+    for k in range(3):
+        if bi[b, BI_VMAP + k] >= 0:
+            v2 += nu[bi[b, BI_VMAP + k]] ** 2
+        if bi[b, BI_VMAP + V_WX + k] >= 0:
+            w2 += nu[bi[b, BI_VMAP + V_WX + k]] ** 2
+    if bi[b, BI_VMAP + V_ANGLE] >= 0:
+        w2 += nu[bi[b, BI_VMAP + V_ANGLE]] ** 2
+    bound = np.sqrt(v2)
+    if w2 > 0.0:
+        bound += np.sqrt(w2) * bf[b, BF_BOUND]
+    return bound
+
+
+@numba.njit(cache=True)
+def _halfspace_normal(bi, bf, q, h, pos):
+    """World normal (nx, ny, nz) and offset of half-space body h."""
+    lx, ly, lz = bf[h, BF_HSN], bf[h, BF_HSN + 1], bf[h, BF_HSN + 2]
+    nx, ny, nz = lx, ly, lz
+    if bi[h, BI_QMAP + Q_ANGLE] >= 0 or bf[h, BF_QUAT + 1] != 0.0 or bf[h, BF_QUAT + 2] != 0.0 or bf[h, BF_QUAT + 3] != 0.0:
+        w, x, y, z = bf[h, BF_QUAT], bf[h, BF_QUAT + 1], bf[h, BF_QUAT + 2], bf[h, BF_QUAT + 3]
+        if bi[h, BI_QMAP + Q_ANGLE] >= 0:
+            half = 0.5 * q[bi[h, BI_QMAP + Q_ANGLE]]
+            w, x, y, z = np.cos(half), 0.0, 0.0, np.sin(half)
+        nx = (1 - 2 * (y * y + z * z)) * lx + 2 * (x * y - w * z) * ly + 2 * (x * z + w * y) * lz
+        ny = 2 * (x * y + w * z) * lx + (1 - 2 * (x * x + z * z)) * ly + 2 * (y * z - w * x) * lz
+        nz = 2 * (x * z - w * y) * lx + 2 * (y * z + w * x) * ly + (1 - 2 * (x * x + y * y)) * lz
+    off = bf[h, BF_HSO] + nx * pos[h, 0] + ny * pos[h, 1] + nz * pos[h, 2]
+    return nx, ny, nz, off
+
+
+@numba.njit(cache=True)
+def broadphase_keep(S, q, p, reach):
+    """False when pair p is certainly farther apart than reach (bounding spheres / half-space)."""
+    pos = np.zeros((S.bi.shape[0], 3))
+    positions(S.bi, S.bf, q, pos)
+    return _keep(S.bi, S.bf, q, pos, S.pi[p, PI_A], S.pi[p, PI_B], reach)
+
+
+@numba.njit(cache=True)
+def _keep(bi, bf, q, pos, a, b, reach):
+    keep = False
+    ka, kb = bi[a, BI_KIND], bi[b, BI_KIND]
+    if ka == SHAPE_HALFSPACE or kb == SHAPE_HALFSPACE:
+        h, o = a, b
+        if ka != SHAPE_HALFSPACE:
+            h, o = b, a
+        if bi[o, BI_KIND] != SHAPE_HALFSPACE:
+            nx, ny, nz, off = _halfspace_normal(bi, bf, q, h, pos)
+            keep = nx * pos[o, 0] + ny * pos[o, 1] + nz * pos[o, 2] - off - bf[o, BF_BOUND] <= reach
+    else:
+        d = np.sqrt((pos[a, 0] - pos[b, 0]) ** 2 + (pos[a, 1] - pos[b, 1]) ** 2 + (pos[a, 2] - pos[b, 2]) ** 2)
+        keep = d - bf[a, BF_BOUND] - bf[b, BF_BOUND] <= reach
+    return keep
+
+
+@numba.njit(cache=True)
+def detect_contacts(S, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsupported):
+    """All contacts with psi <= their pair's margin. Returns (count, number of unsupported pairs).
+
+    A pair's margin is ``margin + MARGIN_SAFETY * h * (speed bounds of both bodies)``.
+    Buffers hold at least sum(S.pair_max_contacts) rows. Pairs the compiled kernels cannot
+    handle (spatial mesh pairs other than mesh-plane) are listed in ``unsupported``.
+    """
+    return detect_contacts_packed(S.dimension, S.bi, S.bf, S.verts, S.pi, S, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsupported)
+
+
+@numba.njit(cache=True)
+def detect_contacts_packed(dimension, bi, bf, verts, pi, S, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsupported):
+    nb = bi.shape[0]
+    pos = np.empty((nb, 3))
+    positions(bi, bf, q, pos)
+    poses = np.empty((nb, 4))
+    if dimension == 2:
+        planar_poses(bi, bf, q, poses)
+    nc = 0
+    n_unsupported = 0
+    for p in range(pi.shape[0]):
+        a, b = pi[p, PI_A], pi[p, PI_B]
+        reach = margin + MARGIN_SAFETY * h * (_speed_bound(bi, bf, nu, a) + _speed_bound(bi, bf, nu, b))
+        if not _keep(bi, bf, q, pos, a, b, reach):
+            continue
+        if dimension == 2:
+            k = collide_2d(bi, bf, verts, poses, a, b, reach, c_psi, c_n, c_pa, c_pb, nc)
+        else:
+            k = collide_pair_3d(S, q, p, reach, c_psi, c_n, c_pa, c_pb, nc)
+        if k < 0:
+            unsupported[n_unsupported] = p
+            n_unsupported += 1
+        else:
+            for i in range(nc, nc + k):
+                c_pair[i] = p
+            nc += k
+    return nc, n_unsupported
+
+
+@numba.njit(cache=True)
+def tangents(S, nc, c_n, c_t, c_o):
+    """Tangent directions: planar t = z x n; spatial (t, o) an orthonormal basis with n."""
+    for i in range(nc):
+        if S.dimension == 2:
+            c_t[i, 0], c_t[i, 1], c_t[i, 2] = -c_n[i, 1], c_n[i, 0], 0.0
+        else:
+            t, o = tangent_basis(c_n[i])
+            c_t[i, 0], c_t[i, 1], c_t[i, 2] = t[0], t[1], t[2]
+            c_o[i, 0], c_o[i, 1], c_o[i, 2] = o[0], o[1], o[2]
+
+
+@numba.njit(cache=True)
+def contact_jacobian(S, q, nc, c_pair, dirs, c_pa, c_pb, W):
+    """Fill W (nv, >= nc) with the Jacobian columns of directions dirs[i] at each contact."""
+    jacobian_packed(S.bi, S.bf, S.pi, q, nc, c_pair, dirs, c_pa, c_pb, W)
+
+
+@numba.njit(cache=True)
+def jacobian_packed(bi, bf, pi, q, nc, c_pair, dirs, c_pa, c_pb, W):
+    pos = np.empty((bi.shape[0], 3))
+    positions(bi, bf, q, pos)
+    W[:, :nc] = 0.0
+    for i in range(nc):
+        p = c_pair[i]
+        for side in range(2):
+            b = pi[p, PI_B] if side == 0 else pi[p, PI_A]
+            sign = 1.0 if side == 0 else -1.0
+            pt = c_pb[i] if side == 0 else c_pa[i]
+            dx, dy, dz = dirs[i, 0], dirs[i, 1], dirs[i, 2]
+            for k in range(3):
+                if bi[b, BI_VMAP + k] >= 0:
+                    W[bi[b, BI_VMAP + k], i] += sign * dirs[i, k]
+            rx, ry, rz = pt[0] - pos[b, 0], pt[1] - pos[b, 1], pt[2] - pos[b, 2]
+            cx = ry * dz - rz * dy
+            cy = rz * dx - rx * dz
+            cz = rx * dy - ry * dx
+            if bi[b, BI_VMAP + V_ANGLE] >= 0:
+                W[bi[b, BI_VMAP + V_ANGLE], i] += sign * cz
+            if bi[b, BI_VMAP + V_WX] >= 0:
+                W[bi[b, BI_VMAP + V_WX], i] += sign * cx
+                W[bi[b, BI_VMAP + V_WX + 1], i] += sign * cy
+                W[bi[b, BI_VMAP + V_WX + 2], i] += sign * cz
+
+
+# ----------------------------------------------------------------------------- Python facing
+
+
+@dataclass(frozen=True)
+class Contacts:
+    """Contacts at one configuration. Arrays have one row (or column, for W) per contact."""
+
+    pair: np.ndarray  # int (nc,)
+    psi: np.ndarray  # (nc,)
+    n: np.ndarray  # (nc, 3)
+    t: np.ndarray  # (nc, 3)
+    o: np.ndarray  # (nc, 3) zeros in the plane
+    pa: np.ndarray  # (nc, 3)
+    pb: np.ndarray  # (nc, 3)
+    W_n: np.ndarray  # (nv, nc)
+    W_t: np.ndarray  # (nv, nc)
+    W_o: np.ndarray  # (nv, nc) empty columns in the plane
+    unsupported: np.ndarray  # pair indices left to python-fcl
+
+
+def capacity(S: SceneData) -> int:
+    return int(np.sum(S.pair_max_contacts))
+
+
+def contact_frames(S: SceneData, q: np.ndarray, nu: np.ndarray | None = None, h: float = 0.0, margin: float = DEFAULT_MARGIN) -> Contacts:
+    """Detect contacts at q (velocities nu over a step h widen the margin) and assemble W."""
+    q = np.ascontiguousarray(q, dtype=np.float64)
+    nu = np.zeros(S.nv) if nu is None else np.ascontiguousarray(nu, dtype=np.float64)
+    cap = max(capacity(S), 1)
+    c_pair = np.zeros(cap, np.int64)
+    c_psi = np.zeros(cap)
+    c_n, c_pa, c_pb = np.zeros((cap, 3)), np.zeros((cap, 3)), np.zeros((cap, 3))
+    unsupported = np.zeros(max(len(S.pair_a), 1), np.int64)
+    nc, nu_count = detect_contacts(S, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsupported)
+    c_t, c_o = np.zeros((cap, 3)), np.zeros((cap, 3))
+    tangents(S, nc, c_n, c_t, c_o)
+    W_n, W_t, W_o = np.zeros((S.nv, cap)), np.zeros((S.nv, cap)), np.zeros((S.nv, cap))
+    contact_jacobian(S, q, nc, c_pair, c_n, c_pa, c_pb, W_n)
+    contact_jacobian(S, q, nc, c_pair, c_t, c_pa, c_pb, W_t)
+    if S.dimension == 3:
+        contact_jacobian(S, q, nc, c_pair, c_o, c_pa, c_pb, W_o)
+    return Contacts(
+        pair=c_pair[:nc].copy(),
+        psi=c_psi[:nc].copy(),
+        n=c_n[:nc].copy(),
+        t=c_t[:nc].copy(),
+        o=c_o[:nc].copy(),
+        pa=c_pa[:nc].copy(),
+        pb=c_pb[:nc].copy(),
+        W_n=W_n[:, :nc].copy(),
+        W_t=W_t[:, :nc].copy(),
+        W_o=W_o[:, :nc].copy() if S.dimension == 3 else np.zeros((S.nv, 0)),
+        unsupported=unsupported[:nu_count].copy(),
+    )

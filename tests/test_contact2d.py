@@ -1,0 +1,157 @@
+"""Planar contact kernels against the reference signed distance, Jacobians against finite
+differences and rigid-body point velocities, manifolds against closed forms."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+from models import geometry as geo
+from models.contact import contact_frames
+from models.contact2d import collide_pair_2d
+from tests.contact_scenes import SHAPES_2D, pair_scene
+
+PAIRS = list(itertools.combinations_with_replacement(sorted(SHAPES_2D), 2))
+
+
+def reference_psi(scenario, q, p, S):
+    A = scenario.spec.bodies[S.pair_a[p]].name
+    B = scenario.spec.bodies[S.pair_b[p]].name
+    P = scenario.placements(q)
+    return geo.signed_distance(scenario.geometries[A], P[A], scenario.geometries[B], P[B])
+
+
+def kernel(S, q, p, margin=1e9):
+    cap = int(S.pair_max_contacts[p])
+    psi, n, pa, pb = np.zeros(cap), np.zeros((cap, 3)), np.zeros((cap, 3)), np.zeros((cap, 3))
+    k = collide_pair_2d(S, q, p, margin, psi, n, pa, pb, 0)
+    return psi[:k], n[:k], pa[:k], pb[:k]
+
+
+def random_q(rng):
+    return np.concatenate([rng.uniform(-1, 1, 2), rng.uniform(-3, 3, 1), rng.uniform(-1, 1, 2), rng.uniform(-3, 3, 1)])
+
+
+@pytest.mark.parametrize("a, b", PAIRS, ids=lambda x: x)
+def test_min_psi_matches_reference_on_random_touching_and_penetrating_poses(tmp_path, a, b):
+    scenario, S = pair_scene(tmp_path, a, b)
+    rng = np.random.default_rng(hash((a, b)) % 2**32)
+    checked = 0
+    for _ in range(120):
+        q = random_q(rng)
+        psi, n, _, _ = kernel(S, q, 2)  # pair 2 = (a, b)
+        # slide b along the witness normal to touching, just apart, just inside, and 1 mm inside
+        i = int(np.argmin(psi))
+        for target in (None, 0.0, 1e-9, -1e-9, -1e-3):
+            qq = q.copy()
+            if target is not None:
+                qq[3:5] += (target - psi[i]) * n[i, :2]
+            for p in range(3):
+                got, nn, pa, pb = kernel(S, qq, p)
+                assert 1 <= len(got) <= S.pair_max_contacts[p]
+                assert got.min() == pytest.approx(reference_psi(scenario, qq, p, S), abs=1e-9)
+                np.testing.assert_allclose(np.linalg.norm(nn, axis=1), 1.0, atol=1e-12)
+                np.testing.assert_allclose(pb - pa, got[:, None] * nn, atol=1e-9)
+                checked += 1
+    assert checked == 120 * 5 * 3
+
+
+@pytest.mark.parametrize("a, b", PAIRS, ids=lambda x: x)
+def test_normal_jacobian_is_the_gradient_of_the_reference_distance(tmp_path, a, b):
+    scenario, S = pair_scene(tmp_path, a, b)
+    rng = np.random.default_rng(7)
+    eps = 1e-6
+    for _ in range(40):
+        q = random_q(rng)
+        c = contact_frames(S, q, margin=1e9)
+        for p in range(3):
+            rows = np.flatnonzero(c.pair == p)
+            psi = c.psi[rows]
+            order = np.argsort(psi)
+            if len(psi) > 1 and psi[order[1]] - psi[order[0]] < 1e-4:
+                continue  # the min of two nearly equal contacts is not differentiable there
+            col = c.W_n[:, rows[order[0]]]
+            for j in range(S.nv):
+                dq = np.zeros(S.nq)
+                dq[j] = eps
+                fd = (reference_psi(scenario, q + dq, p, S) - reference_psi(scenario, q - dq, p, S)) / (2 * eps)
+                assert col[j] == pytest.approx(fd, abs=1e-5)
+
+
+def point_velocity(q, nu, body, point):
+    """Velocity of a material point of planar body 1 (a) or 2 (b): v + w x r."""
+    base = 0 if body == "a" else 3
+    r = point[:2] - q[base : base + 2]
+    w = nu[base + 2]
+    return np.array([nu[base] - w * r[1], nu[base + 1] + w * r[0]])
+
+
+@pytest.mark.parametrize("a, b", PAIRS[:6], ids=lambda x: x)
+def test_tangent_jacobian_is_the_relative_sliding_velocity(tmp_path, a, b):
+    _, S = pair_scene(tmp_path, a, b)
+    rng = np.random.default_rng(11)
+    for _ in range(30):
+        q = random_q(rng)
+        nu = rng.normal(size=6)
+        c = contact_frames(S, q, margin=1e9)
+        for i in np.flatnonzero(c.pair == 2):
+            rel = point_velocity(q, nu, "b", c.pb[i]) - point_velocity(q, nu, "a", c.pa[i])
+            assert c.W_t[:, i] @ nu == pytest.approx(rel @ c.t[i, :2], abs=1e-12)
+            assert c.W_n[:, i] @ nu == pytest.approx(rel @ c.n[i, :2], abs=1e-12)
+            assert c.t[i, :2] @ c.n[i, :2] == pytest.approx(0.0, abs=1e-15)
+
+
+def test_box_flat_on_the_floor_makes_two_contacts_at_its_corners(tmp_path):
+    scenario, S = pair_scene(tmp_path, "box", "disc")
+    # rotate the box to the floor's slope and put its lower face 1e-4 above the floor line
+    n = np.array([0.3, 1.0]) / np.hypot(0.3, 1.0)
+    theta = np.arctan2(-n[0], n[1])
+    offset = -20.0 / np.hypot(0.3, 1.0)
+    centre = (offset + 0.2 + 1e-4) * n
+    q = np.array([centre[0], centre[1], theta, 5.0, 5.0, 0.0])
+    psi, nn, pa, pb = kernel(S, q, 0)
+    assert len(psi) == 4 and np.sum(np.abs(psi - 1e-4) < 1e-12) == 2
+    lower = np.flatnonzero(np.abs(psi - 1e-4) < 1e-12)
+    R = geo.rotation_2d(theta)
+    corners = {tuple(np.round(R @ v + centre, 9)) for v in ([-0.4, -0.2], [0.4, -0.2])}
+    assert {tuple(np.round(pb[i, :2], 9)) for i in lower} == corners
+
+
+def test_face_to_face_boxes_give_the_overlap_interval(tmp_path):
+    _, S = pair_scene(tmp_path, "box", "box")
+    # b directly above a, shifted right by 0.3, gap 0.01: contacts at x = -0.1 and 0.4
+    q = np.array([0.0, 0.0, 0.0, 0.3, 0.41, 0.0])
+    psi, nn, pa, pb = kernel(S, q, 2)
+    assert len(psi) == 2
+    np.testing.assert_allclose(psi, 0.01, atol=1e-12)
+    np.testing.assert_allclose(nn[:, :2], [[0, 1], [0, 1]], atol=1e-12)
+    assert sorted(np.round(pb[:, 0], 12)) == [-0.1, 0.4]
+
+
+def test_paper_scene_contacts(triangle_file):
+    from models.kinematics import compile_scene
+    from models.scenario import load_scenario
+
+    scenario = load_scenario(triangle_file)
+    S = compile_scene(scenario)
+    # fingers lowered onto the faces: finger1 at depth where it touches the left face
+    y_touch = 0.5 + 0.05 * np.sqrt(2)  # centre above the face point x = -0.5, y = 0.5
+    q = np.array([0.0, y_touch, y_touch])
+    c = contact_frames(S, q)
+    pairs = {(scenario.spec.bodies[S.pair_a[p]].name, scenario.spec.bodies[S.pair_b[p]].name) for p in c.pair}
+    assert ("triangle", "finger1") in pairs and ("triangle", "finger2") in pairs
+    i = next(i for i, p in enumerate(c.pair) if scenario.spec.bodies[S.pair_b[p]].name == "finger1")
+    assert c.psi[i] == pytest.approx(0.0, abs=1e-12)
+    np.testing.assert_allclose(c.n[i, :2], [-np.sqrt(0.5), np.sqrt(0.5)], atol=1e-12)
+    # W_n column over (triangle.x, finger1.y, finger2.y): the paper's sqrt(2)/2 entries
+    np.testing.assert_allclose(c.W_n[:, i], [np.sqrt(0.5), np.sqrt(0.5), 0.0], atol=1e-12)
+
+
+def test_broadphase_keeps_far_pairs_out_and_widens_with_speed(tmp_path):
+    _, S = pair_scene(tmp_path, "disc", "disc")
+    q = np.array([0.0, 0.0, 0.0, 1.0, 0.0, 0.0])  # 0.4 apart
+    assert not np.any(contact_frames(S, q).pair == 2)
+    nu = np.array([0.0, 0.0, 0.0, -50.0, 0.0, 0.0])  # closing at 50 m/s: 0.5 m in one 10 ms step
+    assert np.any(contact_frames(S, q, nu=nu, h=1e-2).pair == 2)
