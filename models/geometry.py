@@ -294,6 +294,52 @@ def signed_distance(ga: Geometry, Xa: Placement, gb: Geometry, Xb: Placement) ->
         P = ga.core @ Xa.rotation.T + Xa.translation
         Q = gb.core @ Xb.rotation.T + Xb.translation
         return core_signed_distance_2d(P, Q) - ga.radius - gb.radius
+    return _spatial_signed_distance(ga, Xa, gb, Xb)
+
+
+def _segment_closest(p1, q1, p2, q2) -> tuple[np.ndarray, np.ndarray]:
+    """Closest points of segments [p1, q1] and [p2, q2] (Ericson, Real-Time Collision Detection 5.1.9)."""
+    d1, d2, r = q1 - p1, q2 - p2, p1 - p2
+    a, e, f = float(d1 @ d1), float(d2 @ d2), float(d2 @ r)
+    if a <= 1e-300 and e <= 1e-300:
+        return p1, p2
+    if a <= 1e-300:
+        return p1, p2 + min(max(f / e, 0.0), 1.0) * d2
+    c = float(d1 @ r)
+    if e <= 1e-300:
+        return p1 + min(max(-c / a, 0.0), 1.0) * d1, p2
+    b = float(d1 @ d2)
+    denom = a * e - b * b
+    s = min(max((b * f - c * e) / denom, 0.0), 1.0) if denom > 1e-14 * a * e else 0.0
+    t = (b * s + f) / e
+    if t < 0.0:
+        t, s = 0.0, min(max(-c / a, 0.0), 1.0)
+    elif t > 1.0:
+        t, s = 1.0, min(max((b - c) / a, 0.0), 1.0)
+    return p1 + s * d1, p2 + t * d2
+
+
+def _point_box_signed_distance(p: np.ndarray, half: np.ndarray) -> float:
+    """Signed distance of a point (box frame) to a box of half extents `half`."""
+    d = np.abs(p) - half
+    outside = np.linalg.norm(np.maximum(d, 0.0))
+    return float(outside) if outside > 0.0 else float(np.max(d))
+
+
+def _spatial_signed_distance(ga: Geometry, Xa: Placement, gb: Geometry, Xb: Placement) -> float:
+    """Analytic for pairs of spheres and capsules and for sphere-box (python-fcl's GJK/EPA can
+    abort the process on such pairs near touching); python-fcl for box-box, capsule-box, meshes."""
+    kinds = {ga.fcl_args[0], gb.fcl_args[0]}
+    if kinds <= {"sphere", "capsule"}:
+        A = ga.core @ Xa.rotation.T + Xa.translation
+        B = gb.core @ Xb.rotation.T + Xb.translation
+        pa, pb = _segment_closest(A[0], A[-1], B[0], B[-1])
+        return float(np.linalg.norm(pb - pa)) - ga.radius - gb.radius
+    if kinds == {"sphere", "box"}:
+        sphere, Xs, box, Xbox = (ga, Xa, gb, Xb) if ga.fcl_args[0] == "sphere" else (gb, Xb, ga, Xa)
+        centre = Xbox.rotation.T @ (Xs.translation - Xbox.translation)
+        half = 0.5 * np.asarray(box.fcl_args[1:], dtype=float)
+        return _point_box_signed_distance(centre, half) - sphere.radius
     return _fcl_signed_distance(ga, Xa, gb, Xb)
 
 

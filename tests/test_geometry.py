@@ -154,3 +154,24 @@ def test_rpy_quaternion_is_unit_and_matches_rotation():
     Ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
     Rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
     np.testing.assert_allclose(R, Rz @ Ry @ Rx, atol=1e-12)
+
+
+def test_sphere_resting_on_a_box_near_touching_does_not_reach_fcl():
+    """python-fcl 0.7 aborts the process on this pose (libccd); the analytic path answers."""
+    sphere = g3(Sphere(type="sphere", radius=0.07))
+    box = g3(Box(type="box", size=(0.4, 0.3, 0.2)))
+    d = geo.signed_distance(box, at3(0, 0, 0), sphere, at3(0.05, 0.02, 0.1 + 0.07 - 1e-9))
+    assert d == pytest.approx(-1e-9, abs=1e-15)
+    # inside: depth to the nearest face
+    assert geo.signed_distance(box, at3(0, 0, 0), sphere, at3(0.15, 0.0, 0.0)) == pytest.approx(-0.05 - 0.07)
+    # off an edge
+    assert geo.signed_distance(box, at3(0, 0, 0), sphere, at3(0.3, 0.25, 0.0)) == pytest.approx(np.hypot(0.1, 0.1) - 0.07)
+
+
+def test_capsule_pairs_are_analytic():
+    cap = g3(Capsule(type="capsule", radius=0.1, length=1.0))
+    # crossed capsules, one above the other
+    q = geo.rpy_quaternion(0.0, 0.0, math.pi / 2)
+    assert geo.signed_distance(cap, at3(0, 0, 0), cap, at3(0.2, 0.1, 0.5, q)) == pytest.approx(0.3)
+    # parallel, overlapping sideways
+    assert geo.signed_distance(cap, at3(0, 0, 0), cap, at3(0.3, 0.15, 0.0)) == pytest.approx(-0.05)
