@@ -1,0 +1,983 @@
+"""Compiled solvers for the linear complementarity problem (LCP), with honest statuses.
+
+The LCP(M, q): given a square ``M`` (n x n) and ``q`` (n,), find ``z`` with
+
+    z >= 0,    w = M z + q >= 0,    z^T w = 0.
+
+Two solvers, both compiled with numba:
+
+* `lemke_kernel` -- Lemke's complementary pivoting method (covering vector e = ones, dense
+  revised tableau, lexicographic minimum-ratio rule).  Finite and exact up to round-off; it
+  solves every LCP with a P-matrix or a positive semidefinite M that has a solution, and more
+  generally every feasible LCP with a copositive-plus M.  On other matrices it may stop on a
+  secondary ray although a solution exists (e.g. bimatrix games).
+* `pgs_kernel` -- projected Gauss-Seidel / projected SOR.  Cheap, converges for symmetric
+  positive definite M (and some other classes), needs M[i, i] > 0.
+
+Use `solve_lcp`, the Python-facing entry point: it validates the input, runs a kernel, then
+*recomputes* ``w`` and the residual from ``M``, ``q`` and ``z`` (it never trusts a kernel's own
+success flag) and classifies the result with an `LCPStatus`.  It never raises on numerical
+trouble: bad shapes, non-finite numbers, divergence, cycling and ray termination all come
+back as statuses.
+
+Residual (`complementarity_residual`): the natural-map residual
+
+    r(z) = || min(z, M z + q) ||_inf / (1 + ||q||_inf),
+
+which is zero exactly when z solves the LCP (it measures infeasibility of z, infeasibility of
+w and complementarity at once; it is the inf-norm version of Siconos's
+``||z - max(0, z - w)|| / (1 + ||q||)``).  It is absolute for small q and relative to q for
+large q; it is +inf if z or w has a non-finite entry.
+
+Also here: the conversion of a 2D frictional contact problem ("fc2d", local form) to an LCP
+(`contact_lcp_from_fc2d`), its inverse map (`fc2d_reactions_from_lcp`) and a direct check of
+the Coulomb conditions (`fc2d_coulomb_error`).
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+__all__ = [
+    "DEFAULT_LEMKE_PIVOTS_PER_VARIABLE",
+    "DEFAULT_PGS_MAX_ITERATIONS",
+    "DEFAULT_TOL",
+    "INACCURATE_TOL",
+    "LCPResult",
+    "LCPStatus",
+    "Fc2dLCP",
+    "complementarity_residual",
+    "contact_lcp_from_fc2d",
+    "default_max_iterations",
+    "fc2d_coulomb_error",
+    "fc2d_reactions_from_lcp",
+    "lemke_kernel",
+    "pgs_kernel",
+    "solve_lcp",
+]
+
+# --------------------------------------------------------------------------------------------
+# Status codes.  Plain module-level ints so that the numba kernels can return them; the
+# `LCPStatus` enum below has the same values.
+# --------------------------------------------------------------------------------------------
+STATUS_SOLVED = 0
+STATUS_SOLVED_INACCURATE = 1
+STATUS_RAY_TERMINATION = 2
+STATUS_MAX_ITERATIONS = 3
+STATUS_ZERO_DIAGONAL = 4
+STATUS_NON_FINITE_INPUT = 5
+STATUS_NON_FINITE_OUTPUT = 6
+STATUS_INVALID_INPUT = 7
+STATUS_NUMERICAL_FAILURE = 8
+
+# --------------------------------------------------------------------------------------------
+# Algorithm constants.
+# --------------------------------------------------------------------------------------------
+#: Default acceptance tolerance on the recomputed residual (`complementarity_residual`).
+DEFAULT_TOL = 1e-9
+#: A finished solve whose residual is above ``tol`` but at most this is SOLVED_INACCURATE;
+#: above this it is NUMERICAL_FAILURE.
+INACCURATE_TOL = 1e-6
+#: Default Lemke pivot limit is this times (n + 1).
+DEFAULT_LEMKE_PIVOTS_PER_VARIABLE = 50
+#: Default number of PGS sweeps.
+DEFAULT_PGS_MAX_ITERATIONS = 10_000
+#: Lemke: an entry d_i = sum_k Binv[i, k] a_k of the entering column is a pivot candidate
+#: only if d_i > LEMKE_PIVOT_TOL * max(sum_k |Binv[i, k] a_k|, h_i max_k |a_k|), where h_i is
+#: the magnitude of the numbers that went into row i of Binv (below that d_i is round-off).
+#: Row-wise, so it does not depend on how M, q and the covering vector compare in scale.
+LEMKE_PIVOT_TOL = 1e-10
+#: Lemke: in a stage of the lexicographic ratio test (values a_i, divisors d_i, minimum ratio
+#: r_min), row i ties with the minimum when (a_i / d_i - r_min) * max_c d_c is at most
+#: LEMKE_TIE_TOL times the magnitudes involved (|a_i|, |r_min| d_c, the stage's largest |a|
+#: or the LEMKE_NOISE floor): choosing it then moves no other basic value by more than
+#: round-off.
+LEMKE_TIE_TOL = 1e-11
+#: Lemke: round-off floor of the tableau entries (a few hundred ulps) relative to the size of
+#: the numbers that went into them; differences below it are ties in the lexicographic test.
+LEMKE_NOISE = 1e-13
+#: Lemke: when the path ends on a ray at a point whose natural-map residual is at most this
+#: (z0 ~ 0: a round-off-broken tie with z0), that point is returned as a solution.
+LEMKE_RESCUE_TOL = DEFAULT_TOL
+#: PGS: M[i, i] <= PGS_ZERO_DIAGONAL_TOL * max_j |M[j, j]| (or <= 0) counts as a zero diagonal.
+PGS_ZERO_DIAGONAL_TOL = 1e-14
+
+
+class LCPStatus(enum.IntEnum):
+    """Outcome of an LCP solve.  Only `SOLVED` is a success; see `.message`."""
+
+    SOLVED = STATUS_SOLVED
+    SOLVED_INACCURATE = STATUS_SOLVED_INACCURATE
+    RAY_TERMINATION = STATUS_RAY_TERMINATION
+    MAX_ITERATIONS = STATUS_MAX_ITERATIONS
+    ZERO_DIAGONAL = STATUS_ZERO_DIAGONAL
+    NON_FINITE_INPUT = STATUS_NON_FINITE_INPUT
+    NON_FINITE_OUTPUT = STATUS_NON_FINITE_OUTPUT
+    INVALID_INPUT = STATUS_INVALID_INPUT
+    NUMERICAL_FAILURE = STATUS_NUMERICAL_FAILURE
+
+    @property
+    def message(self) -> str:
+        """A human-readable explanation of the status."""
+        return _STATUS_MESSAGES[self]
+
+    @property
+    def is_success(self) -> bool:
+        return self is LCPStatus.SOLVED
+
+
+_STATUS_MESSAGES = {
+    LCPStatus.SOLVED: "solved: the recomputed residual is within the tolerance",
+    LCPStatus.SOLVED_INACCURATE: (
+        "the solver finished, but the recomputed residual is above the tolerance "
+        f"(though at most {INACCURATE_TOL:g}); z is an approximate solution"
+    ),
+    LCPStatus.RAY_TERMINATION: (
+        "Lemke ended on a secondary ray: for copositive-plus M (e.g. positive semidefinite) "
+        "this proves the LCP has no solution; for other M it proves nothing (a solution may "
+        "exist that Lemke cannot reach)"
+    ),
+    LCPStatus.MAX_ITERATIONS: (
+        "the pivot / iteration limit was reached before a solution was found"
+    ),
+    LCPStatus.ZERO_DIAGONAL: (
+        "PGS needs every diagonal entry M[i, i] > 0; a diagonal entry is zero, negative or "
+        "negligible (use Lemke, or regularise M)"
+    ),
+    LCPStatus.NON_FINITE_INPUT: "M or q (or z0) contains NaN or infinity",
+    LCPStatus.NON_FINITE_OUTPUT: (
+        "the iterates became non-finite (overflow / divergence); z is not a solution"
+    ),
+    LCPStatus.INVALID_INPUT: (
+        "invalid input: M must be a square 2-D array, q a 1-D array of matching length, "
+        "z0 (if given) like q, tol > 0, 0 < omega < 2, max_iterations >= 0"
+    ),
+    LCPStatus.NUMERICAL_FAILURE: (
+        "the solver finished, but the recomputed residual is above the loose tolerance "
+        f"{INACCURATE_TOL:g} (round-off or a singular pivot); z is not a solution"
+    ),
+}
+
+
+# --------------------------------------------------------------------------------------------
+# Residual.
+# --------------------------------------------------------------------------------------------
+@numba.njit(cache=True, error_model="numpy")
+def _matvec_plus(M, z, q):
+    """w = M z + q with explicit loops (works for any array layout)."""
+    n = q.shape[0]
+    w = np.empty(n)
+    for i in range(n):
+        s = q[i]
+        for j in range(n):
+            s += M[i, j] * z[j]
+        w[i] = s
+    return w
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _natural_map_residual(z, w, q):
+    """||min(z, w)||_inf / (1 + ||q||_inf); +inf if anything is non-finite."""
+    n = q.shape[0]
+    qmax = 0.0
+    for i in range(n):
+        a = abs(q[i])
+        if not np.isfinite(a):
+            return np.inf
+        if a > qmax:
+            qmax = a
+    r = 0.0
+    for i in range(n):
+        if not (np.isfinite(z[i]) and np.isfinite(w[i])):
+            return np.inf
+        m = abs(min(z[i], w[i]))
+        if m > r:
+            r = m
+    return r / (1.0 + qmax)
+
+
+@numba.njit(cache=True, error_model="numpy")
+def complementarity_residual(M, q, z):
+    """Natural-map residual ``||min(z, M z + q)||_inf / (1 + ||q||_inf)``.
+
+    Recomputed from M, q and z (never from a solver's w).  Zero iff z solves LCP(M, q);
+    ``+inf`` if any of q, z or w = M z + q is non-finite.  M: (n, n), q and z: (n,).
+    """
+    w = _matvec_plus(M, z, q)
+    return _natural_map_residual(z, w, q)
+
+
+# --------------------------------------------------------------------------------------------
+# Lemke.
+# --------------------------------------------------------------------------------------------
+@numba.njit(cache=True, error_model="numpy")
+def _lex_select(qbar, Binv, div, cand, ncand, tie_tol, zrow, qscale, hist):
+    """Lexicographic minimum-ratio selection among rows ``cand[:ncand]``.
+
+    Stage 0 compares qbar[i] / div[i]; stage k+1 compares Binv[i, k] / div[i] among the rows
+    still tied, until one row is left (the rows of Binv are linearly independent, so in exact
+    arithmetic the choice is unique).  ``div`` must be positive on the candidate rows.  If
+    ``zrow >= 0`` (the row where the artificial z0 is basic) is tied in stage 0, it is chosen:
+    letting z0 leave ends Lemke's method with a solution.  Ties are decided with the relative
+    tolerance ``tie_tol`` against the magnitudes involved, with an absolute round-off floor
+    LEMKE_NOISE * hist_i (times ``qscale`` = ||q||_inf in stage 0).
+    """
+    n = Binv.shape[0]
+    for stage in range(-1, n):
+        if ncand == 1:
+            break
+        rmin = np.inf
+        allzero = True
+        dcmax = 0.0
+        scale = 0.0
+        hmax = 0.0
+        for c in range(ncand):
+            i = cand[c]
+            a = qbar[i] if stage < 0 else Binv[i, stage]
+            if a != 0.0:
+                allzero = False
+            r = a / div[i]
+            if r < rmin:
+                rmin = r
+            if div[i] > dcmax:
+                dcmax = div[i]
+            if abs(a) > scale:
+                scale = abs(a)
+            if hist[i] > hmax:
+                hmax = hist[i]
+        if allzero:  # every candidate ties in this stage (common on sparse problems)
+            if stage < 0 and zrow >= 0:
+                for c in range(ncand):
+                    if cand[c] == zrow:
+                        return zrow
+            continue
+        # Absolute noise floor: an exact zero shows up as round-off of the size of the
+        # numbers that went into the row (hist), times ||q||_inf for qbar = Binv q.
+        floor = LEMKE_NOISE * hmax * (qscale if stage < 0 else 1.0)
+        if floor > tie_tol * scale:
+            scale = floor / tie_tol
+        kept = 0
+        zrow_tied = False
+        for c in range(ncand):
+            i = cand[c]
+            a = qbar[i] if stage < 0 else Binv[i, stage]
+            # Choosing row i instead of the minimising row m moves row m's basic value by
+            # -(r_i - r_min) d_m; row i ties only if that is round-off sized for every
+            # candidate m, i.e. (r_i - r_min) * max_c d_c is below the noise level.
+            excess = (a / div[i] - rmin) * dcmax
+            if excess <= tie_tol * (abs(a) * dcmax / div[i] + abs(rmin) * dcmax + scale):
+                cand[kept] = i
+                kept += 1
+                if i == zrow:
+                    zrow_tied = True
+        if kept == 0:  # cannot happen except through NaN; keep the first candidate
+            kept = 1
+        ncand = kept
+        if stage < 0 and zrow_tied:
+            return zrow
+    return cand[0]
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _pivot(Binv, qbar, d, r, idx, hist):
+    """Gauss-Jordan pivot of the revised tableau (Binv, qbar) on row r with column d.
+
+    Only rows with d_i != 0 and only the nonzero columns of the pivot row are touched (``idx``
+    is an int work array of length n), which keeps pivots cheap on sparse contact problems.
+    ``hist[i]`` tracks the magnitude of the numbers that went into row i of Binv (its
+    round-off scale, which cancellation does not reduce): hist_r /= |p| for the pivot row,
+    and hist_i = max(hist_i, |d_i| max_k |Binv[r, k]|) for the updated rows.
+    """
+    n = Binv.shape[0]
+    p = d[r]
+    inv = 1.0 / p
+    hist[r] *= abs(inv)
+    nnz = 0
+    hr = 0.0
+    for k in range(n):
+        v = Binv[r, k]
+        if v != 0.0:
+            v *= inv
+            Binv[r, k] = v
+            idx[nnz] = k
+            nnz += 1
+            if abs(v) > hr:
+                hr = abs(v)
+    qbar[r] *= inv
+    if qbar[r] < 0.0:
+        qbar[r] = 0.0
+    dense = 2 * nnz > n
+    for i in range(n):
+        if i == r:
+            continue
+        f = d[i]
+        if f == 0.0:
+            continue
+        if abs(f) * hr > hist[i]:
+            hist[i] = abs(f) * hr
+        if dense:
+            for k in range(n):
+                Binv[i, k] -= f * Binv[r, k]
+        else:
+            for t in range(nnz):
+                k = idx[t]
+                Binv[i, k] -= f * Binv[r, k]
+        v = qbar[i] - f * qbar[r]
+        # In exact arithmetic every basic value stays >= 0 after the first pivot; negative
+        # values are round-off (or tie-tolerance) drift.  Clamping them to 0 is a tiny
+        # perturbation of q that keeps the path feasible; the final polish uses the true q.
+        qbar[i] = v if v > 0.0 else 0.0
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _entering_column(M, Binv, var, n, d, mag, col, idx):
+    """d = Binv @ a_var for the system  I w - M z - e z0 = q  (var: w_i=i, z_j=n+j, z0=2n).
+
+    Also mag = |Binv| @ |a_var|, the size of the terms summed into each d_i (its round-off
+    scale); returns max_k |a_k|.  Sparse columns of M (fewer than n/2 nonzeros) are multiplied through their
+    nonzeros only.
+    """
+    amax = 1.0
+    if var < n:
+        for i in range(n):
+            d[i] = Binv[i, var]
+            mag[i] = abs(d[i])
+    elif var < 2 * n:
+        j = var - n
+        nnz = 0
+        amax = 0.0
+        for k in range(n):
+            v = M[k, j]
+            col[k] = v
+            if v != 0.0:
+                idx[nnz] = k
+                nnz += 1
+                if abs(v) > amax:
+                    amax = abs(v)
+        if 2 * nnz > n:
+            for i in range(n):
+                s = 0.0
+                m = 0.0
+                for k in range(n):
+                    t = Binv[i, k] * col[k]
+                    s += t
+                    m += abs(t)
+                d[i] = -s
+                mag[i] = m
+        else:
+            for i in range(n):
+                s = 0.0
+                m = 0.0
+                for t in range(nnz):
+                    k = idx[t]
+                    u = Binv[i, k] * col[k]
+                    s += u
+                    m += abs(u)
+                d[i] = -s
+                mag[i] = m
+    else:
+        for i in range(n):
+            s = 0.0
+            m = 0.0
+            for k in range(n):
+                s += Binv[i, k]
+                m += abs(Binv[i, k])
+            d[i] = -s
+            mag[i] = m
+    return amax
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _gauss_solve(A, b):
+    """Solve A x = b by Gaussian elimination with partial pivoting (A, b are overwritten).
+
+    Returns (x, ok); ok is False if A is numerically singular or the result is non-finite.
+    """
+    m = b.shape[0]
+    x = np.zeros(m)
+    amax = 0.0
+    for i in range(m):
+        for j in range(m):
+            if abs(A[i, j]) > amax:
+                amax = abs(A[i, j])
+    if m == 0:
+        return x, True
+    if not (amax > 0.0) or not np.isfinite(amax):
+        return x, False
+    for k in range(m):
+        p = k
+        best = abs(A[k, k])
+        for i in range(k + 1, m):
+            if abs(A[i, k]) > best:
+                best = abs(A[i, k])
+                p = i
+        if best <= 1e-14 * amax:
+            return x, False
+        if p != k:
+            for j in range(m):
+                t = A[k, j]
+                A[k, j] = A[p, j]
+                A[p, j] = t
+            t = b[k]
+            b[k] = b[p]
+            b[p] = t
+        for i in range(k + 1, m):
+            f = A[i, k] / A[k, k]
+            if f != 0.0:
+                for j in range(k, m):
+                    A[i, j] -= f * A[k, j]
+                b[i] -= f * b[k]
+    for k in range(m - 1, -1, -1):
+        s = b[k]
+        for j in range(k + 1, m):
+            s -= A[k, j] * x[j]
+        x[k] = s / A[k, k]
+        if not np.isfinite(x[k]):
+            return x, False
+    return x, True
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _z_from_basis(basis, qbar, n):
+    z = np.zeros(n)
+    for i in range(n):
+        v = basis[i]
+        if n <= v < 2 * n:
+            z[v - n] = qbar[i]
+    return z
+
+
+@numba.njit(cache=True, error_model="numpy")
+def lemke_kernel(M, q, max_pivots):
+    """Lemke's method with covering vector e = ones and the lexicographic ratio test.
+
+    Works on the system ``I w - M z - e z0 = q`` with an explicit basis inverse ``Binv``
+    (n x n) and ``qbar = Binv q`` (a revised dense tableau, O(n^2) per pivot).  The ratio
+    test is the lexicographic minimum-ratio rule of Cottle-Pang-Stone (sec. 4.9): among rows
+    with d_i > 0 take the lexicographic minimum of ``(qbar_i, Binv[i, :]) / d_i``, which is
+    Lemke's method applied to q perturbed by (eps, eps^2, ...) and cannot cycle on degenerate
+    problems.  When the artificial variable z0 is among the rows tied for the minimum ratio
+    it leaves at once (this ends the method with a solution).  When z0 leaves, the
+    complementary solution is polished by solving ``M[J, J] z_J = -q_J`` on the final basis
+    J (kept if it lowers the residual).  If the path ends on a secondary ray at a point that
+    nevertheless solves the LCP to LEMKE_RESCUE_TOL (this happens when z0 reaches 0 in a
+    tie that round-off broke the wrong way), that point is returned with STATUS_SOLVED.
+
+    Parameters: M (n, n) float64, q (n,) float64, max_pivots (int, counts every pivot
+    including the first one that brings z0 in).
+
+    Returns ``(z, w, status_code, pivots)`` with w = M z + q recomputed from z and status one
+    of STATUS_SOLVED (z solves the LCP up to round-off), STATUS_RAY_TERMINATION (no pivot
+    row for the entering column: secondary ray; z is the last basic point, which still has
+    z0 > 0 and is not a solution), STATUS_MAX_ITERATIONS (z as for the ray) or
+    STATUS_NON_FINITE_OUTPUT.  q >= 0 returns z = 0 with 0 pivots; n = 0 returns empty
+    arrays and STATUS_SOLVED.  The kernel does not check its input (see `solve_lcp`).
+    """
+    n = q.shape[0]
+    z = np.zeros(n)
+    if n == 0:
+        return z, np.zeros(0), STATUS_SOLVED, 0
+    trivial = True
+    for i in range(n):
+        if not (q[i] >= 0.0):
+            trivial = False
+            break
+    if trivial:
+        return z, _matvec_plus(M, z, q), STATUS_SOLVED, 0
+
+    qscale = 0.0
+    for i in range(n):
+        if abs(q[i]) > qscale:
+            qscale = abs(q[i])
+    Binv = np.eye(n)
+    qbar = q.copy()
+    basis = np.arange(n)  # basic variable of each row: w_i = i, z_j = n + j, z0 = 2n
+    d = np.empty(n)
+    mag = np.empty(n)
+    hist = np.ones(n)
+    col = np.empty(n)
+    cand = np.empty(n, dtype=np.int64)
+    idx = np.empty(n, dtype=np.int64)
+    ones = np.ones(n)
+    z0 = 2 * n
+
+    # First pivot: z0 enters (column -e) in the lexicographically smallest row of (q, I),
+    # i.e. (one of) the most negative q_i; this makes the basis feasible.
+    for i in range(n):
+        d[i] = -1.0
+        cand[i] = i
+    r = _lex_select(qbar, Binv, ones, cand, n, LEMKE_TIE_TOL, -1, qscale, hist)
+    leaving = basis[r]
+    _pivot(Binv, qbar, d, r, idx, hist)
+    basis[r] = z0
+    zrow = r
+    pivots = 1
+    entering = leaving + n  # the complement of w_r is z_r
+
+    status = STATUS_MAX_ITERATIONS
+    while pivots < max_pivots:
+        amax = _entering_column(M, Binv, entering, n, d, mag, col, idx)
+        dmax = 0.0
+        for i in range(n):
+            if abs(d[i]) > dmax:
+                dmax = abs(d[i])
+        if not np.isfinite(dmax):
+            status = STATUS_NON_FINITE_OUTPUT
+            break
+        ncand = 0
+        for i in range(n):
+            if d[i] > LEMKE_PIVOT_TOL * max(mag[i], hist[i] * amax):
+                cand[ncand] = i
+                ncand += 1
+        if ncand == 0:
+            status = STATUS_RAY_TERMINATION
+            break
+        r = _lex_select(qbar, Binv, d, cand, ncand, LEMKE_TIE_TOL, zrow, qscale, hist)
+        leaving = basis[r]
+        _pivot(Binv, qbar, d, r, idx, hist)
+        basis[r] = entering
+        pivots += 1
+        if leaving == z0:  # complementary basis reached: a solution
+            status = STATUS_SOLVED
+            break
+        entering = leaving + n if leaving < n else leaving - n
+        finite = True
+        for i in range(n):
+            if not np.isfinite(qbar[i]):
+                finite = False
+                break
+        if not finite:
+            status = STATUS_NON_FINITE_OUTPUT
+            break
+
+    z = _z_from_basis(basis, qbar, n)
+    w = _matvec_plus(M, z, q)
+    if status == STATUS_SOLVED or status == STATUS_RAY_TERMINATION:
+        # Polish: the complementary point of the final basis (w_J = 0 on the basic z_J,
+        # z = 0 elsewhere) recomputed from the true q.
+        z2, ok = _basis_point(M, q, basis, n, cand)
+        if ok:
+            w2 = _matvec_plus(M, z2, q)
+            if _natural_map_residual(z2, w2, q) < _natural_map_residual(z, w, q):
+                z = z2
+                w = w2
+        if status == STATUS_RAY_TERMINATION and _natural_map_residual(z, w, q) <= LEMKE_RESCUE_TOL:
+            # The ray starts where z0 is (numerically) zero: the current point already
+            # solves the LCP (z0 tied for leaving but round-off broke the tie the other way).
+            status = STATUS_SOLVED
+    return z, w, status, pivots
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _basis_point(M, q, basis, n, work):
+    """Solve M[J, J] z_J = -q_J for the basic z variables J of ``basis``; z = 0 elsewhere."""
+    nj = 0
+    for i in range(n):
+        if n <= basis[i] < 2 * n:
+            work[nj] = basis[i] - n
+            nj += 1
+    A = np.empty((nj, nj))
+    b = np.empty(nj)
+    for a in range(nj):
+        b[a] = -q[work[a]]
+        for c in range(nj):
+            A[a, c] = M[work[a], work[c]]
+    x, ok = _gauss_solve(A, b)
+    z2 = np.zeros(n)
+    if ok:
+        for a in range(nj):
+            z2[work[a]] = x[a]
+    return z2, ok
+
+
+# --------------------------------------------------------------------------------------------
+# Projected Gauss-Seidel.
+# --------------------------------------------------------------------------------------------
+@numba.njit(cache=True, error_model="numpy")
+def pgs_kernel(M, q, z0, max_iters, tol, omega):
+    """Projected Gauss-Seidel with over-relaxation (projected SOR).
+
+    One sweep: for i = 0..n-1, ``z_i <- max(0, z_i - omega * (M[i, :] z + q_i) / M[i, i])``.
+    Starts from ``max(z0, 0)``; after every sweep recomputes w = M z + q and stops when the
+    natural-map residual (see `complementarity_residual`) is <= tol.  Converges for
+    symmetric positive definite M when 0 < omega < 2.
+
+    Returns ``(z, w, status_code, iterations)``: STATUS_SOLVED (residual <= tol after
+    ``iterations`` sweeps), STATUS_MAX_ITERATIONS (last iterate returned),
+    STATUS_ZERO_DIAGONAL (some M[i, i] <= PGS_ZERO_DIAGONAL_TOL * max|diag| or <= 0; nothing
+    is iterated, z = max(z0, 0)) or STATUS_NON_FINITE_OUTPUT (the iterates overflowed).
+    n = 0 returns empty arrays and STATUS_SOLVED.  The kernel does not check its input.
+    """
+    n = q.shape[0]
+    z = np.empty(n)
+    for i in range(n):
+        z[i] = max(z0[i], 0.0)
+    if n == 0:
+        return z, np.zeros(0), STATUS_SOLVED, 0
+    dmax = 0.0
+    for i in range(n):
+        if abs(M[i, i]) > dmax:
+            dmax = abs(M[i, i])
+    for i in range(n):
+        if not (M[i, i] > 0.0 and M[i, i] > PGS_ZERO_DIAGONAL_TOL * dmax):
+            return z, _matvec_plus(M, z, q), STATUS_ZERO_DIAGONAL, 0
+    w = _matvec_plus(M, z, q)
+    if _natural_map_residual(z, w, q) <= tol:
+        return z, w, STATUS_SOLVED, 0
+    for it in range(max_iters):
+        for i in range(n):
+            s = q[i]
+            for j in range(n):
+                s += M[i, j] * z[j]
+            v = z[i] - omega * s / M[i, i]
+            z[i] = v if v > 0.0 else 0.0
+        w = _matvec_plus(M, z, q)
+        res = _natural_map_residual(z, w, q)
+        if res <= tol:
+            return z, w, STATUS_SOLVED, it + 1
+        if not np.isfinite(res):
+            return z, w, STATUS_NON_FINITE_OUTPUT, it + 1
+    return z, w, STATUS_MAX_ITERATIONS, max_iters
+
+
+# --------------------------------------------------------------------------------------------
+# Python-facing API.
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class LCPResult:
+    """Result of `solve_lcp`.
+
+    z, w: float64 arrays of shape (n,) with w = M z + q recomputed from M, q and z (empty
+    arrays for INVALID_INPUT; z = 0 and w = NaN for NON_FINITE_INPUT).  On failure z is the
+    solver's last iterate and is *not* a solution.  residual: `complementarity_residual`
+    of z (+inf when it cannot be computed).  iterations: Lemke pivots or PGS sweeps.
+    method: "lemke" or "pgs".
+    """
+
+    z: np.ndarray
+    w: np.ndarray
+    status: LCPStatus
+    residual: float
+    iterations: int
+    method: str
+
+    @property
+    def success(self) -> bool:
+        """True iff status is SOLVED (residual <= the tolerance that was asked for)."""
+        return self.status is LCPStatus.SOLVED
+
+    @property
+    def message(self) -> str:
+        return self.status.message
+
+
+_METHODS = ("lemke", "pgs")
+
+
+def default_max_iterations(method: str, n: int) -> int:
+    """Lemke: DEFAULT_LEMKE_PIVOTS_PER_VARIABLE * (n + 1) pivots; PGS: DEFAULT_PGS_MAX_ITERATIONS."""
+    if method == "lemke":
+        return DEFAULT_LEMKE_PIVOTS_PER_VARIABLE * (n + 1)
+    if method == "pgs":
+        return DEFAULT_PGS_MAX_ITERATIONS
+    raise ValueError(f"unknown LCP method {method!r}; expected one of {_METHODS}")
+
+
+def _fail(status: LCPStatus, method: str, n: int | None) -> LCPResult:
+    if n is None:
+        z = np.zeros(0)
+        w = np.zeros(0)
+    else:
+        z = np.zeros(n)
+        w = np.full(n, np.nan)
+    return LCPResult(z=z, w=w, status=status, residual=float("inf"), iterations=0, method=method)
+
+
+def solve_lcp(
+    M,
+    q,
+    method: str = "lemke",
+    *,
+    z0=None,
+    max_iterations: int | None = None,
+    tol: float = DEFAULT_TOL,
+    omega: float = 1.0,
+) -> LCPResult:
+    """Solve LCP(M, q): z >= 0, w = M z + q >= 0, z^T w = 0.
+
+    Parameters
+    ----------
+    M : array_like (n, n)   -- converted to a C-contiguous float64 array.
+    q : array_like (n,)
+    method : "lemke" (default) or "pgs".  Any other value raises ValueError (the only
+        exception this function raises).
+    z0 : array_like (n,), optional -- PGS warm start (default zeros); ignored by Lemke.
+    max_iterations : Lemke pivot limit (default 50 (n + 1)) or PGS sweep limit (default
+        10 000).
+    tol : acceptance tolerance on the recomputed residual (default 1e-9).
+    omega : PGS relaxation factor in (0, 2); 1 is plain PGS.
+
+    Returns
+    -------
+    LCPResult.  ``w`` and ``residual`` are always recomputed here from M, q and z.  A kernel
+    success is downgraded to SOLVED_INACCURATE (tol < residual <= 1e-6), NUMERICAL_FAILURE
+    (residual above that) or NON_FINITE_OUTPUT.  Kernel failures are kept as they are
+    (RAY_TERMINATION, MAX_ITERATIONS, ZERO_DIAGONAL, ...).  Shape or parameter errors give
+    INVALID_INPUT and NaN/inf in M, q or z0 give NON_FINITE_INPUT, with no exception.
+    """
+    if method not in _METHODS:
+        raise ValueError(f"unknown LCP method {method!r}; expected one of {_METHODS}")
+    with np.errstate(all="ignore"):
+        try:
+            if np.iscomplexobj(M) or np.iscomplexobj(q):
+                raise TypeError("complex input")
+            M = np.ascontiguousarray(M, dtype=np.float64)
+            q = np.ascontiguousarray(q, dtype=np.float64)
+        except Exception:  # noqa: BLE001 - anything not convertible to floats is invalid input
+            return _fail(LCPStatus.INVALID_INPUT, method, None)
+        if q.ndim != 1 or M.ndim != 2 or M.shape != (q.shape[0], q.shape[0]):
+            return _fail(LCPStatus.INVALID_INPUT, method, None)
+        n = q.shape[0]
+        try:
+            tol = float(tol)
+            omega = float(omega)
+            if max_iterations is None:
+                max_iterations = default_max_iterations(method, n)
+            if isinstance(max_iterations, bool) or int(max_iterations) != max_iterations:
+                raise ValueError
+            max_iterations = int(max_iterations)
+            if z0 is not None and np.iscomplexobj(z0):
+                raise TypeError("complex z0")
+            z0a = np.zeros(n) if z0 is None else np.ascontiguousarray(z0, dtype=np.float64)
+        except Exception:  # noqa: BLE001
+            return _fail(LCPStatus.INVALID_INPUT, method, n)
+        if (
+            not (tol > 0.0 and np.isfinite(tol))
+            or not (0.0 < omega < 2.0)
+            or max_iterations < 0
+            or z0a.shape != (n,)
+        ):
+            return _fail(LCPStatus.INVALID_INPUT, method, n)
+        if not (np.isfinite(M).all() and np.isfinite(q).all() and np.isfinite(z0a).all()):
+            return _fail(LCPStatus.NON_FINITE_INPUT, method, n)
+
+        if method == "lemke":
+            z, _, code, iters = lemke_kernel(M, q, max_iterations)
+        else:
+            z, _, code, iters = pgs_kernel(M, q, z0a, max_iterations, tol, omega)
+        z = np.asarray(z, dtype=np.float64)
+        w = M @ z + q
+        residual = float(complementarity_residual(M, q, z))
+        status = LCPStatus(int(code))
+        if status is LCPStatus.SOLVED:
+            if not (np.isfinite(z).all() and np.isfinite(w).all()):
+                status = LCPStatus.NON_FINITE_OUTPUT
+            elif residual <= tol:
+                status = LCPStatus.SOLVED
+            elif residual <= max(INACCURATE_TOL, tol):
+                status = LCPStatus.SOLVED_INACCURATE
+            else:
+                status = LCPStatus.NUMERICAL_FAILURE
+        return LCPResult(
+            z=z, w=w, status=status, residual=residual, iterations=int(iters), method=method
+        )
+
+
+# --------------------------------------------------------------------------------------------
+# 2D frictional contact (fc2d) <-> LCP.
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Fc2dLCP:
+    """An fc2d problem rewritten as LCP(M, q) (see `contact_lcp_from_fc2d`).
+
+    normal_index[c], plus_index[c], minus_index[c], gamma_index[c] are the positions of
+    contact c's r_n, b+, b-, gamma in the LCP vector (-1 for the last three when mu_c = 0).
+    gamma_scale[c]: the LCP variable at gamma_index[c] is gamma_c / gamma_scale[c] (gamma is
+    rescaled to force units so that all blocks of M have the scale of W).
+    """
+
+    M: np.ndarray
+    q: np.ndarray
+    mu: np.ndarray
+    n_contacts: int
+    normal_index: np.ndarray
+    plus_index: np.ndarray
+    minus_index: np.ndarray
+    gamma_index: np.ndarray
+    gamma_scale: np.ndarray
+
+
+def _check_fc2d(W, q, mu):
+    W = np.ascontiguousarray(W, dtype=np.float64)
+    q = np.ascontiguousarray(q, dtype=np.float64)
+    mu = np.ascontiguousarray(mu, dtype=np.float64).reshape(-1)
+    nc = mu.shape[0]
+    if q.shape != (2 * nc,) or W.shape != (2 * nc, 2 * nc):
+        raise ValueError(
+            f"fc2d shapes: need W (2nc, 2nc), q (2nc,), mu (nc,); got W {W.shape}, "
+            f"q {q.shape}, mu {mu.shape}"
+        )
+    if not (np.isfinite(mu).all() and (mu >= 0).all()):
+        raise ValueError("fc2d friction coefficients must be finite and >= 0")
+    return W, q, mu, nc
+
+
+def contact_lcp_from_fc2d(W, q, mu) -> Fc2dLCP:
+    """Rewrite a 2D frictional contact problem (local form) as an LCP.
+
+    fc2d problem: nc contacts, reaction r = (r_n^1, r_t^1, ..., r_n^nc, r_t^nc) (normal then
+    tangential per contact), local velocity u = W r + q, and for each contact
+
+        0 <= u_n  _|_  r_n >= 0,     |r_t| <= mu r_n,
+        u_t != 0  =>  r_t = -mu r_n sign(u_t)      (Coulomb, maximal dissipation).
+
+    Construction (the two-direction polyhedral cone; exact in 2D): split r_t = b+ - b- with
+    b+, b- >= 0 and add gamma >= 0, the sliding speed.  The per-contact LCP variables are
+    (r_n, b+, b-, gamma) and the complementarity pairs are
+
+        u_n              >= 0  _|_  r_n   >= 0
+        u_t  + gamma     >= 0  _|_  b+    >= 0
+        -u_t + gamma     >= 0  _|_  b-    >= 0
+        mu r_n - b+ - b- >= 0  _|_  gamma >= 0
+
+    With u = W r + q and r_t = b+ - b- this is LCP(M, q_lcp); for contact blocks a, c
+    (n = normal, t = tangential entries of W):
+
+        rows of a \\ cols of c:  r_n        b+         b-         gamma
+        u_n                    W_nn       W_nt       -W_nt      0
+        u_t + gamma            W_tn       W_tt       -W_tt      [a == c]
+        -u_t + gamma           -W_tn      -W_tt      W_tt       [a == c]
+        mu r_n - b+ - b-       mu_a[a==c] -[a==c]    -[a==c]    0
+
+    and q_lcp = (q_n, q_t, -q_t, 0) per contact.  Scaling: the gamma column and row of each
+    contact are multiplied by s_c = max(W_nn, W_tt) of that contact, rounded to a power of
+    two (a symmetric diagonal scaling, so the LCP solution is unchanged except that the
+    variable becomes gamma / s_c); this keeps the unit entries of the friction rows at the
+    scale of W, which Lemke's pivoting needs when W is far from 1 (e.g. 1e3 or 1e-4 in SI
+    units).  If gamma > 0 then b+ + b- = mu r_n and
+    gamma = |u_t|, and the complementarity forces the force component opposite to the
+    sliding direction to vanish: exactly Coulomb's law.
+
+    Properties: for z >= 0, z^T M z = r^T W r + sum_c mu_c gamma_c r_n,c, so M is copositive
+    when W is positive semidefinite (but not copositive-plus in general; Lemke's method is
+    known to process this LCP class, Anitescu & Potra 1997).  Every gamma row has a zero
+    diagonal, so PGS cannot be applied to this LCP (it reports ZERO_DIAGONAL).
+
+    Contacts with mu = 0 keep only r_n (their b+, b-, gamma are dropped; r_t = 0).
+
+    Raises ValueError on inconsistent shapes or negative / non-finite mu.  Variables are
+    ordered contact by contact.
+    """
+    W, q, mu, nc = _check_fc2d(W, q, mu)
+    normal = np.full(nc, -1, dtype=np.int64)
+    plus = np.full(nc, -1, dtype=np.int64)
+    minus = np.full(nc, -1, dtype=np.int64)
+    gamma = np.full(nc, -1, dtype=np.int64)
+    k = 0
+    for c in range(nc):
+        normal[c] = k
+        k += 1
+        if mu[c] > 0.0:
+            plus[c], minus[c], gamma[c] = k, k + 1, k + 2
+            k += 3
+    m = k
+    fr = np.flatnonzero(mu > 0.0)
+    nI = 2 * np.arange(nc)  # rows/cols of W for normals
+    tI = nI + 1  # tangentials
+    M = np.zeros((m, m))
+    ql = np.zeros(m)
+    # normal rows
+    diag_scale = np.maximum(np.abs(W[nI, nI]), np.abs(W[tI, tI]))
+    gscale = np.ones(nc)
+    pos = diag_scale > 0.0
+    gscale[pos] = np.exp2(np.round(np.log2(diag_scale[pos])))
+    M[np.ix_(normal, normal)] = W[np.ix_(nI, nI)]
+    M[np.ix_(normal, plus[fr])] = W[np.ix_(nI, tI[fr])]
+    M[np.ix_(normal, minus[fr])] = -W[np.ix_(nI, tI[fr])]
+    ql[normal] = q[nI]
+    if fr.size:
+        P, Mi, G = plus[fr], minus[fr], gamma[fr]
+        Wtn = W[np.ix_(tI[fr], nI)]
+        Wtt = W[np.ix_(tI[fr], tI[fr])]
+        M[np.ix_(P, normal)] = Wtn
+        M[np.ix_(P, P)] = Wtt
+        M[np.ix_(P, Mi)] = -Wtt
+        sc = gscale[fr]
+        M[P, G] = sc
+        M[np.ix_(Mi, normal)] = -Wtn
+        M[np.ix_(Mi, P)] = -Wtt
+        M[np.ix_(Mi, Mi)] = Wtt
+        M[Mi, G] = sc
+        M[G, normal[fr]] = sc * mu[fr]
+        M[G, P] = -sc
+        M[G, Mi] = -sc
+        ql[P] = q[tI[fr]]
+        ql[Mi] = -q[tI[fr]]
+    return Fc2dLCP(
+        M=M,
+        q=ql,
+        mu=mu,
+        n_contacts=nc,
+        normal_index=normal,
+        plus_index=plus,
+        minus_index=minus,
+        gamma_index=gamma,
+        gamma_scale=gscale,
+    )
+
+
+def fc2d_reactions_from_lcp(problem: Fc2dLCP, z) -> np.ndarray:
+    """Map an LCP solution of `contact_lcp_from_fc2d` back to r = (r_n, r_t) per contact.
+
+    Returns a (2 nc,) array, normal then tangential per contact: r_n = z[normal], r_t =
+    z[b+] - z[b-] (0 for frictionless contacts).
+    """
+    z = np.asarray(z, dtype=np.float64)
+    if z.shape != problem.q.shape:
+        raise ValueError(f"z has shape {z.shape}, expected {problem.q.shape}")
+    nc = problem.n_contacts
+    r = np.zeros(2 * nc)
+    r[0::2] = z[problem.normal_index]
+    fr = problem.plus_index >= 0
+    rt = np.zeros(nc)
+    rt[fr] = z[problem.plus_index[fr]] - z[problem.minus_index[fr]]
+    r[1::2] = rt
+    return r
+
+
+def fc2d_coulomb_error(W, q, mu, r) -> float:
+    """Coulomb-law error of reactions r for the fc2d problem (W, q, mu); u = W r + q.
+
+    Per contact (r_n, r_t, u_n, u_t), with the non-associated Coulomb law of
+    `contact_lcp_from_fc2d`, the max of
+
+        |min(r_n, u_n)|                                  normal complementarity,
+        max(0, |r_t| - mu r_n)                           cone feasibility,
+        |r_t - clip(r_t - u_t, -mu r_n+, mu r_n+)|       sliding opposite to u_t
+                                                         (r_n+ = max(r_n, 0)),
+
+    each zero exactly when the contact satisfies Coulomb's law; the maximum over contacts is
+    divided by (1 + ||q||_inf).  Returns +inf if anything is non-finite.  Raises ValueError
+    on inconsistent shapes.
+    """
+    W, q, mu, nc = _check_fc2d(W, q, mu)
+    r = np.asarray(r, dtype=np.float64)
+    if r.shape != (2 * nc,):
+        raise ValueError(f"r has shape {r.shape}, expected {(2 * nc,)}")
+    with np.errstate(all="ignore"):
+        u = W @ r + q
+        if not (np.isfinite(u).all() and np.isfinite(r).all()):
+            return float("inf")
+        if nc == 0:
+            return 0.0
+        rn, rt, un, ut = r[0::2], r[1::2], u[0::2], u[1::2]
+        e_n = np.abs(np.minimum(rn, un))
+        e_cone = np.maximum(0.0, np.abs(rt) - mu * rn)
+        bound = mu * np.maximum(rn, 0.0)
+        e_t = np.abs(rt - np.clip(rt - ut, -bound, bound))
+        err = max(e_n.max(), e_cone.max(), e_t.max())
+        return float(err / (1.0 + np.abs(q).max()))
