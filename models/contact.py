@@ -123,17 +123,36 @@ def detect_contacts(S, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsuppo
     Buffers hold at least sum(S.pair_max_contacts) rows. Pairs the compiled kernels cannot
     handle (spatial mesh pairs other than mesh-plane) are listed in ``unsupported``.
     """
-    return detect_contacts_packed(S.dimension, S.bi, S.bf, S.verts, S.pi, S, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsupported)
+    if S.dimension == 2:
+        return detect_planar(S.bi, S.bf, S.verts, S.pi, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb), 0
+    return detect_spatial(S, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsupported)
 
 
 @numba.njit(cache=True)
-def detect_contacts_packed(dimension, bi, bf, verts, pi, S, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsupported):
+def detect_planar(bi, bf, verts, pi, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb):
+    """detect_contacts for planar scenes on the packed tables (the rollout's hot path)."""
     nb = bi.shape[0]
     pos = np.empty((nb, 3))
     positions(bi, bf, q, pos)
     poses = np.empty((nb, 4))
-    if dimension == 2:
-        planar_poses(bi, bf, q, poses)
+    planar_poses(bi, bf, q, poses)
+    nc = 0
+    for p in range(pi.shape[0]):
+        a, b = pi[p, PI_A], pi[p, PI_B]
+        reach = margin + MARGIN_SAFETY * h * (_speed_bound(bi, bf, nu, a) + _speed_bound(bi, bf, nu, b))
+        if _keep(bi, bf, q, pos, a, b, reach):
+            k = collide_2d(bi, bf, verts, poses, a, b, reach, c_psi, c_n, c_pa, c_pb, nc)
+            for i in range(nc, nc + k):
+                c_pair[i] = p
+            nc += k
+    return nc
+
+
+@numba.njit(cache=True)
+def detect_spatial(S, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsupported):
+    bi, bf, pi = S.bi, S.bf, S.pi
+    pos = np.empty((bi.shape[0], 3))
+    positions(bi, bf, q, pos)
     nc = 0
     n_unsupported = 0
     for p in range(pi.shape[0]):
@@ -141,10 +160,7 @@ def detect_contacts_packed(dimension, bi, bf, verts, pi, S, q, nu, h, margin, c_
         reach = margin + MARGIN_SAFETY * h * (_speed_bound(bi, bf, nu, a) + _speed_bound(bi, bf, nu, b))
         if not _keep(bi, bf, q, pos, a, b, reach):
             continue
-        if dimension == 2:
-            k = collide_2d(bi, bf, verts, poses, a, b, reach, c_psi, c_n, c_pa, c_pb, nc)
-        else:
-            k = collide_pair_3d(S, q, p, reach, c_psi, c_n, c_pa, c_pb, nc)
+        k = collide_pair_3d(S, q, p, reach, c_psi, c_n, c_pa, c_pb, nc)
         if k < 0:
             unsupported[n_unsupported] = p
             n_unsupported += 1
@@ -158,8 +174,13 @@ def detect_contacts_packed(dimension, bi, bf, verts, pi, S, q, nu, h, margin, c_
 @numba.njit(cache=True)
 def tangents(S, nc, c_n, c_t, c_o):
     """Tangent directions: planar t = z x n; spatial (t, o) an orthonormal basis with n."""
+    tangents_packed(S.dimension, nc, c_n, c_t, c_o)
+
+
+@numba.njit(cache=True)
+def tangents_packed(dimension, nc, c_n, c_t, c_o):
     for i in range(nc):
-        if S.dimension == 2:
+        if dimension == 2:
             c_t[i, 0], c_t[i, 1], c_t[i, 2] = -c_n[i, 1], c_n[i, 0], 0.0
         else:
             t, o = tangent_basis(c_n[i])

@@ -1,0 +1,192 @@
+"""Rollouts: many steps per call inside numba, with goal/unsafe checks and early stops.
+
+`rollout_kernel` runs a piecewise-constant control sequence (controls[k] for durations[k]
+seconds) with a fixed step h. Each step: detect contacts at q, classify q (unsafe first,
+then goal; touch predicates use the contacts just found, so they cost nothing extra), then
+step the model (`models.stepper`). It stops at the first of: unsafe entered, goal reached, a
+step failure (status), the end of the controls (the final state is classified once more).
+Every `record_every`-th state, and the last, is recorded for plots and plans.
+
+Skipping what a scene does not need: with no contact the step is a free update with a
+precomputed inverse system matrix; mu = 0 pairs get no friction variables; rigid models
+carry no deformation; quasistatic models never touch the inertia terms.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from models.contact import detect_planar, detect_spatial, jacobian_packed, tangents_packed
+from models.predicates import evaluate
+from models.stepper import (
+    CONTACT_MARGIN,
+    QUASISTATIC_INERTIA,
+    STEP_OK,
+    STEP_SINGULAR,
+    STEP_UNSUPPORTED_PAIR,
+    dynamics_step,
+    gravity_force,
+    has_rotations,
+    kinematic_step,
+    system_matrix,
+)
+
+OUTCOME_NONE = 0
+OUTCOME_GOAL = 1
+OUTCOME_UNSAFE = 2
+OUTCOME_NAMES = {OUTCOME_NONE: "none", OUTCOME_GOAL: "goal", OUTCOME_UNSAFE: "unsafe"}
+
+
+@numba.njit(cache=True)
+def _classify(goal, unsafe, q, pair_psi):
+    outcome = OUTCOME_NONE
+    if evaluate(unsafe, q, pair_psi):
+        outcome = OUTCOME_UNSAFE
+    elif evaluate(goal, q, pair_psi):
+        outcome = OUTCOME_GOAL
+    return outcome
+
+
+@numba.njit(cache=True)
+def _inverse_or_empty(A):
+    """A^-1 when A is safely invertible, else an empty matrix (the step reports singularity)."""
+    for r in range(A.shape[0]):
+        if not (A[r, r] > 0.0):
+            return np.zeros((0, 0))
+    return np.linalg.inv(A)
+
+
+@numba.njit(cache=True)
+def rollout_kernel(S, D, model, goal, unsafe, q, nu, q_ref, delta_n, delta_t, controls, durations, h, record_every, max_records):
+    """Run the controls from the given state.
+
+    Returns (q, nu, q_ref, delta_n, delta_t, t, outcome, status, steps, lcp_solves, pivots,
+    max_residual, max_lcp_size, rec_t (n,), rec_q (n, nq), rec_nu (n, nv)).
+    """
+    dimension = S.dimension
+    spatial = dimension == 3
+    bi, bf, pi, pf, verts = S.bi, S.bf, S.pi, S.pf, S.verts
+    nv = S.nv
+    q_index, v_index, kp, kd, lower, upper = D.q_index, D.v_index, D.kp, D.kd, D.lower, D.upper
+    kinematic = model.kinematic
+    compliant = model.compliant
+    theta = model.theta
+    directions = model.friction_directions
+    eps = model.eps
+    eps_eff = QUASISTATIC_INERTIA if eps == 0.0 else eps
+    # buffers, allocated once
+    cap = 1
+    first_slot = np.zeros(pi.shape[0], np.int64)
+    for p in range(pi.shape[0]):
+        first_slot[p] = cap - 1
+        cap += pi[p, 2]
+    c_pair = np.zeros(cap, np.int64)
+    c_slot = np.zeros(cap, np.int64)
+    c_psi = np.zeros(cap)
+    c_n, c_t, c_o = np.zeros((cap, 3)), np.zeros((cap, 3)), np.zeros((cap, 3))
+    c_pa, c_pb = np.zeros((cap, 3)), np.zeros((cap, 3))
+    W_n, W_t, W_o = np.zeros((nv, cap)), np.zeros((nv, cap)), np.zeros((nv, cap))
+    unsupported = np.zeros(max(pi.shape[0], 1), np.int64)
+    pair_psi = np.full(max(pi.shape[0], 1), np.inf)
+    # what never changes during the rollout
+    rhs_const = h * gravity_force(bi, bf, D.gravity, nv)
+    constant_A = not has_rotations(bi)
+    A = system_matrix(bi, bf, q, nv, eps_eff, h, v_index, kp, kd)
+    Ainv = _inverse_or_empty(A) if constant_A else np.zeros((0, 0))
+    max_records = max(max_records, 2)
+    rec_t = np.zeros(max_records)
+    rec_q = np.zeros((max_records, q.shape[0]))
+    rec_nu = np.zeros((max_records, nv))
+    rec_q[0] = q
+    rec_nu[0] = nu
+    n_rec = 1
+    t = 0.0
+    steps = 0
+    lcp_solves = 0
+    pivots = 0
+    max_residual = 0.0
+    max_size = 0
+    outcome = OUTCOME_NONE
+    status = STEP_OK
+    if not kinematic and constant_A and Ainv.shape[0] != nv:
+        status = STEP_SINGULAR
+    for k in range(controls.shape[0]):
+        if status != STEP_OK or outcome != OUTCOME_NONE:
+            break
+        n_steps = int(np.round(durations[k] / h))
+        u = controls[k]
+        for _ in range(n_steps):
+            # contacts at q
+            n_unsupported = 0
+            if spatial:
+                nc, n_unsupported = detect_spatial(S, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported)
+            else:
+                nc = detect_planar(bi, bf, verts, pi, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb)
+            pair_psi[:] = np.inf
+            for i in range(nc):
+                p = c_pair[i]
+                if c_psi[i] < pair_psi[p]:
+                    pair_psi[p] = c_psi[i]
+                c_slot[i] = first_slot[p] if (i == 0 or c_pair[i - 1] != p) else c_slot[i - 1] + 1
+            outcome = _classify(goal, unsafe, q, pair_psi)
+            if outcome != OUTCOME_NONE:
+                break
+            if n_unsupported > 0:
+                status = STEP_UNSUPPORTED_PAIR
+                break
+            if nc > 0:
+                jacobian_packed(bi, bf, pi, q, nc, c_pair, c_n, c_pa, c_pb, W_n)
+            if kinematic:
+                q2, nu2, q_ref2, st, piv, res = kinematic_step(bi, h, q, q_ref, u, q_index, v_index, lower, upper, nc, c_psi, W_n, nv)
+                dn2, dt2 = delta_n, delta_t
+                size = nc
+            else:
+                if nc > 0:
+                    tangents_packed(dimension, nc, c_n, c_t, c_o)
+                    jacobian_packed(bi, bf, pi, q, nc, c_pair, c_t, c_pa, c_pb, W_t)
+                    if spatial:
+                        jacobian_packed(bi, bf, pi, q, nc, c_pair, c_o, c_pa, c_pb, W_o)
+                if not constant_A:
+                    A = system_matrix(bi, bf, q, nv, eps_eff, h, v_index, kp, kd)
+                q2, nu2, q_ref2, dn2, dt2, st, piv, res, size = dynamics_step(
+                    eps, compliant, theta, directions, h, bi, bf, pf, A, Ainv, rhs_const,
+                    q, nu, q_ref, delta_n, delta_t, u, q_index, v_index, kp, kd, lower, upper,
+                    nc, c_pair, c_psi, c_slot, W_n, W_t, W_o, spatial,
+                )
+            if size > 0:
+                lcp_solves += 1
+                if size > max_size:
+                    max_size = size
+            pivots += piv
+            if res > max_residual:
+                max_residual = res
+            if st != STEP_OK:
+                status = st
+                break
+            q, nu, q_ref, delta_n, delta_t = q2, nu2, q_ref2, dn2, dt2
+            t += h
+            steps += 1
+            if record_every > 0 and steps % record_every == 0 and n_rec < max_records - 1:
+                rec_t[n_rec] = t
+                rec_q[n_rec] = q
+                rec_nu[n_rec] = nu
+                n_rec += 1
+    if status == STEP_OK and outcome == OUTCOME_NONE:
+        zero = np.zeros(nv)
+        if spatial:
+            nc, _ = detect_spatial(S, q, zero, 0.0, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported)
+        else:
+            nc = detect_planar(bi, bf, verts, pi, q, zero, 0.0, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb)
+        pair_psi[:] = np.inf
+        for i in range(nc):
+            if c_psi[i] < pair_psi[c_pair[i]]:
+                pair_psi[c_pair[i]] = c_psi[i]
+        outcome = _classify(goal, unsafe, q, pair_psi)
+    if rec_t[n_rec - 1] != t:
+        rec_t[n_rec] = t
+        rec_q[n_rec] = q
+        rec_nu[n_rec] = nu
+        n_rec += 1
+    return (q, nu, q_ref, delta_n, delta_t, t, outcome, status, steps, lcp_solves, pivots, max_residual, max_size,
+            rec_t[:n_rec], rec_q[:n_rec], rec_nu[:n_rec])

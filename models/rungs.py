@@ -1,0 +1,237 @@
+"""The rungs of the ladder: one small object each, over the one stepper (models.stepper).
+
+Every rung has the same interface:
+
+- ``initial_state(scenario)`` -> `State` at the scenario's start;
+- ``rollout(scenario, state, controls, durations, h, ...)`` -> `RolloutResult` (many steps in
+  one compiled call; controls are commanded speeds of the actuated coordinates);
+- ``lift(state)`` / ``project(state)``: the paper's kappa between rungs (Definition 1): a
+  lower rung's state gains zero velocities / zero deformations, a higher rung's loses them;
+- ``valid(scenario, q)``: non-penetration (the geometric rung's whole model, eq. 9).
+
+`RUNGS` is the registry, lowest fidelity first. Adding a rung touches its own entry only.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from models import geometry as geo
+from models.kinematics import SceneData, compile_scene
+from models.predicates import Program, compile_predicate
+from models.rollout import OUTCOME_NAMES, rollout_kernel
+from models.scenario import Scenario
+from models.stepper import STEP_MESSAGES, STEP_NAMES, Drives, Model
+
+#: Tolerance of the geometric rung's non-penetration check (m).
+GEOMETRIC_TOLERANCE = 1e-9
+#: Default number of states kept in a rollout's trajectory.
+DEFAULT_RECORDS = 2000
+
+
+@dataclass(frozen=True)
+class State:
+    """A rung's state: q, nu, the drives' reference positions, contact deformations."""
+
+    q: np.ndarray
+    nu: np.ndarray
+    q_ref: np.ndarray
+    delta_n: np.ndarray
+    delta_t: np.ndarray
+
+    def named(self, scenario: Scenario) -> dict[str, float]:
+        return {n: float(v) for n, v in zip(scenario.coordinates, self.q)}
+
+
+@dataclass(frozen=True)
+class RolloutResult:
+    state: State
+    t: float
+    outcome: str  # goal, unsafe, none
+    status: str  # ok or a failure code name
+    message: str
+    steps: int
+    lcp_solves: int
+    pivots: int
+    max_residual: float
+    max_lcp_size: int
+    wall_s: float
+    times: np.ndarray
+    trajectory: np.ndarray  # (n, nq)
+    velocities: np.ndarray  # (n, nv)
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "ok"
+
+
+@dataclass
+class Compiled:
+    """What a scenario compiles to (cached per scenario object)."""
+
+    scene: SceneData
+    drives: Drives
+    goal: Program
+    unsafe: Program
+    capacity: int
+
+
+_CACHE: dict[int, tuple[Scenario, Compiled]] = {}
+
+
+def compiled(scenario: Scenario) -> Compiled:
+    hit = _CACHE.get(id(scenario))
+    if hit is not None and hit[0] is scenario:
+        return hit[1]
+    S = compile_scene(scenario)
+    q_index, v_index, kp, kd, lower, upper = [], [], [], [], [], []
+    for body in scenario.spec.bodies:
+        for dof, drive in body.actuators.items():
+            name = f"{body.name}.{dof}"
+            q_index.append(scenario.coordinates.index(name))
+            v_index.append(scenario.velocities.index(name))
+            kp.append(drive.kp)
+            kd.append(drive.kd)
+            lower.append(-np.inf if drive.lower is None else drive.lower)
+            upper.append(np.inf if drive.upper is None else drive.upper)
+    # drives in the scenario's actuated order
+    order = [scenario.coordinates[i] for i in q_index]
+    perm = [order.index(name) for name in scenario.actuated]
+    gravity = np.zeros(3)
+    gravity[: scenario.dimension] = scenario.spec.scene.gravity
+    drives = Drives(
+        q_index=np.array(q_index, np.int64)[perm] if perm else np.zeros(0, np.int64),
+        v_index=np.array(v_index, np.int64)[perm] if perm else np.zeros(0, np.int64),
+        kp=np.array(kp, float)[perm] if perm else np.zeros(0),
+        kd=np.array(kd, float)[perm] if perm else np.zeros(0),
+        lower=np.array(lower, float)[perm] if perm else np.zeros(0),
+        upper=np.array(upper, float)[perm] if perm else np.zeros(0),
+        gravity=gravity,
+    )
+    result = Compiled(
+        scene=S,
+        drives=drives,
+        goal=compile_predicate(scenario, scenario.spec.task.goal),
+        unsafe=compile_predicate(scenario, scenario.spec.task.unsafe),
+        capacity=max(int(S.pair_max_contacts.sum()), 1),
+    )
+    _CACHE[id(scenario)] = (scenario, result)
+    return result
+
+
+@dataclass(frozen=True)
+class Rung:
+    """One model of the family: a name and its physics settings (None: geometric)."""
+
+    name: str
+    model: Model | None
+    description: str = field(default="", compare=False)
+
+    @property
+    def propagates(self) -> bool:
+        return self.model is not None
+
+    def initial_state(self, scenario: Scenario) -> State:
+        c = compiled(scenario)
+        q = np.array(scenario.start, dtype=float)
+        return State(
+            q=q,
+            nu=np.zeros(len(scenario.velocities)),
+            q_ref=q[c.drives.q_index].copy(),
+            delta_n=np.zeros(c.capacity),
+            delta_t=np.zeros((c.capacity, 2)),
+        )
+
+    def lift(self, state: State) -> State:
+        """kappa from a lower rung: what this rung does not model starts at zero."""
+        if self.model is None:
+            return self.project(state)
+        if self.model.kinematic or not self.model.compliant:
+            return replace(state, delta_n=np.zeros_like(state.delta_n), delta_t=np.zeros_like(state.delta_t))
+        return state
+
+    def project(self, state: State) -> State:
+        """To the geometric rung: configuration only."""
+        return State(state.q, np.zeros_like(state.nu), state.q_ref, np.zeros_like(state.delta_n), np.zeros_like(state.delta_t))
+
+    def rollout(
+        self,
+        scenario: Scenario,
+        state: State,
+        controls: np.ndarray,
+        durations: np.ndarray,
+        h: float,
+        *,
+        record_every: int = 0,
+        max_records: int = DEFAULT_RECORDS,
+    ) -> RolloutResult:
+        if self.model is None:
+            raise ValueError("the geometric rung has no dynamics to roll out; use valid()")
+        c = compiled(scenario)
+        durations = np.ascontiguousarray(np.atleast_1d(np.asarray(durations, float)))
+        controls = np.ascontiguousarray(np.asarray(controls, float).reshape(len(durations), len(scenario.actuated)))
+        if len(controls) != len(durations):
+            raise ValueError(f"{len(controls)} controls but {len(durations)} durations")
+        if record_every <= 0:
+            total = int(np.round(durations.sum() / h))
+            record_every = max(1, total // max(max_records - 2, 1))
+        start = time.perf_counter()
+        out = rollout_kernel(
+            c.scene, c.drives, self.model, c.goal, c.unsafe,
+            state.q.copy(), state.nu.copy(), state.q_ref.copy(), state.delta_n.copy(), state.delta_t.copy(),
+            controls, durations, float(h), int(record_every), int(max_records),
+        )
+        wall = time.perf_counter() - start
+        q, nu, q_ref, dn, dt, t, outcome, status, steps, lcp, piv, res, size, rec_t, rec_q, rec_nu = out
+        return RolloutResult(
+            state=State(q, nu, q_ref, dn, dt),
+            t=float(t),
+            outcome=OUTCOME_NAMES[int(outcome)],
+            status=STEP_NAMES[int(status)],
+            message=STEP_MESSAGES[int(status)],
+            steps=int(steps),
+            lcp_solves=int(lcp),
+            pivots=int(piv),
+            max_residual=float(res),
+            max_lcp_size=int(size),
+            wall_s=wall,
+            times=rec_t,
+            trajectory=rec_q,
+            velocities=rec_nu,
+        )
+
+    def valid(self, scenario: Scenario, q: np.ndarray, tolerance: float = GEOMETRIC_TOLERANCE) -> bool:
+        """Eq. (9): no pair penetrates by more than tolerance."""
+        placements = scenario.placements(q)
+        for pair in scenario.pairs:
+            psi = geo.signed_distance(
+                scenario.geometries[pair.body_a], placements[pair.body_a], scenario.geometries[pair.body_b], placements[pair.body_b]
+            )
+            if psi < -tolerance:
+                return False
+        return True
+
+
+RUNGS: dict[str, Rung] = {
+    "geometric": Rung("geometric", None, "eq. (9): non-penetration only"),
+    "kinematic": Rung("kinematic", Model(True, 0.0, False, 1.0, 2), "eq. (8): commanded speeds, min-norm passive speeds"),
+    "quasistatic-rigid": Rung("quasistatic-rigid", Model(False, 0.0, False, 1.0, 4), "eq. (7)"),
+    "quasistatic-compliant": Rung("quasistatic-compliant", Model(False, 0.0, True, 1.0, 4), "eq. (6)"),
+    "dynamic-rigid": Rung("dynamic-rigid", Model(False, 1.0, False, 1.0, 4), "eq. (5)"),
+    "dynamic-compliant": Rung("dynamic-compliant", Model(False, 1.0, True, 1.0, 4), "eq. (3)"),
+}
+
+
+def rung_for(scenario: Scenario, name: str) -> Rung:
+    """The registry's rung with the scenario's per-rung settings (theta, friction directions)."""
+    rung = RUNGS[name]
+    spec = next((r for r in scenario.spec.ladder.rungs if r.model == name), None)
+    if rung.model is None or spec is None:
+        return rung
+    model = rung.model._replace(theta=spec.theta)
+    if spec.friction_directions is not None:
+        model = model._replace(friction_directions=spec.friction_directions)
+    return replace(rung, model=model)

@@ -1,0 +1,456 @@
+"""One time-stepper for the paper's eq. (3), compiled; every rung is a setting of it.
+
+A step from (q, nu, q_ref, delta) with commanded actuator speeds u over h reads as
+contacts -> assemble -> solve -> integrate:
+
+1. contacts (done by the caller, `models.rollout`): detected at q with a broadphase margin
+   from nu and h; frames n, t (o); Jacobians W_n, W_t (W_o). Friction directions D are +-t in
+   the plane (exact) and d directions of a polyhedral cone in space.
+2. assemble: the drives are implicit PD laws tracking q_ref (advanced by h u, clamped to the
+   position limits), so with inertia scale eps
+
+       A nu+ = eps M nu + h (f_gravity + kp (q_ref+ - q) + kd u) + W_n p_n + D beta,
+       A = eps M + h (h kp + kd) on the driven DOFs,
+
+   where p = h lambda are contact impulses.
+3. solve the LCP in (p_n, beta, gamma) (Stewart-Trinkle form) with Lemke. Compliant contact
+   (eq. 3, damping read as C/h (delta+ - delta)) adds 1 / (h (h K + C)) to the diagonal of the
+   normal and friction blocks and shifts q by the previous deformation; rigid contact (eq. 5)
+   has neither.
+4. integrate: q+ = q + h G(q) (theta nu+ + (1 - theta) nu) (theta = 1: the paper's semi-implicit
+   scheme), delta+ = (p + C delta) / (h K + C).
+
+Quasistatic rungs (eps = 0) as the limit eps -> 0 of the dynamic model: at eps = 0 a passive
+body with nothing resisting it (the triangle on its frictionless palm, pushed by one finger
+with mu < 1) has no unique velocity. We take the limit of the *memoryless* dynamic step
+eps M nu+ = h F + W p as eps -> 0: it selects, among all velocities that satisfy equilibrium
+and the contact conditions, the one of least kinetic norm nu^T M nu (the LCP is the
+optimality condition of that QP). Numerically eps = QUASISTATIC_INERTIA and the previous
+velocity is not remembered.
+
+Failures never raise: the step returns a status (STEP_OK or a STEP_* code) and the LCP's
+recomputed residual; the rollout stops on a failure.
+
+Hot-path note: numba increfs every array of a tuple that crosses a function boundary, so
+these kernels take the packed scene tables (`SceneData.bi/.bf/.pi/.pf`) and plain arrays.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numba
+import numpy as np
+
+from models.kinematics import (
+    BF_INERTIA,
+    BF_MASS,
+    BF_QUAT,
+    BI_QMAP,
+    BI_VMAP,
+    PF_C,
+    PF_K,
+    PF_MU,
+    Q_QW,
+    V_ANGLE,
+    V_WX,
+    quat_mul,
+    quat_to_matrix,
+)
+from models.lcp import STATUS_SOLVED, STATUS_SOLVED_INACCURATE, complementarity_residual, lemke_kernel
+
+#: Quasistatic rungs: inertia scale standing in for eps -> 0 (times the mass matrix).
+QUASISTATIC_INERTIA = 1e-6
+#: Contacts are detected up to this distance beyond what one step can close (m).
+CONTACT_MARGIN = 1e-3
+#: A contact whose Jacobian column is below this does not couple to any free DOF.
+ZERO_COLUMN = 1e-12
+#: Lemke pivots allowed per LCP variable.
+PIVOTS_PER_VARIABLE = 50
+#: An LCP solution is accepted while its recomputed residual is below this.
+LCP_TOLERANCE = 1e-7
+#: A state entry above this in magnitude counts as diverged.
+DIVERGENCE_LIMIT = 1e10
+
+STEP_OK = 0
+STEP_LCP_FAILED = 1
+STEP_NON_FINITE = 2
+STEP_DIVERGED = 3
+STEP_UNSUPPORTED_PAIR = 4
+STEP_SINGULAR = 5
+STEP_BLOCKED = 6
+STEP_NAMES = {
+    STEP_OK: "ok",
+    STEP_LCP_FAILED: "lcp_failed",
+    STEP_NON_FINITE: "non_finite",
+    STEP_DIVERGED: "diverged",
+    STEP_UNSUPPORTED_PAIR: "unsupported_pair",
+    STEP_SINGULAR: "singular",
+    STEP_BLOCKED: "blocked",
+}
+STEP_MESSAGES = {
+    STEP_OK: "ok",
+    STEP_LCP_FAILED: "the contact LCP could not be solved (Lemke failed or its residual is too large); try a smaller step",
+    STEP_NON_FINITE: "the state became non-finite",
+    STEP_DIVERGED: "the state diverged (an entry exceeded 1e10); try a smaller step",
+    STEP_UNSUPPORTED_PAIR: "a contact pair needs python-fcl (a mesh against a non-plane), which compiled rollouts cannot call",
+    STEP_SINGULAR: "the velocity system is singular (a free DOF with neither inertia nor a drive)",
+    STEP_BLOCKED: "kinematic model: the commanded motion would penetrate something nothing can push away",
+}
+
+
+class Model(NamedTuple):
+    """Physics settings of a rung (what is solved); see the module docstring."""
+
+    kinematic: bool  # eq. (8): actuated speeds exact, passive speeds min-norm; no forces
+    eps: float  # inertia scale: 1 dynamic, 0 quasistatic
+    compliant: bool  # finite K, C with deformation state; else rigid
+    theta: float  # theta-rule weight for the position update
+    friction_directions: int  # polyhedral cone directions in space (2 in the plane)
+
+
+class Drives(NamedTuple):
+    """Actuated DOFs: nu/q indices, PD gains, limits (arrays of length n_actuated)."""
+
+    q_index: np.ndarray
+    v_index: np.ndarray
+    kp: np.ndarray
+    kd: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    gravity: np.ndarray  # (3,)
+
+
+# ----------------------------------------------------------------------------- mass and forces
+
+
+@numba.njit(cache=True)
+def mass_matrix(bi, bf, q, nv):
+    """M(q) in velocity coordinates: m on translations, I_zz on planar/yaw angles, R I R^T on rotations."""
+    M = np.zeros((nv, nv))
+    for b in range(bi.shape[0]):
+        for k in range(3):
+            if bi[b, BI_VMAP + k] >= 0:
+                M[bi[b, BI_VMAP + k], bi[b, BI_VMAP + k]] = bf[b, BF_MASS]
+        if bi[b, BI_VMAP + V_ANGLE] >= 0:
+            M[bi[b, BI_VMAP + V_ANGLE], bi[b, BI_VMAP + V_ANGLE]] = bf[b, BF_INERTIA + 2]
+        if bi[b, BI_VMAP + V_WX] >= 0:
+            quat = np.empty(4)
+            for k in range(4):
+                quat[k] = q[bi[b, BI_QMAP + Q_QW + k]]
+            R = quat_to_matrix(quat / np.sqrt(np.sum(quat * quat)))
+            for r in range(3):
+                for c in range(3):
+                    s = 0.0
+                    for k in range(3):
+                        s += R[r, k] * bf[b, BF_INERTIA + k] * R[c, k]
+                    M[bi[b, BI_VMAP + V_WX + r], bi[b, BI_VMAP + V_WX + c]] = s
+    return M
+
+
+@numba.njit(cache=True)
+def has_rotations(bi):
+    """True when M depends on q (a free spatial rotation)."""
+    for b in range(bi.shape[0]):
+        if bi[b, BI_VMAP + V_WX] >= 0:
+            return True
+    return False
+
+
+@numba.njit(cache=True)
+def gravity_force(bi, bf, gravity, nv):
+    f = np.zeros(nv)
+    for b in range(bi.shape[0]):
+        for k in range(3):
+            if bi[b, BI_VMAP + k] >= 0:
+                f[bi[b, BI_VMAP + k]] += bf[b, BF_MASS] * gravity[k]
+    return f
+
+
+@numba.njit(cache=True)
+def gyroscopic_force(bi, bf, q, nu, nv):
+    """-w x (I_world w) for free spatial rotations (the paper's k(t, q, nu))."""
+    f = np.zeros(nv)
+    for b in range(bi.shape[0]):
+        if bi[b, BI_VMAP + V_WX] < 0:
+            continue
+        quat = np.empty(4)
+        for k in range(4):
+            quat[k] = q[bi[b, BI_QMAP + Q_QW + k]]
+        R = quat_to_matrix(quat / np.sqrt(np.sum(quat * quat)))
+        w = np.empty(3)
+        for k in range(3):
+            w[k] = nu[bi[b, BI_VMAP + V_WX + k]]
+        wb = R.T @ w
+        Lb = np.empty(3)
+        for k in range(3):
+            Lb[k] = bf[b, BF_INERTIA + k] * wb[k]
+        L = R @ Lb
+        f[bi[b, BI_VMAP + V_WX]] -= w[1] * L[2] - w[2] * L[1]
+        f[bi[b, BI_VMAP + V_WX + 1]] -= w[2] * L[0] - w[0] * L[2]
+        f[bi[b, BI_VMAP + V_WX + 2]] -= w[0] * L[1] - w[1] * L[0]
+    return f
+
+
+@numba.njit(cache=True)
+def system_matrix(bi, bf, q, nv, eps, h, v_index, kp, kd):
+    """A = eps M + h (h kp + kd) on the driven DOFs."""
+    A = eps * mass_matrix(bi, bf, q, nv)
+    for j in range(v_index.shape[0]):
+        A[v_index[j], v_index[j]] += h * (h * kp[j] + kd[j])
+    return A
+
+
+@numba.njit(cache=True)
+def integrate_positions(bi, q, nu, h):
+    """q + h G(q) nu, renormalising quaternions (the paper's q^{l+1} = q^l + h G nu^{l+1})."""
+    out = q.copy()
+    for b in range(bi.shape[0]):
+        for k in range(4):  # translations and the planar/yaw angle: G = identity
+            if bi[b, BI_QMAP + k] >= 0:
+                out[bi[b, BI_QMAP + k]] = q[bi[b, BI_QMAP + k]] + h * nu[bi[b, BI_VMAP + k]]
+        if bi[b, BI_QMAP + Q_QW] >= 0:
+            quat = np.empty(4)
+            for k in range(4):
+                quat[k] = q[bi[b, BI_QMAP + Q_QW + k]]
+            omega = np.array([0.0, nu[bi[b, BI_VMAP + V_WX]], nu[bi[b, BI_VMAP + V_WX + 1]], nu[bi[b, BI_VMAP + V_WX + 2]]])
+            dq = quat_mul(omega, quat)
+            norm = 0.0
+            for k in range(4):
+                quat[k] += 0.5 * h * dq[k]
+                norm += quat[k] * quat[k]
+            norm = np.sqrt(norm)
+            for k in range(4):
+                out[bi[b, BI_QMAP + Q_QW + k]] = quat[k] / norm
+    return out
+
+
+# ----------------------------------------------------------------------------- the step
+
+
+@numba.njit(cache=True)
+def _column_norm(W, i):
+    s = 0.0
+    for r in range(W.shape[0]):
+        s += W[r, i] * W[r, i]
+    return np.sqrt(s)
+
+
+@numba.njit(cache=True)
+def _finite_and_bounded(x):
+    ok = True
+    for v in x.ravel():
+        if not (abs(v) <= DIVERGENCE_LIMIT):
+            ok = False
+    return ok
+
+
+@numba.njit(cache=True)
+def dynamics_step(
+    model_eps, compliant, theta, directions, h,
+    bi, bf, pf, A, Ainv, rhs_const, q, nu, q_ref, delta_n, delta_t, u,
+    q_index, v_index, kp, kd, lower, upper,
+    nc, c_pair, c_psi, c_slot, W_n, W_t, W_o, spatial,
+):
+    """One step of eq. (3) given the contacts at q. Pure: returns new arrays.
+
+    A, Ainv: the system matrix and its inverse (Ainv may be empty: then A is solved each call).
+    rhs_const: h * (gravity force) (the part of the right-hand side that never changes).
+    Returns (q+, nu+, q_ref+, delta_n+, delta_t+, status, pivots, residual, lcp_size).
+    """
+    nv = nu.shape[0]
+    na = v_index.shape[0]
+    quasistatic = model_eps == 0.0
+    q_ref_new = q_ref.copy()
+    rhs = rhs_const.copy()
+    eps = QUASISTATIC_INERTIA if quasistatic else model_eps
+    if not quasistatic:
+        M = mass_matrix(bi, bf, q, nv)
+        rhs += eps * (M @ nu)
+        if spatial:
+            rhs += h * eps * gyroscopic_force(bi, bf, q, nu, nv)
+    for j in range(na):
+        q_ref_new[j] = min(max(q_ref[j] + h * u[j], lower[j]), upper[j])
+        rhs[v_index[j]] += h * (kp[j] * (q_ref_new[j] - q[q_index[j]]) + kd[j] * u[j])
+    if Ainv.shape[0] == nv:
+        nu_free = Ainv @ rhs
+    else:
+        nu_free = np.linalg.solve(A, rhs)
+    nu_new = nu_free
+    delta_n_new = np.zeros_like(delta_n)
+    delta_t_new = np.zeros_like(delta_t)
+    status = STEP_OK
+    pivots = 0
+    residual = 0.0
+    size = 0
+    # contacts that couple to a free DOF; friction only where mu > 0 and the tangent couples
+    active = np.empty(nc, np.int64)
+    n_act = 0
+    for i in range(nc):
+        if _column_norm(W_n, i) > ZERO_COLUMN:
+            active[n_act] = i
+            n_act += 1
+    if n_act > 0:
+        nu_new, p_n, p_t, status, pivots, residual, size = _contact_solve(
+            compliant, directions, spatial, h, A, Ainv, nu_free, active[:n_act], pf, c_pair, c_psi, c_slot, W_n, W_t, W_o, delta_n, delta_t
+        )
+        if status == STEP_OK and compliant:
+            for k in range(n_act):
+                i = active[k]
+                K, C = pf[c_pair[i], PF_K], pf[c_pair[i], PF_C]
+                slot = c_slot[i]
+                delta_n_new[slot] = (p_n[k] + C * delta_n[slot]) / (h * K + C)
+                for c in range(2):
+                    delta_t_new[slot, c] = (p_t[k, c] + C * delta_t[slot, c]) / (h * K + C)
+    if status != STEP_OK:
+        return q, nu, q_ref, delta_n, delta_t, status, pivots, residual, size
+    if theta == 1.0:
+        q_new = integrate_positions(bi, q, nu_new, h)
+    else:
+        q_new = integrate_positions(bi, q, theta * nu_new + (1.0 - theta) * nu, h)
+    if not (_finite_and_bounded(q_new) and _finite_and_bounded(nu_new)):
+        bad = STEP_DIVERGED
+        if not (np.all(np.isfinite(q_new)) and np.all(np.isfinite(nu_new))):
+            bad = STEP_NON_FINITE
+        return q, nu, q_ref, delta_n, delta_t, bad, pivots, residual, size
+    return q_new, nu_new, q_ref_new, delta_n_new, delta_t_new, STEP_OK, pivots, residual, size
+
+
+@numba.njit(cache=True)
+def _contact_solve(compliant, directions, spatial, h, A, Ainv, nu_free, active, pf, c_pair, c_psi, c_slot, W_n, W_t, W_o, delta_n, delta_t):
+    """Build and solve the contact LCP. Returns (nu+, p_n, p_t, status, pivots, residual, size)."""
+    nc = active.shape[0]
+    nv = nu_free.shape[0]
+    d = directions if spatial else 2
+    fric = np.empty(nc, np.int64)
+    nf = 0
+    for k in range(nc):
+        i = active[k]
+        couples = _column_norm(W_t, i) > ZERO_COLUMN
+        if spatial and _column_norm(W_o, i) > ZERO_COLUMN:
+            couples = True
+        if pf[c_pair[i], PF_MU] > 0.0 and couples:
+            fric[nf] = k
+            nf += 1
+    nd = nf * d
+    # friction directions in the (t, o) basis; a Jacobian column is linear in its direction
+    coef = np.zeros((max(nd, 1), 2))
+    J = np.empty((nv, nc + nd))
+    for k in range(nc):
+        for v in range(nv):
+            J[v, k] = W_n[v, active[k]]
+    for f in range(nf):
+        i = active[fric[f]]
+        for j in range(d):
+            r = f * d + j
+            if spatial:
+                ang = 2.0 * np.pi * j / d
+                coef[r, 0], coef[r, 1] = np.cos(ang), np.sin(ang)
+            else:
+                coef[r, 0] = 1.0 if j == 0 else -1.0
+            for v in range(nv):
+                J[v, nc + r] = coef[r, 0] * W_t[v, i]
+                if spatial:
+                    J[v, nc + r] += coef[r, 1] * W_o[v, i]
+    if Ainv.shape[0] == nv:
+        AinvJ = Ainv @ J
+    else:
+        AinvJ = np.linalg.solve(A, J)
+    n = nc + nd + nf
+    Mlcp = np.zeros((n, n))
+    qlcp = np.zeros(n)
+    Mlcp[: nc + nd, : nc + nd] = J.T @ AinvJ
+    Jt_nu = J.T @ nu_free
+    for k in range(nc):
+        i = active[k]
+        qlcp[k] = c_psi[i] / h + Jt_nu[k]
+        if compliant:
+            K, C = pf[c_pair[i], PF_K], pf[c_pair[i], PF_C]
+            comp = 1.0 / (h * (h * K + C))
+            Mlcp[k, k] += comp
+            qlcp[k] += comp * C * delta_n[c_slot[i]]
+    for f in range(nf):
+        k = fric[f]
+        i = active[k]
+        p = c_pair[i]
+        g = nc + nd + f
+        Mlcp[g, k] = pf[p, PF_MU]
+        K, C = pf[p, PF_K], pf[p, PF_C]
+        slot = c_slot[i]
+        for j in range(d):
+            r = nc + f * d + j
+            qlcp[r] = Jt_nu[r]
+            Mlcp[r, g] = 1.0
+            Mlcp[g, r] = -1.0
+            if compliant:
+                comp = 1.0 / (h * (h * K + C))
+                for j2 in range(d):
+                    r2 = nc + f * d + j2
+                    Mlcp[r, r2] += comp * (coef[r - nc, 0] * coef[r2 - nc, 0] + coef[r - nc, 1] * coef[r2 - nc, 1])
+                qlcp[r] -= K / (h * K + C) * (coef[r - nc, 0] * delta_t[slot, 0] + coef[r - nc, 1] * delta_t[slot, 1])
+    z, w, status, pivots = lemke_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1))
+    residual = complementarity_residual(Mlcp, qlcp, z)
+    p_n = z[:nc].copy()
+    p_t = np.zeros((nc, 2))
+    if (status != STATUS_SOLVED and status != STATUS_SOLVED_INACCURATE) or not (residual <= LCP_TOLERANCE):
+        return nu_free, p_n, p_t, STEP_LCP_FAILED, pivots, residual, n
+    for f in range(nf):
+        k = fric[f]
+        for j in range(d):
+            r = nc + f * d + j
+            p_t[k, 0] += z[r] * coef[r - nc, 0]
+            p_t[k, 1] += z[r] * coef[r - nc, 1]
+    nu_new = nu_free + AinvJ @ z[: nc + nd]
+    return nu_new, p_n, p_t, STEP_OK, pivots, residual, n
+
+
+@numba.njit(cache=True)
+def kinematic_step(bi, h, q, q_ref, u, q_index, v_index, lower, upper, nc, c_psi, W_n, nv):
+    """The paper's eq. (8) given the contacts at q. Returns (q+, nu+, q_ref+, status, pivots, residual).
+
+    Actuated DOFs move at the commanded speed (stopping at their position limits); the
+    passive speeds v are the least-norm ones keeping every contact's psi + h W_n^T nu >= 0:
+    min |v|^2 s.t. W_p^T v >= -(psi / h + W_a^T u). Its dual is the LCP
+    0 <= lam _|_ W_p^T W_p lam + (psi / h + W_a^T u) >= 0 with v = W_p lam, solved by Lemke
+    (tests check it against the OSQP wrapper). An infeasible LCP means the command pushes
+    into something nothing can move: STEP_BLOCKED.
+    """
+    na = v_index.shape[0]
+    nu = np.zeros(nv)
+    q_ref_new = q_ref.copy()
+    actuated = np.zeros(nv, np.bool_)
+    for j in range(na):
+        target = min(max(q[q_index[j]] + h * u[j], lower[j]), upper[j])
+        nu[v_index[j]] = (target - q[q_index[j]]) / h
+        q_ref_new[j] = target
+        actuated[v_index[j]] = True
+    pivots = 0
+    residual = 0.0
+    status = STEP_OK
+    if nc > 0:
+        Wp = np.zeros((nv, nc))
+        qlcp = np.zeros(nc)
+        for i in range(nc):
+            s = c_psi[i] / h
+            for v in range(nv):
+                if actuated[v]:
+                    s += W_n[v, i] * nu[v]
+                else:
+                    Wp[v, i] = W_n[v, i]
+            qlcp[i] = s
+        Mlcp = Wp.T @ Wp
+        lam, w, st, pivots = lemke_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (nc + 1))
+        residual = complementarity_residual(Mlcp, qlcp, lam)
+        if (st != STATUS_SOLVED and st != STATUS_SOLVED_INACCURATE) or not (residual <= LCP_TOLERANCE):
+            status = STEP_BLOCKED
+        else:
+            v_passive = Wp @ lam
+            for v in range(nv):
+                if not actuated[v]:
+                    nu[v] = v_passive[v]
+    if status != STEP_OK:
+        return q, nu, q_ref, status, pivots, residual
+    q_new = integrate_positions(bi, q, nu, h)
+    if not (_finite_and_bounded(q_new) and _finite_and_bounded(nu)):
+        return q, nu, q_ref, STEP_NON_FINITE, pivots, residual
+    return q_new, nu, q_ref_new, STEP_OK, pivots, residual
