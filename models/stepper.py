@@ -317,8 +317,12 @@ def dynamics_step(
 
 
 @numba.njit(cache=True)
-def _contact_solve(compliant, directions, spatial, h, A, Ainv, nu_free, active, pf, c_pair, c_psi, c_slot, W_n, W_t, W_o, delta_n, delta_t):
-    """Build and solve the contact LCP. Returns (nu+, p_n, p_t, status, pivots, residual, size)."""
+def contact_lcp(compliant, directions, spatial, h, A, Ainv, nu_free, active, pf, c_pair, c_psi, c_slot, W_n, W_t, W_o, delta_n, delta_t):
+    """Assemble the contact LCP of the active contacts.
+
+    Unknowns z = (p_n (nc), beta (nf * d), gamma (nf)); returns (M, q, A^-1 J, coef, fric, nf)
+    with J = [W_n | D] and coef the friction directions in the (t, o) basis.
+    """
     nc = active.shape[0]
     nv = nu_free.shape[0]
     d = directions if spatial else 2
@@ -359,8 +363,9 @@ def _contact_solve(compliant, directions, spatial, h, A, Ainv, nu_free, active, 
     n = nc + nd + nf
     Mlcp = np.zeros((n, n))
     qlcp = np.zeros(n)
-    Mlcp[: nc + nd, : nc + nd] = J.T @ AinvJ
-    Jt_nu = J.T @ nu_free
+    Jt = np.ascontiguousarray(J.T)
+    Mlcp[: nc + nd, : nc + nd] = Jt @ AinvJ
+    Jt_nu = Jt @ nu_free
     for k in range(nc):
         i = active[k]
         qlcp[k] = c_psi[i] / h + Jt_nu[k]
@@ -388,6 +393,19 @@ def _contact_solve(compliant, directions, spatial, h, A, Ainv, nu_free, active, 
                     r2 = nc + f * d + j2
                     Mlcp[r, r2] += comp * (coef[r - nc, 0] * coef[r2 - nc, 0] + coef[r - nc, 1] * coef[r2 - nc, 1])
                 qlcp[r] -= K / (h * K + C) * (coef[r - nc, 0] * delta_t[slot, 0] + coef[r - nc, 1] * delta_t[slot, 1])
+    return Mlcp, qlcp, AinvJ, coef, fric, nf
+
+
+@numba.njit(cache=True)
+def _contact_solve(compliant, directions, spatial, h, A, Ainv, nu_free, active, pf, c_pair, c_psi, c_slot, W_n, W_t, W_o, delta_n, delta_t):
+    """Build and solve the contact LCP. Returns (nu+, p_n, p_t, status, pivots, residual, size)."""
+    Mlcp, qlcp, AinvJ, coef, fric, nf = contact_lcp(
+        compliant, directions, spatial, h, A, Ainv, nu_free, active, pf, c_pair, c_psi, c_slot, W_n, W_t, W_o, delta_n, delta_t
+    )
+    nc = active.shape[0]
+    d = directions if spatial else 2
+    nd = nf * d
+    n = qlcp.shape[0]
     z, w, status, pivots = lemke_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1))
     residual = complementarity_residual(Mlcp, qlcp, z)
     p_n = z[:nc].copy()

@@ -687,3 +687,41 @@ def test_poses_match_the_kinematics(scenes):
             np.testing.assert_allclose(np.array(R), R_ref, atol=1e-15)
             np.testing.assert_allclose(np.array(R), X[name].rotation, atol=1e-14)
             np.testing.assert_allclose(p, X[name].translation, atol=1e-15)
+
+
+def test_spatial_jacobians_are_rates_of_psi_along_the_motion():
+    """W^T nu equals d psi / dt along q(t) = q + t G(q) nu (world angular velocity), by central
+    differences, for the box on the table and the sphere pusher against the box."""
+    from models.contact import contact_frames
+    from models.kinematics import G_matrix, compile_scene
+    from models.scenario import load_scenario
+    from tests.conftest import SCENARIOS
+
+    scenario = load_scenario(SCENARIOS / "box_push_3d.toml")
+    S = compile_scene(scenario)
+    rng = np.random.default_rng(4)
+    checked = 0
+    for _ in range(30):
+        q = np.array(scenario.start, dtype=float)
+        quat = np.array([1.0, *rng.normal(scale=0.15, size=3)])
+        q[3:7] = quat / np.linalg.norm(quat)
+        q[2] = 0.05 + rng.uniform(0.0, 0.02)  # near the table
+        q[7:9] = [-0.1 - 0.03 - rng.uniform(0, 0.01), rng.uniform(-0.05, 0.05)]  # pusher near the -x face
+        nu = rng.normal(size=S.nv)
+        frames = contact_frames(S, q, margin=0.2)
+        eps = 1e-7
+        G = G_matrix(S, q)
+        plus = contact_frames(S, q + eps * G @ nu, margin=0.2)
+        minus = contact_frames(S, q - eps * G @ nu, margin=0.2)
+        for p in np.unique(frames.pair):
+            rows = np.flatnonzero(frames.pair == p)
+            i = rows[np.argmin(frames.psi[rows])]
+            others = frames.psi[rows]
+            if len(rows) > 1 and np.sort(others)[1] - np.sort(others)[0] < 1e-3:
+                continue  # the min of near-equal contacts is not differentiable
+            psi_plus = plus.psi[plus.pair == p].min()
+            psi_minus = minus.psi[minus.pair == p].min()
+            rate = (psi_plus - psi_minus) / (2 * eps)
+            assert frames.W_n[:, i] @ nu == pytest.approx(rate, abs=1e-5 * (1 + abs(rate)))
+            checked += 1
+    assert checked >= 30

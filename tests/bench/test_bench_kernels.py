@@ -1,7 +1,8 @@
-"""Kernel benchmarks (pytest-benchmark; run with `pytest -m slow tests/bench --benchmark-enable`).
+"""Kernel benchmarks (pytest-benchmark): `pytest -m slow tests/bench --benchmark-enable`.
 
 Per-call times are measured over compiled loops of many calls, so they exclude Python's
-dispatch cost, which the rollout never pays.
+dispatch cost, which the rollout never pays. `extra_info["per_call_us"]` holds the median
+per call.
 """
 
 from __future__ import annotations
@@ -10,10 +11,11 @@ import numba
 import numpy as np
 import pytest
 
-from models.contact import capacity, contact_jacobian, detect_contacts, tangents
-from models.kinematics import compile_scene
-from models.lcp import solve_lcp
+from models.contact import contact_frames, detect_planar, jacobian_packed, tangents_packed
+from models.lcp import lemke_kernel, pgs_kernel
+from models.rungs import compiled
 from models.scenario import load_scenario
+from models.stepper import contact_lcp, system_matrix
 from tests.conftest import SCENARIOS
 
 pytestmark = pytest.mark.slow
@@ -21,36 +23,90 @@ CALLS = 10_000
 
 
 @numba.njit(cache=True)
-def _contacts_loop(S, q, calls):
-    cap = 0
-    for p in range(S.pair_max_contacts.shape[0]):
-        cap += S.pair_max_contacts[p]
+def _contacts_loop(bi, bf, verts, pi, nv, q, calls):
+    cap = 1
+    for p in range(pi.shape[0]):
+        cap += pi[p, 2]
     c_pair = np.zeros(cap, np.int64)
     c_psi = np.zeros(cap)
     c_n, c_t, c_o = np.zeros((cap, 3)), np.zeros((cap, 3)), np.zeros((cap, 3))
     c_pa, c_pb = np.zeros((cap, 3)), np.zeros((cap, 3))
-    unsupported = np.zeros(S.pair_a.shape[0], np.int64)
-    W_n, W_t = np.zeros((S.nv, cap)), np.zeros((S.nv, cap))
-    nu = np.zeros(S.nv)
+    W_n, W_t = np.zeros((nv, cap)), np.zeros((nv, cap))
+    nu = np.zeros(nv)
     total = 0
     for k in range(calls):
-        q[1] -= 1e-9  # keep the compiler from hoisting the work
-        nc, _ = detect_contacts(S, q, nu, 1e-4, 1e-3, c_pair, c_psi, c_n, c_pa, c_pb, unsupported)
-        tangents(S, nc, c_n, c_t, c_o)
-        contact_jacobian(S, q, nc, c_pair, c_n, c_pa, c_pb, W_n)
-        contact_jacobian(S, q, nc, c_pair, c_t, c_pa, c_pb, W_t)
+        q[0] += 1e-12  # keep the compiler from hoisting the work
+        nc = detect_planar(bi, bf, verts, pi, q, nu, 1e-4, 1e-3, c_pair, c_psi, c_n, c_pa, c_pb)
+        tangents_packed(2, nc, c_n, c_t, c_o)
+        jacobian_packed(bi, bf, pi, q, nc, c_pair, c_n, c_pa, c_pb, W_n)
+        jacobian_packed(bi, bf, pi, q, nc, c_pair, c_t, c_pa, c_pb, W_t)
         total += nc
     return total
 
 
+def _paper_scene():
+    scenario = load_scenario(SCENARIOS / "two_finger_triangle.toml")
+    y = 0.5 + 0.05 * np.sqrt(2)  # both fingers on the faces
+    return scenario, compiled(scenario), np.array([0.0, y, y])
+
+
 def test_paper_scene_distance_and_jacobians(benchmark):
-    S = compile_scene(load_scenario(SCENARIOS / "two_finger_triangle.toml"))
-    y = 0.5 + 0.05 * np.sqrt(2)
-    q = np.array([0.0, y, y])
-    _contacts_loop(S, q.copy(), 10)
-    total = benchmark(_contacts_loop, S, q.copy(), CALLS)
+    _, c, q = _paper_scene()
+    S = c.scene
+    args = (S.bi, S.bf, S.verts, S.pi, S.nv)
+    _contacts_loop(*args, q.copy(), 10)
+    total = benchmark(_contacts_loop, *args, q.copy(), CALLS)
     assert total >= 2 * CALLS  # both finger contacts found every call
     benchmark.extra_info["per_call_us"] = benchmark.stats.stats.median / CALLS * 1e6
+
+
+def paper_scene_lcp():
+    """The dynamic-compliant step's LCP with both fingers on the faces (h = 1e-4)."""
+    scenario, c, q = _paper_scene()
+    S, D = c.scene, c.drives
+    h = 1e-4
+    frames = contact_frames(S, q)
+    fingers = np.flatnonzero(np.abs(frames.W_n[1:, :]).sum(axis=0) > 0)  # the two finger contacts
+    A = system_matrix(S.bi, S.bf, q, S.nv, 1.0, h, D.v_index, D.kp, D.kd)
+    nu_free = np.linalg.solve(A, np.array([0.0, -0.05, -0.05]))
+    slots = np.arange(len(frames.psi))
+    M, qv, *_ = contact_lcp(
+        True, 2, False, h, A, np.linalg.inv(A), nu_free, fingers.astype(np.int64), S.pf, frames.pair, frames.psi, slots,
+        np.ascontiguousarray(frames.W_n), np.ascontiguousarray(frames.W_t), np.zeros_like(frames.W_n),
+        np.zeros(len(slots)), np.zeros((len(slots), 2)),
+    )
+    return M, qv
+
+
+@numba.njit(cache=True)
+def _lemke_loop(M, q, calls):
+    total = 0
+    for k in range(calls):
+        q[0] += 1e-15
+        z, w, status, pivots = lemke_kernel(M, q, 500)
+        total += pivots
+    return total
+
+
+@numba.njit(cache=True)
+def _pgs_loop(M, q, calls):
+    total = 0
+    z0 = np.zeros(q.shape[0])
+    for k in range(calls):
+        q[0] += 1e-15
+        z, w, status, iterations = pgs_kernel(M, q, z0, 100_000, 1e-9, 1.0)
+        total += iterations
+    return total
+
+
+def test_lemke_on_the_paper_scene_lcp(benchmark):
+    M, q = paper_scene_lcp()
+    assert M.shape == (8, 8)  # 2 normals, 2 x 2 friction directions, 2 sliding speeds
+    _lemke_loop(M, q.copy(), 10)
+    pivots = benchmark(_lemke_loop, M, q.copy(), CALLS)
+    assert pivots > 0
+    benchmark.extra_info["per_call_us"] = benchmark.stats.stats.median / CALLS * 1e6
+    benchmark.extra_info["pivots"] = pivots / CALLS
 
 
 def _contact_lcp(n, rng):
@@ -59,9 +115,12 @@ def _contact_lcp(n, rng):
     return M, rng.normal(size=n)
 
 
-@pytest.mark.parametrize("n", [2, 4, 8, 16, 32, 64])
+@pytest.mark.parametrize("n", [4, 8, 16, 32, 64])
 @pytest.mark.parametrize("method", ["lemke", "pgs"])
 def test_lcp(benchmark, method, n):
     M, q = _contact_lcp(n, np.random.default_rng(n))
-    result = benchmark(solve_lcp, M, q, method=method, max_iterations=100_000)
-    assert result.residual < 1e-6
+    loop = _lemke_loop if method == "lemke" else _pgs_loop
+    calls = max(10, 20_000 // n**2)
+    loop(M, q.copy(), 2)
+    benchmark(loop, M, q.copy(), calls)
+    benchmark.extra_info["per_call_us"] = benchmark.stats.stats.median / calls * 1e6
