@@ -38,6 +38,7 @@ from models.kinematics import (
     V_ANGLE,
     V_WX,
     SceneData,
+    body_pose_3d,
     planar_poses,
     positions,
 )
@@ -149,6 +150,32 @@ def detect_planar(bi, bf, verts, pi, q, nu, h, margin, c_pair, c_psi, c_n, c_pa,
 
 
 @numba.njit(cache=True)
+def _world_aabb(S, q, b):
+    p, R = body_pose_3d(S, q, b)
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    for i in range(S.vstart[b], S.vstart[b] + S.vcount[b]):
+        for k in range(3):
+            v = p[k] + R[k, 0] * S.verts[i, 0] + R[k, 1] * S.verts[i, 1] + R[k, 2] * S.verts[i, 2]
+            lo[k] = min(lo[k], v)
+            hi[k] = max(hi[k], v)
+    r = S.radius[b]
+    return lo - r, hi + r
+
+
+@numba.njit(cache=True)
+def _aabbs_apart(S, q, a, b, reach):
+    """Second broadphase stage in space: world bounding boxes farther apart than reach."""
+    lo_a, hi_a = _world_aabb(S, q, a)
+    lo_b, hi_b = _world_aabb(S, q, b)
+    apart = False
+    for k in range(3):
+        if lo_b[k] - hi_a[k] > reach or lo_a[k] - hi_b[k] > reach:
+            apart = True
+    return apart
+
+
+@numba.njit(cache=True)
 def detect_spatial(S, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsupported):
     bi, bf, pi = S.bi, S.bf, S.pi
     pos = np.empty((bi.shape[0], 3))
@@ -159,6 +186,8 @@ def detect_spatial(S, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsuppor
         a, b = pi[p, PI_A], pi[p, PI_B]
         reach = margin + MARGIN_SAFETY * h * (_speed_bound(bi, bf, nu, a) + _speed_bound(bi, bf, nu, b))
         if not _keep(bi, bf, q, pos, a, b, reach):
+            continue
+        if bi[a, BI_KIND] != SHAPE_HALFSPACE and bi[b, BI_KIND] != SHAPE_HALFSPACE and _aabbs_apart(S, q, a, b, reach):
             continue
         k = collide_pair_3d(S, q, p, reach, c_psi, c_n, c_pa, c_pb, nc)
         if k < 0:

@@ -338,8 +338,8 @@ def _entering_column(M, Binv, var, n, d, mag, col, idx):
     """d = Binv @ a_var for the system  I w - M z - e z0 = q  (var: w_i=i, z_j=n+j, z0=2n).
 
     Also mag = |Binv| @ |a_var|, the size of the terms summed into each d_i (its round-off
-    scale); returns max_k |a_k|.  Sparse columns of M (fewer than n/2 nonzeros) are multiplied through their
-    nonzeros only.
+    scale); returns max_k |a_k|.  Sparse columns of M (fewer than n/2 nonzeros) are
+    multiplied through their nonzeros only.
     """
     amax = 1.0
     if var < n:
@@ -466,6 +466,12 @@ def lemke_kernel(M, q, max_pivots):
     J (kept if it lowers the residual).  If the path ends on a secondary ray at a point that
     nevertheless solves the LCP to LEMKE_RESCUE_TOL (this happens when z0 reaches 0 in a
     tie that round-off broke the wrong way), that point is returned with STATUS_SOLVED.
+
+    Round-off handling (see the LEMKE_* constants): an entry of the entering column counts as
+    positive only above LEMKE_PIVOT_TOL times its own round-off scale; lexicographic ties are
+    decided relative to the magnitudes involved with a LEMKE_NOISE floor; basic values that
+    drift below 0 are clamped to 0.  Exact-arithmetic checks on small degenerate problems
+    (tests/test_lcp.py) show the same pivot sequence as rational-arithmetic Lemke.
 
     Parameters: M (n, n) float64, q (n,) float64, max_pivots (int, counts every pivot
     including the first one that brings z0 in).
@@ -679,7 +685,8 @@ _METHODS = ("lemke", "pgs")
 
 
 def default_max_iterations(method: str, n: int) -> int:
-    """Lemke: DEFAULT_LEMKE_PIVOTS_PER_VARIABLE * (n + 1) pivots; PGS: DEFAULT_PGS_MAX_ITERATIONS."""
+    """Default limit: Lemke DEFAULT_LEMKE_PIVOTS_PER_VARIABLE * (n + 1) pivots, PGS
+    DEFAULT_PGS_MAX_ITERATIONS sweeps.  Raises ValueError for an unknown method."""
     if method == "lemke":
         return DEFAULT_LEMKE_PIVOTS_PER_VARIABLE * (n + 1)
     if method == "pgs":

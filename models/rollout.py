@@ -54,7 +54,7 @@ def _inverse_or_empty(A):
     for r in range(A.shape[0]):
         if not (A[r, r] > 0.0):
             return np.zeros((0, 0))
-    return np.linalg.inv(A)
+    return np.ascontiguousarray(np.linalg.inv(A))
 
 
 @numba.njit(cache=True)
@@ -62,7 +62,8 @@ def rollout_kernel(S, D, model, goal, unsafe, q, nu, q_ref, delta_n, delta_t, co
     """Run the controls from the given state.
 
     Returns (q, nu, q_ref, delta_n, delta_t, t, outcome, status, steps, lcp_solves, pivots,
-    max_residual, max_lcp_size, rec_t (n,), rec_q (n, nq), rec_nu (n, nv)).
+    max_residual, max_lcp_size, rec_t (n,), rec_q (n, nq), rec_nu (n, nv), pair_force (n_pairs,):
+    the normal contact force of each pair over the last step taken).
     """
     dimension = S.dimension
     spatial = dimension == 3
@@ -89,6 +90,7 @@ def rollout_kernel(S, D, model, goal, unsafe, q, nu, q_ref, delta_n, delta_t, co
     W_n, W_t, W_o = np.zeros((nv, cap)), np.zeros((nv, cap)), np.zeros((nv, cap))
     unsupported = np.zeros(max(pi.shape[0], 1), np.int64)
     pair_psi = np.full(max(pi.shape[0], 1), np.inf)
+    pair_force = np.zeros(max(pi.shape[0], 1))  # normal force per pair in the last step
     # what never changes during the rollout
     rhs_const = h * gravity_force(bi, bf, D.gravity, nv)
     constant_A = not has_rotations(bi)
@@ -141,6 +143,7 @@ def rollout_kernel(S, D, model, goal, unsafe, q, nu, q_ref, delta_n, delta_t, co
                 q2, nu2, q_ref2, st, piv, res = kinematic_step(bi, h, q, q_ref, u, q_index, v_index, lower, upper, nc, c_psi, W_n, nv)
                 dn2, dt2 = delta_n, delta_t
                 size = nc
+                p_n = np.zeros(nc)
             else:
                 if nc > 0:
                     tangents_packed(dimension, nc, c_n, c_t, c_o)
@@ -149,7 +152,7 @@ def rollout_kernel(S, D, model, goal, unsafe, q, nu, q_ref, delta_n, delta_t, co
                         jacobian_packed(bi, bf, pi, q, nc, c_pair, c_o, c_pa, c_pb, W_o)
                 if not constant_A:
                     A = system_matrix(bi, bf, q, nv, eps_eff, h, v_index, kp, kd)
-                q2, nu2, q_ref2, dn2, dt2, st, piv, res, size = dynamics_step(
+                q2, nu2, q_ref2, dn2, dt2, st, piv, res, size, p_n = dynamics_step(
                     eps, compliant, theta, directions, h, bi, bf, pf, A, Ainv, rhs_const,
                     q, nu, q_ref, delta_n, delta_t, u, q_index, v_index, kp, kd, lower, upper,
                     nc, c_pair, c_psi, c_slot, W_n, W_t, W_o, spatial,
@@ -165,6 +168,9 @@ def rollout_kernel(S, D, model, goal, unsafe, q, nu, q_ref, delta_n, delta_t, co
                 status = st
                 break
             q, nu, q_ref, delta_n, delta_t = q2, nu2, q_ref2, dn2, dt2
+            pair_force[:] = 0.0
+            for i in range(nc):
+                pair_force[c_pair[i]] += p_n[i] / h
             t += h
             steps += 1
             if record_every > 0 and steps % record_every == 0 and n_rec < max_records - 1:
@@ -189,4 +195,4 @@ def rollout_kernel(S, D, model, goal, unsafe, q, nu, q_ref, delta_n, delta_t, co
         rec_nu[n_rec] = nu
         n_rec += 1
     return (q, nu, q_ref, delta_n, delta_t, t, outcome, status, steps, lcp_solves, pivots, max_residual, max_size,
-            rec_t[:n_rec], rec_q[:n_rec], rec_nu[:n_rec])
+            rec_t[:n_rec], rec_q[:n_rec], rec_nu[:n_rec], pair_force)

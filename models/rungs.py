@@ -62,6 +62,7 @@ class RolloutResult:
     times: np.ndarray
     trajectory: np.ndarray  # (n, nq)
     velocities: np.ndarray  # (n, nv)
+    pair_force: np.ndarray  # (n_pairs,) normal force of each contact pair in the last step, N
 
     @property
     def ok(self) -> bool:
@@ -185,7 +186,7 @@ class Rung:
             controls, durations, float(h), int(record_every), int(max_records),
         )
         wall = time.perf_counter() - start
-        q, nu, q_ref, dn, dt, t, outcome, status, steps, lcp, piv, res, size, rec_t, rec_q, rec_nu = out
+        q, nu, q_ref, dn, dt, t, outcome, status, steps, lcp, piv, res, size, rec_t, rec_q, rec_nu, force = out
         return RolloutResult(
             state=State(q, nu, q_ref, dn, dt),
             t=float(t),
@@ -201,7 +202,12 @@ class Rung:
             times=rec_t,
             trajectory=rec_q,
             velocities=rec_nu,
+            pair_force=force[: len(scenario.pairs)],
         )
+
+    def step(self, scenario: Scenario, state: State, control: np.ndarray, h: float) -> RolloutResult:
+        """One step of length h under a commanded speed per actuated coordinate."""
+        return self.rollout(scenario, state, np.reshape(control, (1, -1)), [h], h, record_every=1, max_records=2)
 
     def valid(self, scenario: Scenario, q: np.ndarray, tolerance: float = GEOMETRIC_TOLERANCE) -> bool:
         """Eq. (9): no pair penetrates by more than tolerance."""

@@ -69,6 +69,8 @@ ZERO_COLUMN = 1e-12
 PIVOTS_PER_VARIABLE = 50
 #: An LCP solution is accepted while its recomputed residual is below this.
 LCP_TOLERANCE = 1e-7
+#: Relative diagonal added to the contact rows when Lemke fails on a singular (redundant) LCP.
+LCP_REGULARIZATION = 1e-9
 #: A state entry above this in magnitude counts as diverged.
 DIVERGENCE_LIMIT = 1e10
 
@@ -256,7 +258,8 @@ def dynamics_step(
 
     A, Ainv: the system matrix and its inverse (Ainv may be empty: then A is solved each call).
     rhs_const: h * (gravity force) (the part of the right-hand side that never changes).
-    Returns (q+, nu+, q_ref+, delta_n+, delta_t+, status, pivots, residual, lcp_size).
+    Returns (q+, nu+, q_ref+, delta_n+, delta_t+, status, pivots, residual, lcp_size, p_n)
+    with p_n (nc,) the normal impulse of each contact (0 where inactive).
     """
     nv = nu.shape[0]
     na = v_index.shape[0]
@@ -283,6 +286,7 @@ def dynamics_step(
     pivots = 0
     residual = 0.0
     size = 0
+    impulses = np.zeros(nc)
     # contacts that couple to a free DOF; friction only where mu > 0 and the tangent couples
     active = np.empty(nc, np.int64)
     n_act = 0
@@ -294,6 +298,8 @@ def dynamics_step(
         nu_new, p_n, p_t, status, pivots, residual, size = _contact_solve(
             compliant, directions, spatial, h, A, Ainv, nu_free, active[:n_act], pf, c_pair, c_psi, c_slot, W_n, W_t, W_o, delta_n, delta_t
         )
+        for k in range(n_act):
+            impulses[active[k]] = p_n[k]
         if status == STEP_OK and compliant:
             for k in range(n_act):
                 i = active[k]
@@ -303,7 +309,7 @@ def dynamics_step(
                 for c in range(2):
                     delta_t_new[slot, c] = (p_t[k, c] + C * delta_t[slot, c]) / (h * K + C)
     if status != STEP_OK:
-        return q, nu, q_ref, delta_n, delta_t, status, pivots, residual, size
+        return q, nu, q_ref, delta_n, delta_t, status, pivots, residual, size, impulses
     if theta == 1.0:
         q_new = integrate_positions(bi, q, nu_new, h)
     else:
@@ -312,8 +318,8 @@ def dynamics_step(
         bad = STEP_DIVERGED
         if not (np.all(np.isfinite(q_new)) and np.all(np.isfinite(nu_new))):
             bad = STEP_NON_FINITE
-        return q, nu, q_ref, delta_n, delta_t, bad, pivots, residual, size
-    return q_new, nu_new, q_ref_new, delta_n_new, delta_t_new, STEP_OK, pivots, residual, size
+        return q, nu, q_ref, delta_n, delta_t, bad, pivots, residual, size, impulses
+    return q_new, nu_new, q_ref_new, delta_n_new, delta_t_new, STEP_OK, pivots, residual, size, impulses
 
 
 @numba.njit(cache=True)
@@ -393,6 +399,19 @@ def contact_lcp(compliant, directions, spatial, h, A, Ainv, nu_free, active, pf,
                     r2 = nc + f * d + j2
                     Mlcp[r, r2] += comp * (coef[r - nc, 0] * coef[r2 - nc, 0] + coef[r - nc, 1] * coef[r2 - nc, 1])
                 qlcp[r] -= K / (h * K + C) * (coef[r - nc, 0] * delta_t[slot, 0] + coef[r - nc, 1] * delta_t[slot, 1])
+    # the sliding-speed variable gamma of each friction contact sits beside W-sized entries
+    # with entries mu and +-1: scale its row and column to the contact's friction diagonal
+    # (complementarity is kept; gamma is not used afterwards), as Siconos-style LCPs need
+    for f in range(nf):
+        g = nc + nd + f
+        scale = 0.0
+        for j in range(d):
+            r = nc + f * d + j
+            scale = max(scale, abs(Mlcp[r, r]))
+        if scale > 0.0:
+            for r in range(n):
+                Mlcp[r, g] *= scale
+                Mlcp[g, r] *= scale
     return Mlcp, qlcp, AinvJ, coef, fric, nf
 
 
@@ -406,8 +425,25 @@ def _contact_solve(compliant, directions, spatial, h, A, Ainv, nu_free, active, 
     d = directions if spatial else 2
     nd = nf * d
     n = qlcp.shape[0]
+    # LCP(s M, s q) has the solutions of LCP(M, q): scale to unit size for Lemke's pivot
+    # tolerances (quasistatic rungs make M ~ 1 / QUASISTATIC_INERTIA)
+    scale = 0.0
+    for r in range(n):
+        for c in range(n):
+            scale = max(scale, abs(Mlcp[r, c]))
+    if scale > 0.0:
+        Mlcp /= scale
+        qlcp /= scale
     z, w, status, pivots = lemke_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1))
     residual = complementarity_residual(Mlcp, qlcp, z)
+    if (status != STATUS_SOLVED and status != STATUS_SOLVED_INACCURATE) or not (residual <= LCP_TOLERANCE):
+        # redundant rigid contacts make M singular; a tiny compliance on the contact rows
+        # (LCP_REGULARIZATION, relative) restores a unique solution
+        for r in range(nc + nd):
+            Mlcp[r, r] += LCP_REGULARIZATION
+        z, w, status, more = lemke_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1))
+        pivots += more
+        residual = complementarity_residual(Mlcp, qlcp, z)
     p_n = z[:nc].copy()
     p_t = np.zeros((nc, 2))
     if (status != STATUS_SOLVED and status != STATUS_SOLVED_INACCURATE) or not (residual <= LCP_TOLERANCE):

@@ -14,13 +14,15 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from models.scenario import Scenario, ScenarioError, load_scenario, parse_overrides
+import numpy as np
+
+from models.scenario import Problem, Scenario, ScenarioError, load_scenario, parse_overrides
+from models.schema import RUNGS as RUNG_NAMES
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
 
 #: Subcommands the design reserves whose machinery is not built yet, with what they will do.
 RESERVED = {
-    "simulate": "replay a plan or the scenario's policy under a chosen rung",
     "plan": "plan up the model ladder (geometric -> kinematic -> quasistatic -> dynamic)",
     "sweep": "map feasible sets over design parameters (the paper's Fig. 5)",
     "bench": "work-precision, throughput and scaling benchmarks",
@@ -57,6 +59,22 @@ def build_parser() -> argparse.ArgumentParser:
     schema.add_argument("--out", type=Path, help="write the schema to this file instead of printing it")
     schema.set_defaults(handler=cmd_schema)
 
+    simulate = sub.add_parser(
+        "simulate",
+        help="run the scenario's open-loop policy under one rung",
+        description="Run the scenario's [task.policy] (constant commanded speeds) under one rung of "
+        "the model family and report the outcome (goal, unsafe or none), the final state and the "
+        "solver counters. Exit 0 when the run completed, 1 when a numerical failure stopped it.",
+    )
+    simulate.add_argument("file", type=Path, help="scenario file (TOML)")
+    simulate.add_argument("--model", required=True, metavar="RUNG", help="rung: " + ", ".join(RUNG_NAMES[1:]))
+    _add_param_option(simulate)
+    simulate.add_argument("--duration", type=float, help="seconds to run (default: the policy's duration)")
+    simulate.add_argument("--step", type=float, help="time step h (default: the rung's h in the ladder)")
+    simulate.add_argument("--json", action="store_true", help="print one JSON object")
+    simulate.add_argument("--plot", type=Path, help="write a trajectory plot (PNG or SVG) here")
+    simulate.set_defaults(handler=cmd_simulate)
+
     for name, what in RESERVED.items():
         reserved = sub.add_parser(name, help=f"(not built yet) {what}", description=f"Not built yet: {what}.")
         reserved.add_argument("args", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
@@ -85,6 +103,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except BrokenPipeError:  # the reader went away (e.g. `| head`): nothing more to say
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_OK
 
 
 # ----------------------------------------------------------------------------- commands
@@ -120,10 +141,155 @@ def cmd_schema(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_simulate(args: argparse.Namespace) -> int:
+    scenario = load_from_args(args)
+    policy = scenario.spec.task.policy
+    problems = []
+    if args.model not in RUNG_NAMES:
+        problems.append(Problem("--model", f"unknown rung {args.model!r}; rungs: {', '.join(RUNG_NAMES)}"))
+    elif args.model == "geometric":
+        problems.append(Problem("--model", "the geometric rung is a validity check with no dynamics to simulate"))
+    if policy is None:
+        problems.append(Problem("task.policy", "simulate runs the scenario's policy, and this file has none"))
+    rung_spec = next((r for r in scenario.spec.ladder.rungs if r.model == args.model), None)
+    h = args.step if args.step is not None else (rung_spec.h if rung_spec else None)
+    if problems and problems[0].key == "--model":
+        pass  # no step to look for
+    elif h is None:
+        problems.append(Problem("--step", f"the ladder has no {args.model} rung to take h from; give --step"))
+    elif not (h > 0 and h < float("inf")):
+        problems.append(Problem("--step", f"must be a positive number, got {h}"))
+    duration = args.duration if args.duration is not None else (policy.duration if policy else None)
+    if duration is not None and not (duration > 0 and duration < float("inf")):
+        problems.append(Problem("--duration", f"must be a positive number, got {duration}"))
+    if problems:
+        raise ScenarioError(scenario.path, problems)
+
+    from models.rungs import rung_for
+
+    rung = rung_for(scenario, args.model)
+    controls = np.array([[policy.speeds.get(name, 0.0) for name in scenario.actuated]])
+    state = rung.initial_state(scenario)
+    rung.rollout(scenario, state, controls, [h], h)  # load the compiled kernels before timing
+    result = run_with_progress(rung, scenario, state, controls, duration, h, quiet=args.json)
+    summary = {
+        "file": str(scenario.path),
+        "model": args.model,
+        "h": h,
+        "duration": duration,
+        "outcome": result.outcome,
+        "t": result.t,
+        "state": result.state.named(scenario),
+        "velocity": {n: float(v) for n, v in zip(scenario.velocities, result.state.nu)},
+        "steps": result.steps,
+        "wall_s": result.wall_s,
+        "steps_per_s": result.steps / result.wall_s if result.wall_s > 0 else None,
+        "status": result.status,
+        "message": result.message,
+        "lcp_solves": result.lcp_solves,
+        "pivots": result.pivots,
+        "max_residual": result.max_residual,
+        "max_lcp_size": result.max_lcp_size,
+        "parameters": dict(scenario.parameters),
+    }
+    if args.plot:
+        from planner.plots import plot_rollouts
+
+        plot_rollouts(args.plot, scenario.coordinates, scenario.start, [(args.model, result.times, result.trajectory)],
+                      f"{scenario.spec.scenario.name}: {args.model}, h = {h:g}, outcome {result.outcome}")
+        summary["plot"] = str(args.plot)
+    if args.json:
+        print(json.dumps(summary, indent=2))
+    else:
+        print_simulation(summary)
+    return EXIT_OK if result.ok else EXIT_FAILED
+
+
+#: A rollout longer than this many steps runs in chunks with a progress bar.
+PROGRESS_STEPS = 200_000
+
+
+def run_with_progress(rung, scenario, state, controls, duration, h, *, quiet: bool):
+    """One compiled rollout, or chunks of one with a progress bar when it is long."""
+    total = int(round(duration / h))
+    if total <= PROGRESS_STEPS or quiet:
+        return rung.rollout(scenario, state, controls, [duration], h)
+    from rich.progress import Progress
+
+    chunks = -(-total // PROGRESS_STEPS)
+    results = []
+    with Progress(transient=True) as progress:
+        task = progress.add_task(f"{rung.name}", total=total)
+        done = 0
+        for _ in range(chunks):
+            n = min(PROGRESS_STEPS, total - done)
+            result = rung.rollout(scenario, state, controls, [n * h], h)
+            results.append(result)
+            done += n
+            progress.update(task, completed=done)
+            state = result.state
+            if result.outcome != "none" or not result.ok:
+                break
+    return _join(results)
+
+
+def _join(results):
+    from dataclasses import replace
+
+    last = results[-1]
+    offsets = np.cumsum([0.0] + [r.t for r in results[:-1]])
+    return replace(
+        last,
+        t=float(sum(r.t for r in results)),
+        steps=sum(r.steps for r in results),
+        lcp_solves=sum(r.lcp_solves for r in results),
+        pivots=sum(r.pivots for r in results),
+        max_residual=max(r.max_residual for r in results),
+        max_lcp_size=max(r.max_lcp_size for r in results),
+        wall_s=sum(r.wall_s for r in results),
+        times=np.concatenate([r.times + o for r, o in zip(results, offsets)]),
+        trajectory=np.concatenate([r.trajectory for r in results]),
+        velocities=np.concatenate([r.velocities for r in results]),
+    )
+
+
+def print_simulation(summary: dict[str, Any]) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    console = Console(highlight=False)
+    console.print(
+        f"[bold]{summary['model']}[/bold] on {summary['file']} (h = {summary['h']:g}, {summary['duration']:g} s): "
+        f"outcome [bold]{summary['outcome']}[/bold] at t = {summary['t']:.4f} s, status {summary['status']}"
+    )
+    if summary["status"] != "ok":
+        console.print(f"[red]{summary['message']}[/red]")
+    table = Table(title="final state", title_justify="left")
+    table.add_column("coordinate")
+    table.add_column("q")
+    table.add_column("velocity")
+    velocity = summary["velocity"]
+    for name, value in summary["state"].items():
+        table.add_row(name, f"{value:.6g}", f"{velocity[name]:.6g}" if name in velocity else "")
+    for name, v in velocity.items():
+        if name not in summary["state"]:
+            table.add_row(name, "", f"{v:.6g}")
+    console.print(table)
+    rate = summary["steps_per_s"]
+    console.print(
+        f"{summary['steps']} steps in {summary['wall_s']:.3f} s"
+        + (f" ({rate:,.0f} steps/s)" if rate else "")
+        + f"; {summary['lcp_solves']} LCP solves, {summary['pivots']} pivots, "
+        f"largest LCP {summary['max_lcp_size']}, max residual {summary['max_residual']:.2e}"
+    )
+    if "plot" in summary:
+        console.print(f"plot written to {summary['plot']}")
+
+
 def cmd_reserved(args: argparse.Namespace) -> int:
     print(
         f"error: 'ladder {args.command}' is not built yet ({RESERVED[args.command]}); "
-        "available now: ladder check, ladder schema",
+        "available now: ladder check, ladder simulate, ladder schema",
         file=sys.stderr,
     )
     return EXIT_BAD_INPUT

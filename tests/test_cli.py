@@ -81,7 +81,7 @@ def test_missing_file():
     assert "no/such/file.toml: no such file" in result.stderr
 
 
-@pytest.mark.parametrize("command", ["simulate", "plan", "sweep", "bench", "serve"])
+@pytest.mark.parametrize("command", ["plan", "sweep", "bench", "serve"])
 def test_reserved_commands_say_so(command):
     result = ladder(command, "scenarios/two_finger_triangle.toml")
     assert result.returncode == 2
@@ -91,3 +91,33 @@ def test_reserved_commands_say_so(command):
 def test_unknown_command_is_a_usage_error():
     result = ladder("fly")
     assert result.returncode == 2
+
+
+def test_simulate_json_on_the_paper_scene(tmp_path):
+    plot = tmp_path / "fig4.png"
+    result = ladder(
+        "simulate", str(SCENARIOS / "two_finger_triangle.toml"), "--model", "quasistatic-rigid",
+        "--param", "v1=0.8", "--json", "--plot", str(plot),
+    )
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout)
+    for key in ("outcome", "t", "state", "steps", "wall_s", "status", "lcp_solves", "pivots"):
+        assert key in summary
+    assert summary["outcome"] == "goal" and summary["status"] == "ok"
+    assert set(summary["state"]) == {"triangle.x", "finger1.y", "finger2.y"}
+    assert plot.stat().st_size > 10_000
+
+
+@pytest.mark.parametrize(
+    "args, fragment",
+    [
+        (["--model", "nonsense"], "--model: unknown rung"),
+        (["--model", "geometric"], "no dynamics"),
+        (["--model", "dynamic-rigid"], "--step"),
+        (["--model", "kinematic", "--step", "-1"], "--step: must be a positive number"),
+    ],
+)
+def test_simulate_bad_arguments(args, fragment):
+    result = ladder("simulate", str(SCENARIOS / "two_finger_triangle.toml"), *args)
+    assert result.returncode == 2
+    assert fragment in result.stderr and "Traceback" not in result.stderr
