@@ -33,6 +33,7 @@ from models.kinematics import (
     BI_VMAP,
     PI_A,
     PI_B,
+    PI_INERT,
     Q_ANGLE,
     SHAPE_HALFSPACE,
     V_ANGLE,
@@ -139,6 +140,8 @@ def detect_planar(bi, bf, verts, pi, q, nu, h, margin, c_pair, c_psi, c_n, c_pa,
     planar_poses(bi, bf, q, poses)
     nc = 0
     for p in range(pi.shape[0]):
+        if pi[p, PI_INERT]:
+            continue
         a, b = pi[p, PI_A], pi[p, PI_B]
         reach = margin + MARGIN_SAFETY * h * (_speed_bound(bi, bf, nu, a) + _speed_bound(bi, bf, nu, b))
         if _keep(bi, bf, q, pos, a, b, reach):
@@ -183,6 +186,8 @@ def detect_spatial(S, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsuppor
     nc = 0
     n_unsupported = 0
     for p in range(pi.shape[0]):
+        if pi[p, PI_INERT]:
+            continue
         a, b = pi[p, PI_A], pi[p, PI_B]
         reach = margin + MARGIN_SAFETY * h * (_speed_bound(bi, bf, nu, a) + _speed_bound(bi, bf, nu, b))
         if not _keep(bi, bf, q, pos, a, b, reach):

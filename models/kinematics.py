@@ -41,7 +41,7 @@ V_X, V_Y, V_Z, V_ANGLE, V_WX = 0, 1, 2, 3, 4
 # columns of the packed tables (see SceneData.bi, .bf, .pi, .pf)
 BI_KIND, BI_VSTART, BI_VCOUNT, BI_QMAP, BI_VMAP, BI_COLUMNS = 0, 1, 2, 3, 11, 18
 BF_RADIUS, BF_HALF, BF_HSN, BF_HSO, BF_POS, BF_QUAT, BF_MASS, BF_INERTIA, BF_BOUND, BF_COLUMNS = 0, 1, 4, 7, 8, 11, 15, 16, 19, 20
-PI_A, PI_B, PI_MAX = 0, 1, 2
+PI_A, PI_B, PI_MAX, PI_INERT = 0, 1, 2, 3
 PF_MU, PF_K, PF_C = 0, 1, 2
 
 
@@ -76,7 +76,7 @@ class SceneData(NamedTuple):
     # a tuple that crosses a function boundary, so hot code passes these few instead of S.
     bi: np.ndarray  # int64[nb, BI_COLUMNS]: kind, vstart, vcount, qmap (8), vmap (7)
     bf: np.ndarray  # float64[nb, BF_COLUMNS]: radius, half extents, hs normal, hs offset, base pos, base quat, mass, inertia, bound
-    pi: np.ndarray  # int64[np, 3]: a, b, max contacts
+    pi: np.ndarray  # int64[np, 4]: a, b, max contacts, inert (1: the pair can never matter; see inert_pairs)
     pf: np.ndarray  # float64[np, 3]: mu, K, C
 
 
@@ -212,9 +212,50 @@ def compile_scene(scenario: Scenario) -> SceneData:
         pair_max_contacts=max_contacts,
         bi=np.ascontiguousarray(bi),
         bf=np.ascontiguousarray(bf),
-        pi=np.ascontiguousarray(np.stack([pair_a, pair_b, max_contacts], axis=1).reshape(-1, 3).astype(np.int64)),
+        pi=np.ascontiguousarray(
+            np.stack([pair_a, pair_b, max_contacts, inert_pairs(scenario, pair_a, pair_b, bound)], axis=1).reshape(-1, 4).astype(np.int64)
+        ),
         pf=np.ascontiguousarray(pf),
     )
+
+
+#: Bodies whose fixed separation exceeds their bounding radii by this much never meet (m).
+NEVER_MEET_MARGIN = 1e-2
+
+
+def inert_pairs(scenario: Scenario, pair_a, pair_b, bound) -> np.ndarray:
+    """1 for contact pairs that can never change the motion, which detection then skips:
+
+    - a fixed half-space against a body that only translates, along axes parallel to the
+      boundary (the triangle sliding on the palm): psi never changes, W_n is zero;
+    - two bodies that only translate, whose separation across all their free axes exceeds
+      their bounding radii (two fingers moving vertically side by side).
+
+    Touch predicates can still ask for such a pair: `models.rungs` clears the flag for them.
+    """
+    dim = scenario.dimension
+    bodies = scenario.spec.bodies
+    flags = np.zeros(len(pair_a), np.int64)
+    for p, (a, b) in enumerate(zip(pair_a, pair_b)):
+        A, B = bodies[a], bodies[b]
+        if A.velocity or B.velocity:
+            continue  # scripted obstacles move in ways the DOFs do not say
+        if any(d in ("theta", "yaw", "rotation") for d in A.dofs + B.dofs):
+            continue
+        free = {"xyz".index(d) for d in A.dofs + B.dofs}
+        ga, gb = scenario.geometries[A.name], scenario.geometries[B.name]
+        if ga.kind == "halfspace" or gb.kind == "halfspace":
+            h = A if ga.kind == "halfspace" else B
+            g = ga if ga.kind == "halfspace" else gb
+            normal = scenario.base_placements[h.name].rotation @ g.normal
+            flags[p] = int(all(abs(normal[k]) < 1e-12 for k in free))
+            continue
+        pa = scenario.base_placements[A.name].translation
+        pb = scenario.base_placements[B.name].translation
+        fixed = [k for k in range(dim) if k not in free]
+        separation = float(np.linalg.norm([pa[k] - pb[k] for k in fixed])) if fixed else 0.0
+        flags[p] = int(separation > bound[a] + bound[b] + NEVER_MEET_MARGIN)
+    return flags
 
 
 def _rotation_to_quat(R: np.ndarray) -> np.ndarray:

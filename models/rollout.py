@@ -29,6 +29,7 @@ from models.stepper import (
     gravity_force,
     has_rotations,
     kinematic_step,
+    mass_matrix,
     system_matrix,
 )
 
@@ -58,8 +59,9 @@ def _inverse_or_empty(A):
 
 
 @numba.njit(cache=True)
-def rollout_kernel(S, D, model, goal, unsafe, q, nu, q_ref, delta_n, delta_t, controls, durations, h, record_every, max_records):
-    """Run the controls from the given state.
+def rollout_kernel(S, D, model, goal, unsafe, q, nu, q_ref, delta_n, delta_t, controls, durations, h, record_every, max_records, stop_at_outcome):
+    """Run the controls from the given state (stopping at goal/unsafe if stop_at_outcome;
+    otherwise the returned outcome is the first one met, and the run goes on).
 
     Returns (q, nu, q_ref, delta_n, delta_t, t, outcome, status, steps, lcp_solves, pivots,
     max_residual, max_lcp_size, rec_t (n,), rec_q (n, nq), rec_nu (n, nv), pair_force (n_pairs,):
@@ -96,6 +98,7 @@ def rollout_kernel(S, D, model, goal, unsafe, q, nu, q_ref, delta_n, delta_t, co
     constant_A = not has_rotations(bi)
     A = system_matrix(bi, bf, q, nv, eps_eff, h, v_index, kp, kd)
     Ainv = _inverse_or_empty(A) if constant_A else np.zeros((0, 0))
+    M_const = mass_matrix(bi, bf, q, nv) if constant_A else np.zeros((0, 0))
     max_records = max(max_records, 2)
     rec_t = np.zeros(max_records)
     rec_q = np.zeros((max_records, q.shape[0]))
@@ -114,7 +117,7 @@ def rollout_kernel(S, D, model, goal, unsafe, q, nu, q_ref, delta_n, delta_t, co
     if not kinematic and constant_A and Ainv.shape[0] != nv:
         status = STEP_SINGULAR
     for k in range(controls.shape[0]):
-        if status != STEP_OK or outcome != OUTCOME_NONE:
+        if status != STEP_OK or (outcome != OUTCOME_NONE and stop_at_outcome):
             break
         n_steps = int(np.round(durations[k] / h))
         u = controls[k]
@@ -131,9 +134,10 @@ def rollout_kernel(S, D, model, goal, unsafe, q, nu, q_ref, delta_n, delta_t, co
                 if c_psi[i] < pair_psi[p]:
                     pair_psi[p] = c_psi[i]
                 c_slot[i] = first_slot[p] if (i == 0 or c_pair[i - 1] != p) else c_slot[i - 1] + 1
-            outcome = _classify(goal, unsafe, q, pair_psi)
-            if outcome != OUTCOME_NONE:
-                break
+            if outcome == OUTCOME_NONE or stop_at_outcome:
+                outcome = _classify(goal, unsafe, q, pair_psi)
+                if outcome != OUTCOME_NONE and stop_at_outcome:
+                    break
             if n_unsupported > 0:
                 status = STEP_UNSUPPORTED_PAIR
                 break
@@ -153,7 +157,7 @@ def rollout_kernel(S, D, model, goal, unsafe, q, nu, q_ref, delta_n, delta_t, co
                 if not constant_A:
                     A = system_matrix(bi, bf, q, nv, eps_eff, h, v_index, kp, kd)
                 q2, nu2, q_ref2, dn2, dt2, st, piv, res, size, p_n = dynamics_step(
-                    eps, compliant, theta, directions, h, bi, bf, pf, A, Ainv, rhs_const,
+                    eps, compliant, theta, directions, h, bi, bf, pf, A, Ainv, M_const, rhs_const,
                     q, nu, q_ref, delta_n, delta_t, u, q_index, v_index, kp, kd, lower, upper,
                     nc, c_pair, c_psi, c_slot, W_n, W_t, W_o, spatial,
                 )

@@ -21,7 +21,8 @@ import numpy as np
 
 from models import geometry as geo
 from models.kinematics import SceneData, compile_scene
-from models.predicates import Program, compile_predicate
+from models.kinematics import PI_INERT
+from models.predicates import OP_TOUCH, Program, compile_predicate
 from models.rollout import OUTCOME_NAMES, rollout_kernel
 from models.scenario import Scenario
 from models.stepper import STEP_MESSAGES, STEP_NAMES, Drives, Model
@@ -112,11 +113,18 @@ def compiled(scenario: Scenario) -> Compiled:
         upper=np.array(upper, float)[perm] if perm else np.zeros(0),
         gravity=gravity,
     )
+    goal = compile_predicate(scenario, scenario.spec.task.goal)
+    unsafe = compile_predicate(scenario, scenario.spec.task.unsafe)
+    watched = {int(i) for P in (goal, unsafe) for op, i in zip(P.op, P.index) if op == OP_TOUCH}
+    if watched:
+        pi = S.pi.copy()
+        pi[sorted(watched), PI_INERT] = 0  # predicates need these distances
+        S = S._replace(pi=pi)
     result = Compiled(
         scene=S,
         drives=drives,
-        goal=compile_predicate(scenario, scenario.spec.task.goal),
-        unsafe=compile_predicate(scenario, scenario.spec.task.unsafe),
+        goal=goal,
+        unsafe=unsafe,
         capacity=max(int(S.pair_max_contacts.sum()), 1),
     )
     _CACHE[id(scenario)] = (scenario, result)
@@ -168,6 +176,7 @@ class Rung:
         *,
         record_every: int = 0,
         max_records: int = DEFAULT_RECORDS,
+        stop_at_outcome: bool = True,
     ) -> RolloutResult:
         if self.model is None:
             raise ValueError("the geometric rung has no dynamics to roll out; use valid()")
@@ -183,7 +192,7 @@ class Rung:
         out = rollout_kernel(
             c.scene, c.drives, self.model, c.goal, c.unsafe,
             state.q.copy(), state.nu.copy(), state.q_ref.copy(), state.delta_n.copy(), state.delta_t.copy(),
-            controls, durations, float(h), int(record_every), int(max_records),
+            controls, durations, float(h), int(record_every), int(max_records), bool(stop_at_outcome),
         )
         wall = time.perf_counter() - start
         q, nu, q_ref, dn, dt, t, outcome, status, steps, lcp, piv, res, size, rec_t, rec_q, rec_nu, force = out

@@ -250,13 +250,14 @@ def _finite_and_bounded(x):
 @numba.njit(cache=True)
 def dynamics_step(
     model_eps, compliant, theta, directions, h,
-    bi, bf, pf, A, Ainv, rhs_const, q, nu, q_ref, delta_n, delta_t, u,
+    bi, bf, pf, A, Ainv, M_const, rhs_const, q, nu, q_ref, delta_n, delta_t, u,
     q_index, v_index, kp, kd, lower, upper,
     nc, c_pair, c_psi, c_slot, W_n, W_t, W_o, spatial,
 ):
     """One step of eq. (3) given the contacts at q. Pure: returns new arrays.
 
     A, Ainv: the system matrix and its inverse (Ainv may be empty: then A is solved each call).
+    M_const: the mass matrix when it does not depend on q (else empty: computed here).
     rhs_const: h * (gravity force) (the part of the right-hand side that never changes).
     Returns (q+, nu+, q_ref+, delta_n+, delta_t+, status, pivots, residual, lcp_size, p_n)
     with p_n (nc,) the normal impulse of each contact (0 where inactive).
@@ -268,8 +269,10 @@ def dynamics_step(
     rhs = rhs_const.copy()
     eps = QUASISTATIC_INERTIA if quasistatic else model_eps
     if not quasistatic:
-        M = mass_matrix(bi, bf, q, nv)
-        rhs += eps * (M @ nu)
+        if M_const.shape[0] == nv:
+            rhs += eps * (M_const @ nu)
+        else:
+            rhs += eps * (mass_matrix(bi, bf, q, nv) @ nu)
         if spatial:
             rhs += h * eps * gyroscopic_force(bi, bf, q, nu, nv)
     for j in range(na):
@@ -280,8 +283,11 @@ def dynamics_step(
     else:
         nu_free = np.linalg.solve(A, rhs)
     nu_new = nu_free
-    delta_n_new = np.zeros_like(delta_n)
-    delta_t_new = np.zeros_like(delta_t)
+    delta_n_new = delta_n  # rigid models keep them zero; compliant ones get new arrays below
+    delta_t_new = delta_t
+    if compliant:
+        delta_n_new = np.zeros_like(delta_n)
+        delta_t_new = np.zeros_like(delta_t)
     status = STEP_OK
     pivots = 0
     residual = 0.0
