@@ -132,18 +132,27 @@ def detect_contacts(S, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsuppo
 
 @numba.njit(cache=True)
 def detect_planar(bi, bf, verts, pi, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb):
-    """detect_contacts for planar scenes on the packed tables (the rollout's hot path)."""
+    """detect_contacts for planar scenes on the packed tables."""
     nb = bi.shape[0]
-    pos = np.empty((nb, 3))
+    return detect_planar_into(bi, bf, verts, pi, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, np.empty((nb, 8)))
+
+
+@numba.njit(cache=True)
+def detect_planar_into(bi, bf, verts, pi, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, scratch):
+    """detect_planar with a caller-owned scratch (nb, 8) array: the rollout's hot path."""
+    nb = bi.shape[0]
+    pos = scratch[:, 0:3]
+    poses = scratch[:, 3:7]
     positions(bi, bf, q, pos)
-    poses = np.empty((nb, 4))
     planar_poses(bi, bf, q, poses)
+    for b in range(nb):
+        scratch[b, 7] = MARGIN_SAFETY * h * _speed_bound(bi, bf, nu, b)
     nc = 0
     for p in range(pi.shape[0]):
         if pi[p, PI_INERT]:
             continue
         a, b = pi[p, PI_A], pi[p, PI_B]
-        reach = margin + MARGIN_SAFETY * h * (_speed_bound(bi, bf, nu, a) + _speed_bound(bi, bf, nu, b))
+        reach = margin + scratch[a, 7] + scratch[b, 7]
         if _keep(bi, bf, q, pos, a, b, reach):
             k = collide_2d(bi, bf, verts, poses, a, b, reach, c_psi, c_n, c_pa, c_pb, nc)
             for i in range(nc, nc + k):

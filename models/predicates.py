@@ -88,16 +88,21 @@ def max_touch_tolerance(*programs: Program) -> float:
 @numba.njit(cache=True)
 def evaluate(P, q, pair_psi):
     """Evaluate program P at configuration q with per-pair minimum distances pair_psi."""
-    stack = np.zeros(P.op.shape[0] + 1, np.bool_)
+    return evaluate_with(P.op, P.index, P.lo, P.hi, q, pair_psi, np.zeros(P.op.shape[0] + 1, np.bool_))
+
+
+@numba.njit(cache=True)
+def evaluate_with(op_codes, index, lo, hi, q, pair_psi, stack):
+    """evaluate() on the program's arrays with a caller-owned stack (len(op_codes) + 1)."""
     top = 0
-    for k in range(P.op.shape[0]):
-        op = P.op[k]
+    for k in range(op_codes.shape[0]):
+        op = op_codes[k]
         if op == OP_BOX:
-            v = q[P.index[k]]
-            stack[top] = P.lo[k] <= v <= P.hi[k]
+            v = q[index[k]]
+            stack[top] = lo[k] <= v <= hi[k]
             top += 1
         elif op == OP_TOUCH:
-            stack[top] = pair_psi[P.index[k]] <= P.lo[k]
+            stack[top] = pair_psi[index[k]] <= lo[k]
             top += 1
         elif op == OP_TRUE:
             stack[top] = True
@@ -105,7 +110,7 @@ def evaluate(P, q, pair_psi):
         elif op == OP_NOT:
             stack[top - 1] = not stack[top - 1]
         else:
-            n = P.index[k]
+            n = index[k]
             result = op == OP_AND
             for j in range(top - n, top):
                 if op == OP_AND:

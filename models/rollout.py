@@ -17,8 +17,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from models.contact import detect_planar, detect_spatial, jacobian_packed, tangents_packed
-from models.predicates import evaluate
+from models.contact import detect_planar, detect_planar_into, detect_spatial, jacobian_packed, tangents_packed
+from models.predicates import evaluate, evaluate_with
 from models.stepper import (
     CONTACT_MARGIN,
     QUASISTATIC_INERTIA,
@@ -26,6 +26,7 @@ from models.stepper import (
     STEP_SINGULAR,
     STEP_UNSUPPORTED_PAIR,
     dynamics_step,
+    free_step,
     gravity_force,
     has_rotations,
     kinematic_step,
@@ -45,6 +46,16 @@ def _classify(goal, unsafe, q, pair_psi):
     if evaluate(unsafe, q, pair_psi):
         outcome = OUTCOME_UNSAFE
     elif evaluate(goal, q, pair_psi):
+        outcome = OUTCOME_GOAL
+    return outcome
+
+
+@numba.njit(cache=True)
+def _classify_with(g_op, g_index, g_lo, g_hi, u_op, u_index, u_lo, u_hi, q, pair_psi, stack):
+    outcome = OUTCOME_NONE
+    if evaluate_with(u_op, u_index, u_lo, u_hi, q, pair_psi, stack):
+        outcome = OUTCOME_UNSAFE
+    elif evaluate_with(g_op, g_index, g_lo, g_hi, q, pair_psi, stack):
         outcome = OUTCOME_GOAL
     return outcome
 
@@ -93,6 +104,10 @@ def rollout_kernel(S, D, model, goal, unsafe, q, nu, q_ref, delta_n, delta_t, co
     unsupported = np.zeros(max(pi.shape[0], 1), np.int64)
     pair_psi = np.full(max(pi.shape[0], 1), np.inf)
     pair_force = np.zeros(max(pi.shape[0], 1))  # normal force per pair in the last step
+    scratch = np.empty((bi.shape[0], 8))
+    g_op, g_index, g_lo, g_hi = goal.op, goal.index, goal.lo, goal.hi
+    u_op, u_index, u_lo, u_hi = unsafe.op, unsafe.index, unsafe.lo, unsafe.hi
+    stack = np.zeros(max(g_op.shape[0], u_op.shape[0]) + 1, np.bool_)
     # what never changes during the rollout
     rhs_const = h * gravity_force(bi, bf, D.gravity, nv)
     constant_A = not has_rotations(bi)
@@ -127,7 +142,7 @@ def rollout_kernel(S, D, model, goal, unsafe, q, nu, q_ref, delta_n, delta_t, co
             if spatial:
                 nc, n_unsupported = detect_spatial(S, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported)
             else:
-                nc = detect_planar(bi, bf, verts, pi, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb)
+                nc = detect_planar_into(bi, bf, verts, pi, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, scratch)
             pair_psi[:] = np.inf
             for i in range(nc):
                 p = c_pair[i]
@@ -135,7 +150,7 @@ def rollout_kernel(S, D, model, goal, unsafe, q, nu, q_ref, delta_n, delta_t, co
                     pair_psi[p] = c_psi[i]
                 c_slot[i] = first_slot[p] if (i == 0 or c_pair[i - 1] != p) else c_slot[i - 1] + 1
             if outcome == OUTCOME_NONE or stop_at_outcome:
-                outcome = _classify(goal, unsafe, q, pair_psi)
+                outcome = _classify_with(g_op, g_index, g_lo, g_hi, u_op, u_index, u_lo, u_hi, q, pair_psi, stack)
                 if outcome != OUTCOME_NONE and stop_at_outcome:
                     break
             if n_unsupported > 0:
@@ -148,6 +163,14 @@ def rollout_kernel(S, D, model, goal, unsafe, q, nu, q_ref, delta_n, delta_t, co
                 dn2, dt2 = delta_n, delta_t
                 size = nc
                 p_n = np.zeros(nc)
+            elif nc == 0 and constant_A:
+                # the cheap path: no contact, constant system matrix
+                q2, nu2, q_ref2, st = free_step(eps, theta, h, bi, Ainv, M_const, rhs_const, q, nu, q_ref, u, q_index, v_index, kp, kd, lower, upper)
+                dn2, dt2 = delta_n, delta_t
+                if compliant and (delta_n.any() or delta_t.any()):
+                    dn2, dt2 = np.zeros_like(delta_n), np.zeros_like(delta_t)
+                piv, res, size = 0, 0.0, 0
+                p_n = np.zeros(0)
             else:
                 if nc > 0:
                     tangents_packed(dimension, nc, c_n, c_t, c_o)

@@ -248,6 +248,34 @@ def _finite_and_bounded(x):
 
 
 @numba.njit(cache=True)
+def free_step(eps, theta, h, bi, Ainv, M_const, rhs_const, q, nu, q_ref, u, q_index, v_index, kp, kd, lower, upper):
+    """dynamics_step without contacts and with a constant system matrix: the cheap path.
+
+    Returns (q+, nu+, q_ref+, status); equals dynamics_step with nc = 0 (tests check it).
+    """
+    quasistatic = eps == 0.0
+    rhs = rhs_const.copy()
+    if not quasistatic:
+        rhs += eps * (M_const @ nu)
+    q_ref_new = q_ref.copy()
+    for j in range(v_index.shape[0]):
+        q_ref_new[j] = min(max(q_ref[j] + h * u[j], lower[j]), upper[j])
+        rhs[v_index[j]] += h * (kp[j] * (q_ref_new[j] - q[q_index[j]]) + kd[j] * u[j])
+    nu_new = Ainv @ rhs
+    if theta == 1.0:
+        q_new = integrate_positions(bi, q, nu_new, h)
+    else:
+        q_new = integrate_positions(bi, q, theta * nu_new + (1.0 - theta) * nu, h)
+    status = STEP_OK
+    if not (_finite_and_bounded(q_new) and _finite_and_bounded(nu_new)):
+        status = STEP_DIVERGED
+        if not (np.all(np.isfinite(q_new)) and np.all(np.isfinite(nu_new))):
+            status = STEP_NON_FINITE
+        return q, nu, q_ref, status
+    return q_new, nu_new, q_ref_new, status
+
+
+@numba.njit(cache=True)
 def dynamics_step(
     model_eps, compliant, theta, directions, h,
     bi, bf, pf, A, Ainv, M_const, rhs_const, q, nu, q_ref, delta_n, delta_t, u,

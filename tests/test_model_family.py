@@ -390,3 +390,26 @@ def test_quasistatic_rungs_hold_their_accuracy_at_larger_steps():
         coarse = run_triangle("quasistatic-rigid", 0.8, 0.5, h=h)
         assert coarse.outcome == "goal"
         assert coarse.state.q[0] == pytest.approx(fine, abs=10 * h)
+
+
+@pytest.mark.parametrize("eps", [1.0, 0.0])
+def test_cheap_free_step_equals_the_full_step_without_contacts(eps):
+    from models.rungs import compiled
+    from models.stepper import QUASISTATIC_INERTIA, dynamics_step, free_step, gravity_force, mass_matrix, system_matrix
+
+    scenario = load_scenario(SCENARIOS / "free_transfer.toml")
+    c = compiled(scenario)
+    S, D = c.scene, c.drives
+    h = 1e-3
+    q, nu, q_ref, u = np.array([0.2, 0.1]), np.array([0.3, -0.2]), np.array([0.25, 0.05]), np.array([0.5, 0.4])
+    A = system_matrix(S.bi, S.bf, q, S.nv, eps or QUASISTATIC_INERTIA, h, D.v_index, D.kp, D.kd)
+    Ainv, M = np.linalg.inv(A), mass_matrix(S.bi, S.bf, q, S.nv)
+    rhs = h * gravity_force(S.bi, S.bf, D.gravity, S.nv)
+    drives = (D.q_index, D.v_index, D.kp, D.kd, D.lower, D.upper)
+    fast = free_step(eps, 1.0, h, S.bi, Ainv, M, rhs, q, nu, q_ref, u, *drives)
+    empty = np.zeros((S.nv, 1))
+    full = dynamics_step(eps, False, 1.0, 2, h, S.bi, S.bf, S.pf, A, Ainv, M, rhs, q, nu, q_ref, np.zeros(1), np.zeros((1, 2)), u,
+                         *drives, 0, np.zeros(1, np.int64), np.zeros(1), np.zeros(1, np.int64), empty, empty, empty, False)
+    for a, b in zip(fast[:3], full[:3]):
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-15)
+    assert fast[3] == full[5] == 0
