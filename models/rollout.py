@@ -63,10 +63,14 @@ def _classify_with(g_op, g_index, g_lo, g_hi, u_op, u_index, u_lo, u_hi, q, pair
 @numba.njit(cache=True)
 def _inverse_or_empty(A):
     """A^-1 when A is safely invertible, else an empty matrix (the step reports singularity)."""
+    out = np.zeros((0, 0))
+    ok = True
     for r in range(A.shape[0]):
         if not (A[r, r] > 0.0):
-            return np.zeros((0, 0))
-    return np.ascontiguousarray(np.linalg.inv(A))
+            ok = False
+    if ok:
+        out = np.linalg.inv(A).copy()
+    return out
 
 
 @numba.njit(cache=True)
@@ -112,8 +116,11 @@ def rollout_kernel(S, D, model, goal, unsafe, q, nu, q_ref, delta_n, delta_t, co
     rhs_const = h * gravity_force(bi, bf, D.gravity, nv)
     constant_A = not has_rotations(bi)
     A = system_matrix(bi, bf, q, nv, eps_eff, h, v_index, kp, kd)
-    Ainv = _inverse_or_empty(A) if constant_A else np.zeros((0, 0))
-    M_const = mass_matrix(bi, bf, q, nv) if constant_A else np.zeros((0, 0))
+    Ainv = np.zeros((0, 0))
+    M_const = np.zeros((0, 0))
+    if constant_A:
+        Ainv = _inverse_or_empty(A)
+        M_const = mass_matrix(bi, bf, q, nv)
     max_records = max(max_records, 2)
     rec_t = np.zeros(max_records)
     rec_q = np.zeros((max_records, q.shape[0]))

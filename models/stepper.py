@@ -493,6 +493,23 @@ def _contact_solve(compliant, directions, spatial, h, A, Ainv, nu_free, active, 
 
 
 @numba.njit(cache=True)
+def _min_norm_passive(Wp, psi_h, Wa_u, alpha, nc):
+    """Passive speeds of eq. (8) with the actuated motion scaled by alpha (see kinematic_step)."""
+    qlcp = np.empty(nc)
+    for i in range(nc):
+        qlcp[i] = psi_h[i] + alpha * Wa_u[i]
+    Mlcp = np.ascontiguousarray(Wp.T) @ Wp
+    lam, w, st, pivots = lemke_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (nc + 1))
+    residual = complementarity_residual(Mlcp, qlcp, lam)
+    ok = (st == STATUS_SOLVED or st == STATUS_SOLVED_INACCURATE) and residual <= LCP_TOLERANCE
+    return Wp @ lam, ok, pivots, residual
+
+
+#: Bisection steps for the largest feasible fraction of a blocked kinematic step.
+BLOCKED_BISECTIONS = 30
+
+
+@numba.njit(cache=True)
 def kinematic_step(bi, h, q, q_ref, u, q_index, v_index, lower, upper, nc, c_psi, W_n, nv):
     """The paper's eq. (8) given the contacts at q. Returns (q+, nu+, q_ref+, status, pivots, residual).
 
@@ -500,44 +517,61 @@ def kinematic_step(bi, h, q, q_ref, u, q_index, v_index, lower, upper, nc, c_psi
     passive speeds v are the least-norm ones keeping every contact's psi + h W_n^T nu >= 0:
     min |v|^2 s.t. W_p^T v >= -(psi / h + W_a^T u). Its dual is the LCP
     0 <= lam _|_ W_p^T W_p lam + (psi / h + W_a^T u) >= 0 with v = W_p lam, solved by Lemke
-    (tests check it against the OSQP wrapper). An infeasible LCP means the command pushes
-    into something nothing can move: STEP_BLOCKED.
+    (tests check it against the OSQP wrapper).
+
+    A command that pushes into something nothing can move (the two fingers closing on the
+    triangle: form closure) has no solution. The kinematic model then moves the actuators by
+    the largest feasible fraction of the step (bisection), so the world jams: a state, not an
+    error. STEP_BLOCKED only when not even standing still is feasible.
     """
     na = v_index.shape[0]
     nu = np.zeros(nv)
-    q_ref_new = q_ref.copy()
+    u_eff = np.zeros(nv)
     actuated = np.zeros(nv, np.bool_)
     for j in range(na):
         target = min(max(q[q_index[j]] + h * u[j], lower[j]), upper[j])
-        nu[v_index[j]] = (target - q[q_index[j]]) / h
-        q_ref_new[j] = target
+        u_eff[v_index[j]] = (target - q[q_index[j]]) / h
         actuated[v_index[j]] = True
     pivots = 0
     residual = 0.0
+    alpha = 1.0
     status = STEP_OK
+    v_passive = np.zeros(nv)
     if nc > 0:
         Wp = np.zeros((nv, nc))
-        qlcp = np.zeros(nc)
+        psi_h = np.zeros(nc)
+        Wa_u = np.zeros(nc)
         for i in range(nc):
-            s = c_psi[i] / h
+            psi_h[i] = c_psi[i] / h
             for v in range(nv):
                 if actuated[v]:
-                    s += W_n[v, i] * nu[v]
+                    Wa_u[i] += W_n[v, i] * u_eff[v]
                 else:
                     Wp[v, i] = W_n[v, i]
-            qlcp[i] = s
-        Mlcp = Wp.T @ Wp
-        lam, w, st, pivots = lemke_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (nc + 1))
-        residual = complementarity_residual(Mlcp, qlcp, lam)
-        if (st != STATUS_SOLVED and st != STATUS_SOLVED_INACCURATE) or not (residual <= LCP_TOLERANCE):
-            status = STEP_BLOCKED
-        else:
-            v_passive = Wp @ lam
-            for v in range(nv):
-                if not actuated[v]:
-                    nu[v] = v_passive[v]
+        v_passive, ok, pivots, residual = _min_norm_passive(Wp, psi_h, Wa_u, 1.0, nc)
+        if not ok:
+            lo, hi = 0.0, 1.0
+            v_lo, ok_lo, piv, res = _min_norm_passive(Wp, psi_h, Wa_u, 0.0, nc)
+            pivots += piv
+            if not ok_lo:
+                status = STEP_BLOCKED
+            else:
+                for _ in range(BLOCKED_BISECTIONS):
+                    mid = 0.5 * (lo + hi)
+                    v_mid, ok_mid, piv, res = _min_norm_passive(Wp, psi_h, Wa_u, mid, nc)
+                    pivots += piv
+                    if ok_mid:
+                        lo, v_lo, residual = mid, v_mid, res
+                    else:
+                        hi = mid
+                alpha, v_passive = lo, v_lo
     if status != STEP_OK:
         return q, nu, q_ref, status, pivots, residual
+    q_ref_new = q_ref.copy()
+    for j in range(na):
+        q_ref_new[j] = q[q_index[j]] + h * alpha * u_eff[v_index[j]]
+    for v in range(nv):
+        nu[v] = alpha * u_eff[v] if actuated[v] else v_passive[v]
     q_new = integrate_positions(bi, q, nu, h)
     if not (_finite_and_bounded(q_new) and _finite_and_bounded(nu)):
         return q, nu, q_ref, STEP_NON_FINITE, pivots, residual
