@@ -117,17 +117,7 @@ def _closest_features(P, Q):
         ne = _n_edges(kb)
         for i in range(ka):
             ax, ay = A[i, 0], A[i, 1]
-            if ne == 0:
-                cx, cy = B[0, 0], B[0, 1]
-                d = np.hypot(ax - cx, ay - cy)
-                if d < best:
-                    best = d
-                    if swap == 0:
-                        cpx, cpy, cqx, cqy = ax, ay, cx, cy
-                    else:
-                        cpx, cpy, cqx, cqy = cx, cy, ax, ay
-                continue
-            for e in range(ne):
+            for e in range(max(ne, 1)):  # a single point is a zero-length segment
                 j = (e + 1) % kb
                 cx, cy = _closest_on_segment(ax, ay, B[e, 0], B[e, 1], B[j, 0], B[j, 1])
                 d = np.hypot(ax - cx, ay - cy)
