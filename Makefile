@@ -27,7 +27,8 @@ demo: $(VENV)/.installed
 			--json --plot $(OUT)/two_finger_triangle.$$rung.png > $(OUT)/two_finger_triangle.$$rung.json || exit $$?; \
 		echo "$$rung: $$(python3 -c "import json,sys; d=json.load(open('$(OUT)/two_finger_triangle.$$rung.json')); print(d['outcome'], 'at t =', round(d['t'], 4), 's,', d['status'], '| x3 =', round(d['state']['triangle.x'], 4))")"; \
 	done
-	@echo "outputs: $(OUT)/ (check summary, one JSON result and one Fig. 4 plot per rung)"
+	$(VENV)/bin/ladder plan scenarios/two_finger_triangle.toml --param v1=0.8 --out $(OUT)/plan
+	@echo "outputs: $(OUT)/ (check summary, one simulation JSON and Fig. 4 plot per rung, and plan/: plan.json, report.json, a plot per rung)"
 
 test: $(VENV)/.installed-test
 	$(PY) -m pytest

@@ -23,7 +23,6 @@ EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
 
 #: Subcommands the design reserves whose machinery is not built yet, with what they will do.
 RESERVED = {
-    "plan": "plan up the model ladder (geometric -> kinematic -> quasistatic -> dynamic)",
     "sweep": "map feasible sets over design parameters (the paper's Fig. 5)",
     "bench": "work-precision, throughput and scaling benchmarks",
     "serve": "serve planning requests over HTTP",
@@ -74,6 +73,23 @@ def build_parser() -> argparse.ArgumentParser:
     simulate.add_argument("--json", action="store_true", help="print one JSON object")
     simulate.add_argument("--plot", type=Path, help="write a trajectory plot (PNG or SVG) here")
     simulate.set_defaults(handler=cmd_simulate)
+
+    plan = sub.add_parser(
+        "plan",
+        help="plan up the model ladder",
+        description="Plan with the cheapest rung, then replay the plan under each higher rung and "
+        "replan where it no longer holds. Writes plan.json (per rung: controls, durations, states, "
+        "report) and a plot per rung. Exit 0 when the top rung holds, 1 when no plan was found.",
+    )
+    plan.add_argument("file", type=Path, help="scenario file (TOML)")
+    _add_param_option(plan)
+    plan.add_argument("--rungs", help="comma-separated rungs (default: the scenario's ladder)")
+    plan.add_argument("--top", metavar="RUNG", help="stop at this rung")
+    plan.add_argument("--seed", type=int, help="seed for OMPL's and our RNG (default: the scenario's)")
+    plan.add_argument("--iterations", type=int, default=2000, help="planner iterations per rung (the budget; default 2000)")
+    plan.add_argument("--out", type=Path, default=Path("out/plan"), help="output folder (default out/plan)")
+    plan.add_argument("--json", action="store_true", help="print the plan report as one JSON object")
+    plan.set_defaults(handler=cmd_plan)
 
     for name, what in RESERVED.items():
         reserved = sub.add_parser(name, help=f"(not built yet) {what}", description=f"Not built yet: {what}.")
@@ -205,6 +221,70 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     return EXIT_OK if result.ok else EXIT_FAILED
 
 
+def cmd_plan(args: argparse.Namespace) -> int:
+    scenario = load_from_args(args)
+    names = [r.model for r in scenario.spec.ladder.rungs]
+    problems = []
+    if args.rungs:
+        names = [n.strip() for n in args.rungs.split(",") if n.strip()]
+        bad = [n for n in names if n not in RUNG_NAMES]
+        if bad:
+            problems.append(Problem("--rungs", f"unknown rung(s) {', '.join(bad)}; rungs: {', '.join(RUNG_NAMES)}"))
+    if args.top is not None:
+        if args.top not in RUNG_NAMES:
+            problems.append(Problem("--top", f"unknown rung {args.top!r}"))
+        else:
+            names = [n for n in names if RUNG_NAMES.index(n) <= RUNG_NAMES.index(args.top)]
+    if args.iterations is not None and args.iterations <= 0:
+        problems.append(Problem("--iterations", "must be a positive number"))
+    if problems:
+        raise ScenarioError(scenario.path, problems)
+
+    from planner.ladder import run_ladder
+    from planner.plots import plot_rollouts
+    from models.rungs import rung_for
+
+    def progress(name: str) -> None:
+        if not args.json:
+            print(f"planning: {name} ...", flush=True)
+
+    result = run_ladder(scenario, rungs=names, seed=args.seed, iterations=args.iterations, progress=progress)
+    report = result.to_json()
+    args.out.mkdir(parents=True, exist_ok=True)
+    # plan.json is reproducible (no timings): the same seed gives the same bytes
+    write_atomic(args.out / "plan.json", json.dumps(result.to_json(timings=False), indent=1) + "\n")
+    write_atomic(args.out / "report.json", json.dumps(report, indent=1) + "\n")
+    plots = []
+    for rung_report in result.rungs:
+        if not rung_report.durations:
+            continue
+        rung = rung_for(scenario, rung_report.rung)
+        spec = next((r for r in scenario.spec.ladder.rungs if r.model == rung_report.rung), None)
+        h = spec.h if spec and spec.h else 1e-3
+        replay = rung.rollout(scenario, rung.initial_state(scenario), np.array(rung_report.controls), np.array(rung_report.durations), h)
+        path = plot_rollouts(args.out / f"plan.{rung_report.rung}.png", scenario.coordinates, scenario.start,
+                             [(rung_report.rung, replay.times, replay.trajectory)], f"{scenario.spec.scenario.name}: plan under {rung_report.rung}")
+        plots.append(str(path))
+    if args.json:
+        print(json.dumps(report, indent=2))
+    else:
+        from rich.console import Console
+        from rich.table import Table
+
+        table = Table(title=f"ladder on {scenario.path} (seed {result.seed})", title_justify="left")
+        for col in ("rung", "ended", "outcome", "wall s", "propagations", "iterations", "controls"):
+            table.add_column(col)
+        for r in result.rungs:
+            table.add_row(r.rung, r.ended, r.outcome, f"{r.wall_s:.2f}", str(r.propagations), str(r.iterations), str(len(r.durations)))
+        console = Console(highlight=False)
+        console.print(table)
+        for r in result.rungs:
+            if r.reason:
+                console.print(f"{r.rung}: {r.reason}")
+        print(f"top rung holds: {'yes' if result.top_holds else 'no'}; plan written to {args.out / 'plan.json'}; plots: {', '.join(plots) or 'none'}")
+    return EXIT_OK if result.top_holds else EXIT_FAILED
+
+
 #: A rollout longer than this many steps runs in chunks with a progress bar.
 PROGRESS_STEPS = 200_000
 
@@ -289,7 +369,7 @@ def print_simulation(summary: dict[str, Any]) -> None:
 def cmd_reserved(args: argparse.Namespace) -> int:
     print(
         f"error: 'ladder {args.command}' is not built yet ({RESERVED[args.command]}); "
-        "available now: ladder check, ladder simulate, ladder schema",
+        "available now: ladder check, ladder simulate, ladder plan, ladder schema",
         file=sys.stderr,
     )
     return EXIT_BAD_INPUT

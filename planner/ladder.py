@@ -1,0 +1,125 @@
+"""The replan-on-upgrade pipeline: plan with the cheapest rung, then go up the ladder.
+
+For each rung in order (this first version):
+
+- ``geometric``: the start must be valid (non-penetrating, not unsafe); geometric paths are
+  not yet turned into seeds, so the rung is reported as skipped with that reason;
+- the first rung with dynamics plans from scratch (OMPL control planning over its rollout);
+- every later rung replays the previous rung's controls from its own lifted start; if the
+  replay reaches the goal without entering the unsafe set the plan is accepted with no
+  search ("replayed"), otherwise the rung plans again ("replanned").
+
+Each rung's report says how it ended, wall time, propagations and planner iterations, and
+the replay's outcome. Seeded replanning (extra roots from the previous path, biased
+sampling) is the next step; see the issue's note.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from models.rungs import RUNGS, rung_for
+from models.scenario import Problem, Scenario, ScenarioError
+from models.schema import RUNGS as RUNG_ORDER
+from planner.ompl_adapter import plan_control
+
+
+@dataclass
+class RungReport:
+    rung: str
+    ended: str  # replayed, replanned, planned, failed, skipped
+    reason: str = ""
+    outcome: str = "none"  # what the accepted controls reach under this rung
+    wall_s: float = 0.0
+    propagations: int = 0
+    iterations: int = 0
+    controls: list = field(default_factory=list)
+    durations: list = field(default_factory=list)
+    states: list = field(default_factory=list)
+
+
+@dataclass
+class LadderResult:
+    scenario: str
+    seed: int
+    rungs: list[RungReport]
+
+    @property
+    def top_holds(self) -> bool:
+        physical = [r for r in self.rungs if r.ended != "skipped"]
+        return bool(physical) and physical[-1].outcome == "goal"
+
+    def to_json(self, timings: bool = True) -> dict:
+        """The plan; without timings it is a pure function of the scenario and the seed."""
+        rungs = [asdict(r) for r in self.rungs]
+        if not timings:
+            for r in rungs:
+                del r["wall_s"]
+        return {"scenario": self.scenario, "seed": self.seed, "top_holds": self.top_holds, "rungs": rungs}
+
+
+def check_start(scenario: Scenario) -> None:
+    """A start inside the unsafe set is bad input (penetration is caught by the loader)."""
+    rung = RUNGS["kinematic"]
+    result = rung.rollout(scenario, rung.initial_state(scenario), np.zeros((1, len(scenario.actuated))), [0.0], 1e-3)
+    if result.outcome == "unsafe":
+        raise ScenarioError(scenario.path, [Problem("task.start", "the start state is inside the unsafe set; nothing can be planned from it")])
+
+
+def run_ladder(scenario: Scenario, *, rungs: list[str] | None = None, seed: int | None = None, iterations: int = 2000, progress=None) -> LadderResult:
+    """Plan up the ladder; see the module docstring."""
+    check_start(scenario)
+    spec = scenario.spec.ladder
+    names = rungs or [r.model for r in spec.rungs]
+    seed = spec.seed if seed is None else seed
+    reports: list[RungReport] = []
+    previous: RungReport | None = None
+    for name in names:
+        if progress:
+            progress(name)
+        rung = rung_for(scenario, name)
+        if not rung.propagates:
+            reports.append(RungReport(name, "skipped", "geometric paths are not yet used as seeds; the start is valid"))
+            continue
+        rung_spec = next((r for r in spec.rungs if r.model == name), None)
+        h = rung_spec.h if rung_spec and rung_spec.h else _default_step(name)
+        period = (rung_spec.control_period if rung_spec and rung_spec.control_period else None) or spec.control_period
+        start = rung.initial_state(scenario)
+        t0 = time.perf_counter()
+        if previous is not None and previous.durations:
+            replay = rung.rollout(scenario, start, np.array(previous.controls), np.array(previous.durations), h)
+            if replay.outcome == "goal" and replay.ok:
+                reports.append(RungReport(name, "replayed", "the previous plan holds under this rung", "goal",
+                                          time.perf_counter() - t0, 0, 0, previous.controls, previous.durations, previous.states))
+                previous = reports[-1]
+                continue
+        plan = plan_control(scenario, rung, start, h=h, control_period=period, seed=seed, iterations=iterations,
+                            planner=(rung_spec.planner if rung_spec and rung_spec.planner else spec.planner))
+        wall = time.perf_counter() - t0
+        outcome = "none"
+        if len(plan.durations):
+            outcome = rung.rollout(scenario, start, plan.controls, plan.durations, h).outcome
+        ended = ("planned" if previous is None else "replanned") if plan.exact and outcome == "goal" else "failed"
+        report = RungReport(name, ended, "" if ended != "failed" else "no exact plan within the iteration budget",
+                            outcome, wall, plan.propagations, plan.iterations,
+                            plan.controls.tolist(), plan.durations.tolist(), plan.states.tolist())
+        reports.append(report)
+        if ended == "failed":
+            break
+        previous = report
+    return LadderResult(str(scenario.path), int(seed), reports)
+
+
+def _default_step(name: str) -> float:
+    return {"kinematic": 1e-2, "quasistatic-rigid": 1e-3, "quasistatic-compliant": 1e-3}.get(name, 1e-4)
+
+
+def rung_names_until(top: str | None, names: list[str]) -> list[str]:
+    if top is None:
+        return names
+    if top not in RUNG_ORDER:
+        raise ValueError(top)
+    return [n for n in names if RUNG_ORDER.index(n) <= RUNG_ORDER.index(top)]
