@@ -72,6 +72,7 @@ def build_parser() -> argparse.ArgumentParser:
     simulate.add_argument("--step", type=float, help="time step h (default: the rung's h in the ladder)")
     simulate.add_argument("--json", action="store_true", help="print one JSON object")
     simulate.add_argument("--plot", type=Path, help="write a trajectory plot (PNG or SVG) here")
+    simulate.add_argument("--plan", type=Path, help="replay this plan.json's top-rung controls instead of the policy")
     simulate.set_defaults(handler=cmd_simulate)
 
     plan = sub.add_parser(
@@ -87,6 +88,10 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument("--top", metavar="RUNG", help="stop at this rung")
     plan.add_argument("--seed", type=int, help="seed for OMPL's and our RNG (default: the scenario's)")
     plan.add_argument("--iterations", type=int, default=2000, help="planner iterations per rung (the budget; default 2000)")
+    plan.add_argument("--planner", choices=["RRT", "KPIECE1", "EST"], help="control planner (default: the scenario's)")
+    plan.add_argument("--time-limit", type=float, help="wall-clock cap per rung in seconds (plans are then not reproducible)")
+    plan.add_argument("--flat", action="store_true", help="plan directly at the top rung with the same budget (the baseline)")
+    plan.add_argument("--no-seed-roots", action="store_true", help="replan from scratch instead of rooting trees at the previous plan")
     plan.add_argument("--out", type=Path, default=Path("out/plan"), help="output folder (default out/plan)")
     plan.add_argument("--json", action="store_true", help="print the plan report as one JSON object")
     plan.set_defaults(handler=cmd_plan)
@@ -165,7 +170,17 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         problems.append(Problem("--model", f"unknown rung {args.model!r}; rungs: {', '.join(RUNG_NAMES)}"))
     elif args.model == "geometric":
         problems.append(Problem("--model", "the geometric rung is a validity check with no dynamics to simulate"))
-    if policy is None:
+    plan_controls = None
+    if args.plan is not None:
+        try:
+            plan_data = json.loads(args.plan.read_text())
+            last = [r for r in plan_data["rungs"] if r.get("durations")][-1]
+            plan_controls = (np.array(last["controls"], float).reshape(len(last["durations"]), -1), np.array(last["durations"], float))
+            if plan_controls[0].shape[1] != len(scenario.actuated):
+                raise ValueError(f"the plan has {plan_controls[0].shape[1]} controls per step, the scene {len(scenario.actuated)}")
+        except (OSError, ValueError, KeyError, IndexError, TypeError) as exc:
+            raise ScenarioError(args.plan, [Problem("rungs", f"not a usable plan file: {exc}")]) from None
+    elif policy is None:
         problems.append(Problem("task.policy", "simulate runs the scenario's policy, and this file has none"))
     rung_spec = next((r for r in scenario.spec.ladder.rungs if r.model == args.model), None)
     h = args.step if args.step is not None else (rung_spec.h if rung_spec else None)
@@ -176,6 +191,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     elif not (h > 0 and h < float("inf")):
         problems.append(Problem("--step", f"must be a positive number, got {h}"))
     duration = args.duration if args.duration is not None else (policy.duration if policy else None)
+    if plan_controls is not None and args.duration is None:
+        duration = float(plan_controls[1].sum())
     if duration is not None and not (duration > 0 and duration < float("inf")):
         problems.append(Problem("--duration", f"must be a positive number, got {duration}"))
     if problems:
@@ -184,10 +201,15 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     from models.rungs import rung_for
 
     rung = rung_for(scenario, args.model)
-    controls = np.array([[policy.speeds.get(name, 0.0) for name in scenario.actuated]])
     state = rung.initial_state(scenario)
-    rung.rollout(scenario, state, controls, [h], h)  # load the compiled kernels before timing
-    result = run_with_progress(rung, scenario, state, controls, duration, h, quiet=args.json)
+    if plan_controls is not None:
+        controls, durations = plan_controls
+        rung.rollout(scenario, state, controls[:1], [h], h)  # load the compiled kernels before timing
+        result = rung.rollout(scenario, state, controls, durations, h)
+    else:
+        controls = np.array([[policy.speeds.get(name, 0.0) for name in scenario.actuated]])
+        rung.rollout(scenario, state, controls, [h], h)  # load the compiled kernels before timing
+        result = run_with_progress(rung, scenario, state, controls, duration, h, quiet=args.json)
     summary = {
         "file": str(scenario.path),
         "model": args.model,
@@ -237,6 +259,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
             names = [n for n in names if RUNG_NAMES.index(n) <= RUNG_NAMES.index(args.top)]
     if args.iterations is not None and args.iterations <= 0:
         problems.append(Problem("--iterations", "must be a positive number"))
+    if args.time_limit is not None and not args.time_limit > 0:
+        problems.append(Problem("--time-limit", "must be a positive number of seconds"))
     if problems:
         raise ScenarioError(scenario.path, problems)
 
@@ -248,7 +272,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
         if not args.json:
             print(f"planning: {name} ...", flush=True)
 
-    result = run_ladder(scenario, rungs=names, seed=args.seed, iterations=args.iterations, progress=progress)
+    result = run_ladder(scenario, rungs=names, seed=args.seed, iterations=args.iterations, progress=progress,
+                        flat=args.flat, planner=args.planner, time_limit=args.time_limit, seeded=not args.no_seed_roots)
     report = result.to_json()
     args.out.mkdir(parents=True, exist_ok=True)
     # plan.json is reproducible (no timings): the same seed gives the same bytes

@@ -7,17 +7,19 @@ For each rung in order (this first version):
 - the first rung with dynamics plans from scratch (OMPL control planning over its rollout);
 - every later rung replays the previous rung's controls from its own lifted start; if the
   replay reaches the goal without entering the unsafe set the plan is accepted with no
-  search ("replayed"), otherwise the rung plans again ("replanned").
+  search ("replayed"), otherwise the rung plans again ("replanned") with the tree also
+  rooted at the states of the longest replayed prefix that still agrees, and the prefix is
+  spliced in front of a path that starts at one of them (OMPL-CRIB section 5).
 
 Each rung's report says how it ended, wall time, propagations and planner iterations, and
-the replay's outcome. Seeded replanning (extra roots from the previous path, biased
-sampling) is the next step; see the issue's note.
+the replay's outcome. Biased
+sampling toward the previous path is not done yet.
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
@@ -69,8 +71,25 @@ def check_start(scenario: Scenario) -> None:
         raise ScenarioError(scenario.path, [Problem("task.start", "the start state is inside the unsafe set; nothing can be planned from it")])
 
 
-def run_ladder(scenario: Scenario, *, rungs: list[str] | None = None, seed: int | None = None, iterations: int = 2000, progress=None) -> LadderResult:
-    """Plan up the ladder; see the module docstring."""
+def run_ladder(
+    scenario: Scenario,
+    *,
+    rungs: list[str] | None = None,
+    seed: int | None = None,
+    iterations: int = 2000,
+    progress=None,
+    seeded: bool = True,
+    flat: bool = False,
+    planner: str | None = None,
+    time_limit: float | None = None,
+) -> LadderResult:
+    """Plan up the ladder; see the module docstring.
+
+    seeded: replanning roots the tree at the previous plan's states replayed under the rung.
+    flat: plan directly at the last rung with the same budget (the baseline).
+    """
+    if flat:
+        rungs = (rungs or [r.model for r in scenario.spec.ladder.rungs])[-1:]
     check_start(scenario)
     spec = scenario.spec.ladder
     names = rungs or [r.model for r in spec.rungs]
@@ -96,8 +115,16 @@ def run_ladder(scenario: Scenario, *, rungs: list[str] | None = None, seed: int 
                                           time.perf_counter() - t0, 0, 0, previous.controls, previous.durations, previous.states))
                 previous = reports[-1]
                 continue
+        seeds, prefix_controls, prefix_durations = [], [], []
+        if previous is not None and previous.durations and seeded:
+            seeds, prefix_controls, prefix_durations = _replayed_prefix(scenario, rung, start, previous, h)
         plan = plan_control(scenario, rung, start, h=h, control_period=period, seed=seed, iterations=iterations,
-                            planner=(rung_spec.planner if rung_spec and rung_spec.planner else spec.planner))
+                            planner=planner or (rung_spec.planner if rung_spec and rung_spec.planner else spec.planner),
+                            extra_starts=seeds, time_limit=time_limit)
+        if plan.start_index > 0:  # the path starts at a seed: splice the previous prefix in front
+            j = plan.start_index
+            plan = replace(plan, controls=np.concatenate([np.array(prefix_controls[:j]).reshape(j, -1), plan.controls]),
+                           durations=np.concatenate([prefix_durations[:j], plan.durations]))
         wall = time.perf_counter() - t0
         outcome = "none"
         if len(plan.durations):
@@ -111,6 +138,22 @@ def run_ladder(scenario: Scenario, *, rungs: list[str] | None = None, seed: int 
             break
         previous = report
     return LadderResult(str(scenario.path), int(seed), reports)
+
+
+def _replayed_prefix(scenario, rung, start, previous, h):
+    """The previous plan replayed under `rung` control by control, up to where it stops
+    agreeing (unsafe, failed or goal): the states there seed the tree."""
+    seeds, controls, durations = [], [], []
+    state = start
+    for u, d in zip(previous.controls, previous.durations):
+        out = rung.rollout(scenario, state, np.array(u).reshape(1, -1), [d], h)
+        if not out.ok or out.outcome != "none":
+            break
+        state = out.state
+        seeds.append(state)
+        controls.append(u)
+        durations.append(d)
+    return seeds, controls, np.array(durations, dtype=float)
 
 
 def _default_step(name: str) -> float:

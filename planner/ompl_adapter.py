@@ -38,6 +38,7 @@ class ControlPlan:
     exact: bool
     propagations: int
     iterations: int
+    start_index: int = 0  # which start the path begins at (0: the real start; i: extra_starts[i - 1])
 
 
 def _layout(scenario: Scenario, state: State) -> tuple[int, int, int, int, int]:
@@ -82,8 +83,15 @@ def plan_control(
     iterations: int,
     planner: str = "RRT",
     goal_distance=None,
+    extra_starts: list[State] | None = None,
+    time_limit: float | None = None,
 ) -> ControlPlan:
-    """Plan commanded speeds from `start` under `rung` with OMPL's control planner."""
+    """Plan commanded speeds from `start` under `rung` with OMPL's control planner.
+
+    extra_starts: more tree roots (OMPL-CRIB section 5), e.g. the previous plan's states
+    replayed under this rung; the result says which root its path starts at.
+    time_limit: a wall-clock cap on top of the iteration budget (then not reproducible).
+    """
     from ompl import base as ob
     from ompl import control as oc
     from ompl import util as ou
@@ -179,15 +187,28 @@ def plan_control(
             return float(1e-6 + goal_distance(np.array([s[0][i] for i in range(nq)])))
 
     ss = oc.SimpleSetup(si)
-    start_state = space.allocState()
-    write(start_state, flatten(start))
-    ss.setStartState(start_state)
+    starts = [start] + list(extra_starts or [])
+    roots = []
+    for k, st in enumerate(starts):
+        root = space.allocState()
+        write(root, flatten(st))
+        roots.append(read(root))
+        if k == 0:
+            ss.setStartState(root)
+        else:
+            ss.addStartState(root)
     ss.setGoal(Goal(si))
     ss.setPlanner(getattr(oc, planner)(si))
     done = {"iterations": 0}
 
+    import time as _time
+
+    deadline = None if time_limit is None else _time.perf_counter() + time_limit
+
     def stop() -> bool:
         done["iterations"] += 1
+        if deadline is not None and _time.perf_counter() > deadline:
+            return True
         return done["iterations"] > iterations or ss.haveExactSolutionPath()
 
     ss.solve(ob.PlannerTerminationCondition(stop))
@@ -198,6 +219,8 @@ def plan_control(
     controls = np.array([[c[j] for j in range(na)] for c in path.getControls()]).reshape(-1, na)
     durations = np.array(path.getControlDurations(), dtype=float)
     states = np.array([[s[0][i] for i in range(nq)] for s in path.getStates()])
-    result = ControlPlan(controls, durations, states, exact, counter["propagations"], done["iterations"])
+    first = read(path.getState(0))
+    start_index = int(np.argmin([np.max(np.abs(first - r)) for r in roots]))
+    result = ControlPlan(controls, durations, states, exact, counter["propagations"], done["iterations"], start_index)
     del path, ss, si, space
     return result
