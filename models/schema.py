@@ -374,6 +374,16 @@ class LadderSpec(Strict):
     control_period: Positive = Field(0.05, description="default duration of one control, s")
 
 
+class ExpectSpec(Strict):
+    """What the scenario must do with its default parameters (run by `pytest scenarios/`)."""
+
+    policy: dict[Literal[RUNGS[1:]], Literal["goal", "unsafe", "none"]] = Field(  # type: ignore[valid-type]
+        default_factory=dict, description="outcome of the task's policy under each named rung"
+    )
+    plan: bool | None = Field(None, description="true: `ladder plan` must find a plan that holds at the top rung")
+    plan_iterations: Annotated[int, Field(gt=0)] = Field(2000, description="planner budget per rung for the plan check")
+
+
 class ScenarioSpec(Strict):
     """A whole scenario file."""
 
@@ -387,6 +397,7 @@ class ScenarioSpec(Strict):
     bodies: tuple[BodySpec, ...] = Field(min_length=1)
     task: TaskSpec
     ladder: LadderSpec
+    expect: ExpectSpec | None = None
 
 
 def json_schema() -> dict[str, Any]:

@@ -72,6 +72,13 @@ def control_bounds(scenario: Scenario) -> tuple[np.ndarray, np.ndarray]:
     return np.array(lo), np.array(hi)
 
 
+def _projection_coordinates(scenario: Scenario, most: int = 3) -> list[int]:
+    """Indices of up to `most` translational coordinates, passive bodies first."""
+    passive = [i for i, n in enumerate(scenario.coordinates) if n not in scenario.actuated and n.split(".")[1] in ("x", "y", "z")]
+    active = [i for i, n in enumerate(scenario.coordinates) if n in scenario.actuated]
+    return (passive + active)[:most] or [0]
+
+
 def plan_control(
     scenario: Scenario,
     rung: Rung,
@@ -118,6 +125,28 @@ def plan_control(
     space.addSubspace(qspace, 1.0)
     space.addSubspace(aux, AUXILIARY_WEIGHT)
     space.lock()
+    projected = _projection_coordinates(scenario)
+
+    class Projection(ob.ProjectionEvaluator):
+        """KPIECE1 / EST grid: the passive bodies' positions first, then the actuated ones."""
+
+        def __init__(self, space_):
+            super().__init__(space_)
+            self.defaultCellSizes()
+
+        def getDimension(self):
+            return len(projected)
+
+        def defaultCellSizes(self):
+            for k in range(len(projected)):
+                self.setCellSizes(k, 0.05)
+
+        def project(self, state, out):
+            for k, i in enumerate(projected):
+                out[k] = state[0][i]
+
+    projection = Projection(space)
+    space.registerDefaultProjection(projection)
 
     na = len(scenario.actuated)
     cspace = oc.RealVectorControlSpace(space, max(na, 1))

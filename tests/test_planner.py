@@ -116,3 +116,17 @@ def test_simulate_replays_a_plan_file_under_any_rung(tmp_path):
     sim = subprocess.run([sys.executable, "-m", "planner", "simulate", str(TRIANGLE), "--plan", str(bad), "--model", "kinematic"],
                          capture_output=True, text=True, env=env, timeout=300)
     assert sim.returncode == 2 and "not a usable plan file" in sim.stderr
+
+
+def test_scenario_expectations_run_as_pytest_items_and_can_fail(tmp_path):
+    text = (SCENARIOS / "incline_block.toml").read_text()
+    good = tmp_path / "good.toml"
+    good.write_text(text)
+    wrong = tmp_path / "wrong.toml"
+    wrong.write_text(text.replace('policy = { dynamic-rigid = "goal", dynamic-compliant = "goal" }', 'policy = { dynamic-rigid = "unsafe" }'))
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "--rootdir", str(tmp_path), str(tmp_path)],
+                          capture_output=True, text=True, env=env, timeout=600, cwd=tmp_path)
+    assert done.returncode == 1, done.stdout + done.stderr
+    assert "2 passed" in done.stdout and "1 failed" in done.stdout
+    assert "expected 'unsafe'" in done.stdout
