@@ -121,3 +121,37 @@ def evaluate_with(op_codes, index, lo, hi, q, pair_psi, stack):
             stack[top] = result
             top += 1
     return stack[0]
+
+
+def pair_distances(scenario: Scenario, q: np.ndarray) -> np.ndarray:
+    """Signed distance of every contact pair at q (reference geometry, Python: for planners)."""
+    from models import geometry as geo
+
+    placements = scenario.placements(q)
+    return np.array(
+        [
+            geo.signed_distance(scenario.geometries[p.body_a], placements[p.body_a], scenario.geometries[p.body_b], placements[p.body_b])
+            for p in scenario.pairs
+        ]
+    )
+
+
+def predicate_distance(scenario: Scenario, node, q: np.ndarray, pair_psi: np.ndarray) -> float:
+    """How far q is from satisfying the predicate (0 inside): interval and touch violations,
+    summed over `all`, the least over `any`; `not` is 0 or 1."""
+    kind = type(node).__name__
+    if kind == "BoxPredicate":
+        total = 0.0
+        for name, (lo, hi) in node.box.items():
+            v = q[scenario.coordinates.index(name)]
+            total += max(lo - v, 0.0, v - hi)
+        return total
+    if kind == "TouchPredicate":
+        tol = node.tol if node.tol is not None else scenario.spec.contact.touch_tolerance
+        index = _pair_index(scenario, *node.touch)
+        return max(float(pair_psi[index]) - tol, 0.0)
+    if kind == "AllPredicate":
+        return sum(predicate_distance(scenario, c, q, pair_psi) for c in node.all)
+    if kind == "AnyPredicate":
+        return min(predicate_distance(scenario, c, q, pair_psi) for c in node.any)
+    return 0.0 if predicate_distance(scenario, node.not_, q, pair_psi) > 0.0 else 1.0

@@ -284,11 +284,16 @@ def cmd_plan(args: argparse.Namespace) -> int:
         if not rung_report.durations:
             continue
         rung = rung_for(scenario, rung_report.rung)
-        spec = next((r for r in scenario.spec.ladder.rungs if r.model == rung_report.rung), None)
-        h = spec.h if spec and spec.h else 1e-3
-        replay = rung.rollout(scenario, rung.initial_state(scenario), np.array(rung_report.controls), np.array(rung_report.durations), h)
+        if rung.propagates:
+            spec = next((r for r in scenario.spec.ladder.rungs if r.model == rung_report.rung), None)
+            h = spec.h if spec and spec.h else 1e-3
+            replay = rung.rollout(scenario, rung.initial_state(scenario), np.array(rung_report.controls), np.array(rung_report.durations), h)
+            times, trajectory = replay.times, replay.trajectory
+        else:  # the geometric path itself
+            times = np.concatenate([[0.0], np.cumsum(rung_report.durations)])
+            trajectory = np.array(rung_report.states)
         path = plot_rollouts(args.out / f"plan.{rung_report.rung}.png", scenario.coordinates, scenario.start,
-                             [(rung_report.rung, replay.times, replay.trajectory)], f"{scenario.spec.scenario.name}: plan under {rung_report.rung}")
+                             [(rung_report.rung, times, trajectory)], f"{scenario.spec.scenario.name}: plan under {rung_report.rung}")
         plots.append(str(path))
     if args.json:
         print(json.dumps(report, indent=2))

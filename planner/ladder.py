@@ -2,9 +2,11 @@
 
 For each rung in order (this first version):
 
-- ``geometric``: the start must be valid (non-penetrating, not unsafe); geometric paths are
-  not yet turned into seeds, so the rung is reported as skipped with that reason;
-- the first rung with dynamics plans from scratch (OMPL control planning over its rollout);
+- ``geometric``: OMPL geometric planning in the C-space of the free DOFs with validity =
+  non-penetration and not unsafe; its path becomes commanded speeds for the actuated DOFs
+  (an approximate path too: the goal set is thin), which the next rung replays;
+- a rung with dynamics and no usable previous plan plans from scratch (OMPL control
+  planning over its rollout);
 - every later rung replays the previous rung's controls from its own lifted start; if the
   replay reaches the goal without entering the unsafe set the plan is accepted with no
   search ("replayed"), otherwise the rung plans again ("replanned") with the tree also
@@ -26,7 +28,7 @@ import numpy as np
 from models.rungs import RUNGS, rung_for
 from models.scenario import Problem, Scenario, ScenarioError
 from models.schema import RUNGS as RUNG_ORDER
-from planner.ompl_adapter import plan_control
+from planner.ompl_adapter import plan_control, plan_geometric
 
 
 @dataclass
@@ -51,8 +53,7 @@ class LadderResult:
 
     @property
     def top_holds(self) -> bool:
-        physical = [r for r in self.rungs if r.ended != "skipped"]
-        return bool(physical) and physical[-1].outcome == "goal"
+        return bool(self.rungs) and self.rungs[-1].outcome == "goal"
 
     def to_json(self, timings: bool = True) -> dict:
         """The plan; without timings it is a pure function of the scenario and the seed."""
@@ -101,7 +102,8 @@ def run_ladder(
             progress(name)
         rung = rung_for(scenario, name)
         if not rung.propagates:
-            reports.append(RungReport(name, "skipped", "geometric paths are not yet used as seeds; the start is valid"))
+            reports.append(_geometric(scenario, seed, iterations, planner))
+            previous = reports[-1] if reports[-1].durations else None
             continue
         rung_spec = next((r for r in spec.rungs if r.model == name), None)
         h = rung_spec.h if rung_spec and rung_spec.h else _default_step(name)
@@ -138,6 +140,31 @@ def run_ladder(
             break
         previous = report
     return LadderResult(str(scenario.path), int(seed), reports)
+
+
+def _geometric(scenario: Scenario, seed: int, iterations: int, planner: str | None) -> RungReport:
+    """Plan the geometric rung and turn its path into commanded speeds for the actuated DOFs:
+    each segment is driven at the speeds that cover it in whole control periods without
+    exceeding any drive's max_speed. An approximate path (the goal set is thin: touching
+    within a tolerance) is still offered to the next rung as a seed."""
+    spec = scenario.spec.ladder
+    rung_spec = next((r for r in spec.rungs if r.model == "geometric"), None)
+    t0 = time.perf_counter()
+    path = plan_geometric(scenario, seed=seed, iterations=iterations,
+                          planner=(rung_spec.planner if rung_spec and rung_spec.planner else "RRTConnect"))
+    period = spec.control_period
+    index = [scenario.coordinates.index(n) for n in scenario.actuated]
+    max_speed = np.array([scenario.body(n.split(".")[0]).actuators[n.split(".")[1]].max_speed for n in scenario.actuated])
+    controls, durations = [], []
+    for a, b in zip(path.states[:-1], path.states[1:]):
+        delta = b[index] - a[index]
+        periods = max(1, int(np.ceil(np.max(np.abs(delta) / max_speed / period, initial=0.0) - 1e-9)))
+        controls.append((delta / (periods * period)).tolist())
+        durations.append(periods * period)
+    ended = "planned" if path.exact else "approximate"
+    reason = "" if path.exact else "no path into the goal set within the budget; the closest one seeds the next rung"
+    return RungReport("geometric", ended, reason, "goal" if path.exact else "none", time.perf_counter() - t0, 0,
+                      path.iterations, controls, durations, path.states.tolist())
 
 
 def _replayed_prefix(scenario, rung, start, previous, h):

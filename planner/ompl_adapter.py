@@ -253,3 +253,86 @@ def plan_control(
     result = ControlPlan(controls, durations, states, exact, counter["propagations"], done["iterations"], start_index)
     del path, ss, si, space
     return result
+
+
+@dataclass(frozen=True)
+class GeometricPlan:
+    states: np.ndarray  # (k, nq) waypoints
+    exact: bool
+    iterations: int
+    checks: int
+
+
+def plan_geometric(scenario: Scenario, *, seed: int, iterations: int, planner: str = "RRTConnect") -> GeometricPlan:
+    """The geometric rung (eq. 9): a path in the C-space of all free DOFs whose states do not
+    penetrate and are not unsafe, ending in the goal set. RRTConnect needs a goal it can
+    sample, which the goal predicates do not give, so RRTConnect falls back to RRT here."""
+    from ompl import base as ob
+    from ompl import geometric as og
+    from ompl import util as ou
+
+    from models.predicates import pair_distances, predicate_distance
+    from models.rungs import RUNGS
+
+    ou.setLogLevel(ou.LOG_NONE)
+    ou.RNG.setSeed(int(seed) + 1)
+    nq = len(scenario.coordinates)
+    task = scenario.spec.task
+    geometric = RUNGS["geometric"]
+    space = ob.RealVectorStateSpace(nq)
+    bounds = ob.RealVectorBounds(nq)
+    for i, name in enumerate(scenario.coordinates):
+        body, dof = name.split(".", 1)
+        drive = scenario.body(body).actuators.get(dof)
+        low = drive.lower if drive is not None and drive.lower is not None else scenario.start[i] - PASSIVE_RANGE
+        high = drive.upper if drive is not None and drive.upper is not None else scenario.start[i] + PASSIVE_RANGE
+        bounds.setLow(i, float(low))
+        bounds.setHigh(i, float(high))
+    space.setBounds(bounds)
+    counter = {"checks": 0}
+
+    def q_of(s) -> np.ndarray:
+        return np.array([s[i] for i in range(nq)])
+
+    def valid(s) -> bool:
+        counter["checks"] += 1
+        q = q_of(s)
+        if not geometric.valid(scenario, q):
+            return False
+        if task.unsafe is not None and predicate_distance(scenario, task.unsafe, q, pair_distances(scenario, q)) == 0.0:
+            return False
+        return True
+
+    ss = og.SimpleSetup(space)
+    ss.setStateValidityChecker(valid)
+    si = ss.getSpaceInformation()
+    si.setStateValidityCheckingResolution(0.01)
+
+    class Goal(ob.GoalRegion):
+        def __init__(self, si_):
+            super().__init__(si_)
+            self.setThreshold(1e-12)
+
+        def distanceGoal(self, s):
+            q = q_of(s)
+            return float(predicate_distance(scenario, task.goal, q, pair_distances(scenario, q)))
+
+    start = space.allocState()
+    for i in range(nq):
+        start[i] = float(scenario.start[i])
+    ss.setStartState(start)
+    ss.setGoal(Goal(si))
+    chosen = og.RRT(si) if planner == "RRTConnect" else getattr(og, planner)(si)
+    ss.setPlanner(chosen)
+    done = {"iterations": 0}
+
+    def stop() -> bool:
+        done["iterations"] += 1
+        return done["iterations"] > iterations or ss.haveExactSolutionPath()
+
+    ss.solve(ob.PlannerTerminationCondition(stop))
+    exact = bool(ss.haveExactSolutionPath())
+    states = np.array([q_of(s) for s in ss.getSolutionPath().getStates()]) if ss.haveSolutionPath() else scenario.start[None, :].copy()
+    result = GeometricPlan(states, exact, done["iterations"], counter["checks"])
+    del ss, si, space
+    return result

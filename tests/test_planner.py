@@ -130,3 +130,17 @@ def test_scenario_expectations_run_as_pytest_items_and_can_fail(tmp_path):
     assert done.returncode == 1, done.stdout + done.stderr
     assert "2 passed" in done.stdout and "1 failed" in done.stdout
     assert "expected 'unsafe'" in done.stdout
+
+
+def test_geometric_rung_plans_free_transfer_and_the_kinematic_rung_replays_it():
+    """No contact is needed: the geometric path, turned into speeds, holds under kinematics."""
+    scenario = load_scenario(SCENARIOS / "free_transfer.toml")
+    result = run_ladder(scenario, seed=3, iterations=3000)
+    geometric, kinematic = result.rungs
+    assert geometric.ended == "planned" and geometric.outcome == "goal"
+    assert kinematic.ended == "replayed" and kinematic.propagations == 0
+    from planner.ompl_adapter import plan_geometric
+    from models.rungs import RUNGS
+
+    path = plan_geometric(scenario, seed=3, iterations=3000)
+    assert all(RUNGS["geometric"].valid(scenario, q) for q in path.states)
