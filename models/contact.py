@@ -318,3 +318,23 @@ def contact_frames(S: SceneData, q: np.ndarray, nu: np.ndarray | None = None, h:
         W_o=W_o[:, :nc].copy() if S.dimension == 3 else np.zeros((S.nv, 0)),
         unsupported=unsupported[:nu_count].copy(),
     )
+
+
+@numba.njit(cache=True)
+def pair_min_distances(S, q, margin, out):
+    """Fill out (n_pairs,) with each pair's signed distance at q (inf beyond margin or inert;
+    nan for pairs only python-fcl can measure)."""
+    cap = 1
+    for p in range(S.pi.shape[0]):
+        cap += S.pi[p, 2]
+    c_pair = np.zeros(cap, np.int64)
+    c_psi = np.zeros(cap)
+    c_n, c_pa, c_pb = np.zeros((cap, 3)), np.zeros((cap, 3)), np.zeros((cap, 3))
+    unsupported = np.zeros(max(S.pi.shape[0], 1), np.int64)
+    nc, n_unsupported = detect_contacts(S, q, np.zeros(S.nv), 0.0, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsupported)
+    out[:] = np.inf
+    for i in range(nc):
+        if c_psi[i] < out[c_pair[i]]:
+            out[c_pair[i]] = c_psi[i]
+    for k in range(n_unsupported):
+        out[unsupported[k]] = np.nan

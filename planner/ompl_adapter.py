@@ -272,13 +272,12 @@ def plan_geometric(scenario: Scenario, *, seed: int, iterations: int, planner: s
     from ompl import util as ou
 
     from models.predicates import pair_distances, predicate_distance
-    from models.rungs import RUNGS
+    from models.rungs import GEOMETRIC_TOLERANCE
 
     ou.setLogLevel(ou.LOG_NONE)
     ou.RNG.setSeed(int(seed) + 1)
     nq = len(scenario.coordinates)
     task = scenario.spec.task
-    geometric = RUNGS["geometric"]
     space = ob.RealVectorStateSpace(nq)
     bounds = ob.RealVectorBounds(nq)
     for i, name in enumerate(scenario.coordinates):
@@ -294,12 +293,26 @@ def plan_geometric(scenario: Scenario, *, seed: int, iterations: int, planner: s
     def q_of(s) -> np.ndarray:
         return np.array([s[i] for i in range(nq)])
 
+    from models.contact import pair_min_distances
+    from models.rungs import compiled
+
+    scene = compiled(scenario).scene
+    psi = np.empty(max(len(scenario.pairs), 1))
+
+    def distances(q: np.ndarray) -> np.ndarray:
+        """Compiled pair distances; python-fcl only for the pairs the kernels cannot do."""
+        pair_min_distances(scene, q, 1e9, psi)
+        if np.isnan(psi).any():
+            return pair_distances(scenario, q)
+        return psi
+
     def valid(s) -> bool:
         counter["checks"] += 1
         q = q_of(s)
-        if not geometric.valid(scenario, q):
+        d = distances(q)
+        if np.any(d[: len(scenario.pairs)] < -GEOMETRIC_TOLERANCE):
             return False
-        if task.unsafe is not None and predicate_distance(scenario, task.unsafe, q, pair_distances(scenario, q)) == 0.0:
+        if task.unsafe is not None and predicate_distance(scenario, task.unsafe, q, d) == 0.0:
             return False
         return True
 
@@ -315,7 +328,7 @@ def plan_geometric(scenario: Scenario, *, seed: int, iterations: int, planner: s
 
         def distanceGoal(self, s):
             q = q_of(s)
-            return float(predicate_distance(scenario, task.goal, q, pair_distances(scenario, q)))
+            return float(predicate_distance(scenario, task.goal, q, distances(q)))
 
     start = space.allocState()
     for i in range(nq):
