@@ -72,6 +72,19 @@ def control_bounds(scenario: Scenario) -> tuple[np.ndarray, np.ndarray]:
     return np.array(lo), np.array(hi)
 
 
+def _configuration_bounds(ob, scenario: Scenario, q0: np.ndarray):
+    """OMPL bounds on q: the drives' position limits, else q0 +- PASSIVE_RANGE."""
+    bounds = ob.RealVectorBounds(len(scenario.coordinates))
+    for i, name in enumerate(scenario.coordinates):
+        body, dof = name.split(".", 1)
+        drive = scenario.body(body).actuators.get(dof)
+        low = drive.lower if drive is not None and drive.lower is not None else q0[i] - PASSIVE_RANGE
+        high = drive.upper if drive is not None and drive.upper is not None else q0[i] + PASSIVE_RANGE
+        bounds.setLow(i, float(low))
+        bounds.setHigh(i, float(high))
+    return bounds
+
+
 def _projection_coordinates(scenario: Scenario, most: int = 3) -> list[int]:
     """Indices of up to `most` translational coordinates, passive bodies first."""
     passive = [i for i, n in enumerate(scenario.coordinates) if n not in scenario.actuated and n.split(".")[1] in ("x", "y", "z")]
@@ -111,15 +124,7 @@ def plan_control(
 
     space = ob.CompoundStateSpace()
     qspace = ob.RealVectorStateSpace(nq)
-    qb = ob.RealVectorBounds(nq)
-    for i, name in enumerate(scenario.coordinates):
-        body, dof = name.split(".", 1)
-        drive = scenario.body(body).actuators.get(dof)
-        low = drive.lower if drive is not None and drive.lower is not None else start.q[i] - PASSIVE_RANGE
-        high = drive.upper if drive is not None and drive.upper is not None else start.q[i] + PASSIVE_RANGE
-        qb.setLow(i, float(low))
-        qb.setHigh(i, float(high))
-    qspace.setBounds(qb)
+    qspace.setBounds(_configuration_bounds(ob, scenario, start.q))
     aux = ob.RealVectorStateSpace(n_aux)
     aux.setBounds(-1e9, 1e9)
     space.addSubspace(qspace, 1.0)
@@ -279,15 +284,7 @@ def plan_geometric(scenario: Scenario, *, seed: int, iterations: int, planner: s
     nq = len(scenario.coordinates)
     task = scenario.spec.task
     space = ob.RealVectorStateSpace(nq)
-    bounds = ob.RealVectorBounds(nq)
-    for i, name in enumerate(scenario.coordinates):
-        body, dof = name.split(".", 1)
-        drive = scenario.body(body).actuators.get(dof)
-        low = drive.lower if drive is not None and drive.lower is not None else scenario.start[i] - PASSIVE_RANGE
-        high = drive.upper if drive is not None and drive.upper is not None else scenario.start[i] + PASSIVE_RANGE
-        bounds.setLow(i, float(low))
-        bounds.setHigh(i, float(high))
-    space.setBounds(bounds)
+    space.setBounds(_configuration_bounds(ob, scenario, scenario.start))
     counter = {"checks": 0}
 
     def q_of(s) -> np.ndarray:
