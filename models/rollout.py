@@ -80,7 +80,9 @@ def rollout_kernel(S, D, model, goal, unsafe, q, nu, q_ref, delta_n, delta_t, co
 
     Returns (q, nu, q_ref, delta_n, delta_t, t, outcome, status, steps, lcp_solves, pivots,
     max_residual, max_lcp_size, rec_t (n,), rec_q (n, nq), rec_nu (n, nv), pair_force (n_pairs,):
-    the normal contact force of each pair over the last step taken).
+    the normal contact force of each pair over the last step taken, min_psi: the smallest
+    contact signed distance met at the start of any step (inf if none), force_steps: how many
+    steps had a positive normal contact impulse).
     """
     dimension = S.dimension
     spatial = dimension == 3
@@ -134,6 +136,8 @@ def rollout_kernel(S, D, model, goal, unsafe, q, nu, q_ref, delta_n, delta_t, co
     pivots = 0
     max_residual = 0.0
     max_size = 0
+    min_psi = np.inf
+    force_steps = 0
     outcome = OUTCOME_NONE
     status = STEP_OK
     if not kinematic and constant_A and Ainv.shape[0] != nv:
@@ -153,6 +157,8 @@ def rollout_kernel(S, D, model, goal, unsafe, q, nu, q_ref, delta_n, delta_t, co
             pair_psi[:] = np.inf
             for i in range(nc):
                 p = c_pair[i]
+                if c_psi[i] < min_psi:
+                    min_psi = c_psi[i]
                 if c_psi[i] < pair_psi[p]:
                     pair_psi[p] = c_psi[i]
                 c_slot[i] = first_slot[p] if (i == 0 or c_pair[i - 1] != p) else c_slot[i - 1] + 1
@@ -203,8 +209,13 @@ def rollout_kernel(S, D, model, goal, unsafe, q, nu, q_ref, delta_n, delta_t, co
                 break
             q, nu, q_ref, delta_n, delta_t = q2, nu2, q_ref2, dn2, dt2
             pair_force[:] = 0.0
-            for i in range(nc):
+            pushed = False
+            for i in range(p_n.shape[0]):
                 pair_force[c_pair[i]] += p_n[i] / h
+                if p_n[i] > 0.0:
+                    pushed = True
+            if pushed:
+                force_steps += 1
             t += h
             steps += 1
             if record_every > 0 and steps % record_every == 0 and n_rec < max_records - 1:
@@ -229,4 +240,4 @@ def rollout_kernel(S, D, model, goal, unsafe, q, nu, q_ref, delta_n, delta_t, co
         rec_nu[n_rec] = nu
         n_rec += 1
     return (q, nu, q_ref, delta_n, delta_t, t, outcome, status, steps, lcp_solves, pivots, max_residual, max_size,
-            rec_t[:n_rec], rec_q[:n_rec], rec_nu[:n_rec], pair_force)
+            rec_t[:n_rec], rec_q[:n_rec], rec_nu[:n_rec], pair_force, min_psi, force_steps)

@@ -64,6 +64,12 @@ class RolloutResult:
     trajectory: np.ndarray  # (n, nq)
     velocities: np.ndarray  # (n, nv)
     pair_force: np.ndarray  # (n_pairs,) normal force of each contact pair in the last step, N
+    min_psi: float = np.inf  # smallest contact signed distance met (negative: penetration), m
+    force_steps: int = 0  # steps in which some contact carried a positive normal force
+
+    @property
+    def max_penetration(self) -> float:
+        return float(max(0.0, -self.min_psi))
 
     @property
     def ok(self) -> bool:
@@ -195,7 +201,7 @@ class Rung:
             controls, durations, float(h), int(record_every), int(max_records), bool(stop_at_outcome),
         )
         wall = time.perf_counter() - start
-        q, nu, q_ref, dn, dt, t, outcome, status, steps, lcp, piv, res, size, rec_t, rec_q, rec_nu, force = out
+        q, nu, q_ref, dn, dt, t, outcome, status, steps, lcp, piv, res, size, rec_t, rec_q, rec_nu, force, min_psi, force_steps = out
         return RolloutResult(
             state=State(q, nu, q_ref, dn, dt),
             t=float(t),
@@ -212,6 +218,8 @@ class Rung:
             trajectory=rec_q,
             velocities=rec_nu,
             pair_force=force[: len(scenario.pairs)],
+            min_psi=float(min_psi),
+            force_steps=int(force_steps),
         )
 
     def step(self, scenario: Scenario, state: State, control: np.ndarray, h: float) -> RolloutResult:
@@ -238,6 +246,21 @@ RUNGS: dict[str, Rung] = {
     "dynamic-rigid": Rung("dynamic-rigid", Model(False, 1.0, False, 1.0, 4), "eq. (5)"),
     "dynamic-compliant": Rung("dynamic-compliant", Model(False, 1.0, True, 1.0, 4), "eq. (3)"),
 }
+
+
+def pair_signed_distances(scenario: Scenario, q: np.ndarray) -> np.ndarray:
+    """Every contact pair's signed distance at q: the compiled kernels, python-fcl only for
+    the pairs they cannot measure (inert pairs read inf)."""
+    from models.contact import pair_min_distances
+    from models.predicates import pair_distances
+
+    out = np.empty(max(len(scenario.pairs), 1))
+    pair_min_distances(compiled(scenario).scene, np.asarray(q, float), 1e9, out)
+    if np.isnan(out).any():
+        reference = pair_distances(scenario, q)
+        missing = np.isnan(out)
+        out[: len(reference)][missing[: len(reference)]] = reference[missing[: len(reference)]]
+    return out[: len(scenario.pairs)]
 
 
 def rung_for(scenario: Scenario, name: str) -> Rung:

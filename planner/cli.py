@@ -91,7 +91,8 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument("--planner", choices=["RRT", "KPIECE1", "EST"], help="control planner (default: the scenario's)")
     plan.add_argument("--time-limit", type=float, help="wall-clock cap per rung in seconds (plans are then not reproducible)")
     plan.add_argument("--flat", action="store_true", help="plan directly at the top rung with the same budget (the baseline)")
-    plan.add_argument("--no-seed-roots", action="store_true", help="replan from scratch instead of rooting trees at the previous plan")
+    plan.add_argument("--no-seed-roots", action="store_true", help="replan without rooting trees at the previous plan's states")
+    plan.add_argument("--no-guide", action="store_true", help="replan without sampling near the previous plan")
     plan.add_argument("--out", type=Path, default=Path("out/plan"), help="output folder (default out/plan)")
     plan.add_argument("--json", action="store_true", help="print the plan report as one JSON object")
     plan.set_defaults(handler=cmd_plan)
@@ -264,16 +265,27 @@ def cmd_plan(args: argparse.Namespace) -> int:
     if problems:
         raise ScenarioError(scenario.path, problems)
 
-    from planner.ladder import run_ladder
+    from planner.ladder import run_ladder, step_for
     from planner.plots import plot_rollouts
     from models.rungs import rung_for
 
-    def progress(name: str) -> None:
-        if not args.json:
-            print(f"planning: {name} ...", flush=True)
+    live = sys.stderr.isatty() and not args.json
+    budget = args.iterations * (len(names) if args.flat else 1)
+
+    def progress(name: str, iterations: int, propagations: int) -> None:
+        """One live line on a terminal (stderr); one line per rung otherwise."""
+        if args.json:
+            return
+        if live:
+            print(f"\rplanning {name}: {iterations}/{budget} iterations, {propagations} propagations   ", end="", file=sys.stderr, flush=True)
+        elif iterations == 0:
+            print(f"planning: {name} ...", file=sys.stderr, flush=True)
 
     result = run_ladder(scenario, rungs=names, seed=args.seed, iterations=args.iterations, progress=progress,
-                        flat=args.flat, planner=args.planner, time_limit=args.time_limit, seeded=not args.no_seed_roots)
+                        flat=args.flat, planner=args.planner, time_limit=args.time_limit, seeded=not args.no_seed_roots,
+                        guided=not args.no_guide)
+    if live:
+        print("\r" + " " * 78 + "\r", end="", file=sys.stderr, flush=True)
     report = result.to_json()
     args.out.mkdir(parents=True, exist_ok=True)
     # plan.json is reproducible (no timings): the same seed gives the same bytes
@@ -285,8 +297,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
             continue
         rung = rung_for(scenario, rung_report.rung)
         if rung.propagates:
-            spec = next((r for r in scenario.spec.ladder.rungs if r.model == rung_report.rung), None)
-            h = spec.h if spec and spec.h else 1e-3
+            h = step_for(scenario, rung_report.rung)
             replay = rung.rollout(scenario, rung.initial_state(scenario), np.array(rung_report.controls), np.array(rung_report.durations), h)
             times, trajectory = replay.times, replay.trajectory
         else:  # the geometric path itself
@@ -302,11 +313,13 @@ def cmd_plan(args: argparse.Namespace) -> int:
         from rich.table import Table
 
         table = Table(title=f"ladder on {scenario.path} (seed {result.seed})", title_justify="left")
-        for col in ("rung", "ended", "outcome", "wall s", "propagations", "iterations", "controls"):
-            table.add_column(col)
+        for col in ("rung", "ended", "outcome", "wall s", "props", "iters", "goal dist", "max pen", "fails", "controls"):
+            table.add_column(col, no_wrap=True)
         for r in result.rungs:
-            table.add_row(r.rung, r.ended, r.outcome, f"{r.wall_s:.2f}", str(r.propagations), str(r.iterations), str(len(r.durations)))
-        console = Console(highlight=False)
+            distance = "-" if r.goal_distance is None else f"{r.goal_distance:.2g}"
+            table.add_row(r.rung, r.ended, r.outcome, f"{r.wall_s:.2f}", str(r.propagations), str(r.iterations), distance,
+                          f"{r.max_penetration:.1e}", str(r.solver_failures), str(len(r.durations)))
+        console = Console(highlight=False, width=max(Console().width, 110))
         console.print(table)
         for r in result.rungs:
             if r.reason:

@@ -1,21 +1,25 @@
 """The replan-on-upgrade pipeline: plan with the cheapest rung, then go up the ladder.
 
-For each rung in order (this first version):
+For each rung in order:
 
 - ``geometric``: OMPL geometric planning in the C-space of the free DOFs with validity =
-  non-penetration and not unsafe; its path becomes commanded speeds for the actuated DOFs
-  (an approximate path too: the goal set is thin), which the next rung replays;
-- a rung with dynamics and no usable previous plan plans from scratch (OMPL control
-  planning over its rollout);
-- every later rung replays the previous rung's controls from its own lifted start; if the
-  replay reaches the goal without entering the unsafe set the plan is accepted with no
-  search ("replayed"), otherwise the rung plans again ("replanned") with the tree also
-  rooted at the states of the longest replayed prefix that still agrees, and the prefix is
-  spliced in front of a path that starts at one of them (OMPL-CRIB section 5).
+  non-penetration and not unsafe, toward goal states made by projection; its path becomes
+  commanded speeds for the actuated DOFs (an approximate path too), which the next rung
+  replays or is guided by;
+- a rung whose physics along the previous plan is the same as the previous rung's (the
+  rigid and compliant variants of one model when no contact carries force at the same step
+  size) is "skipped", with the reason, and inherits the plan;
+- every other rung replays the previous rung's controls from its own start; if the replay
+  reaches the goal without entering the unsafe set the plan is accepted with no search
+  ("replayed"), otherwise the rung plans again ("replanned"): the tree is also rooted at the
+  states of the longest replayed prefix that still agrees, the prefix is spliced in front
+  of a path that starts at one of them (OMPL-CRIB section 5), and RRT / EST draw part of
+  their samples near the previous plan's configurations;
+- a rung with no usable previous plan plans from scratch ("planned").
 
-Each rung's report says how it ended, wall time, propagations and planner iterations, and
-the replay's outcome. Biased
-sampling toward the previous path is not done yet.
+Each rung's report says how it ended, wall time, propagations, planner iterations, how far
+the accepted plan ends from the goal, the largest penetration along it, and how many
+propagations ended in a solver failure.
 """
 
 from __future__ import annotations
@@ -25,7 +29,8 @@ from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
-from models.rungs import RUNGS, rung_for
+from models.predicates import predicate_distance
+from models.rungs import RUNGS, pair_signed_distances, rung_for
 from models.scenario import Problem, Scenario, ScenarioError
 from models.schema import RUNGS as RUNG_ORDER
 from planner.ompl_adapter import plan_control, plan_geometric
@@ -40,6 +45,11 @@ class RungReport:
     wall_s: float = 0.0
     propagations: int = 0
     iterations: int = 0
+    goal_distance: float | None = None  # of the accepted plan's last state (0 in the goal)
+    max_penetration: float = 0.0  # along the accepted plan under this rung, m
+    contact_steps: int = 0  # steps of that replay in which a contact carried force
+    solver_failures: int = 0  # propagations that ended in a numerical failure while planning
+    status: str = "ok"  # the replay's solver status
     controls: list = field(default_factory=list)
     durations: list = field(default_factory=list)
     states: list = field(default_factory=list)
@@ -80,6 +90,7 @@ def run_ladder(
     iterations: int = 2000,
     progress=None,
     seeded: bool = True,
+    guided: bool = True,
     flat: bool = False,
     planner: str | None = None,
     time_limit: float | None = None,
@@ -87,59 +98,114 @@ def run_ladder(
     """Plan up the ladder; see the module docstring.
 
     seeded: replanning roots the tree at the previous plan's states replayed under the rung.
-    flat: plan directly at the last rung with the same budget (the baseline).
+    guided: replanning RRT / EST sample near the previous plan's configurations.
+    flat: plan directly at the last rung, with the budget of the whole ladder (iterations and
+    time limit times the number of rungs): the baseline.
+    progress: called as progress(rung, iterations, propagations) while a rung plans.
     """
-    if flat:
-        rungs = (rungs or [r.model for r in scenario.spec.ladder.rungs])[-1:]
     check_start(scenario)
     spec = scenario.spec.ladder
     names = rungs or [r.model for r in spec.rungs]
+    if flat:
+        iterations *= len(names)
+        time_limit = None if time_limit is None else time_limit * len(names)
+        names = names[-1:]
     seed = spec.seed if seed is None else seed
     reports: list[RungReport] = []
     previous: RungReport | None = None
     for name in names:
         if progress:
-            progress(name)
+            progress(name, 0, 0)
         rung = rung_for(scenario, name)
         if not rung.propagates:
             reports.append(_geometric(scenario, seed, iterations, planner))
             previous = reports[-1] if reports[-1].durations else None
             continue
         rung_spec = next((r for r in spec.rungs if r.model == name), None)
-        h = rung_spec.h if rung_spec and rung_spec.h else _default_step(name)
+        h = step_for(scenario, name)
         period = (rung_spec.control_period if rung_spec and rung_spec.control_period else None) or spec.control_period
         start = rung.initial_state(scenario)
         t0 = time.perf_counter()
         if previous is not None and previous.durations:
-            replay = rung.rollout(scenario, start, np.array(previous.controls), np.array(previous.durations), h)
-            if replay.outcome == "goal" and replay.ok:
-                reports.append(RungReport(name, "replayed", "the previous plan holds under this rung", "goal",
-                                          time.perf_counter() - t0, 0, 0, previous.controls, previous.durations, previous.states))
+            same = _same_physics(scenario, previous, name)
+            if same:
+                reports.append(replace(previous, rung=name, ended="skipped", reason=same, wall_s=time.perf_counter() - t0,
+                                       propagations=0, iterations=0, solver_failures=0))
+                previous = reports[-1]
+                continue
+            replay = assess(scenario, name, previous.controls, previous.durations)
+            if replay["outcome"] == "goal" and replay["status"] == "ok":
+                reports.append(RungReport(name, "replayed", "the previous plan holds under this rung", wall_s=time.perf_counter() - t0,
+                                          controls=previous.controls, durations=previous.durations, states=previous.states, **replay))
                 previous = reports[-1]
                 continue
         seeds, prefix_controls, prefix_durations = [], [], []
         if previous is not None and previous.durations and seeded:
             seeds, prefix_controls, prefix_durations = _replayed_prefix(scenario, rung, start, previous, h)
+        guide = np.array(previous.states) if previous is not None and previous.states and guided else None
         plan = plan_control(scenario, rung, start, h=h, control_period=period, seed=seed, iterations=iterations,
                             planner=planner or (rung_spec.planner if rung_spec and rung_spec.planner else spec.planner),
-                            extra_starts=seeds, time_limit=time_limit)
+                            extra_starts=seeds, guide=guide, time_limit=time_limit,
+                            progress=(lambda i, n, _name=name: progress(_name, i, n)) if progress else None)
         if plan.start_index > 0:  # the path starts at a seed: splice the previous prefix in front
             j = plan.start_index
             plan = replace(plan, controls=np.concatenate([np.array(prefix_controls[:j]).reshape(j, -1), plan.controls]),
                            durations=np.concatenate([prefix_durations[:j], plan.durations]))
         wall = time.perf_counter() - t0
-        outcome = "none"
-        if len(plan.durations):
-            outcome = rung.rollout(scenario, start, plan.controls, plan.durations, h).outcome
-        ended = ("planned" if previous is None else "replanned") if plan.exact and outcome == "goal" else "failed"
-        report = RungReport(name, ended, "" if ended != "failed" else "no exact plan within the iteration budget",
-                            outcome, wall, plan.propagations, plan.iterations,
-                            plan.controls.tolist(), plan.durations.tolist(), plan.states.tolist())
+        replay = assess(scenario, name, plan.controls.tolist(), plan.durations.tolist())
+        accepted = plan.exact and replay["outcome"] == "goal" and replay["status"] == "ok"
+        ended = ("planned" if previous is None else "replanned") if accepted else "failed"
+        reason = ""
+        if not accepted:
+            reason = "no exact plan within the iteration budget" if not plan.exact else (
+                f"the plan found does not hold when replayed ({replay['outcome']}, {replay['status']})")
+        report = RungReport(name, ended, reason, wall_s=wall, propagations=plan.propagations, iterations=plan.iterations,
+                            solver_failures=plan.failures, controls=plan.controls.tolist(), durations=plan.durations.tolist(),
+                            states=plan.states.tolist(), **replay)
         reports.append(report)
         if ended == "failed":
             break
         previous = report
     return LadderResult(str(scenario.path), int(seed), reports)
+
+
+def assess(scenario: Scenario, name: str, controls, durations) -> dict:
+    """Replay controls under a rung from the start: outcome, solver status, goal distance of
+    the last state, largest penetration and contact steps, as report fields."""
+    rung = rung_for(scenario, name)
+    if not len(durations):
+        q = np.array(scenario.start, float)
+        d = pair_signed_distances(scenario, q)
+        return {"outcome": "none", "status": "ok", "goal_distance": float(predicate_distance(scenario, scenario.spec.task.goal, q, d)),
+                "max_penetration": 0.0, "contact_steps": 0}
+    out = rung.rollout(scenario, rung.initial_state(scenario), np.array(controls, float), np.array(durations, float), step_for(scenario, name))
+    q = out.state.q
+    distance = 0.0 if out.outcome == "goal" else float(predicate_distance(scenario, scenario.spec.task.goal, q, pair_signed_distances(scenario, q)))
+    return {"outcome": out.outcome, "status": out.status, "goal_distance": distance,
+            "max_penetration": out.max_penetration, "contact_steps": out.force_steps}
+
+
+#: Rung pairs that are one model with rigid and with compliant contact.
+COMPLIANCE_SIBLINGS = ({"quasistatic-rigid", "quasistatic-compliant"}, {"dynamic-rigid", "dynamic-compliant"})
+
+
+def _same_physics(scenario: Scenario, previous: RungReport, name: str) -> str:
+    """Why rung `name` would compute exactly what `previous` computed, or "" if it might not."""
+    if previous.outcome != "goal" or previous.status != "ok" or {previous.rung, name} not in COMPLIANCE_SIBLINGS:
+        return ""
+    if previous.contact_steps != 0 or step_for(scenario, previous.rung) != step_for(scenario, name):
+        return ""
+    a, b = rung_for(scenario, previous.rung).model, rung_for(scenario, name).model
+    if a._replace(compliant=b.compliant) != b:
+        return ""
+    return (f"no contact carries force along the plan under {previous.rung} at the same step, and without contact force "
+            f"{name} is the same model: the plan holds as it is")
+
+
+def step_for(scenario: Scenario, name: str) -> float:
+    """The rung's time step: the scenario's, else the rung's default."""
+    rung_spec = next((r for r in scenario.spec.ladder.rungs if r.model == name), None)
+    return rung_spec.h if rung_spec and rung_spec.h else _default_step(name)
 
 
 def _geometric(scenario: Scenario, seed: int, iterations: int, planner: str | None) -> RungReport:
@@ -163,8 +229,12 @@ def _geometric(scenario: Scenario, seed: int, iterations: int, planner: str | No
         durations.append(periods * period)
     ended = "planned" if path.exact else "approximate"
     reason = "" if path.exact else "no path into the goal set within the budget; the closest one seeds the next rung"
+    if not path.goal_samples:
+        reason += ("; " if reason else "") + "no goal state could be made by projection, so RRT searched for the goal region"
+    q = path.states[-1]
+    distance = float(predicate_distance(scenario, scenario.spec.task.goal, q, pair_signed_distances(scenario, q)))
     return RungReport("geometric", ended, reason, "goal" if path.exact else "none", time.perf_counter() - t0, 0,
-                      path.iterations, controls, durations, path.states.tolist())
+                      path.iterations, goal_distance=distance, controls=controls, durations=durations, states=path.states.tolist())
 
 
 def _replayed_prefix(scenario, rung, start, previous, h):

@@ -28,6 +28,12 @@ AUXILIARY_WEIGHT = 1e-6
 PASSIVE_RANGE = 2.0
 #: Each control is held for 1 to this many control periods.
 MAX_CONTROL_PERIODS = 10
+#: Fraction of RRT's samples drawn near the previous rung's plan when one guides it.
+GUIDE_BIAS = 0.3
+#: Standard deviation of those samples around a guide state, as a fraction of the bounds.
+GUIDE_SPREAD = 0.02
+#: The progress callback runs every this many planner iterations.
+PROGRESS_EVERY = 25
 
 
 @dataclass(frozen=True)
@@ -39,6 +45,7 @@ class ControlPlan:
     propagations: int
     iterations: int
     start_index: int = 0  # which start the path begins at (0: the real start; i: extra_starts[i - 1])
+    failures: int = 0  # propagations that ended in a numerical failure (a status, pruned from the tree)
 
 
 def _layout(scenario: Scenario, state: State) -> tuple[int, int, int, int, int]:
@@ -72,16 +79,26 @@ def control_bounds(scenario: Scenario) -> tuple[np.ndarray, np.ndarray]:
     return np.array(lo), np.array(hi)
 
 
-def _configuration_bounds(ob, scenario: Scenario, q0: np.ndarray):
-    """OMPL bounds on q: the drives' position limits, else q0 +- PASSIVE_RANGE."""
-    bounds = ob.RealVectorBounds(len(scenario.coordinates))
+def configuration_limits(scenario: Scenario, q0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Bounds on q: the drives' position limits, else q0 +- PASSIVE_RANGE."""
+    low, high = np.asarray(q0, float) - PASSIVE_RANGE, np.asarray(q0, float) + PASSIVE_RANGE
     for i, name in enumerate(scenario.coordinates):
         body, dof = name.split(".", 1)
         drive = scenario.body(body).actuators.get(dof)
-        low = drive.lower if drive is not None and drive.lower is not None else q0[i] - PASSIVE_RANGE
-        high = drive.upper if drive is not None and drive.upper is not None else q0[i] + PASSIVE_RANGE
-        bounds.setLow(i, float(low))
-        bounds.setHigh(i, float(high))
+        if drive is not None and drive.lower is not None:
+            low[i] = drive.lower
+        if drive is not None and drive.upper is not None:
+            high[i] = drive.upper
+    return low, high
+
+
+def _configuration_bounds(ob, scenario: Scenario, q0: np.ndarray):
+    """OMPL bounds on q (configuration_limits)."""
+    low, high = configuration_limits(scenario, q0)
+    bounds = ob.RealVectorBounds(len(scenario.coordinates))
+    for i in range(len(low)):
+        bounds.setLow(i, float(low[i]))
+        bounds.setHigh(i, float(high[i]))
     return bounds
 
 
@@ -104,13 +121,22 @@ def plan_control(
     planner: str = "RRT",
     goal_distance=None,
     extra_starts: list[State] | None = None,
+    guide: np.ndarray | None = None,
+    guide_bias: float = GUIDE_BIAS,
     time_limit: float | None = None,
+    progress=None,
 ) -> ControlPlan:
     """Plan commanded speeds from `start` under `rung` with OMPL's control planner.
 
     extra_starts: more tree roots (OMPL-CRIB section 5), e.g. the previous plan's states
     replayed under this rung; the result says which root its path starts at.
+    guide: configurations (k, nq) of the previous rung's plan. RRT and EST then draw this
+    fraction (guide_bias) of their samples near them, through the goal's sampler (the only
+    sampling hook the 2.0.1 bindings leave: OMPL-CRIB section 5); a drawn guide state is a
+    direction to grow toward, never taken for a goal state. KPIECE1 does not sample toward
+    goals, so the guide does not bias it.
     time_limit: a wall-clock cap on top of the iteration budget (then not reproducible).
+    progress: called as progress(iterations, propagations) every PROGRESS_EVERY iterations.
     """
     from ompl import base as ob
     from ompl import control as oc
@@ -165,7 +191,7 @@ def plan_control(
     si = oc.SpaceInformation(space, cspace)
     si.setPropagationStepSize(control_period)
     si.setMinMaxControlDuration(1, MAX_CONTROL_PERIODS)
-    counter = {"propagations": 0}
+    counter = {"propagations": 0, "failures": 0}
 
     def read(s) -> np.ndarray:
         x = np.empty(nq + n_aux)
@@ -195,6 +221,7 @@ def plan_control(
         new_flag = FLAG_RUNNING
         if not out.ok:
             new_flag = FLAG_FAILED
+            counter["failures"] += 1
         elif out.outcome == "goal":
             new_flag = FLAG_GOAL
         elif out.outcome == "unsafe":
@@ -208,17 +235,49 @@ def plan_control(
     si.setStatePropagator(propagate)
     si.setStateValidityChecker(valid)
 
+    guide_q = None if guide is None or len(guide) == 0 else np.asarray(guide, float).reshape(-1, nq)
+    rng = np.random.default_rng(int(seed))
+    q_low, q_high = configuration_limits(scenario, start.q)
+    spread = GUIDE_SPREAD * (q_high - q_low)
+    blank = flatten(start)[nq:]
+    blank[:] = 0.0
+
+    def distance_to_goal(s) -> float:
+        if s[1][n_aux - 1] == FLAG_GOAL:
+            return 0.0
+        if goal_distance is None:
+            return 1.0
+        return float(1e-6 + goal_distance(np.array([s[0][i] for i in range(nq)])))
+
     class Goal(ob.GoalRegion):
         def __init__(self, si_):
             super().__init__(si_)
             self.setThreshold(1e-12)
 
         def distanceGoal(self, s):
-            if s[1][n_aux - 1] == FLAG_GOAL:
-                return 0.0
-            if goal_distance is None:
-                return 1.0
-            return float(1e-6 + goal_distance(np.array([s[0][i] for i in range(nq)])))
+            return distance_to_goal(s)
+
+    class GuidedGoal(ob.GoalSampleableRegion):
+        """The same goal; its sampler hands the planner states near the previous plan."""
+
+        def __init__(self, si_):
+            super().__init__(si_)
+            self.setThreshold(1e-12)
+
+        def distanceGoal(self, s):
+            return distance_to_goal(s)
+
+        def sampleGoal(self, s):
+            # later states more often: they lie closer to the goal
+            k = min(int(len(guide_q) * np.sqrt(rng.random())), len(guide_q) - 1)
+            q = np.clip(guide_q[k] + spread * rng.standard_normal(nq), q_low, q_high)
+            write(s, np.concatenate([q, blank]))
+
+        def maxSampleCount(self):
+            return 1 << 30
+
+        def couldSample(self):
+            return True
 
     ss = oc.SimpleSetup(si)
     starts = [start] + list(extra_starts or [])
@@ -231,8 +290,14 @@ def plan_control(
             ss.setStartState(root)
         else:
             ss.addStartState(root)
-    ss.setGoal(Goal(si))
-    ss.setPlanner(getattr(oc, planner)(si))
+    chosen = getattr(oc, planner)(si)
+    if guide_q is not None and planner in ("RRT", "EST"):
+        ss.setGoal(GuidedGoal(si))
+        if planner == "RRT":
+            chosen.setGoalBias(float(guide_bias))
+    else:
+        ss.setGoal(Goal(si))
+    ss.setPlanner(chosen)
     done = {"iterations": 0}
 
     import time as _time
@@ -241,6 +306,8 @@ def plan_control(
 
     def stop() -> bool:
         done["iterations"] += 1
+        if progress is not None and done["iterations"] % PROGRESS_EVERY == 0:
+            progress(done["iterations"], counter["propagations"])
         if deadline is not None and _time.perf_counter() > deadline:
             return True
         return done["iterations"] > iterations or ss.haveExactSolutionPath()
@@ -248,14 +315,16 @@ def plan_control(
     ss.solve(ob.PlannerTerminationCondition(stop))
     exact = bool(ss.haveExactSolutionPath())
     if not ss.haveSolutionPath():
-        return ControlPlan(np.zeros((0, na)), np.zeros(0), start.q[None, :].copy(), False, counter["propagations"], done["iterations"])
+        return ControlPlan(np.zeros((0, na)), np.zeros(0), start.q[None, :].copy(), False, counter["propagations"], done["iterations"],
+                           failures=counter["failures"])
     path = ss.getSolutionPath()
     controls = np.array([[c[j] for j in range(na)] for c in path.getControls()]).reshape(-1, na)
     durations = np.array(path.getControlDurations(), dtype=float)
     states = np.array([[s[0][i] for i in range(nq)] for s in path.getStates()])
     first = read(path.getState(0))
     start_index = int(np.argmin([np.max(np.abs(first - r)) for r in roots]))
-    result = ControlPlan(controls, durations, states, exact, counter["propagations"], done["iterations"], start_index)
+    result = ControlPlan(controls, durations, states, exact, counter["propagations"], done["iterations"], start_index,
+                         failures=counter["failures"])
     del path, ss, si, space
     return result
 
@@ -266,18 +335,24 @@ class GeometricPlan:
     exact: bool
     iterations: int
     checks: int
+    goal_samples: int = 0  # goal states made by projection (0: the planner searched for the goal region)
 
 
 def plan_geometric(scenario: Scenario, *, seed: int, iterations: int, planner: str = "RRTConnect") -> GeometricPlan:
     """The geometric rung (eq. 9): a path in the C-space of all free DOFs whose states do not
-    penetrate and are not unsafe, ending in the goal set. RRTConnect needs a goal it can
-    sample, which the goal predicates do not give, so RRTConnect falls back to RRT here."""
+    penetrate and are not unsafe, ending in the goal set.
+
+    The goal set is thin (touching within a tolerance), so a tree rarely lands in it by
+    chance: goal states are made by projection (`goal_samples`), and the planner (RRTConnect
+    by default) grows a tree from them too. The path is then shortened with OMPL's
+    simplifier, which keeps its end points. Without any goal sample (none found), RRTConnect
+    falls back to RRT toward the goal region."""
     from ompl import base as ob
     from ompl import geometric as og
     from ompl import util as ou
 
-    from models.predicates import pair_distances, predicate_distance
-    from models.rungs import GEOMETRIC_TOLERANCE
+    from models.predicates import predicate_distance
+    from models.rungs import GEOMETRIC_TOLERANCE, pair_signed_distances
 
     ou.setLogLevel(ou.LOG_NONE)
     ou.RNG.setSeed(int(seed) + 1)
@@ -285,38 +360,33 @@ def plan_geometric(scenario: Scenario, *, seed: int, iterations: int, planner: s
     task = scenario.spec.task
     space = ob.RealVectorStateSpace(nq)
     space.setBounds(_configuration_bounds(ob, scenario, scenario.start))
+    low, high = configuration_limits(scenario, scenario.start)
     counter = {"checks": 0}
 
     def q_of(s) -> np.ndarray:
         return np.array([s[i] for i in range(nq)])
 
-    from models.contact import pair_min_distances
-    from models.rungs import compiled
-
-    scene = compiled(scenario).scene
-    psi = np.empty(max(len(scenario.pairs), 1))
-
-    def distances(q: np.ndarray) -> np.ndarray:
-        """Compiled pair distances; python-fcl only for the pairs the kernels cannot do."""
-        pair_min_distances(scene, q, 1e9, psi)
-        if np.isnan(psi).any():
-            return pair_distances(scenario, q)
-        return psi
-
-    def valid(s) -> bool:
-        counter["checks"] += 1
-        q = q_of(s)
-        d = distances(q)
-        if np.any(d[: len(scenario.pairs)] < -GEOMETRIC_TOLERANCE):
+    def valid_q(q: np.ndarray) -> bool:
+        d = pair_signed_distances(scenario, q)
+        if np.any(d < -GEOMETRIC_TOLERANCE):
             return False
         if task.unsafe is not None and predicate_distance(scenario, task.unsafe, q, d) == 0.0:
             return False
-        return True
+        return bool(np.all(q >= low) and np.all(q <= high))
+
+    def valid(s) -> bool:
+        counter["checks"] += 1
+        return valid_q(q_of(s))
 
     ss = og.SimpleSetup(space)
     ss.setStateValidityChecker(valid)
     si = ss.getSpaceInformation()
-    si.setStateValidityCheckingResolution(0.01)
+    si.setStateValidityCheckingResolution(GEOMETRIC_RESOLUTION)
+    pool = goal_samples(scenario, np.random.default_rng(int(seed)), low, high, valid_q) if planner == "RRTConnect" else []
+
+    def goal_distance(s) -> float:
+        q = q_of(s)
+        return float(predicate_distance(scenario, task.goal, q, pair_signed_distances(scenario, q)))
 
     class Goal(ob.GoalRegion):
         def __init__(self, si_):
@@ -324,15 +394,41 @@ def plan_geometric(scenario: Scenario, *, seed: int, iterations: int, planner: s
             self.setThreshold(1e-12)
 
         def distanceGoal(self, s):
-            q = q_of(s)
-            return float(predicate_distance(scenario, task.goal, q, distances(q)))
+            return goal_distance(s)
+
+    class SampledGoal(ob.GoalSampleableRegion):
+        """The goal region, with the projected goal states to root a goal tree at."""
+
+        def __init__(self, si_):
+            super().__init__(si_)
+            self.setThreshold(1e-12)
+            self.drawn = 0
+
+        def distanceGoal(self, s):
+            return goal_distance(s)
+
+        def sampleGoal(self, s):
+            q = pool[self.drawn % len(pool)]
+            self.drawn += 1
+            for i in range(nq):
+                s[i] = float(q[i])
+
+        def maxSampleCount(self):
+            return len(pool)
+
+        def couldSample(self):
+            return True
 
     start = space.allocState()
     for i in range(nq):
         start[i] = float(scenario.start[i])
     ss.setStartState(start)
-    ss.setGoal(Goal(si))
-    chosen = og.RRT(si) if planner == "RRTConnect" else getattr(og, planner)(si)
+    if pool:
+        ss.setGoal(SampledGoal(si))
+        chosen = getattr(og, planner)(si)
+    else:
+        ss.setGoal(Goal(si))
+        chosen = og.RRT(si) if planner == "RRTConnect" else getattr(og, planner)(si)
     ss.setPlanner(chosen)
     done = {"iterations": 0}
 
@@ -342,7 +438,84 @@ def plan_geometric(scenario: Scenario, *, seed: int, iterations: int, planner: s
 
     ss.solve(ob.PlannerTerminationCondition(stop))
     exact = bool(ss.haveExactSolutionPath())
-    states = np.array([q_of(s) for s in ss.getSolutionPath().getStates()]) if ss.haveSolutionPath() else scenario.start[None, :].copy()
-    result = GeometricPlan(states, exact, done["iterations"], counter["checks"])
+    if ss.haveSolutionPath():
+        path = ss.getSolutionPath()
+        if exact:
+            og.PathSimplifier(si).simplifyMax(path)
+        states = np.array([q_of(s) for s in path.getStates()])
+        del path
+    else:
+        states = scenario.start[None, :].copy()
+    result = GeometricPlan(states, exact, done["iterations"], counter["checks"], len(pool))
     del ss, si, space
     return result
+
+
+#: Motion checks of the geometric rung: states this fraction of the space's extent apart.
+GEOMETRIC_RESOLUTION = 0.002
+#: Attempts and Newton iterations of the goal-state projection.
+GOAL_ATTEMPTS, GOAL_POOL, PROJECTION_ITERATIONS = 300, 24, 25
+
+
+def goal_samples(scenario: Scenario, rng: np.random.Generator, low: np.ndarray, high: np.ndarray, valid) -> list[np.ndarray]:
+    """Configurations in the goal set, for goal trees: a uniform sample projected onto the
+    goal's constraints (intervals by clipping, `touch` pairs by Gauss-Newton steps on their
+    signed distances toward half the touch tolerance, with finite-difference gradients over
+    the positional and planar-angle coordinates; one branch of each `any`, chosen at random),
+    kept when the goal predicate holds and `valid` accepts it."""
+    from models.predicates import _pair_index, predicate_distance
+    from models.rungs import pair_signed_distances
+
+    goal = scenario.spec.task.goal
+    tolerance = scenario.spec.contact.touch_tolerance
+    movable = [i for i, n in enumerate(scenario.coordinates) if n.rsplit(".", 1)[1] in ("x", "y", "z", "theta", "yaw")]
+
+    def constraints(node, boxes, touches) -> None:
+        kind = type(node).__name__
+        if kind == "BoxPredicate":
+            for name, (lo, hi) in node.box.items():
+                boxes.append((scenario.coordinates.index(name), lo, hi))
+        elif kind == "TouchPredicate":
+            tol = node.tol if node.tol is not None else tolerance
+            touches.append((_pair_index(scenario, *node.touch), 0.5 * tol, 0.5 * tol))
+        elif kind == "AllPredicate":
+            for child in node.all:
+                constraints(child, boxes, touches)
+        elif kind == "AnyPredicate":
+            constraints(node.any[int(rng.integers(len(node.any)))], boxes, touches)
+
+    pool: list[np.ndarray] = []
+    for _ in range(GOAL_ATTEMPTS):
+        if len(pool) >= GOAL_POOL:
+            break
+        boxes, touches = [], []
+        constraints(goal, boxes, touches)
+        q = np.array(scenario.start, float)
+        lo, hi = low.copy(), high.copy()
+        for i, a, b in boxes:  # box coordinates start inside their interval, not on its edge
+            lo[i], hi[i] = max(lo[i], a), min(hi[i], b)
+        q[movable] = lo[movable] + rng.random(len(movable)) * (hi[movable] - lo[movable])
+        for _ in range(PROJECTION_ITERATIONS):
+            for i, lo, hi in boxes:
+                q[i] = min(max(q[i], lo), hi)
+            if not touches:
+                break
+            d = pair_signed_distances(scenario, q)
+            r = np.array([d[p] - target for p, target, _ in touches])
+            if np.all(np.abs(r) <= np.array([band for _, _, band in touches])):
+                break
+            if not np.all(np.isfinite(r)):
+                r = np.where(np.isfinite(r), r, 1.0)
+            J = np.zeros((len(touches), len(movable)))
+            step = 1e-6
+            for j, i in enumerate(movable):
+                qe = q.copy()
+                qe[i] += step
+                de = pair_signed_distances(scenario, qe)
+                J[:, j] = [(de[p] - d[p]) / step if np.isfinite(de[p]) and np.isfinite(d[p]) else 0.0 for p, _, _ in touches]
+            dq = J.T @ np.linalg.solve(J @ J.T + 1e-12 * np.eye(len(touches)), r)
+            q[movable] -= dq
+            q = np.clip(q, low, high)
+        if predicate_distance(scenario, goal, q, pair_signed_distances(scenario, q)) == 0.0 and valid(q):
+            pool.append(q)
+    return pool

@@ -44,8 +44,21 @@ def test_free_transfer_higher_rungs_are_accepted_by_replay_without_search():
     result = run_ladder(scenario, rungs=["kinematic", "quasistatic-rigid", "dynamic-rigid", "dynamic-compliant"], seed=3, iterations=3000)
     assert result.rungs[0].ended == "planned"
     for report in result.rungs[1:]:
-        assert report.ended == "replayed" and report.propagations == 0
+        assert report.ended in ("replayed", "skipped") and report.propagations == 0
+    # nothing is touched on the way, so dynamic-compliant (same step as dynamic-rigid) is the same physics
+    assert [r.ended for r in result.rungs[1:]] == ["replayed", "replayed", "skipped"]
+    assert result.rungs[2].contact_steps == 0 and "no contact carries force" in result.rungs[3].reason
     assert result.top_holds
+    rung = rung_for(scenario, "dynamic-compliant")  # the skip was right: the plan does hold there
+    top = result.rungs[-1]
+    assert rung.rollout(scenario, rung.initial_state(scenario), np.array(top.controls), np.array(top.durations), 1e-4).outcome == "goal"
+
+
+def test_a_plan_that_pushes_is_not_skipped_between_rigid_and_compliant_contact():
+    scenario = load_scenario(TRIANGLE, {"v1": 0.8})
+    result = run_ladder(scenario, rungs=["kinematic", "dynamic-rigid", "dynamic-compliant"], seed=1, iterations=2000)
+    assert result.rungs[1].contact_steps > 0
+    assert result.rungs[2].ended != "skipped"
 
 
 def test_a_start_inside_the_unsafe_set_is_bad_input(tmp_path):
