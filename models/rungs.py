@@ -17,12 +17,14 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field, replace
 
+import numba
 import numpy as np
 
 from models import geometry as geo
+from models.contact import pair_min_distances
 from models.kinematics import SceneData, compile_scene
 from models.kinematics import PI_INERT
-from models.predicates import OP_TOUCH, Program, compile_predicate
+from models.predicates import OP_TOUCH, Program, compile_predicate, evaluate_with
 from models.rollout import OUTCOME_NAMES, rollout_kernel
 from models.scenario import Scenario
 from models.stepper import STEP_MESSAGES, STEP_NAMES, Drives, Model
@@ -248,10 +250,49 @@ RUNGS: dict[str, Rung] = {
 }
 
 
+@numba.njit(cache=True)
+def _geometric_check(S, op, index, lo, hi, q, low, high, tolerance, psi, stack):
+    """1 if q is in bounds, penetrates nowhere by more than tolerance and is not unsafe; 0 if
+    not; -1 if some pair needs python-fcl to measure."""
+    for i in range(q.shape[0]):
+        if q[i] < low[i] or q[i] > high[i]:
+            return 0
+    pair_min_distances(S, q, 1e9, psi)
+    for p in range(psi.shape[0]):
+        if np.isnan(psi[p]):
+            return -1
+        if psi[p] < -tolerance:
+            return 0
+    return 0 if evaluate_with(op, index, lo, hi, q, psi, stack) else 1
+
+
+def geometric_checker(scenario: Scenario, low: np.ndarray, high: np.ndarray, tolerance: float = GEOMETRIC_TOLERANCE):
+    """A function q -> bool: the geometric rung's validity (bounds, eq. (9) non-penetration,
+    not unsafe), compiled, with python-fcl only for the pairs the kernels cannot measure."""
+    from models.predicates import predicate_distance
+
+    c = compiled(scenario)
+    unsafe = c.unsafe
+    psi = np.empty(max(c.scene.pi.shape[0], 1))
+    stack = np.zeros(unsafe.op.shape[0] + 1, np.bool_)
+    low, high = np.ascontiguousarray(low, float), np.ascontiguousarray(high, float)
+    task = scenario.spec.task
+
+    def check(q: np.ndarray) -> bool:
+        ok = _geometric_check(c.scene, unsafe.op, unsafe.index, unsafe.lo, unsafe.hi, q, low, high, tolerance, psi, stack)
+        if ok >= 0:
+            return ok == 1
+        d = pair_signed_distances(scenario, q)
+        if np.any(d < -tolerance):
+            return False
+        return not (task.unsafe is not None and predicate_distance(scenario, task.unsafe, q, d) == 0.0)
+
+    return check
+
+
 def pair_signed_distances(scenario: Scenario, q: np.ndarray) -> np.ndarray:
     """Every contact pair's signed distance at q: the compiled kernels, python-fcl only for
     the pairs they cannot measure (inert pairs read inf)."""
-    from models.contact import pair_min_distances
     from models.predicates import pair_distances
 
     out = np.empty(max(len(scenario.pairs), 1))

@@ -30,7 +30,7 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 
 from models.predicates import predicate_distance
-from models.rungs import RUNGS, pair_signed_distances, rung_for
+from models.rungs import RUNGS, State, pair_signed_distances, rung_for
 from models.scenario import Problem, Scenario, ScenarioError
 from models.schema import RUNGS as RUNG_ORDER
 from planner.ompl_adapter import plan_control, plan_geometric
@@ -133,26 +133,32 @@ def run_ladder(
                                        propagations=0, iterations=0, solver_failures=0))
                 previous = reports[-1]
                 continue
-            replay = assess(scenario, name, previous.controls, previous.durations)
-            if replay["outcome"] == "goal" and replay["status"] == "ok":
+        replay = None
+        if previous is not None and previous.durations:
+            replay = _replay(scenario, rung, start, previous, h)
+            if replay.outcome == "goal" and replay.status == "ok":
                 reports.append(RungReport(name, "replayed", "the previous plan holds under this rung", wall_s=time.perf_counter() - t0,
-                                          controls=previous.controls, durations=previous.durations, states=previous.states, **replay))
+                                          controls=previous.controls, durations=previous.durations, states=previous.states,
+                                          **replay.fields(scenario)))
                 previous = reports[-1]
                 continue
-        seeds, prefix_controls, prefix_durations = [], [], []
-        if previous is not None and previous.durations and seeded:
-            seeds, prefix_controls, prefix_durations = _replayed_prefix(scenario, rung, start, previous, h)
+        seeds, prefix_controls, prefix_durations = [], [], np.zeros(0)
+        if replay is not None and seeded:
+            seeds, prefix_controls, prefix_durations = replay.states, replay.controls, np.array(replay.durations)
         guide = np.array(previous.states) if previous is not None and previous.states and guided else None
         plan = plan_control(scenario, rung, start, h=h, control_period=period, seed=seed, iterations=iterations,
                             planner=planner or (rung_spec.planner if rung_spec and rung_spec.planner else spec.planner),
                             extra_starts=seeds, guide=guide, time_limit=time_limit,
                             progress=(lambda i, n, _name=name: progress(_name, i, n)) if progress else None)
-        if plan.start_index > 0:  # the path starts at a seed: splice the previous prefix in front
-            j = plan.start_index
+        j = plan.start_index
+        if j > 0:  # the path starts at a seed: splice the previous prefix in front
             plan = replace(plan, controls=np.concatenate([np.array(prefix_controls[:j]).reshape(j, -1), plan.controls]),
                            durations=np.concatenate([prefix_durations[:j], plan.durations]))
+        # the plan replayed from the start: the prefix's part is known, the rest runs from the seed it starts at
+        head = replay.head(j) if j > 0 else _Replay.empty(start)
+        tail = _replay_controls(scenario, rung, head.state, plan.controls[j:], plan.durations[j:], h, head)
+        replay = tail.fields(scenario)
         wall = time.perf_counter() - t0
-        replay = assess(scenario, name, plan.controls.tolist(), plan.durations.tolist())
         accepted = plan.exact and replay["outcome"] == "goal" and replay["status"] == "ok"
         ended = ("planned" if previous is None else "replanned") if accepted else "failed"
         reason = ""
@@ -237,20 +243,63 @@ def _geometric(scenario: Scenario, seed: int, iterations: int, planner: str | No
                       path.iterations, goal_distance=distance, controls=controls, durations=durations, states=path.states.tolist())
 
 
-def _replayed_prefix(scenario, rung, start, previous, h):
-    """The previous plan replayed under `rung` control by control, up to where it stops
-    agreeing (unsafe, failed or goal): the states there seed the tree."""
-    seeds, controls, durations = [], [], []
-    state = start
-    for u, d in zip(previous.controls, previous.durations):
-        out = rung.rollout(scenario, state, np.array(u).reshape(1, -1), [d], h)
+@dataclass
+class _Replay:
+    """A plan replayed control by control: the states after each control while it ran on
+    (outcome none, status ok), and what the run met."""
+
+    state: State
+    states: list = field(default_factory=list)
+    controls: list = field(default_factory=list)
+    durations: list = field(default_factory=list)
+    outcome: str = "none"
+    status: str = "ok"
+    min_psi: float = np.inf
+    contact_steps: int = 0
+    steps_min_psi: list = field(default_factory=list)  # running (min_psi, contact_steps) after each control
+
+    @staticmethod
+    def empty(start: State) -> "_Replay":
+        return _Replay(start)
+
+    def head(self, j: int) -> "_Replay":
+        """The first j controls of this replay."""
+        min_psi, contact = self.steps_min_psi[j - 1]
+        return _Replay(self.states[j - 1], self.states[:j], self.controls[:j], self.durations[:j], "none", "ok", min_psi, contact,
+                       self.steps_min_psi[:j])
+
+    def fields(self, scenario: Scenario) -> dict:
+        q = self.state.q
+        distance = 0.0 if self.outcome == "goal" else float(
+            predicate_distance(scenario, scenario.spec.task.goal, q, pair_signed_distances(scenario, q)))
+        return {"outcome": self.outcome, "status": self.status, "goal_distance": distance,
+                "max_penetration": float(max(0.0, -self.min_psi)), "contact_steps": int(self.contact_steps)}
+
+
+def _replay_controls(scenario, rung, state, controls, durations, h, so_far: _Replay) -> _Replay:
+    """Continue `so_far` with controls, one rollout each, until one ends in the goal, the
+    unsafe set or a solver failure."""
+    run = _Replay(state, list(so_far.states), list(so_far.controls), list(so_far.durations), "none", "ok", so_far.min_psi,
+                  so_far.contact_steps, list(so_far.steps_min_psi))
+    for u, d in zip(controls, durations):
+        out = rung.rollout(scenario, run.state, np.array(u, float).reshape(1, -1), [float(d)], h)
+        run.min_psi = min(run.min_psi, out.min_psi)
+        run.contact_steps += out.force_steps
+        run.state = out.state
         if not out.ok or out.outcome != "none":
+            run.outcome, run.status = out.outcome, out.status
             break
-        state = out.state
-        seeds.append(state)
-        controls.append(u)
-        durations.append(d)
-    return seeds, controls, np.array(durations, dtype=float)
+        run.states.append(out.state)
+        run.controls.append(list(u))
+        run.durations.append(float(d))
+        run.steps_min_psi.append((run.min_psi, run.contact_steps))
+    return run
+
+
+def _replay(scenario, rung, start, previous, h) -> _Replay:
+    """The previous plan replayed under `rung`: where it stops agreeing (unsafe, failed) or
+    holds (goal), and the states before that, which seed the tree when it does not hold."""
+    return _replay_controls(scenario, rung, start, previous.controls, previous.durations, h, _Replay.empty(start))
 
 
 def _default_step(name: str) -> float:

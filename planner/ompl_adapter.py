@@ -352,7 +352,7 @@ def plan_geometric(scenario: Scenario, *, seed: int, iterations: int, planner: s
     from ompl import util as ou
 
     from models.predicates import predicate_distance
-    from models.rungs import GEOMETRIC_TOLERANCE, pair_signed_distances
+    from models.rungs import geometric_checker, pair_signed_distances
 
     ou.setLogLevel(ou.LOG_NONE)
     ou.RNG.setSeed(int(seed) + 1)
@@ -366,23 +366,22 @@ def plan_geometric(scenario: Scenario, *, seed: int, iterations: int, planner: s
     def q_of(s) -> np.ndarray:
         return np.array([s[i] for i in range(nq)])
 
-    def valid_q(q: np.ndarray) -> bool:
-        d = pair_signed_distances(scenario, q)
-        if np.any(d < -GEOMETRIC_TOLERANCE):
-            return False
-        if task.unsafe is not None and predicate_distance(scenario, task.unsafe, q, d) == 0.0:
-            return False
-        return bool(np.all(q >= low) and np.all(q <= high))
+    valid_q = geometric_checker(scenario, low, high)
+    x = np.empty(nq)
 
     def valid(s) -> bool:
         counter["checks"] += 1
-        return valid_q(q_of(s))
+        for i in range(nq):
+            x[i] = s[i]
+        return valid_q(x)
 
     ss = og.SimpleSetup(space)
     ss.setStateValidityChecker(valid)
     si = ss.getSpaceInformation()
     si.setStateValidityCheckingResolution(GEOMETRIC_RESOLUTION)
-    pool = goal_samples(scenario, np.random.default_rng(int(seed)), low, high, valid_q) if planner == "RRTConnect" else []
+    sampler = GoalSampler(scenario, np.random.default_rng(int(seed)), low, high, valid_q)
+    pool = [sampler.draw()] if planner == "RRTConnect" else []
+    pool = [q for q in pool if q is not None]
 
     def goal_distance(s) -> float:
         q = q_of(s)
@@ -403,18 +402,25 @@ def plan_geometric(scenario: Scenario, *, seed: int, iterations: int, planner: s
             super().__init__(si_)
             self.setThreshold(1e-12)
             self.drawn = 0
+            self.growing = True
 
         def distanceGoal(self, s):
             return goal_distance(s)
 
         def sampleGoal(self, s):
+            """A new projected goal state while the pool may grow, else one from the pool."""
+            if self.growing and len(pool) < GOAL_POOL and self.drawn >= len(pool) - 1:
+                q = sampler.draw()
+                self.growing = q is not None  # stop trying once the projection fails
+                if q is not None:
+                    pool.append(q)
             q = pool[self.drawn % len(pool)]
             self.drawn += 1
             for i in range(nq):
                 s[i] = float(q[i])
 
         def maxSampleCount(self):
-            return len(pool)
+            return GOAL_POOL
 
         def couldSample(self):
             return True
@@ -454,68 +460,70 @@ def plan_geometric(scenario: Scenario, *, seed: int, iterations: int, planner: s
 #: Motion checks of the geometric rung: states this fraction of the space's extent apart.
 GEOMETRIC_RESOLUTION = 0.002
 #: Attempts and Newton iterations of the goal-state projection.
-GOAL_ATTEMPTS, GOAL_POOL, PROJECTION_ITERATIONS = 300, 24, 25
+GOAL_ATTEMPTS, GOAL_POOL, PROJECTION_ITERATIONS = 50, 24, 25
 
 
-def goal_samples(scenario: Scenario, rng: np.random.Generator, low: np.ndarray, high: np.ndarray, valid) -> list[np.ndarray]:
-    """Configurations in the goal set, for goal trees: a uniform sample projected onto the
-    goal's constraints (intervals by clipping, `touch` pairs by Gauss-Newton steps on their
-    signed distances toward half the touch tolerance, with finite-difference gradients over
-    the positional and planar-angle coordinates; one branch of each `any`, chosen at random),
-    kept when the goal predicate holds and `valid` accepts it."""
-    from models.predicates import _pair_index, predicate_distance
-    from models.rungs import pair_signed_distances
+class GoalSampler:
+    """Configurations in the goal set, for goal trees: a uniform sample (coordinates the goal
+    bounds drawn inside their interval) projected onto the goal's constraints (intervals by
+    clipping, `touch` pairs by Gauss-Newton steps on their signed distances toward half the
+    touch tolerance, with finite-difference gradients over the positional and planar-angle
+    coordinates; one branch of each `any`, chosen at random), kept when the goal predicate
+    holds and `valid` accepts it. `draw()` tries up to GOAL_ATTEMPTS samples, else None."""
 
-    goal = scenario.spec.task.goal
-    tolerance = scenario.spec.contact.touch_tolerance
-    movable = [i for i, n in enumerate(scenario.coordinates) if n.rsplit(".", 1)[1] in ("x", "y", "z", "theta", "yaw")]
+    def __init__(self, scenario: Scenario, rng: np.random.Generator, low: np.ndarray, high: np.ndarray, valid) -> None:
+        self.scenario, self.rng, self.low, self.high, self.valid = scenario, rng, low, high, valid
+        self.movable = [i for i, n in enumerate(scenario.coordinates) if n.rsplit(".", 1)[1] in ("x", "y", "z", "theta", "yaw")]
 
-    def constraints(node, boxes, touches) -> None:
+    def _constraints(self, node, boxes, touches) -> None:
+        from models.predicates import _pair_index
+
         kind = type(node).__name__
         if kind == "BoxPredicate":
             for name, (lo, hi) in node.box.items():
-                boxes.append((scenario.coordinates.index(name), lo, hi))
+                boxes.append((self.scenario.coordinates.index(name), lo, hi))
         elif kind == "TouchPredicate":
-            tol = node.tol if node.tol is not None else tolerance
-            touches.append((_pair_index(scenario, *node.touch), 0.5 * tol, 0.5 * tol))
+            tol = node.tol if node.tol is not None else self.scenario.spec.contact.touch_tolerance
+            touches.append((_pair_index(self.scenario, *node.touch), 0.5 * tol))
         elif kind == "AllPredicate":
             for child in node.all:
-                constraints(child, boxes, touches)
+                self._constraints(child, boxes, touches)
         elif kind == "AnyPredicate":
-            constraints(node.any[int(rng.integers(len(node.any)))], boxes, touches)
+            self._constraints(node.any[int(self.rng.integers(len(node.any)))], boxes, touches)
 
-    pool: list[np.ndarray] = []
-    for _ in range(GOAL_ATTEMPTS):
-        if len(pool) >= GOAL_POOL:
-            break
-        boxes, touches = [], []
-        constraints(goal, boxes, touches)
-        q = np.array(scenario.start, float)
-        lo, hi = low.copy(), high.copy()
-        for i, a, b in boxes:  # box coordinates start inside their interval, not on its edge
-            lo[i], hi[i] = max(lo[i], a), min(hi[i], b)
-        q[movable] = lo[movable] + rng.random(len(movable)) * (hi[movable] - lo[movable])
-        for _ in range(PROJECTION_ITERATIONS):
-            for i, lo, hi in boxes:
-                q[i] = min(max(q[i], lo), hi)
-            if not touches:
-                break
-            d = pair_signed_distances(scenario, q)
-            r = np.array([d[p] - target for p, target, _ in touches])
-            if np.all(np.abs(r) <= np.array([band for _, _, band in touches])):
-                break
-            if not np.all(np.isfinite(r)):
+    def draw(self) -> np.ndarray | None:
+        from models.predicates import predicate_distance
+        from models.rungs import pair_signed_distances
+
+        scenario, rng, low, high, movable = self.scenario, self.rng, self.low, self.high, self.movable
+        goal = scenario.spec.task.goal
+        for _ in range(GOAL_ATTEMPTS):
+            boxes, touches = [], []
+            self._constraints(goal, boxes, touches)
+            q = np.array(scenario.start, float)
+            lo, hi = low.copy(), high.copy()
+            for i, a, b in boxes:  # box coordinates start inside their interval, not on its edge
+                lo[i], hi[i] = max(lo[i], a), min(hi[i], b)
+            q[movable] = lo[movable] + rng.random(len(movable)) * (hi[movable] - lo[movable])
+            for _ in range(PROJECTION_ITERATIONS):
+                for i, a, b in boxes:
+                    q[i] = min(max(q[i], a), b)
+                if not touches:
+                    break
+                d = pair_signed_distances(scenario, q)
+                r = np.array([d[p] - target for p, target in touches])
+                if np.all(np.abs(r) <= np.array([target for _, target in touches])):
+                    break
                 r = np.where(np.isfinite(r), r, 1.0)
-            J = np.zeros((len(touches), len(movable)))
-            step = 1e-6
-            for j, i in enumerate(movable):
-                qe = q.copy()
-                qe[i] += step
-                de = pair_signed_distances(scenario, qe)
-                J[:, j] = [(de[p] - d[p]) / step if np.isfinite(de[p]) and np.isfinite(d[p]) else 0.0 for p, _, _ in touches]
-            dq = J.T @ np.linalg.solve(J @ J.T + 1e-12 * np.eye(len(touches)), r)
-            q[movable] -= dq
-            q = np.clip(q, low, high)
-        if predicate_distance(scenario, goal, q, pair_signed_distances(scenario, q)) == 0.0 and valid(q):
-            pool.append(q)
-    return pool
+                J = np.zeros((len(touches), len(movable)))
+                step = 1e-6
+                for j, i in enumerate(movable):
+                    qe = q.copy()
+                    qe[i] += step
+                    de = pair_signed_distances(scenario, qe)
+                    J[:, j] = [(de[p] - d[p]) / step if np.isfinite(de[p]) and np.isfinite(d[p]) else 0.0 for p, _ in touches]
+                q[movable] -= J.T @ np.linalg.solve(J @ J.T + 1e-12 * np.eye(len(touches)), r)
+                q = np.clip(q, low, high)
+            if predicate_distance(scenario, goal, q, pair_signed_distances(scenario, q)) == 0.0 and self.valid(q):
+                return q
+        return None

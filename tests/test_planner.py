@@ -92,7 +92,7 @@ def test_seeding_from_the_previous_plan_saves_propagations():
     """Replan free_transfer's dynamic-rigid rung given the kinematic plan cut short (so its
     replay stops before the goal): roots along the replayed prefix need fewer propagations
     than planning from scratch, in the median over seeds."""
-    from planner.ladder import RungReport, _replayed_prefix
+    from planner.ladder import RungReport, _replay
     from planner.ompl_adapter import plan_control
 
     scenario = load_scenario(SCENARIOS / "free_transfer.toml")
@@ -101,7 +101,7 @@ def test_seeding_from_the_previous_plan_saves_propagations():
     previous = RungReport("kinematic", "planned", controls=first.controls[:cut], durations=first.durations[:cut])
     rung = rung_for(scenario, "dynamic-rigid")
     start = rung.initial_state(scenario)
-    seeds, controls, durations = _replayed_prefix(scenario, rung, start, previous, 1e-3)
+    seeds = _replay(scenario, rung, start, previous, 1e-3).states
     assert len(seeds) >= cut // 2
     scratch, seeded = [], []
     for seed in range(1, 8):
