@@ -145,7 +145,8 @@ def run_ladder(
         seeds, prefix_controls, prefix_durations = [], [], np.zeros(0)
         if replay is not None and seeded:
             seeds, prefix_controls, prefix_durations = replay.states, replay.controls, np.array(replay.durations)
-        guide = np.array(previous.states) if previous is not None and previous.states and guided else None
+        # the geometric path moves passive bodies on their own: its states are no guide for physics
+        guide = np.array(previous.states) if previous is not None and previous.states and guided and previous.rung != "geometric" else None
         plan = plan_control(scenario, rung, start, h=h, control_period=period, seed=seed, iterations=iterations,
                             planner=planner or (rung_spec.planner if rung_spec and rung_spec.planner else spec.planner),
                             extra_starts=seeds, guide=guide, time_limit=time_limit,
