@@ -1,0 +1,413 @@
+"""Feasible sets over design parameters (the paper's Section 4, Fig. 5): parameter sweeps.
+
+A sweep evaluates the scenario's parametric open-loop policy (``[task.policy]``: constant
+commanded speeds, expressions in the design parameters) at every point of a grid of design
+parameters, under one or more models, and classifies each run as ``goal`` (the paper's Z_F),
+``unsafe`` (Z_U) or ``neither`` (including runs a solver failure stopped: their status says
+so). A model is a rung, optionally with parameter overrides (``dynamic-compliant[C=0]``), so
+the paper's variants (plastic or elastic impacts, with or without finger dynamics) are one
+sweep each.
+
+`refine` then finds the boundaries between classes by bisection along grid lines, to a
+tolerance, instead of leaving them at grid resolution.
+
+Runs are independent, so they go to an executor: a local process pool (default) or a Dask
+cluster (``dask://HOST:PORT``, through ``distributed``; a ``LocalCluster`` for tests).
+Every run is a pure function of (file, parameters, model, h, duration), so the results do
+not depend on the executor or on the order runs finish in.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from models.scenario import Problem, ScenarioError
+
+CLASSES = ("goal", "unsafe", "neither")
+
+
+@dataclass(frozen=True)
+class Axis:
+    """One grid axis: a design parameter and its values (``log``: log-spaced)."""
+
+    name: str
+    values: tuple[float, ...]
+    log: bool = False
+
+
+@dataclass(frozen=True)
+class ModelSpec:
+    """A rung and the parameter overrides that make a model variant of it."""
+
+    rung: str
+    overrides: tuple[tuple[str, float], ...] = ()
+
+    @property
+    def label(self) -> str:
+        if not self.overrides:
+            return self.rung
+        return f"{self.rung}[{','.join(f'{k}={v:g}' for k, v in self.overrides)}]"
+
+
+@dataclass(frozen=True)
+class Task:
+    """One run: everything a worker needs (picklable)."""
+
+    file: str
+    parameters: tuple[tuple[str, float], ...]
+    model: ModelSpec
+    h: float | None
+    duration: float | None
+
+
+@dataclass
+class Point:
+    model: str
+    parameters: dict
+    outcome: str  # goal, unsafe, none
+    klass: str  # goal, unsafe, neither
+    t: float
+    status: str
+    final: dict
+    steps: int
+    wall_s: float
+
+
+def parse_axis(text: str, key: str = "--grid") -> Axis:
+    """``NAME=START:STOP:COUNT[:log]`` or ``NAME=V1,V2,...``."""
+    name, sep, spec = text.partition("=")
+    name = name.strip()
+    try:
+        if not sep or not name:
+            raise ValueError("expected NAME=START:STOP:COUNT[:log] or NAME=V1,V2,...")
+        if ":" in spec:
+            parts = spec.split(":")
+            log = len(parts) == 4 and parts[3].strip().lower() == "log"
+            if len(parts) not in (3, 4) or (len(parts) == 4 and not log):
+                raise ValueError("expected START:STOP:COUNT[:log]")
+            start, stop, count = float(parts[0]), float(parts[1]), int(parts[2])
+            if count < 1:
+                raise ValueError("COUNT must be at least 1")
+            if not (math.isfinite(start) and math.isfinite(stop)):
+                raise ValueError("START and STOP must be finite")
+            if log and (start <= 0 or stop <= 0):
+                raise ValueError("a log axis needs START and STOP > 0")
+            values = np.geomspace(start, stop, count) if log else np.linspace(start, stop, count)
+        else:
+            values = np.array([float(v) for v in spec.split(",") if v.strip()])
+            log = False
+            if not len(values) or not np.all(np.isfinite(values)):
+                raise ValueError("expected finite values")
+    except ValueError as exc:
+        raise ScenarioError(Path(key), [Problem(f"{key} {text}", str(exc))]) from None
+    return Axis(name, tuple(float(v) for v in values), log)
+
+
+_MODEL = re.compile(r"^\s*([a-z-]+)\s*(?:\[(.*)\])?\s*$")
+
+
+def parse_models(text: str) -> list[ModelSpec]:
+    """``quasistatic-rigid,dynamic-compliant[C=0;finger_mass=1e3]`` (overrides separated by
+    ';' or ',' inside the brackets)."""
+    from models.schema import RUNGS
+
+    models, depth, current = [], 0, ""
+    for ch in text + ",":
+        if ch == "," and depth == 0:
+            if current.strip():
+                models.append(current.strip())
+            current = ""
+            continue
+        depth += ch == "["
+        depth -= ch == "]"
+        current += ch
+    specs = []
+    for item in models:
+        m = _MODEL.match(item)
+        if not m or m.group(1) not in RUNGS[1:]:
+            raise ScenarioError(Path("--model"), [Problem(f"--model {item}", f"expected RUNG or RUNG[NAME=VALUE;...], RUNG one of {', '.join(RUNGS[1:])}")])
+        overrides = []
+        for part in re.split(r"[;,]", m.group(2) or ""):
+            if not part.strip():
+                continue
+            name, sep, value = part.partition("=")
+            try:
+                number = float(value)
+                if not sep or not math.isfinite(number):
+                    raise ValueError
+            except ValueError:
+                raise ScenarioError(Path("--model"), [Problem(f"--model {item}", f"override {part!r}: expected NAME=NUMBER")]) from None
+            overrides.append((name.strip(), number))
+        specs.append(ModelSpec(m.group(1), tuple(overrides)))
+    return specs
+
+
+def grid_points(axes: list[Axis]) -> list[dict]:
+    """Every combination, the first axis varying slowest."""
+    points = [{}]
+    for axis in axes:
+        points = [{**p, axis.name: v} for p in points for v in axis.values]
+    return points
+
+
+def run_task(task: Task) -> Point:
+    """One run of the policy (in a worker process, or here)."""
+    from models.rungs import rung_for
+    from models.scenario import load_scenario
+
+    params = dict(task.parameters)
+    params.update(dict(task.model.overrides))
+    scenario = load_scenario(task.file, params)
+    policy = scenario.spec.task.policy
+    rung = rung_for(scenario, task.model.rung)
+    spec = next((r for r in scenario.spec.ladder.rungs if r.model == task.model.rung), None)
+    h = task.h or (spec.h if spec and spec.h else 1e-4)
+    duration = task.duration or policy.duration
+    controls = np.array([[policy.speeds.get(name, 0.0) for name in scenario.actuated]])
+    out = rung.rollout(scenario, rung.initial_state(scenario), controls, [duration], h, max_records=2)
+    klass = out.outcome if out.outcome in ("goal", "unsafe") else "neither"
+    return Point(task.model.label, dict(task.parameters), out.outcome, klass, out.t, out.status,
+                 out.state.named(scenario), out.steps, out.wall_s)
+
+
+def _warm() -> None:
+    """Load the compiled kernels in a fresh worker before its first timed run."""
+    import models.rollout  # noqa: F401
+
+
+class Executor:
+    """Runs tasks, yielding (index, Point) as they finish. `local` (process pool) or Dask."""
+
+    def __init__(self, workers: int | None = None, address: str | None = None) -> None:
+        self.address = address
+        self.workers = workers or os.cpu_count() or 1
+        self._pool = None
+        self._client = None
+
+    def __enter__(self) -> "Executor":
+        if self.address:
+            from distributed import Client
+
+            self._client = Client(self.address.removeprefix("dask://"), set_as_default=False)
+        elif self.workers > 1:
+            self._pool = ProcessPoolExecutor(self.workers, initializer=_warm)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=exc[0] is None, cancel_futures=True)
+        if self._client is not None:
+            self._client.close()
+
+    def map(self, tasks: list[Task]):
+        if self._client is not None:
+            from distributed import as_completed
+
+            futures = self._client.map(run_task, tasks, pure=False)
+            index = {f.key: i for i, f in enumerate(futures)}
+            try:
+                for future in as_completed(futures):
+                    yield index[future.key], future.result()
+            finally:
+                self._client.cancel(futures)
+        elif self._pool is not None:
+            futures = {self._pool.submit(run_task, t): i for i, t in enumerate(tasks)}
+            pending = set(futures)
+            try:
+                while pending:
+                    done, pending = wait(pending, return_when=FIRST_COMPLETED)
+                    for f in done:
+                        yield futures[f], f.result()
+            finally:
+                for f in pending:
+                    f.cancel()
+        else:
+            for i, t in enumerate(tasks):
+                yield i, run_task(t)
+
+
+@dataclass
+class SweepResult:
+    file: str
+    axes: list[Axis]
+    models: list[ModelSpec]
+    fixed: dict
+    h: float | None
+    duration: float | None
+    points: list[Point | None]
+    boundaries: list[dict] = field(default_factory=list)
+    complete: bool = True
+    refine_tolerance: float | None = None
+
+    def to_json(self) -> dict:
+        return {
+            "file": self.file,
+            "complete": self.complete,
+            "axes": [asdict(a) for a in self.axes],
+            "models": [m.label for m in self.models],
+            "fixed": self.fixed,
+            "h": self.h,
+            "duration": self.duration,
+            "points": [asdict(p) for p in self.points if p is not None],
+            "missing": sum(p is None for p in self.points),
+            "boundaries": self.boundaries,
+            "refine_tolerance": self.refine_tolerance,
+        }
+
+    def to_csv(self) -> str:
+        names = [a.name for a in self.axes]
+        coords = sorted({k for p in self.points if p is not None for k in p.final})
+        lines = [",".join(["model", *names, "class", "outcome", "t", "status", "steps", *coords])]
+        for p in self.points:
+            if p is None:
+                continue
+            lines.append(",".join([p.model, *(repr(p.parameters[n]) for n in names), p.klass, p.outcome, repr(p.t), p.status,
+                                   str(p.steps), *(repr(p.final.get(c, float("nan"))) for c in coords)]))
+        return "\n".join(lines) + "\n"
+
+
+def sweep(file: str, axes: list[Axis], models: list[ModelSpec], *, fixed: dict | None = None, h: float | None = None,
+          duration: float | None = None, executor: Executor | None = None, progress=None) -> SweepResult:
+    """Every grid point under every model. On KeyboardInterrupt the result so far comes back
+    with complete = False (the caller writes it)."""
+    fixed = dict(fixed or {})
+    points = grid_points(axes)
+    tasks = [Task(str(file), tuple({**fixed, **p}.items()), m, h, duration) for m in models for p in points]
+    result = SweepResult(str(file), axes, models, fixed, h, duration, [None] * len(tasks))
+    own = executor is None
+    executor = executor or Executor(1)
+    try:
+        if own:
+            executor.__enter__()
+        done = 0
+        for i, point in executor.map(tasks):
+            point.parameters = dict(tasks[i].parameters)
+            result.points[i] = point
+            done += 1
+            if progress:
+                progress(done, len(tasks))
+    except KeyboardInterrupt:
+        result.complete = False
+    finally:
+        if own:
+            executor.__exit__(None, None, None)
+    return result
+
+
+def refine(result: SweepResult, *, tolerance: float = 1e-3, executor: Executor | None = None, progress=None) -> SweepResult:
+    """Bisect every pair of grid neighbours (along one axis) whose classes differ, until the
+    bracket is below `tolerance` (relative on log axes, absolute otherwise). Each boundary
+    records the axis, the other parameters, the two classes and the bracket. Brackets of
+    all boundaries advance together, one batch of runs per bisection step."""
+    by_key = {}
+    for p in result.points:
+        if p is not None:
+            by_key[(p.model, tuple(sorted(p.parameters.items())))] = p
+    models = {m.label: m for m in result.models}
+    brackets = []
+    for axis in result.axes:
+        for model in result.models:
+            for p in result.points:
+                if p is None or p.model != model.label:
+                    continue
+                v = p.parameters[axis.name]
+                k = axis.values.index(v) if v in axis.values else -1
+                if k < 0 or k + 1 >= len(axis.values):
+                    continue
+                other = dict(p.parameters)
+                other[axis.name] = axis.values[k + 1]
+                q = by_key.get((model.label, tuple(sorted(other.items()))))
+                if q is not None and q.klass != p.klass:
+                    brackets.append({"model": model.label, "axis": axis.name, "log": axis.log, "at": dict(p.parameters),
+                                     "grid_low": v, "grid_high": axis.values[k + 1],
+                                     "low": v, "high": axis.values[k + 1], "low_class": p.klass, "high_class": q.klass})
+
+    def width(b) -> float:
+        return math.log(b["high"] / b["low"]) if b["log"] else b["high"] - b["low"]
+
+    own = executor is None
+    executor = executor or Executor(1)
+    try:
+        if own:
+            executor.__enter__()
+        step = 0
+        while True:
+            active = [b for b in brackets if width(b) > tolerance]
+            if not active:
+                break
+            tasks = []
+            for b in active:
+                mid = math.sqrt(b["low"] * b["high"]) if b["log"] else 0.5 * (b["low"] + b["high"])
+                b["mid"] = mid
+                params = {**b["at"], b["axis"]: mid}
+                tasks.append(Task(result.file, tuple(params.items()), models[b["model"]], result.h, result.duration))
+            outcomes = [None] * len(tasks)
+            for i, point in executor.map(tasks):
+                outcomes[i] = point
+            for b, point in zip(active, outcomes):
+                mid = b.pop("mid")
+                if point.klass == b["low_class"]:
+                    b["low"] = mid
+                elif point.klass == b["high_class"]:
+                    b["high"] = mid
+                else:  # a third class in between: a boundary on each side of it
+                    brackets.append({**b, "low": mid, "low_class": point.klass})
+                    b["high"], b["high_class"] = mid, point.klass
+            step += 1
+            if progress:
+                progress(step, len(active))
+    except KeyboardInterrupt:
+        result.complete = False
+    finally:
+        if own:
+            executor.__exit__(None, None, None)
+    for b in brackets:
+        b.pop("mid", None)
+        b["boundary"] = math.sqrt(b["low"] * b["high"]) if b["log"] else 0.5 * (b["low"] + b["high"])
+    result.boundaries = brackets
+    result.refine_tolerance = tolerance
+    return result
+
+
+def bands(result: SweepResult, axis: str, klass: str = "goal") -> dict:
+    """Per model and per value of the other swept parameters: the intervals of `axis` whose
+    grid points are of `klass`, each edge refined where `refine` bracketed it (else the grid
+    point; an edge at the end of the grid is marked so)."""
+    others = [a.name for a in result.axes if a.name != axis]
+    out: dict = {}
+    for model in result.models:
+        rows: dict = {}
+        for p in result.points:
+            if p is not None and p.model == model.label:
+                rows.setdefault(tuple(p.parameters[n] for n in others), []).append((p.parameters[axis], p.klass))
+        for rest, values in sorted(rows.items()):
+            values.sort()
+            key = ", ".join(f"{n}={v:g}" for n, v in zip(others, rest)) or "-"
+            edges = []
+            k = 0
+            while k < len(values):
+                if values[k][1] != klass:
+                    k += 1
+                    continue
+                j = k
+                while j + 1 < len(values) and values[j + 1][1] == klass:
+                    j += 1
+                lo, hi = values[k][0], values[j][0]
+                for b in result.boundaries:
+                    if b["model"] != model.label or b["axis"] != axis or tuple(b["at"][n] for n in others) != rest:
+                        continue
+                    if k > 0 and b["grid_high"] == lo and b["high_class"] == klass:
+                        lo = b["boundary"]
+                    if j + 1 < len(values) and b["grid_low"] == hi and b["low_class"] == klass:
+                        hi = b["boundary"]
+                edges.append({"from": lo, "to": hi, "from_is_grid_end": k == 0, "to_is_grid_end": j == len(values) - 1})
+                k = j + 1
+            out.setdefault(model.label, {})[key] = edges
+    return out
