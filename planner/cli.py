@@ -23,7 +23,6 @@ EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
 
 #: Subcommands the design reserves whose machinery is not built yet, with what they will do.
 RESERVED = {
-    "sweep": "map feasible sets over design parameters (the paper's Fig. 5)",
     "bench": "work-precision, throughput and scaling benchmarks",
     "serve": "serve planning requests over HTTP",
 }
@@ -96,6 +95,32 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument("--out", type=Path, default=Path("out/plan"), help="output folder (default out/plan)")
     plan.add_argument("--json", action="store_true", help="print the plan report as one JSON object")
     plan.set_defaults(handler=cmd_plan)
+
+    sweep = sub.add_parser(
+        "sweep",
+        help="map feasible sets over design parameters (the paper's Fig. 5)",
+        description="Run the scenario's [task.policy] at every point of a grid of design parameters under "
+        "each model and classify the runs as goal (Z_F), unsafe (Z_U) or neither. Writes sweep.json and "
+        "sweep.csv and a map plot (sweep.png). Ctrl-C keeps what was computed, marked incomplete. Exit 0 "
+        "when the sweep completed (runs a solver failure stopped are class neither, with their status), "
+        "2 bad input, 130 interrupted.",
+    )
+    sweep.add_argument("file", type=Path, help="scenario file (TOML)")
+    sweep.add_argument("--grid", action="append", default=[], required=True, metavar="NAME=START:STOP:COUNT[:log]",
+                       help="a grid axis over a design parameter (repeatable); NAME=V1,V2,... lists values")
+    _add_param_option(sweep)
+    sweep.add_argument("--model", required=True, metavar="RUNG[,RUNG...]",
+                       help="rungs to run, each optionally with overrides: dynamic-compliant[C=0;finger_mass=1e3]")
+    where = sweep.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, help="local worker processes (default: all cores)")
+    where.add_argument("--executor", metavar="dask://HOST:PORT", help="run on a Dask distributed scheduler")
+    sweep.add_argument("--refine", action="store_true", help="bisect class boundaries along grid lines")
+    sweep.add_argument("--tolerance", type=float, default=1e-3, help="refinement bracket (relative on log axes; default 1e-3)")
+    sweep.add_argument("--duration", type=float, help="seconds per run (default: the policy's duration)")
+    sweep.add_argument("--step", type=float, help="time step h (default: each rung's h in the ladder)")
+    sweep.add_argument("--out", type=Path, default=Path("out/sweep"), help="output folder (default out/sweep)")
+    sweep.add_argument("--json", action="store_true", help="print the result as one JSON object")
+    sweep.set_defaults(handler=cmd_sweep)
 
     for name, what in RESERVED.items():
         reserved = sub.add_parser(name, help=f"(not built yet) {what}", description=f"Not built yet: {what}.")
@@ -409,10 +434,101 @@ def print_simulation(summary: dict[str, Any]) -> None:
         console.print(f"plot written to {summary['plot']}")
 
 
+def cmd_sweep(args: argparse.Namespace) -> int:
+    from planner import sweep as sw
+
+    scenario = load_from_args(args)
+    fixed = parse_overrides(args.param)
+    axes = [sw.parse_axis(text) for text in args.grid]
+    models = sw.parse_models(args.model)
+    problems = []
+    for axis in axes:
+        if axis.name not in scenario.parameters:
+            problems.append(Problem(f"--grid {axis.name}", f"not a design parameter of this file; parameters: {', '.join(scenario.parameters)}"))
+    if len({a.name for a in axes}) != len(axes):
+        problems.append(Problem("--grid", "an axis is given twice"))
+    for model in models:
+        for name, _ in model.overrides:
+            if name not in scenario.parameters:
+                problems.append(Problem(f"--model {model.label}", f"{name!r} is not a design parameter of this file"))
+    if scenario.spec.task.policy is None:
+        problems.append(Problem("task.policy", "a sweep runs the scenario's policy, and this file has none"))
+    if args.workers is not None and args.workers < 1:
+        problems.append(Problem("--workers", "must be at least 1"))
+    if args.executor is not None and not args.executor.startswith("dask://"):
+        problems.append(Problem("--executor", "expected dask://HOST:PORT"))
+    for key, value in (("--duration", args.duration), ("--step", args.step), ("--tolerance", args.tolerance)):
+        if value is not None and not (value > 0 and value < float("inf")):
+            problems.append(Problem(key, f"must be a positive number, got {value}"))
+    if problems:
+        raise ScenarioError(scenario.path, problems)
+    for model in models:  # each variant must load (overrides can make a scene invalid)
+        load_scenario(scenario.path, {**scenario.parameters, **fixed, **dict(model.overrides)})
+
+    live = sys.stderr.isatty() and not args.json
+    interrupted = False
+    bar = None
+    if live:
+        from rich.progress import Progress
+
+        bar = Progress(transient=True)
+        bar.start()
+        task_id = bar.add_task("sweep", total=None)
+
+    def progress(done: int, total: int) -> None:
+        if bar is not None:
+            bar.update(task_id, completed=done, total=total)
+
+    def refine_progress(step: int, active: int) -> None:
+        if bar is not None:
+            bar.update(task_id, description=f"refine step {step}: {active} brackets", completed=0, total=None)
+
+    try:
+        with sw.Executor(args.workers, args.executor) as executor:
+            result = sw.sweep(str(scenario.path), axes, models, fixed=fixed, h=args.step, duration=args.duration,
+                              executor=executor, progress=progress)
+            if result.complete and args.refine:
+                result = sw.refine(result, tolerance=args.tolerance, executor=executor, progress=refine_progress)
+    finally:
+        if bar is not None:
+            bar.stop()
+    interrupted = not result.complete
+    data = result.to_json()
+    if args.refine and result.boundaries:
+        data["bands"] = {a.name: sw.bands(result, a.name) for a in axes}
+    args.out.mkdir(parents=True, exist_ok=True)
+    write_atomic(args.out / "sweep.json", json.dumps(data, indent=1) + "\n")
+    write_atomic(args.out / "sweep.csv", result.to_csv())
+    from planner.plots import plot_feasible_sets
+
+    plot = plot_feasible_sets(args.out / "sweep.png", result) if result.points and any(result.points) else None
+    if args.json:
+        print(json.dumps(data, indent=2))
+    else:
+        counts = {}
+        for p in result.points:
+            if p is not None:
+                counts.setdefault(p.model, {c: 0 for c in sw.CLASSES})[p.klass] += 1
+        for model, c in counts.items():
+            print(f"{model}: {c['goal']} goal, {c['unsafe']} unsafe, {c['neither']} neither")
+        if data.get("bands"):  # along the first axis (all axes are in the JSON)
+            for axis_name, per_model in list(data["bands"].items())[:1]:
+                for model, rows in per_model.items():
+                    for rest, edges in rows.items():
+                        text = "; ".join(f"{e['from']:.4g} .. {e['to']:.4g}" for e in edges) or "none"
+                        print(f"goal band in {axis_name}, {model}, {rest}: {text}")
+        failed = sum(p is not None and p.status != "ok" for p in result.points)
+        if failed:
+            print(f"{failed} runs stopped on a solver failure (class neither; their status is in the results)")
+        state = "INCOMPLETE (interrupted), " if interrupted else ""
+        print(f"{state}results written to {args.out / 'sweep.json'}, {args.out / 'sweep.csv'}" + (f", {plot}" if plot else ""))
+    return EXIT_INTERRUPTED if interrupted else EXIT_OK
+
+
 def cmd_reserved(args: argparse.Namespace) -> int:
     print(
         f"error: 'ladder {args.command}' is not built yet ({RESERVED[args.command]}); "
-        "available now: ladder check, ladder simulate, ladder plan, ladder schema",
+        "available now: ladder check, ladder simulate, ladder plan, ladder sweep, ladder schema",
         file=sys.stderr,
     )
     return EXIT_BAD_INPUT

@@ -62,3 +62,95 @@ def plot_rollouts(path: Path, coordinates, start, runs: list[tuple[str, np.ndarr
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+CLASS_COLOURS = {"goal": "tab:green", "unsafe": "tab:red", "neither": "0.6"}
+
+
+def plot_feasible_sets(path: Path, result) -> Path:
+    """The Fig. 5 analogue: each grid point coloured by class (Z_F green, Z_U red, neither
+    grey), one panel per model; refined boundaries as black ticks. Two axes: a map over them;
+    one axis: a strip. Writes PNG (and SVG when path ends in .svg)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    models = [m.label for m in result.models]
+    axes = result.axes
+    fig, panels = plt.subplots(1, len(models), figsize=(4.2 * len(models), 3.8), squeeze=False, sharey=True)
+    x_axis = axes[0]
+    y_axis = axes[1] if len(axes) > 1 else None
+    for panel, model in zip(panels[0], models):
+        for klass, colour in CLASS_COLOURS.items():
+            pts = [p for p in result.points if p is not None and p.model == model and p.klass == klass]
+            xs = [p.parameters[x_axis.name] for p in pts]
+            ys = [p.parameters[y_axis.name] if y_axis else 0.0 for p in pts]
+            panel.scatter(xs, ys, s=14, color=colour, label=f"{klass} ({len(pts)})", marker="s")
+        for b in result.boundaries:
+            if b["model"] != model:
+                continue
+            if b["axis"] == x_axis.name:
+                y = b["at"][y_axis.name] if y_axis else 0.0
+                panel.plot([b["boundary"]] * 2, [y - 0.02 * _span(y_axis), y + 0.02 * _span(y_axis)], color="k", lw=1.5)
+            elif y_axis is not None and b["axis"] == y_axis.name:
+                x = b["at"][x_axis.name]
+                panel.plot([x / 1.02, x * 1.02] if x_axis.log else [x - 0.01 * _span(x_axis), x + 0.01 * _span(x_axis)],
+                           [b["boundary"]] * 2, color="k", lw=1.5)
+        if x_axis.log:
+            from matplotlib.ticker import NullFormatter, ScalarFormatter
+
+            panel.set_xscale("log")
+            panel.xaxis.set_major_formatter(ScalarFormatter())
+            panel.xaxis.set_minor_formatter(NullFormatter())
+        panel.set_xlabel(x_axis.name)
+        panel.set_title(model, fontsize=9)
+        panel.legend(fontsize=7, loc="best")
+    panels[0][0].set_ylabel(y_axis.name if y_axis else "")
+    fig.suptitle(f"{Path(result.file).stem}: goal (Z_F) and unsafe (Z_U) sets" + ("" if result.complete else " (INCOMPLETE)"))
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    if path.suffix == ".png":
+        fig.savefig(path.with_suffix(".svg"))
+    plt.close(fig)
+    return path
+
+
+def _span(axis) -> float:
+    if axis is None:
+        return 1.0
+    return (max(axis.values) - min(axis.values)) or 1.0
+
+
+def plot_fan(path: Path, panels: list[tuple[str, list[tuple[float, str, np.ndarray]]]], coordinates, start, title: str) -> Path:
+    """The Fig. 4 analogue: per model a panel of trajectories in (x1, x2, x3) for a fan of
+    speed ratios, each coloured by how it ended. panels: [(model label, [(ratio, class,
+    trajectory)])]."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig = plt.figure(figsize=(4.6 * len(panels), 4.6))
+    for k, (label, runs) in enumerate(panels):
+        ax = fig.add_subplot(1, len(panels), k + 1, projection="3d")
+        for ratio, klass, X in runs:
+            P = paper_coordinates(coordinates, start, X)
+            ax.plot(P[:, 0], P[:, 1], P[:, 2], color=CLASS_COLOURS[klass], lw=1.0, ls="-" if klass == "goal" else ":")
+        ax.plot([1, 2], [2, 1], [-0.5, 0.5], color="tab:blue", lw=3, alpha=0.4)
+        ax.set_xlabel("x1")
+        ax.set_ylabel("x2")
+        ax.set_zlabel("x3")
+        ax.set_zlim(-1.0, 1.0)
+        ax.set_title(label, fontsize=9)
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    if path.suffix == ".png":
+        fig.savefig(path.with_suffix(".svg"))
+    plt.close(fig)
+    return path

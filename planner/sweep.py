@@ -213,7 +213,7 @@ class Executor:
             futures = self._client.map(run_task, tasks, pure=False)
             index = {f.key: i for i, f in enumerate(futures)}
             try:
-                for future in as_completed(futures):
+                for future in as_completed(futures, loop=self._client.loop):
                     yield index[future.key], future.result()
             finally:
                 self._client.cancel(futures)
