@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 OUT    ?= out/demo
 
-.PHONY: demo test schema bench clean clean-cache
+.PHONY: demo test schema bench paper clean clean-cache
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -35,6 +35,10 @@ test: $(VENV)/.installed-test
 
 schema: $(VENV)/.installed
 	$(VENV)/bin/ladder schema --out scenarios/scenario.schema.json
+
+# The paper's Figs. 4-5 reproduced: sweeps, plots and docs/paper-reproduction.md (about a minute).
+paper: $(VENV)/.installed
+	$(PY) -m planner.paper --out docs/paper --doc docs/paper-reproduction.md
 
 bench: $(VENV)/.installed-test
 	$(PY) -m pytest -m slow tests/bench --benchmark-enable -s

@@ -6,6 +6,7 @@ x2 = y0 - finger2.y (0 = fully raised) and the triangle's offset x3 = triangle.x
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -106,7 +107,7 @@ def plot_feasible_sets(path: Path, result) -> Path:
             panel.xaxis.set_major_formatter(ScalarFormatter())
             panel.xaxis.set_minor_formatter(NullFormatter())
         panel.set_xlabel(x_axis.name)
-        panel.set_title(model, fontsize=9)
+        panel.set_title("\n".join(textwrap.wrap(model, 38)), fontsize=8)
         panel.legend(fontsize=7, loc="best")
     panels[0][0].set_ylabel(y_axis.name if y_axis else "")
     fig.suptitle(f"{Path(result.file).stem}: goal (Z_F) and unsafe (Z_U) sets" + ("" if result.complete else " (INCOMPLETE)"))
@@ -146,7 +147,7 @@ def plot_fan(path: Path, panels: list[tuple[str, list[tuple[float, str, np.ndarr
         ax.set_ylabel("x2")
         ax.set_zlabel("x3")
         ax.set_zlim(-1.0, 1.0)
-        ax.set_title(label, fontsize=9)
+        ax.set_title("\n".join(textwrap.wrap(label, 38)), fontsize=8)
     fig.suptitle(title)
     fig.tight_layout()
     fig.savefig(path, dpi=110)

@@ -48,9 +48,12 @@ class ModelSpec:
 
     rung: str
     overrides: tuple[tuple[str, float], ...] = ()
+    name: str = ""  # a label of the user's (NAME=RUNG[...])
 
     @property
     def label(self) -> str:
+        if self.name:
+            return self.name
         if not self.overrides:
             return self.rung
         return f"{self.rung}[{','.join(f'{k}={v:g}' for k, v in self.overrides)}]"
@@ -110,12 +113,12 @@ def parse_axis(text: str, key: str = "--grid") -> Axis:
     return Axis(name, tuple(float(v) for v in values), log)
 
 
-_MODEL = re.compile(r"^\s*([a-z-]+)\s*(?:\[(.*)\])?\s*$")
+_MODEL = re.compile(r"^\s*(?:([A-Za-z0-9_.-]+)\s*=\s*)?([a-z-]+)\s*(?:\[(.*)\])?\s*$")
 
 
 def parse_models(text: str) -> list[ModelSpec]:
-    """``quasistatic-rigid,dynamic-compliant[C=0;finger_mass=1e3]`` (overrides separated by
-    ';' or ',' inside the brackets)."""
+    """``quasistatic-rigid,elastic=dynamic-compliant[C=0;finger_mass=1e3]``: rungs, each with
+    optional overrides (separated by ';' or ',' inside the brackets) and an optional label."""
     from models.schema import RUNGS
 
     models, depth, current = [], 0, ""
@@ -131,10 +134,10 @@ def parse_models(text: str) -> list[ModelSpec]:
     specs = []
     for item in models:
         m = _MODEL.match(item)
-        if not m or m.group(1) not in RUNGS[1:]:
-            raise ScenarioError(Path("--model"), [Problem(f"--model {item}", f"expected RUNG or RUNG[NAME=VALUE;...], RUNG one of {', '.join(RUNGS[1:])}")])
+        if not m or m.group(2) not in RUNGS[1:]:
+            raise ScenarioError(Path("--model"), [Problem(f"--model {item}", f"expected [LABEL=]RUNG[NAME=VALUE;...], RUNG one of {', '.join(RUNGS[1:])}")])
         overrides = []
-        for part in re.split(r"[;,]", m.group(2) or ""):
+        for part in re.split(r"[;,]", m.group(3) or ""):
             if not part.strip():
                 continue
             name, sep, value = part.partition("=")
@@ -145,7 +148,7 @@ def parse_models(text: str) -> list[ModelSpec]:
             except ValueError:
                 raise ScenarioError(Path("--model"), [Problem(f"--model {item}", f"override {part!r}: expected NAME=NUMBER")]) from None
             overrides.append((name.strip(), number))
-        specs.append(ModelSpec(m.group(1), tuple(overrides)))
+        specs.append(ModelSpec(m.group(2), tuple(overrides), m.group(1) or ""))
     return specs
 
 

@@ -1,0 +1,275 @@
+"""Reproduce the paper's Section 4 (Figs. 4 and 5) and write docs/paper-reproduction.md.
+
+``python -m planner.paper [--out DIR] [--doc PATH] [--workers N]`` (``make paper``) runs:
+
+- the Fig. 5 sweep: 41 log-spaced speed ratios rho = v1 / v2 in [0.25, 4] (v2 = 1) x mu in
+  {0.3, 0.5, 0.8, 1.2}, under the four models of Fig. 4, with the class boundaries refined
+  by bisection to 1e-3 (relative);
+- the Fig. 4 fan: trajectories in (x1, x2, x3) for nine ratios per model, at mu = 0.5;
+
+and writes the bands of successful ratios, the plots and a point-by-point comparison with
+the paper's statements. Every number in the document comes from this run.
+
+The four models (the paper's Fig. 4 (a)-(d)), on the scene's parameters:
+
+- quasistatic: the quasistatic-rigid rung (eq. 7);
+- dynamic, plastic impacts: dynamic-compliant (eq. 3) with K = 1e6, C = 1e4 and fingers
+  without dynamics of their own: the paper's (b) and (c) ignore the fingers' dynamics, which
+  we model as heavy (1000 kg), stiffly position-controlled fingers (kp = 1e9 N/m, kd = 2e6
+  N s/m: critically damped) that an impact cannot slow down;
+- dynamic, elastic impacts: the same with C = 0;
+- complete dynamic model: dynamic-compliant with C = 1e4 and the scene's own fingers (0.1
+  kg, kp = 1e5 N/m, kd = 2e2 N s/m), so the first finger to touch is slowed down or bounced.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from planner import sweep as sw
+
+SCENE = Path(__file__).resolve().parent.parent / "scenarios" / "two_finger_triangle.toml"
+RIGID_FINGERS = "finger_mass=1e3;finger_kp=1e9;finger_kd=2e6"
+MODELS = (
+    f"quasistatic=quasistatic-rigid,"
+    f"plastic=dynamic-compliant[C=1e4;{RIGID_FINGERS}],"
+    f"elastic=dynamic-compliant[C=0;{RIGID_FINGERS}],"
+    f"fingers=dynamic-compliant[C=1e4]"
+)
+TITLES = {
+    "quasistatic": "(a) quasistatic (rigid contact)",
+    "plastic": "(b) dynamic, plastic impacts (C = 1e4)",
+    "elastic": "(c) dynamic, elastic impacts (C = 0)",
+    "fingers": "(d) complete dynamic model with finger dynamics",
+}
+MUS = (0.3, 0.5, 0.8, 1.2)
+RATIOS = "v1=0.25:4:41:log"
+DURATION = 8.0  # s: the slowest finger (0.25 m/s) needs about 6 s to reach the triangle
+STEP = 1e-4
+TOLERANCE = 1e-3
+PAPER_BAND = (0.7, 1.4)  # read off the paper's Fig. 4 (a) and stated in its text
+
+
+def derived_band(scenario) -> tuple[float, float]:
+    """The quasistatic-rigid band for mu < 1, derived by hand (tests/test_model_family.py):
+    rho_low = (1 - tol) / (c + 0.5) with c = 2.05 - 0.5 - r sqrt 2; rho_high = 1 / rho_low."""
+    r = 0.05
+    tol = scenario.spec.contact.touch_tolerance
+    c = 2.05 - 0.5 - r * math.sqrt(2)
+    low = (1 - tol) / (c + 0.5)
+    return low, 1 / low
+
+
+def run(out: Path, doc: Path, workers: int | None, progress=print) -> dict:
+    from models.scenario import load_scenario
+
+    from planner.plots import plot_fan, plot_feasible_sets
+
+    out.mkdir(parents=True, exist_ok=True)
+    scenario = load_scenario(SCENE)
+    axes = [sw.parse_axis(RATIOS), sw.parse_axis("mu=" + ",".join(str(m) for m in MUS))]
+    models = sw.parse_models(MODELS)
+    t0 = time.perf_counter()
+    with sw.Executor(workers) as executor:
+        per_model = {}
+        timings = {}
+        for model in models:
+            t = time.perf_counter()
+            result = sw.sweep(str(SCENE), axes, [model], fixed={"v2": 1.0}, h=STEP if model.rung != "quasistatic-rigid" else None,
+                              duration=DURATION, executor=executor)
+            timings[model.label] = {"grid_s": time.perf_counter() - t}
+            t = time.perf_counter()
+            result = sw.refine(result, tolerance=TOLERANCE, executor=executor)
+            timings[model.label]["refine_s"] = time.perf_counter() - t
+            per_model[model.label] = result
+            progress(f"{model.label}: {len(result.points)} runs in {timings[model.label]['grid_s']:.1f} s, "
+                     f"{len(result.boundaries)} boundaries refined in {timings[model.label]['refine_s']:.1f} s")
+    total = time.perf_counter() - t0
+    combined = sw.SweepResult(str(SCENE), axes, models, {"v2": 1.0}, STEP, DURATION,
+                              [p for r in per_model.values() for p in r.points],
+                              [b for r in per_model.values() for b in r.boundaries], True, TOLERANCE)
+    bands = sw.bands(combined, "v1")
+    (out / "paper-sweep.json").write_text(json.dumps({**combined.to_json(), "bands": bands, "timings": timings}, indent=1) + "\n")
+    (out / "paper-sweep.csv").write_text(combined.to_csv())
+    fig5 = plot_feasible_sets(out / "fig5.png", combined)
+
+    # Fig. 4: a fan of ratios at mu = 0.5, full trajectories
+    from models.rungs import rung_for
+
+    fan_ratios = np.geomspace(0.4, 2.5, 9)
+    panels = []
+    for model in models:
+        runs = []
+        for rho in fan_ratios:
+            sc = load_scenario(SCENE, {"v1": float(rho), "v2": 1.0, "mu": 0.5, **dict(model.overrides)})
+            rung = rung_for(sc, model.rung)
+            h = STEP if model.rung != "quasistatic-rigid" else 1e-3
+            policy = sc.spec.task.policy
+            controls = np.array([[policy.speeds.get(n, 0.0) for n in sc.actuated]])
+            res = rung.rollout(sc, rung.initial_state(sc), controls, [DURATION], h, stop_at_outcome=False, max_records=800)
+            first = rung.rollout(sc, rung.initial_state(sc), controls, [DURATION], h)
+            klass = first.outcome if first.outcome in ("goal", "unsafe") else "neither"
+            runs.append((float(rho), klass, res.trajectory))
+        panels.append((TITLES[model.label], runs))
+    fig4 = plot_fan(out / "fig4.png", panels, scenario.coordinates, scenario.start,
+                    "Fig. 4 analogue: trajectories for speed ratios 0.4 .. 2.5 at mu = 0.5 (green: grasp, red: slipped out)")
+
+    mu_edges = {}
+    for b in combined.boundaries:
+        if b["axis"] == "mu" and {b["low_class"], b["high_class"]} == {"unsafe", "goal"}:
+            lo, hi = mu_edges.get(b["model"], (math.inf, -math.inf))
+            mu_edges[b["model"]] = (min(lo, b["boundary"]), max(hi, b["boundary"]))
+    text = report(bands, derived_band(scenario), timings, total, doc.parent, out, fig4, fig5, len(combined.points), mu_edges)
+    doc.parent.mkdir(parents=True, exist_ok=True)
+    doc.write_text(text)
+    return {"bands": bands, "timings": timings, "total_s": total}
+
+
+def _band(bands: dict, model: str, mu: float):
+    edges = bands[model].get(f"mu={mu:g}", [])
+    return edges
+
+
+def _fmt(edges) -> str:
+    if not edges:
+        return "none"
+    parts = []
+    for e in edges:
+        lo = f"{e['from']:.4f}" + (" (grid end)" if e["from_is_grid_end"] else "")
+        hi = f"{e['to']:.4f}" + (" (grid end)" if e["to_is_grid_end"] else "")
+        parts.append(f"{lo} .. {hi}")
+    return "; ".join(parts)
+
+
+def _single(edges):
+    return (edges[0]["from"], edges[0]["to"]) if len(edges) == 1 else None
+
+
+def report(bands, derived, timings, total, doc_dir: Path, out: Path, fig4: Path, fig5: Path, runs: int, mu_edges: dict) -> str:
+    import os
+
+    def rel(p: Path) -> str:
+        return os.path.relpath(p, doc_dir)
+
+    lines = [
+        "# Reproducing the paper's Section 4 (Figs. 4 and 5)",
+        "",
+        "Generated by `make paper` (`python -m planner.paper`); every number below comes from that run.",
+        f"Scene: `scenarios/two_finger_triangle.toml` (finger discs r = 0.05 at x = -0.5 and +0.5, triangle with",
+        "base 2 and height 1, frictionless palm). Policy: both fingers descend at constant speeds v1 = rho, v2 = 1.",
+        f"Grid: 41 log-spaced ratios rho in [0.25, 4] x mu in {{{', '.join(f'{m:g}' for m in MUS)}}}, runs of up to {DURATION:g} s",
+        f"(h = {STEP:g} for the dynamic models, the scene's 1e-3 for the quasistatic one); class boundaries",
+        f"refined by bisection to a relative bracket of {TOLERANCE:g}. {runs} grid runs plus the refinement took",
+        f"{total:.1f} s on this machine ({os.cpu_count()} cores).",
+        "",
+        "Models (the paper's Fig. 4 (a)-(d)): " + "; ".join(f"**{k}** = {v}" for k, v in TITLES.items()) + ".",
+        "Plastic and elastic runs use heavy (1000 kg), stiffly position-controlled fingers (kp = 1e9, kd = 2e6),",
+        "since the paper's (b) and (c) ignore finger dynamics; (d) uses the scene's 0.1 kg fingers (kp = 1e5, kd = 2e2).",
+        "",
+        "## Bands of successful speed ratios rho = v1 / v2",
+        "",
+        "| model | " + " | ".join(f"mu = {m:g}" for m in MUS) + " |",
+        "|---|" + "---|" * len(MUS),
+    ]
+    for model in TITLES:
+        lines.append(f"| {TITLES[model]} | " + " | ".join(_fmt(_band(bands, model, m)) for m in MUS) + " |")
+    lines += ["", f"![Fig. 5 analogue]({rel(fig5)})", "", f"![Fig. 4 analogue]({rel(fig4)})", "", "## Against the paper's statements", ""]
+
+    # 1. quasistatic band for mu < 1
+    lo_d, hi_d = derived
+    qs = [(_single(_band(bands, "quasistatic", m)), m) for m in MUS if m < 1]
+    ok = all(b is not None and abs(math.log(b[0] / lo_d)) <= 2 * TOLERANCE and abs(math.log(b[1] / hi_d)) <= 2 * TOLERANCE for b, _ in qs)
+    lines.append(
+        f"1. **Quasistatic band for mu < 1** (paper: roughly {PAPER_BAND[0]} to {PAPER_BAND[1]}). Ours: "
+        + ", ".join(f"mu = {m:g}: {b[0]:.4f} .. {b[1]:.4f}" if b else f"mu = {m:g}: not one band" for b, m in qs)
+        + f". The hand derivation for our geometry gives {lo_d:.4f} .. {hi_d:.4f} independent of mu < 1 "
+        + ("(matched within the refinement tolerance). " if ok else "(NOT matched: see the JSON). ")
+        + "Why this band: with mu < 1 the faster finger cannot stick on its 45-degree face, so (frictionless palm) "
+        "it pushes the triangle sideways exactly as fast as it descends; the grasp still forms as long as the slower "
+        "finger lands on the other face before the triangle has moved 0.5 (the fingers sit 0.5 from the centre line). "
+        "The ratio that just makes it is (1 - tol) / (c + 0.5), with c = 2.05 - 0.5 - r sqrt 2 = 1.479 the travel to "
+        "first contact for our r = 0.05 discs, and its inverse by symmetry: geometry alone fixes it, not mu. For the "
+        "paper's own geometry (point fingers, goal edge from (1, 2, -0.5) to (2, 1, 0.5)) the same derivation gives "
+        "c = 1.5 and 1 / (1.5 + 0.5) = 0.5 .. 2.0. We therefore cannot derive the paper's 'approximately 0.7 and 1.4' "
+        "from the model it states; it is read off its plot, and its quasistatic controller or goal tolerance may differ "
+        "from what the text says. We did not tune our scene toward it."
+    )
+    # 2. mu >= 1 widens to the whole quadrant
+    wide = [(_band(bands, m, 1.2), m) for m in TITLES]
+    full = {m: (len(e) == 1 and e[0]["from_is_grid_end"] and e[0]["to_is_grid_end"]) for e, m in wide}
+    lines.append(
+        "2. **mu >= 1 widens the feasible set to the whole quadrant.** At mu = 1.2 every ratio in [0.25, 4] "
+        + ("grasps under the quasistatic model" if full["quasistatic"] else "does NOT grasp under the quasistatic model")
+        + "; " + ", ".join(f"{m}: {'all' if full[m] else _fmt(e)}" for e, m in wide if m != "quasistatic")
+        + ". Refined mu boundaries (ratios outside the mu < 1 band): "
+        + ", ".join(f"{m}: {lo:.4f} .. {hi:.4f}" for m, (lo, hi) in mu_edges.items())
+        + " (tan 45 degrees = 1: from mu = 1 the first finger sticks and jams the triangle)."
+    )
+    # 3. plastic close to quasistatic
+    diffs = []
+    for m in MUS:
+        a, b = _single(_band(bands, "quasistatic", m)), _single(_band(bands, "plastic", m))
+        if a and b:
+            diffs.append(max(abs(math.log(a[0] / b[0])), abs(math.log(a[1] / b[1]))))
+    lines.append(
+        "3. **Plastic impacts: close to quasistatic.** "
+        + (f"The band edges differ by at most {100 * (math.exp(max(diffs)) - 1):.1f}% across mu." if diffs else "Not comparable (no single band).")
+    )
+    # 4. elastic narrower
+    inside = []
+    for m in MUS:
+        p, e = _single(_band(bands, "plastic", m)), _single(_band(bands, "elastic", m))
+        if p and e:
+            inside.append((m, e[0] >= p[0] - 1e-12 and e[1] <= p[1] + 1e-12, e[1] / e[0], p[1] / p[0]))
+    lines.append(
+        "4. **Elastic impacts: narrower.** "
+        + "; ".join(f"mu = {m:g}: elastic band {'inside' if ok_ else 'NOT inside'} the plastic one (width ratio {we:.3f} vs {wp:.3f})"
+                    for m, ok_, we, wp in inside)
+        + ". The first finger's impact throws the triangle sideways faster than the finger pushes it, so the second finger "
+        "must arrive sooner."
+    )
+    # 5. finger dynamics broader
+    broader = []
+    for m in MUS:
+        q, f = _single(_band(bands, "quasistatic", m)), _single(_band(bands, "fingers", m))
+        if q and f:
+            broader.append((m, f[0] <= q[0] and f[1] >= q[1], f, q))
+    lines.append(
+        "5. **Finger dynamics: broader than quasistatic.** "
+        + "; ".join(f"mu = {m:g}: {f[0]:.4f} .. {f[1]:.4f} vs {q[0]:.4f} .. {q[1]:.4f} ({'broader' if ok_ else 'NOT broader'})"
+                    for m, ok_, f, q in broader)
+        + ". Where ours is NOT broader, the controllers differ: we keep the paper's open-loop policy (a constant-speed "
+        "reference per finger) and give the fingers mass and a PD drive, so a finger slowed by the first impact is "
+        "driven on toward its reference while the triangle keeps the momentum the impact gave it (likely why the "
+        "band narrows, between the plastic and the elastic one; we have not separated the two effects). The paper's "
+        "(d) moves the fingers under a force control derived from an attractive potential well centred on the "
+        "triangle's edge, a different policy that does not keep driving the first finger after contact; the two "
+        "feasible sets are not comparable point by point, and we report what ours computes."
+    )
+    lines += ["", "## Speed", "", "| model | grid runs (s) | refinement (s) |", "|---|---|---|"]
+    for model, t in timings.items():
+        lines.append(f"| {model} | {t['grid_s']:.2f} | {t['refine_s']:.2f} |")
+    lines += ["", f"Raw results: `{rel(out / 'paper-sweep.json')}`, `{rel(out / 'paper-sweep.csv')}`.", ""]
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m planner.paper", description=__doc__.splitlines()[0])
+    parser.add_argument("--out", type=Path, default=Path("docs/paper"), help="folder for plots and raw results")
+    parser.add_argument("--doc", type=Path, default=Path("docs/paper-reproduction.md"), help="the report to write")
+    parser.add_argument("--workers", type=int, help="worker processes (default: all cores)")
+    args = parser.parse_args(argv)
+    result = run(args.out, args.doc, args.workers)
+    print(f"wrote {args.doc} and {args.out}/ in {result['total_s']:.1f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
