@@ -475,14 +475,33 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         bar.start()
         task_id = bar.add_task("sweep", total=None)
 
+    # Ctrl-C sets a flag that is acted on between runs: an interrupt inside a compiled kernel
+    # cannot be raised cleanly there
+    import signal
+
+    stop = {"asked": False}
+
+    def on_interrupt(signum, frame) -> None:
+        stop["asked"] = True
+
     def progress(done: int, total: int) -> None:
         if bar is not None:
             bar.update(task_id, completed=done, total=total)
+        if stop["asked"]:
+            raise KeyboardInterrupt
 
     def refine_progress(step: int, active: int) -> None:
         if bar is not None:
             bar.update(task_id, description=f"refine step {step}: {active} brackets", completed=0, total=None)
+        if stop["asked"]:
+            raise KeyboardInterrupt
 
+    previous_handler = signal.signal(signal.SIGINT, on_interrupt)
+
+    if not args.json:
+        runs = len(sw.grid_points(axes)) * len(models)
+        where = args.executor or f"{args.workers or os.cpu_count() or 1} local workers"
+        print(f"sweeping {runs} runs on {where} (Ctrl-C stops and keeps what is done)", file=sys.stderr, flush=True)
     try:
         with sw.Executor(args.workers, args.executor) as executor:
             result = sw.sweep(str(scenario.path), axes, models, fixed=fixed, h=args.step, duration=args.duration,
@@ -490,9 +509,11 @@ def cmd_sweep(args: argparse.Namespace) -> int:
             if result.complete and args.refine:
                 result = sw.refine(result, tolerance=args.tolerance, executor=executor, progress=refine_progress)
     finally:
+        signal.signal(signal.SIGINT, previous_handler)
         if bar is not None:
             bar.stop()
-    interrupted = not result.complete
+    interrupted = not result.complete or stop["asked"]
+    result.complete = not interrupted
     data = result.to_json()
     if args.refine and result.boundaries:
         data["bands"] = {a.name: sw.bands(result, a.name) for a in axes}

@@ -141,12 +141,14 @@ def plot_fan(path: Path, panels: list[tuple[str, list[tuple[float, str, np.ndarr
         ax = fig.add_subplot(1, len(panels), k + 1, projection="3d")
         for ratio, klass, X in runs:
             P = paper_coordinates(coordinates, start, X)
+            inside = np.abs(P[:, 2]) <= 1.5  # the paper's window; a triangle thrown out leaves it
+            P = P[: (np.argmin(inside) if not inside.all() else len(P))]
             ax.plot(P[:, 0], P[:, 1], P[:, 2], color=CLASS_COLOURS[klass], lw=1.0, ls="-" if klass == "goal" else ":")
         ax.plot([1, 2], [2, 1], [-0.5, 0.5], color="tab:blue", lw=3, alpha=0.4)
         ax.set_xlabel("x1")
         ax.set_ylabel("x2")
         ax.set_zlabel("x3")
-        ax.set_zlim(-1.0, 1.0)
+        ax.set_zlim(-1.5, 1.5)
         ax.set_title("\n".join(textwrap.wrap(label, 38)), fontsize=8)
     fig.suptitle(title)
     fig.tight_layout()

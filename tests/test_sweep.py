@@ -1,0 +1,159 @@
+"""Parameter sweeps: classification, refinement against the hand derivation, executors,
+interruption, bad input."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from models.scenario import ScenarioError
+from planner import sweep as sw
+from tests.conftest import ROOT, SCENARIOS
+from tests.test_model_family import RHO_LOW
+
+TRIANGLE = str(SCENARIOS / "two_finger_triangle.toml")
+RIGID_FINGERS = "finger_mass=1e3;finger_kp=1e9;finger_kd=2e6"
+
+
+def ratio_sweep(models: str, mus: str, count: int = 9, tolerance: float = 1e-3, executor=None):
+    axes = [sw.parse_axis(f"v1=0.25:4:{count}:log"), sw.parse_axis(f"mu={mus}")]
+    result = sw.sweep(TRIANGLE, axes, sw.parse_models(models), fixed={"v2": 1.0}, duration=8.0, executor=executor)
+    return sw.refine(result, tolerance=tolerance, executor=executor)
+
+
+def only_band(result, model, mu):
+    edges = sw.bands(result, "v1")[model][f"mu={mu:g}"]
+    assert len(edges) == 1, edges
+    return edges[0]
+
+
+def test_quasistatic_band_equals_the_hand_derivation_within_the_refinement_tolerance():
+    tolerance = 1e-3
+    result = ratio_sweep("quasistatic-rigid", "0.3,0.8", tolerance=tolerance)
+    assert result.complete and all(p.status == "ok" for p in result.points)
+    for mu in (0.3, 0.8):
+        band = only_band(result, "quasistatic-rigid", mu)
+        assert not band["from_is_grid_end"] and not band["to_is_grid_end"]
+        # the refined edge lies within one bracket (log-relative tolerance) of the derived ratio
+        assert abs(math.log(band["from"] / RHO_LOW)) <= tolerance
+        assert abs(math.log(band["to"] * RHO_LOW)) <= tolerance
+
+
+def test_with_mu_at_least_one_every_ratio_in_the_quadrant_grasps():
+    axes = [sw.parse_axis("v1=0.25:4:13:log"), sw.parse_axis("mu=1.0,1.2")]
+    result = sw.sweep(TRIANGLE, axes, sw.parse_models("quasistatic-rigid"), fixed={"v2": 1.0}, duration=8.0)
+    assert len(result.points) == 26
+    assert all(p.klass == "goal" for p in result.points), [(p.parameters, p.klass) for p in result.points if p.klass != "goal"]
+
+
+def test_elastic_band_lies_inside_the_plastic_band():
+    models = f"plastic=dynamic-compliant[C=1e4;{RIGID_FINGERS}],elastic=dynamic-compliant[C=0;{RIGID_FINGERS}]"
+    result = ratio_sweep(models, "0.5", count=9, tolerance=1e-2)
+    plastic, elastic = only_band(result, "plastic", 0.5), only_band(result, "elastic", 0.5)
+    assert plastic["from"] < elastic["from"] < elastic["to"] < plastic["to"]
+    assert elastic["to"] / elastic["from"] < 0.9 * plastic["to"] / plastic["from"]  # clearly narrower
+
+
+def test_local_pool_and_dask_local_cluster_give_identical_results():
+    distributed = pytest.importorskip("distributed", reason="the test extra installs distributed")
+    with sw.Executor(2) as pool:
+        local = ratio_sweep("quasistatic-rigid", "0.5,1.2", count=7, tolerance=1e-2, executor=pool)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        with sw.Executor(address=f"dask://{cluster.scheduler_address}") as dask:
+            remote = ratio_sweep("quasistatic-rigid", "0.5,1.2", count=7, tolerance=1e-2, executor=dask)
+    assert [(p.parameters, p.klass, p.status, p.t) for p in local.points] == [(p.parameters, p.klass, p.status, p.t) for p in remote.points]
+    assert local.boundaries == remote.boundaries
+    serial = ratio_sweep("quasistatic-rigid", "0.5,1.2", count=7, tolerance=1e-2)
+    assert [p.klass for p in serial.points] == [p.klass for p in local.points]
+
+
+def test_an_interrupted_sweep_keeps_what_it_computed():
+    seen = []
+
+    def progress(done, total):
+        seen.append(done)
+        if done == 5:
+            raise KeyboardInterrupt
+
+    axes = [sw.parse_axis("v1=0.25:4:20:log")]
+    result = sw.sweep(TRIANGLE, axes, sw.parse_models("quasistatic-rigid"), fixed={"v2": 1.0}, duration=8.0, progress=progress)
+    assert not result.complete
+    assert sum(p is not None for p in result.points) == 5
+    data = result.to_json()
+    assert data["complete"] is False and data["missing"] == 15 and len(data["points"]) == 5
+
+
+def test_ctrl_c_on_the_command_writes_partial_results_marked_incomplete(tmp_path):
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    out = tmp_path / "sweep"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "planner", "sweep", TRIANGLE, "--grid", "v1=0.25:4:400:log", "--param", "v2=1",
+         "--model", "dynamic-compliant", "--workers", "1", "--duration", "8", "--out", str(out)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+    )
+    line = proc.stderr.readline()  # "sweeping N runs ..." once the sweep starts
+    assert line.startswith("sweeping 400 runs"), line
+    time.sleep(3.0)
+    proc.send_signal(signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=300)
+    assert proc.returncode == 130, stderr
+    data = json.loads((out / "sweep.json").read_text())
+    assert data["complete"] is False
+    assert 0 < len(data["points"]) < 400 and data["missing"] == 400 - len(data["points"])
+    assert "INCOMPLETE" in stdout
+    assert (out / "sweep.csv").read_text().count("\n") == len(data["points"]) + 1
+
+
+def test_sweep_command_writes_json_csv_and_plot(tmp_path):
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    out = tmp_path / "s"
+    done = subprocess.run(
+        [sys.executable, "-m", "planner", "sweep", TRIANGLE, "--grid", "v1=0.4:2.5:5:log", "--grid", "mu=0.5,1.2", "--param", "v2=1",
+         "--model", "quasistatic-rigid", "--workers", "1", "--duration", "8", "--refine", "--tolerance", "1e-2", "--out", str(out), "--json"],
+        capture_output=True, text=True, env=env, timeout=600,
+    )
+    assert done.returncode == 0, done.stderr
+    data = json.loads(done.stdout)
+    assert data["complete"] and len(data["points"]) == 10 and data["boundaries"]
+    assert json.loads((out / "sweep.json").read_text())["points"] == data["points"]
+    assert (out / "sweep.csv").read_text().splitlines()[0].startswith("model,v1,mu,class,outcome,t,status")
+    assert (out / "sweep.png").stat().st_size > 0 and (out / "sweep.svg").exists()
+
+
+@pytest.mark.parametrize(
+    "args, key",
+    [
+        (["--grid", "nope=0:1:3"], "--grid nope"),
+        (["--grid", "v1=1:0.5"], "--grid v1=1:0.5"),
+        (["--grid", "v1=0:1:3:log"], "--grid v1=0:1:3:log"),
+        (["--grid", "v1=0.5:1:3", "--model", "warp-drive"], "--model warp-drive"),
+        (["--grid", "v1=0.5:1:3", "--model", "dynamic-rigid[Q=1]"], "--model dynamic-rigid"),
+        (["--grid", "v1=0.5:1:3", "--workers", "0"], "--workers"),
+        (["--grid", "v1=0.5:1:3", "--executor", "tcp://x:1"], "--executor"),
+    ],
+)
+def test_bad_sweep_input_is_exit_2_naming_the_key_and_writes_nothing(tmp_path, args, key):
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    out = tmp_path / "s"
+    if "--model" not in args:
+        args = args + ["--model", "quasistatic-rigid"]
+    done = subprocess.run([sys.executable, "-m", "planner", "sweep", TRIANGLE, *args, "--out", str(out)],
+                          capture_output=True, text=True, env=env, timeout=300)
+    assert done.returncode == 2, done.stderr
+    assert key in done.stderr and "Traceback" not in done.stderr
+    assert not out.exists()
+
+
+def test_parse_axis_values():
+    axis = sw.parse_axis("v1=0.25:4:5:log")
+    assert axis.log and axis.values == pytest.approx((0.25, 0.5, 1.0, 2.0, 4.0))
+    assert sw.parse_axis("mu=0.3,0.5").values == (0.3, 0.5)
+    with pytest.raises(ScenarioError):
+        sw.parse_axis("mu=")
