@@ -23,7 +23,6 @@ EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
 
 #: Subcommands the design reserves whose machinery is not built yet, with what they will do.
 RESERVED = {
-    "bench": "work-precision, throughput and scaling benchmarks",
     "serve": "serve planning requests over HTTP",
 }
 
@@ -121,6 +120,20 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--out", type=Path, default=Path("out/sweep"), help="output folder (default out/sweep)")
     sweep.add_argument("--json", action="store_true", help="print the result as one JSON object")
     sweep.set_defaults(handler=cmd_sweep)
+
+    bench = sub.add_parser(
+        "bench",
+        help="benchmarks: work-precision, throughput, scaling, ladder vs flat",
+        description="Measure work-precision (error against closed forms or fine-step references vs wall "
+        "time), throughput (steps/s per rung on the paper's scene), scaling with the number of contacts, "
+        "and the ladder against flat planning (also as OMPL benchmark logs). Writes bench.json, plots and "
+        "docs/benchmarks.md (--doc). --quick is a smoke run of every section.",
+    )
+    bench.add_argument("--quick", action="store_true", help="a small version of every section (about a minute)")
+    bench.add_argument("--out", type=Path, default=Path("out/bench"), help="output folder (default out/bench)")
+    bench.add_argument("--doc", type=Path, help="also write the markdown report here (make bench-doc: docs/benchmarks.md)")
+    bench.add_argument("--json", action="store_true", help="print the results as one JSON object")
+    bench.set_defaults(handler=cmd_bench)
 
     for name, what in RESERVED.items():
         reserved = sub.add_parser(name, help=f"(not built yet) {what}", description=f"Not built yet: {what}.")
@@ -546,10 +559,31 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     return EXIT_INTERRUPTED if interrupted else EXIT_OK
 
 
+def cmd_bench(args: argparse.Namespace) -> int:
+    from planner.bench import run_all
+
+    def progress(text: str) -> None:
+        if not args.json:
+            print(text, file=sys.stderr, flush=True)
+
+    results = run_all(args.out, args.doc, quick=args.quick, progress=progress)
+    if args.json:
+        print(json.dumps(results, indent=2))
+    else:
+        for row in results["throughput"]["rows"]:
+            print(f"throughput {row['rung']:22s} {row['steps_per_s']:>12,.0f} steps/s")
+        for scene, res in results["planning"].items():
+            x = res["summary"]
+            print(f"planning {scene}: ladder {x['ladder']['success_rate']:.0%} in {x['ladder']['median_wall_s']:.3f} s, "
+                  f"flat {x['flat']['success_rate']:.0%} in {x['flat']['median_wall_s']:.3f} s (median)")
+        print(f"results written to {args.out / 'bench.json'}" + (f" and {args.doc}" if args.doc else ""))
+    return EXIT_OK
+
+
 def cmd_reserved(args: argparse.Namespace) -> int:
     print(
         f"error: 'ladder {args.command}' is not built yet ({RESERVED[args.command]}); "
-        "available now: ladder check, ladder simulate, ladder plan, ladder sweep, ladder schema",
+        "available now: ladder check, ladder simulate, ladder plan, ladder sweep, ladder bench, ladder schema",
         file=sys.stderr,
     )
     return EXIT_BAD_INPUT

@@ -81,7 +81,7 @@ def test_missing_file():
     assert "no/such/file.toml: no such file" in result.stderr
 
 
-@pytest.mark.parametrize("command", ["bench", "serve"])
+@pytest.mark.parametrize("command", ["serve"])
 def test_reserved_commands_say_so(command):
     result = ladder(command, "scenarios/two_finger_triangle.toml")
     assert result.returncode == 2

@@ -1,0 +1,359 @@
+"""``ladder bench``: fast and accurate, measured.
+
+Sections (each a function returning a JSON-able dict; `run_all` runs them and writes
+``bench.json``, plots and ``docs/benchmarks.md``):
+
+- work_precision: per scene and rung, error against a reference for a range of steps h,
+  against wall time. References: closed forms where they exist (the incline block's
+  sliding distance; the disc's free fall and plastic landing), otherwise the same rung at a
+  much finer step (the paper's scene; the elastically bouncing disc);
+- throughput: steps per second per rung on the paper's scene (h = 1e-4, until the grasp),
+  and MuJoCo's on the same scene when the optional peer is installed (else: skipped);
+- scaling: cost per step against the number of contacts (a row of boxes resting on a plane,
+  2 contacts each, up to 64 contacts), with the fitted growth exponent;
+- planning: the ladder against planning flat at the top rung over seeds (success rate,
+  median wall time), also written as OMPL benchmark logs (``ompl_benchmark_statistics
+  LOG -d DB`` turns them into the SQLite database Planner Arena reads).
+
+``--quick`` shrinks every section (fewer steps, seeds and sizes) to a smoke run.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import math
+import os
+import platform
+import socket
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+SCENARIOS = ROOT / "scenarios"
+G = 9.81
+
+
+def machine() -> dict:
+    cpu = ""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return {"host": socket.gethostname(), "cpu": cpu or platform.processor(), "cores": os.cpu_count(),
+            "python": platform.python_version(), "system": platform.platform()}
+
+
+def _timed(fn, repeat: int = 3):
+    """(median wall seconds, last result) of fn() over `repeat` calls after one warm-up."""
+    result = fn()
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        result = fn()
+        times.append(time.perf_counter() - t0)
+    return float(np.median(times)), result
+
+
+# ----------------------------------------------------------------------------- work-precision
+
+
+def _rollout(scenario, rung_name, h, duration, controls=None, stop=False, records=4000):
+    from models.rungs import rung_for
+
+    rung = rung_for(scenario, rung_name)
+    u = np.zeros((1, len(scenario.actuated))) if controls is None else np.atleast_2d(controls)
+    return rung.rollout(scenario, rung.initial_state(scenario), u, [duration], h, stop_at_outcome=stop, max_records=records)
+
+
+def work_precision(quick: bool = False) -> dict:
+    from models.scenario import load_scenario
+
+    steps = [1e-2, 1e-3, 1e-4] if quick else [1e-2, 1e-3, 1e-4, 1e-5]
+    rows = []
+
+    # incline: slides 0.5 s at a = g (sin a - mu cos a) (continuous closed form)
+    alpha, mu, T = 30.0, 0.3, 0.5
+    incline = load_scenario(SCENARIOS / "incline_block.toml", {"slope_deg": alpha, "mu": mu})
+    a = G * (math.sin(math.radians(alpha)) - mu * math.cos(math.radians(alpha)))
+    direction = np.array([math.cos(math.radians(alpha)), math.sin(math.radians(alpha))])
+    for rung in ("dynamic-rigid", "dynamic-compliant"):
+        for h in steps:
+            wall, out = _timed(lambda: _rollout(incline, rung, h, T), repeat=1 if h < 1e-4 else 3)
+            travelled = -float(np.dot(out.state.q[:2] - incline.start[:2], direction))
+            rows.append({"scene": "incline_block", "rung": rung, "h": h, "reference": "closed form 0.5 a t^2",
+                         "error": abs(travelled - 0.5 * a * T * T), "wall_s": wall, "status": out.status})
+
+    # disc dropped from 1 m: rigid (plastic) landing has a closed form; elastic compliant vs fine step
+    disc = load_scenario(SCENARIOS / "bouncing_disc.toml")
+    T = 1.0
+    times = np.linspace(0.0, T, 201)
+    landing = math.sqrt(2 * (1.0 - 0.1) / G)
+    exact = np.where(times < landing, 1.0 - 0.5 * G * times**2, 0.1)
+    for h in steps:
+        wall, out = _timed(lambda: _rollout(disc, "dynamic-rigid", h, T), repeat=1 if h < 1e-4 else 3)
+        y = np.interp(times, out.times, out.trajectory[:, 1])
+        rows.append({"scene": "bouncing_disc", "rung": "dynamic-rigid", "h": h, "reference": "closed form (fall, plastic landing)",
+                     "error": float(np.max(np.abs(y - exact))), "wall_s": wall, "status": out.status})
+    ref_h = 1e-5 if quick else 1e-6
+    ref = _rollout(disc, "dynamic-compliant", ref_h, T, records=20000)
+    y_ref = np.interp(times, ref.times, ref.trajectory[:, 1])
+    for h in [s for s in steps if s > ref_h]:
+        wall, out = _timed(lambda: _rollout(disc, "dynamic-compliant", h, T), repeat=1 if h < 1e-4 else 3)
+        y = np.interp(times, out.times, out.trajectory[:, 1])
+        rows.append({"scene": "bouncing_disc", "rung": "dynamic-compliant (C = 0)", "h": h, "reference": f"h = {ref_h:g}",
+                     "error": float(np.max(np.abs(y - y_ref))), "wall_s": wall, "status": out.status})
+
+    # the paper's scene, pushing phase, against the same rung at h = 1e-5
+    tri = load_scenario(SCENARIOS / "two_finger_triangle.toml", {"v1": 0.8})
+    sample = np.linspace(1.45, 1.6, 31)
+    controls = np.array([[-0.8, -1.0]])
+    for rung in ("kinematic", "quasistatic-rigid", "quasistatic-compliant", "dynamic-rigid", "dynamic-compliant"):
+        ref = _rollout(tri, rung, 1e-5, 1.6, controls)
+        R = np.array([np.interp(sample, ref.times, ref.trajectory[:, j]) for j in range(ref.trajectory.shape[1])]).T
+        for h in [s for s in steps if s > 1e-5]:
+            wall, out = _timed(lambda: _rollout(tri, rung, h, 1.6, controls), repeat=1 if h < 1e-4 else 3)
+            X = np.array([np.interp(sample, out.times, out.trajectory[:, j]) for j in range(out.trajectory.shape[1])]).T
+            rows.append({"scene": "two_finger_triangle", "rung": rung, "h": h, "reference": "h = 1e-5",
+                         "error": float(np.max(np.abs(X - R))), "wall_s": wall, "status": out.status})
+    return {"rows": rows}
+
+
+def plot_work_precision(data: dict, out: Path) -> list[str]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    paths = []
+    for scene in sorted({r["scene"] for r in data["rows"]}):
+        fig, ax = plt.subplots(figsize=(6, 4.2))
+        rows = [r for r in data["rows"] if r["scene"] == scene]
+        for rung in dict.fromkeys(r["rung"] for r in rows):
+            mine = [r for r in rows if r["rung"] == rung]
+            ax.loglog([r["wall_s"] for r in mine], [max(r["error"], 1e-16) for r in mine], "o-", label=rung)
+            for r in mine:
+                ax.annotate(f"{r['h']:g}", (r["wall_s"], max(r["error"], 1e-16)), fontsize=6)
+        ax.set_xlabel("wall time (s)")
+        ax.set_ylabel("error (m)")
+        ax.set_title(f"work-precision: {scene}")
+        ax.legend(fontsize=7)
+        fig.tight_layout()
+        path = out / f"work_precision.{scene}.png"
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        paths.append(str(path))
+    return paths
+
+
+# ----------------------------------------------------------------------------- throughput
+
+
+def throughput(quick: bool = False) -> dict:
+    from models.scenario import load_scenario
+
+    tri = load_scenario(SCENARIOS / "two_finger_triangle.toml")
+    controls = np.array([[-1.0, -1.0]])
+    rows = []
+    for rung in ("kinematic", "quasistatic-rigid", "quasistatic-compliant", "dynamic-rigid", "dynamic-compliant"):
+        wall, out = _timed(lambda: _rollout(tri, rung, 1e-4, 3.0, controls, stop=True, records=2), repeat=3 if quick else 7)
+        rows.append({"rung": rung, "h": 1e-4, "steps": out.steps, "outcome": out.outcome, "median_wall_s": wall,
+                     "steps_per_s": out.steps / wall})
+    peer = mujoco_peer()
+    return {"scene": "two_finger_triangle (v1 = v2 = 1, until the grasp)", "rows": rows, "peer": peer}
+
+
+def mujoco_peer() -> dict:
+    try:
+        import mujoco  # noqa: F401
+    except ImportError:
+        return {"skipped": "mujoco is not installed (pip install 'contact-ladder[peers]'); the peer was not timed"}
+    return {"skipped": "a MuJoCo model of the paper's scene is not built yet; the peer was not timed"}
+
+
+# ----------------------------------------------------------------------------- scaling
+
+ROW_TEMPLATE = """
+version = 1
+[scenario]
+name = "box_row"
+[scene]
+dimension = 2
+gravity = [0.0, -9.81]
+[contact]
+mu = 0.5
+K = 1e6
+C = 1e4
+[[bodies]]
+name = "floor"
+role = "obstacle"
+shape = {{ type = "halfplane", normal = [0.0, 1.0] }}
+{boxes}
+[task]
+horizon = 10.0
+goal = {{ box = {{ "b0.x" = [100.0, 200.0] }} }}
+[ladder]
+time_limit = 1.0
+[[ladder.rungs]]
+model = "dynamic-rigid"
+h = 1e-3
+"""
+
+BOX = """[[bodies]]
+name = "b{i}"
+role = "object"
+mass = 1.0
+inertia = 0.0017
+shape = {{ type = "box", size = [0.1, 0.1] }}
+pose = {{ x = {x}, y = 0.05 }}
+dofs = ["x", "y", "theta"]
+"""
+
+
+def scaling(quick: bool = False) -> dict:
+    """Boxes resting apart on a plane, 2 contacts each: per-step cost of dynamic-rigid
+    (Lemke) and dynamic-compliant against the number of contacts."""
+    from models.scenario import load_scenario
+
+    counts = [1, 2, 4, 8, 16] if quick else [1, 2, 4, 8, 16, 32]
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for n in counts:
+            path = Path(tmp) / f"row{n}.toml"
+            path.write_text(ROW_TEMPLATE.format(boxes="".join(BOX.format(i=i, x=0.3 * i) for i in range(n))))
+            scene = load_scenario(path)
+            for rung in ("dynamic-rigid", "dynamic-compliant"):
+                steps = 200 if quick else 1000
+                wall, out = _timed(lambda: _rollout(scene, rung, 1e-3, steps * 1e-3, records=2), repeat=3)
+                rows.append({"rung": rung, "boxes": n, "contacts": 2 * n, "lcp_size": out.max_lcp_size, "us_per_step": 1e6 * wall / out.steps,
+                             "status": out.status, "max_drift": float(np.max(np.abs(out.state.q - scene.start)))})
+    fits = {}
+    for rung in ("dynamic-rigid", "dynamic-compliant"):
+        mine = [r for r in rows if r["rung"] == rung and r["contacts"] >= 4]
+        slope = np.polyfit(np.log([r["contacts"] for r in mine]), np.log([r["us_per_step"] for r in mine]), 1)[0]
+        fits[rung] = float(slope)
+    return {"rows": rows, "growth_exponent": fits,
+            "note": "the stepper solves every contact LCP with Lemke's method; PGS exists in models.lcp but is not wired "
+                    "into the stepper, so there is no solver switch to report yet"}
+
+
+# ----------------------------------------------------------------------------- planning
+
+
+def planning(quick: bool = False, out: Path | None = None) -> dict:
+    from models.scenario import load_scenario
+
+    from planner.benchmark import ladder_vs_flat
+
+    seeds = range(1, 4) if quick else range(1, 11)
+    scenes = [("two_finger_triangle", {"v1": 0.8}), ("four_finger_grasp", {})]
+    if not quick:
+        scenes.append(("box_push_3d", {}))
+    results = {}
+    for name, params in scenes:
+        t0 = time.perf_counter()
+        result = ladder_vs_flat(load_scenario(SCENARIOS / f"{name}.toml", params), seeds)
+        result["total_s"] = time.perf_counter() - t0
+        results[name] = result
+        if out is not None:
+            write_ompl_log(out / f"ladder_vs_flat.{name}.log", name, result)
+    return results
+
+
+def write_ompl_log(path: Path, name: str, result: dict) -> Path:
+    """One experiment in OMPL's benchmark log format, a 'planner' per mode (ladder, flat)."""
+    import ompl
+
+    runs = result["runs"]
+    seeds = sorted({r["seed"] for r in runs})
+    lines = [
+        f"OMPL version {getattr(ompl, '__version__', '2.0.1')}",
+        f"Experiment ladder_vs_flat_{name}",
+        f"Running on {socket.gethostname()}",
+        f"Starting at {_dt.datetime.now().strftime('%Y-%m-%d %H:%M:%S')}",
+        "<<<|",
+        f"ladder vs flat planning on scenarios/{name}.toml, iteration budget {result['iterations']} per rung "
+        "(flat: the whole ladder's), seeds " + ", ".join(map(str, seeds)),
+        "|>>>",
+        "<<<|",
+        machine()["cpu"],
+        "|>>>",
+        f"{seeds[0]} is the random seed",
+        "0 seconds per run",
+        "0 MB per run",
+        f"{len(seeds)} runs per planner",
+        f"{result.get('total_s', 0.0):.3f} seconds spent to collect the data",
+        "0 enum types",
+        "2 planners",
+    ]
+    for mode in ("ladder", "flat"):
+        mine = [r for r in runs if r["mode"] == mode]
+        lines += [f"control_{mode}", "0 common properties", "4 properties for each run",
+                  "time REAL", "solved BOOLEAN", "propagations INTEGER", "seed INTEGER", f"{len(mine)} runs"]
+        lines += [f"{r['wall_s']:.6f}; {int(r['holds'])}; {r['propagations']}; {r['seed']}; " for r in mine]
+        lines.append(".")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+# ----------------------------------------------------------------------------- all
+
+
+def run_all(out: Path, doc: Path | None, quick: bool = False, progress=print) -> dict:
+    out.mkdir(parents=True, exist_ok=True)
+    results = {"machine": machine(), "quick": quick, "date": _dt.datetime.now().isoformat(timespec="seconds")}
+    for name, fn in (("throughput", throughput), ("work_precision", work_precision), ("scaling", scaling)):
+        t0 = time.perf_counter()
+        progress(f"bench: {name} ...")
+        results[name] = fn(quick)
+        progress(f"bench: {name} done in {time.perf_counter() - t0:.1f} s")
+    progress("bench: planning ...")
+    t0 = time.perf_counter()
+    results["planning"] = planning(quick, out)
+    progress(f"bench: planning done in {time.perf_counter() - t0:.1f} s")
+    results["plots"] = plot_work_precision(results["work_precision"], out)
+    (out / "bench.json").write_text(json.dumps(results, indent=1) + "\n")
+    if doc is not None:
+        doc.parent.mkdir(parents=True, exist_ok=True)
+        doc.write_text(markdown(results, doc.parent, out))
+    return results
+
+
+def markdown(r: dict, doc_dir: Path, out: Path) -> str:
+    def rel(p) -> str:
+        return os.path.relpath(p, doc_dir)
+
+    m = r["machine"]
+    lines = ["# Benchmarks", "", f"Generated by `ladder bench{' --quick' if r['quick'] else ''}` on {r['date']}.",
+             f"Machine: {m['cpu']}, {m['cores']} cores, Python {m['python']}, {m['system']}.", "",
+             "## Throughput (paper's scene, h = 1e-4, until the grasp)", "", "| rung | steps | median wall (s) | steps/s |", "|---|---|---|---|"]
+    for row in r["throughput"]["rows"]:
+        lines.append(f"| {row['rung']} | {row['steps']} | {row['median_wall_s']:.4f} | {row['steps_per_s']:,.0f} |")
+    lines += ["", f"Peer (MuJoCo): {r['throughput']['peer'].get('skipped', r['throughput']['peer'])}", "",
+              "## Work-precision", "", "| scene | rung | h | reference | error | wall (s) | status |", "|---|---|---|---|---|---|---|"]
+    for row in r["work_precision"]["rows"]:
+        lines.append(f"| {row['scene']} | {row['rung']} | {row['h']:g} | {row['reference']} | {row['error']:.2e} | {row['wall_s']:.4f} | {row['status']} |")
+    lines += [""] + [f"![{Path(p).stem}]({rel(p)})" for p in r["plots"]]
+    s = r["scaling"]
+    lines += ["", "## Scaling with the number of contacts (boxes resting on a plane, h = 1e-3)", "",
+              "| rung | contacts | LCP size | us/step | status |", "|---|---|---|---|---|"]
+    for row in s["rows"]:
+        lines.append(f"| {row['rung']} | {row['contacts']} | {row['lcp_size']} | {row['us_per_step']:.1f} | {row['status']} |")
+    lines += ["", "Fitted growth exponent of cost per step in the number of contacts (4 and more): "
+              + ", ".join(f"{k}: {v:.2f}" for k, v in s["growth_exponent"].items()) + f". {s['note']}.", "",
+              "## Planning: ladder against flat (equal budgets)", "",
+              "| scene | mode | success | median wall (s) | median propagations |", "|---|---|---|---|---|"]
+    for scene, res in r["planning"].items():
+        for mode in ("ladder", "flat"):
+            x = res["summary"][mode]
+            lines.append(f"| {scene} | {mode} | {x['success_rate']:.0%} | {x['median_wall_s']:.3f} | {x['median_propagations']:.0f} |")
+        lines.append(f"| {scene} | speed-up (median wall, flat / ladder) | | {res['summary']['speedup_median_wall']:.2f}x | |")
+    lines += ["", f"OMPL benchmark logs: `{rel(out)}/ladder_vs_flat.*.log` (`ompl_benchmark_statistics LOG -d bench.db`).", ""]
+    return "\n".join(lines)
