@@ -1,0 +1,60 @@
+"""`ladder bench --quick`: every section runs and says something checkable; the OMPL logs
+load into OMPL's benchmark database."""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from planner.bench import run_all
+
+
+@pytest.fixture(scope="module")
+def quick(tmp_path_factory):
+    out = tmp_path_factory.mktemp("bench")
+    return out, run_all(out, out / "benchmarks.md", quick=True, progress=lambda text: None)
+
+
+def test_work_precision_is_first_order_against_the_closed_forms(quick):
+    _, r = quick
+    for scene, rung in (("incline_block", "dynamic-rigid"), ("bouncing_disc", "dynamic-rigid")):
+        rows = sorted((row for row in r["work_precision"]["rows"] if row["scene"] == scene and row["rung"] == rung), key=lambda x: -x["h"])
+        errors = [row["error"] for row in rows]
+        assert all(row["status"] == "ok" for row in rows)
+        for coarse, fine in zip(errors, errors[1:]):
+            assert 5 < coarse / fine < 20, errors  # ten times smaller h, about ten times smaller error
+
+
+def test_throughput_and_scaling_report_every_rung(quick):
+    _, r = quick
+    assert {row["rung"] for row in r["throughput"]["rows"]} >= {"kinematic", "quasistatic-rigid", "dynamic-compliant"}
+    assert all(row["outcome"] == "goal" and row["steps_per_s"] > 0 for row in r["throughput"]["rows"])
+    assert "skipped" in r["throughput"]["peer"] or "steps_per_s" in r["throughput"]["peer"]
+    rows = r["scaling"]["rows"]
+    assert all(row["status"] == "ok" and row["max_drift"] < 1e-3 for row in rows)  # boxes stay at rest
+    assert [row["contacts"] for row in rows if row["rung"] == "dynamic-rigid"] == [2, 4, 8, 16, 32]
+    assert 0.0 < r["scaling"]["growth_exponent"]["dynamic-rigid"] < 3.0
+
+
+def test_planning_section_and_ompl_logs(quick):
+    out, r = quick
+    for scene, res in r["planning"].items():
+        assert res["summary"]["ladder"]["success_rate"] >= 2 / 3
+        log = out / f"ladder_vs_flat.{scene}.log"
+        db = out / f"{scene}.db"
+        done = subprocess.run([sys.executable, "-m", "ompl.ompl_benchmark_statistics", str(log), "-d", str(db)],
+                              capture_output=True, text=True, timeout=120)
+        assert done.returncode == 0, done.stderr
+        rows = sqlite3.connect(db).execute(
+            "SELECT plannerConfigs.name, COUNT(*), AVG(runs.solved) FROM runs JOIN plannerConfigs ON runs.plannerid = plannerConfigs.id GROUP BY 1"
+        ).fetchall()
+        assert {name for name, _, _ in rows} == {"control_ladder", "control_flat"}
+        assert all(count == 3 for _, count, _ in rows)
+    text = (out / "benchmarks.md").read_text()
+    assert "## Throughput" in text and "## Work-precision" in text and "ladder against flat" in text
+    assert json.loads((out / "bench.json").read_text())["quick"] is True
