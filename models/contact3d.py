@@ -20,21 +20,36 @@ and the smallest psi of a pair is the pair's signed distance.
 - box-box (separating axes over the 15 axes; a face axis gives the incident face clipped
   against the reference face's side planes, at most 4 points: the deepest, the farthest
   from it, then the two spanning the most area; an edge-edge axis gives one contact; boxes
-  apart get their exact distance from their closest features when the faces do not show it).
+  apart get their exact distance from their closest features when the faces do not show it);
+- convex mesh vs box and mesh vs mesh (`_hull_hull`, both as polytopes from the hull tables
+  `SceneData.hull/planes/face_verts/edges/edge_dirs`, built by `models.kinematics.hull_tables`
+  at scene compile time: coplanar triangles merged into one face, distinct edge directions):
+  separating axes over the face normals of both and the crossings of their edge directions.
+  A face axis clips the other body's most opposed face against the reference face's side
+  planes (plus that body's deepest vertex when it lies over the face and the clipped face
+  missed it), reduced to at most 4 points like box-box; an edge-edge axis gives one contact
+  at the support edges; apart, the exact distance comes from the closest features (a vertex
+  against a face it projects into, or two edges, brute force) when the axes do not show it;
+- convex mesh vs sphere (the core point vs the polytope: closest point when outside, the
+  deepest-face rule inside) and mesh vs capsule (the axis vs the polytope: closest features
+  when apart; separating axes over the faces and the crossings of the edge directions with
+  the axis when it meets the polytope): one contact.
 
 Where two contacts stand for a segment over a face (capsules), the point on the curved
 surface is where the line along n leaves the capsule, so it is exactly on the surface even
 when n is not the surface normal there, and the exact closest contact always replaces an
 end contact that is shallower or deeper than it.
 
-Meshes against anything but a plane return -1: the caller then uses `fcl_pair_contacts`
-(python-fcl, one contact). `collide_all_3d` does every pair of a scene in one call.
+A pair returns -1 only when it has no compiled test (planar scenes, or a mesh or box without
+hull tables): the caller may then use `fcl_pair_contacts` (python-fcl, one contact).
+`collide_all_3d` does every pair of a scene in one call.
 
 Performance notes: vectors are tuples of three floats and rotations tuples of rows, so the
-compiled path allocates nothing but two small scratch arrays for box-box face clipping.
-Calling a compiled function increments and decrements the reference count of every array
-in its arguments (SceneData holds 21): about 0.4 us per `collide_pair_3d` call on top of
-the test itself (0.2-0.5 us), which `collide_all_3d` pays once per scene. Helper calls
+compiled path allocates nothing but two small scratch arrays for face clipping (box-box, and
+mesh-box / mesh-mesh face contacts). Calling a compiled function increments and decrements
+the reference count of every array in its arguments (SceneData holds 30): about 0.4 us per
+`collide_pair_3d` call on top of the test itself (0.2-0.5 us; mesh-box about 1-3 us), which
+`collide_all_3d` pays once per scene. Only mesh pairs get the hull tables (`_collide_hull`). Helper calls
 never pass literal constants (numba would compile a specialised copy for each).
 """
 
@@ -1499,8 +1514,8 @@ def collide_pair_3d(S, q, p, margin, c_psi, c_n, c_pa, c_pb, start):
     """Contacts of pair p with psi <= margin, written from index `start` of the output buffers.
 
     Returns how many were written (never more than S.pair_max_contacts[p], nor past the end
-    of the buffers), or -1 if the pair's shape kinds have no compiled test (use
-    `fcl_pair_contacts`). n points from S.pair_a[p] to S.pair_b[p].
+    of the buffers), or -1 if the pair has no compiled test (planar scenes, a mesh or box
+    without hull tables: use `fcl_pair_contacts`). n points from S.pair_a[p] to S.pair_b[p].
 
     A thin entry: it reads the pair's data from S and hands scalars, tuples and only the
     arrays the test needs to `_collide` (a compiled call increments and decrements the
@@ -1658,7 +1673,10 @@ def collide_all_3d(S, q, margin, c_psi, c_n, c_pa, c_pb, c_pair, fallback):
 def fcl_pair_contacts(scenario, S, q, p, margin):
     """One contact of pair p from python-fcl's signed distance: [(psi, n, pa, pb)] or [] if psi > margin.
 
-    For pairs without a compiled test (meshes). Planes never reach fcl (its distance to a
+    For pairs without a compiled test (none in a spatial scene whose meshes have hull tables,
+    which `compile_scene` always builds: convex meshes are compiled against every shape; this
+    stays as an independent check). Its distance is a GJK upper bound (seen 5e-4 high on
+    mesh-box, more on curved shapes) and its penetration depth good to ~1e-6. Planes never reach fcl (its distance to a
     Halfspace crashes python-fcl 0.7): pairs with a plane use the compiled test.
     """
     a, b = int(S.pair_a[p]), int(S.pair_b[p])
