@@ -123,7 +123,8 @@ def detect_contacts(S, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsuppo
 
     A pair's margin is ``margin + MARGIN_SAFETY * h * (speed bounds of both bodies)``.
     Buffers hold at least sum(S.pair_max_contacts) rows. Pairs the compiled kernels cannot
-    handle (spatial mesh pairs other than mesh-plane) are listed in ``unsupported``.
+    handle are listed in ``unsupported``: since convex meshes are compiled (against every
+    spatial shape), only a mesh or box without hull tables in `SceneData` would be.
     """
     if S.dimension == 2:
         return detect_planar(S.bi, S.bf, S.verts, S.pi, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb), 0

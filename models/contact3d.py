@@ -20,21 +20,36 @@ and the smallest psi of a pair is the pair's signed distance.
 - box-box (separating axes over the 15 axes; a face axis gives the incident face clipped
   against the reference face's side planes, at most 4 points: the deepest, the farthest
   from it, then the two spanning the most area; an edge-edge axis gives one contact; boxes
-  apart get their exact distance from their closest features when the faces do not show it).
+  apart get their exact distance from their closest features when the faces do not show it);
+- convex mesh vs box and mesh vs mesh (`_hull_hull`, both as polytopes from the hull tables
+  `SceneData.hull/planes/face_verts/edges/edge_dirs`, built by `models.kinematics.hull_tables`
+  at scene compile time: coplanar triangles merged into one face, distinct edge directions):
+  separating axes over the face normals of both and the crossings of their edge directions.
+  A face axis clips the other body's most opposed face against the reference face's side
+  planes (plus that body's deepest vertex when it lies over the face and the clipped face
+  missed it), reduced to at most 4 points like box-box; an edge-edge axis gives one contact
+  at the support edges; apart, the exact distance comes from the closest features (a vertex
+  against a face it projects into, or two edges, brute force) when the axes do not show it;
+- convex mesh vs sphere (the core point vs the polytope: closest point when outside, the
+  deepest-face rule inside) and mesh vs capsule (the axis vs the polytope: closest features
+  when apart; separating axes over the faces and the crossings of the edge directions with
+  the axis when it meets the polytope): one contact.
 
 Where two contacts stand for a segment over a face (capsules), the point on the curved
 surface is where the line along n leaves the capsule, so it is exactly on the surface even
 when n is not the surface normal there, and the exact closest contact always replaces an
 end contact that is shallower or deeper than it.
 
-Meshes against anything but a plane return -1: the caller then uses `fcl_pair_contacts`
-(python-fcl, one contact). `collide_all_3d` does every pair of a scene in one call.
+A pair returns -1 only when it has no compiled test (planar scenes, or a mesh or box without
+hull tables): the caller may then use `fcl_pair_contacts` (python-fcl, one contact).
+`collide_all_3d` does every pair of a scene in one call.
 
 Performance notes: vectors are tuples of three floats and rotations tuples of rows, so the
-compiled path allocates nothing but two small scratch arrays for box-box face clipping.
-Calling a compiled function increments and decrements the reference count of every array
-in its arguments (SceneData holds 21): about 0.4 us per `collide_pair_3d` call on top of
-the test itself (0.2-0.5 us), which `collide_all_3d` pays once per scene. Helper calls
+compiled path allocates nothing but two small scratch arrays for face clipping (box-box, and
+mesh-box / mesh-mesh face contacts). Calling a compiled function increments and decrements
+the reference count of every array in its arguments (SceneData holds 30): about 0.4 us per
+`collide_pair_3d` call on top of the test itself (0.2-0.5 us; mesh-box about 1-3 us), which
+`collide_all_3d` pays once per scene. Only mesh pairs get the hull tables (`_collide_hull`). Helper calls
 never pass literal constants (numba would compile a specialised copy for each).
 """
 
@@ -51,6 +66,7 @@ from models.kinematics import (
     Q_X,
     Q_Y,
     Q_Z,
+    SHAPE_BOX,
     SHAPE_CAPSULE,
     SHAPE_HALFSPACE,
     SHAPE_MESH,
@@ -1027,6 +1043,469 @@ def _box_box(pA, RA, hA, pB, RB, hB, margin, flip, c_psi, c_n, c_pa, c_pb, start
     return _reduce_emit(buf, m, limit, c_psi, c_n, c_pa, c_pb, start, flip)
 
 
+# ----------------------------------------------------------------------------- convex polytopes (meshes)
+#
+# A polytope body b (box or mesh) is its vertices verts[v0:v0 + nv] and the hull tables of
+# S.hull[b] = (f0, nf, e0, ne, d0, nd): face planes (outward unit n, offset d: n.x <= d),
+# face loops (counterclockwise about n), edges (vertex index pairs), distinct edge directions,
+# all in the body frame. `hb` below is that tuple followed by (v0, nv).
+
+_IDENT = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+_ORIGIN = (0.0, 0.0, 0.0)
+
+
+@numba.njit(cache=True)
+def _vert(verts, i):
+    return (verts[i, 0], verts[i, 1], verts[i, 2])
+
+
+@numba.njit(cache=True)
+def _face_plane(planes, f):
+    return (planes[f, 0], planes[f, 1], planes[f, 2]), planes[f, 3]
+
+
+@numba.njit(cache=True)
+def _dot_range(verts, v0, nv, u):
+    """(min, max) of u.v over vertices v0 .. v0 + nv - 1."""
+    lo = _INF
+    hi = -_INF
+    for i in range(v0, v0 + nv):
+        x = u[0] * verts[i, 0] + u[1] * verts[i, 1] + u[2] * verts[i, 2]
+        lo = min(lo, x)
+        hi = max(hi, x)
+    return lo, hi
+
+
+@numba.njit(cache=True)
+def _in_face(y, n, verts, face_verts, f, slack):
+    """Whether y (body frame) projects into face f (normal n): inside every side plane (e x n
+    points out of the face for a counterclockwise loop) up to slack."""
+    k = face_verts[f, 0]
+    for j in range(k):
+        a = _vert(verts, face_verts[f, 1 + j])
+        b = _vert(verts, face_verts[f, 1 + (j + 1) % k])
+        if _dot(_cross(_sub(b, a), n), _sub(y, a)) > slack:
+            return False
+    return True
+
+
+@numba.njit(cache=True)
+def _point_hull(y, verts, planes, face_verts, edges, hb):
+    """Point y vs polytope hb (body frame): (signed distance, surface point, outward unit normal).
+
+    Inside or on the surface: the face with the largest plane value (the deepest-face rule).
+    Outside: the closest point, on a face (y projects into it) or on an edge.
+    """
+    f0, nf, e0, ne = hb[0], hb[1], hb[2], hb[3]
+    top = -_INF
+    fb = f0
+    for f in range(f0, f0 + nf):
+        n, d = _face_plane(planes, f)
+        s = _dot(n, y) - d
+        if s > top:
+            top, fb = s, f
+    nb, _ = _face_plane(planes, fb)
+    if top <= 0.0:
+        return top, _axpy(y, -top, nb), nb
+    best = _INF
+    cp = y
+    nl = nb
+    for f in range(f0, f0 + nf):
+        n, d = _face_plane(planes, f)
+        s = _dot(n, y) - d
+        if s > 0.0 and s < best and _in_face(y, n, verts, face_verts, f, 0.0):
+            best, cp, nl = s, _axpy(y, -s, n), n
+    for e in range(e0, e0 + ne):
+        P = _vert(verts, edges[e, 0])
+        Q = _vert(verts, edges[e, 1])
+        c = _axpy(P, _point_seg(y, P, Q), _sub(Q, P))
+        g = _sub(y, c)
+        dist = _norm(g)
+        if dist < best:
+            best, cp = dist, c
+            nl = _scale(g, 1.0 / dist) if dist > 0.0 else nb
+    return best, cp, nl
+
+
+@numba.njit(cache=True)
+def _sphere_hull(c, r, p1, R1, hb, verts, planes, face_verts, edges, margin, flip, c_psi, c_n, c_pa, c_pb, start, limit):
+    """Polytope (body 1) vs sphere (body 2, centre c)."""
+    y = _rot_t(R1, _sub(c, p1))
+    dist, cp, nl = _point_hull(y, verts, planes, face_verts, edges, hb)
+    psi = dist - r
+    if psi > margin or limit < 1:
+        return 0
+    n = _rot(R1, nl)
+    _emit(c_psi, c_n, c_pa, c_pb, start, psi, n, _add(_rot(R1, cp), p1), _axpy(c, -r, n), flip)
+    return 1
+
+
+@numba.njit(cache=True)
+def _support_edge(verts, edges, e0, ne, u, axis, M, c):
+    """End points (mapped by x -> c + M x) of the edge along direction u (mapped frame) that is
+    highest along axis."""
+    best = -_INF
+    P = c
+    Q = c
+    for e in range(e0, e0 + ne):
+        A = _add(c, _rot(M, _vert(verts, edges[e, 0])))
+        B = _add(c, _rot(M, _vert(verts, edges[e, 1])))
+        d = _sub(B, A)
+        L = _norm(d)
+        if L <= 0.0 or abs(_dot(d, u)) < (1.0 - 1e-6) * L:
+            continue
+        h = _dot(_add(A, B), axis)
+        if h > best:
+            best, P, Q = h, A, B
+    return P, Q
+
+
+@numba.njit(cache=True)
+def _capsule_hull(a0w, a1w, r, p1, R1, hb, verts, planes, face_verts, edges, dirs, margin, flip,
+                  c_psi, c_n, c_pa, c_pb, start, limit):
+    """Polytope (body 1) vs capsule (body 2, axis a0w a1w), in the polytope's frame: one contact
+    (closest features when apart; separating axes over the faces and the crossings of the edge
+    directions with the axis when the axis meets the polytope)."""
+    f0, nf, e0, ne, d0, nd, v0, nv = hb
+    a = _rot_t(R1, _sub(a0w, p1))
+    b = _rot_t(R1, _sub(a1w, p1))
+    d = _sub(b, a)
+    dlen = _norm(d)
+    # does the axis meet the polytope? (the segment clipped by every face's half-space)
+    t0 = 0.0
+    t1 = 1.0
+    for f in range(f0, f0 + nf):
+        n, off = _face_plane(planes, f)
+        sa = _dot(n, a) - off
+        sb = _dot(n, b) - off
+        if sa > 0.0 and sb > 0.0:
+            t0, t1 = 1.0, 0.0
+            break
+        if sa > 0.0:
+            t0 = max(t0, sa / (sa - sb))
+        elif sb > 0.0:
+            t1 = min(t1, sa / (sa - sb))
+    hit = t0 <= t1
+    n = (0.0, 0.0, 1.0)
+    core = a
+    php = a
+    pcap = a
+    if not hit:
+        best = _INF
+        for end in range(2):
+            y = a if end == 0 else b
+            dist, cp, nl = _point_hull(y, verts, planes, face_verts, edges, hb)
+            if dist < best:
+                best, core, php, n = dist, y, cp, nl
+        for e in range(e0, e0 + ne):
+            P = _vert(verts, edges[e, 0])
+            Q = _vert(verts, edges[e, 1])
+            s, t = _seg_seg(P, Q, a, b)
+            x = _axpy(P, s, _sub(Q, P))
+            y = _axpy(a, t, d)
+            dist = _norm(_sub(y, x))
+            if dist < best:
+                best, core, php = dist, y, x
+                n = _edge_edge_normal(P, Q, a, b, s, t, x, y, dist)
+        if best - r > margin:
+            return 0
+        hit = best <= CORE_TOL
+        if not hit:
+            pcap = _axpy(core, -r, n)
+    if hit:
+        best = -_INF
+        face = f0
+        kind = 0
+        for f in range(f0, f0 + nf):
+            nn, off = _face_plane(planes, f)
+            sep = min(_dot(nn, a), _dot(nn, b)) - off
+            if sep > best:
+                best, face, n = sep, f, nn
+        lo_a, hi_a = _dot_range(verts, v0, nv, n)
+        tol = EDGE_AXIS_TOL * (hi_a - lo_a + dlen)
+        for k in range(d0, d0 + nd):
+            u = _vert(dirs, k)
+            L = _cross(u, d)
+            ln = _norm(L)
+            if ln <= EDGE_PARALLEL * dlen or ln == 0.0:
+                continue
+            L = _scale(L, 1.0 / ln)
+            lo, hi = _dot_range(verts, v0, nv, L)
+            sa = _dot(L, a)
+            sb = _dot(L, b)
+            up = min(sa, sb) - hi
+            down = lo - max(sa, sb)
+            sep, sg = (up, 1.0) if up >= down else (down, -1.0)
+            if sep > best + tol:
+                best, kind, face = sep, 1, k
+                n = _scale(L, sg)
+        if best - r > margin:
+            return 0
+        if kind == 0:
+            nn, off = _face_plane(planes, face)
+            # the deepest point of the part of the axis over the face
+            u0 = 0.0
+            u1 = 1.0
+            k = face_verts[face, 0]
+            for j in range(k):
+                A = _vert(verts, face_verts[face, 1 + j])
+                B = _vert(verts, face_verts[face, 1 + (j + 1) % k])
+                side = _cross(_sub(B, A), nn)
+                sa = _dot(side, _sub(a, A))
+                sb = _dot(side, _sub(b, A))
+                if sa > 0.0 and sb > 0.0:
+                    u0, u1 = 1.0, 0.0
+                    break
+                if sa > 0.0:
+                    u0 = max(u0, sa / (sa - sb))
+                elif sb > 0.0:
+                    u1 = min(u1, sa / (sa - sb))
+            if u0 > u1:
+                u0 = u1 = 0.0 if _dot(nn, a) <= _dot(nn, b) else 1.0
+            te = u0 if _dot(nn, _axpy(a, u0, d)) <= _dot(nn, _axpy(a, u1, d)) else u1
+            core = _axpy(a, te, d)
+            php = _axpy(core, -(_dot(nn, core) - off), nn)
+            T = _capsule_exit(core, _scale(nn, -1.0), a, b, r)
+            pcap = _axpy(core, -T, nn)
+        else:
+            P, Q = _support_edge(verts, edges, e0, ne, _vert(dirs, face), n, _IDENT, _ORIGIN)
+            s, t = _seg_seg(P, Q, a, b)
+            php = _axpy(P, s, _sub(Q, P))
+            core = _axpy(a, t, d)
+            pcap = _axpy(core, -r, n)
+    psi = _dot(_sub(pcap, php), n)
+    if psi > margin or limit < 1:
+        return 0
+    _emit(c_psi, c_n, c_pa, c_pb, start, psi, _rot(R1, n), _add(_rot(R1, php), p1), _add(_rot(R1, pcap), p1), flip)
+    return 1
+
+
+@numba.njit(cache=True)
+def _hull_closest(h1, h2, C, D, verts, planes, face_verts, edges):
+    """Distance, closest points and unit normal (frame 1, from 1 to 2) of two disjoint polytopes;
+    body 2's frame maps into body 1's by y = D + C x. Closest features: a vertex against a face
+    it projects into, or two edges."""
+    best = _INF
+    pa = D
+    pb = D
+    n = (0.0, 0.0, 1.0)
+    for i in range(h2[6], h2[6] + h2[7]):  # vertices of 2 vs faces of 1
+        y = _add(D, _rot(C, _vert(verts, i)))
+        for f in range(h1[0], h1[0] + h1[1]):
+            nn, off = _face_plane(planes, f)
+            s = _dot(nn, y) - off
+            if 0.0 <= s < best and _in_face(y, nn, verts, face_verts, f, 0.0):
+                best, pa, pb, n = s, _axpy(y, -s, nn), y, nn
+    for i in range(h1[6], h1[6] + h1[7]):  # vertices of 1 vs faces of 2 (in frame 2)
+        x = _vert(verts, i)
+        y = _rot_t(C, _sub(x, D))
+        for f in range(h2[0], h2[0] + h2[1]):
+            nn, off = _face_plane(planes, f)
+            s = _dot(nn, y) - off
+            if 0.0 <= s < best and _in_face(y, nn, verts, face_verts, f, 0.0):
+                best, pa, n = s, x, _scale(_rot(C, nn), -1.0)
+                pb = _add(D, _rot(C, _axpy(y, -s, nn)))
+    for j in range(h2[2], h2[2] + h2[3]):
+        U = _add(D, _rot(C, _vert(verts, edges[j, 0])))
+        V = _add(D, _rot(C, _vert(verts, edges[j, 1])))
+        for i in range(h1[2], h1[2] + h1[3]):
+            P = _vert(verts, edges[i, 0])
+            Q = _vert(verts, edges[i, 1])
+            s, t = _seg_seg(P, Q, U, V)
+            x = _axpy(P, s, _sub(Q, P))
+            y = _axpy(U, t, _sub(V, U))
+            dist = _norm(_sub(y, x))
+            if dist < best:
+                best, pa, pb = dist, x, y
+                n = _edge_edge_normal(P, Q, U, V, s, t, x, y, dist)
+    return best, pa, pb, n
+
+
+@numba.njit(cache=True)
+def _hull_hull(p1, R1, h1, s1, p2, R2, h2, s2, verts, planes, face_verts, edges, dirs, margin, flip,
+               c_psi, c_n, c_pa, c_pb, start, limit):
+    """Polytope 1 vs polytope 2 (s1, s2: their sizes, for tolerances). Separating axes in frame 1
+    over the faces of both and the crossings of their edge directions, then contacts: a face
+    axis clips the most opposed face of the other body against the face's side planes (points
+    reduced to 4 like box-box), an edge axis gives one contact at the support edges."""
+    C = _mat_t_mul(R1, R2)  # frame 2 -> frame 1: y = D + C x
+    D = _rot_t(R1, _sub(p2, p1))
+    best = -_INF
+    kind = 0  # 0: face of 1, 1: face of 2, 2: edge-edge
+    idx = np.int64(0)
+    axis = (0.0, 0.0, 1.0)  # frame 1, from 1 to 2
+    for f in range(h1[0], h1[0] + h1[1]):
+        n, off = _face_plane(planes, f)
+        lo, _ = _dot_range(verts, h2[6], h2[7], _rot_t(C, n))
+        sep = lo + _dot(n, D) - off
+        if sep > best:
+            best, kind, idx, axis = sep, 0, f, n
+    for f in range(h2[0], h2[0] + h2[1]):
+        m, off = _face_plane(planes, f)
+        mw = _rot(C, m)
+        lo, _ = _dot_range(verts, h1[6], h1[7], mw)
+        sep = lo - (off + _dot(mw, D))
+        if sep > best:
+            best, kind, idx, axis = sep, 1, f, _scale(mw, -1.0)
+    tol = EDGE_AXIS_TOL * (s1 + s2)
+    ei = np.int64(0)
+    ej = np.int64(0)
+    for i in range(h1[4], h1[4] + h1[5]):
+        u = _vert(dirs, i)
+        for j in range(h2[4], h2[4] + h2[5]):
+            L = _cross(u, _rot(C, _vert(dirs, j)))
+            ln = _norm(L)
+            if ln <= EDGE_PARALLEL:
+                continue
+            L = _scale(L, 1.0 / ln)
+            lo1, hi1 = _dot_range(verts, h1[6], h1[7], L)
+            lo2, hi2 = _dot_range(verts, h2[6], h2[7], _rot_t(C, L))
+            c = _dot(L, D)
+            up = lo2 + c - hi1
+            down = lo1 - (hi2 + c)
+            sep, sg = (up, 1.0) if up >= down else (down, -1.0)
+            if sep > best + tol:
+                best, kind, ei, ej = sep, 2, i, j
+                axis = _scale(L, sg)
+    if best > margin or limit < 1:
+        return 0
+
+    if kind == 2:
+        P, Q = _support_edge(verts, edges, h1[2], h1[3], _vert(dirs, ei), axis, _IDENT, _ORIGIN)
+        U, V = _support_edge(verts, edges, h2[2], h2[3], _rot(C, _vert(dirs, ej)), _scale(axis, -1.0), C, D)
+        s, t = _seg_seg(P, Q, U, V)
+        pa = _axpy(P, s, _sub(Q, P))
+        pb = _axpy(U, t, _sub(V, U))
+        n = axis
+        psi = _dot(_sub(pb, pa), axis)
+        # apart, the axis' separation is the distance only if these edges are the supports
+        # along it (else the supports are vertices) and their closest points are inside both
+        _, hi1 = _dot_range(verts, h1[6], h1[7], axis)
+        lo2, _ = _dot_range(verts, h2[6], h2[7], _rot_t(C, axis))
+        lo2 += _dot(axis, D)
+        slack = EDGE_AXIS_TOL * (s1 + s2)
+        supported = (min(_dot(P, axis), _dot(Q, axis)) >= hi1 - slack
+                     and max(_dot(U, axis), _dot(V, axis)) <= lo2 + slack)
+        if best > 0.0 and not (supported and 0.0 < s < 1.0 and 0.0 < t < 1.0):
+            psi, pa, pb, n = _hull_closest(h1, h2, C, D, verts, planes, face_verts, edges)
+            if psi <= CORE_TOL:
+                n = axis
+        if psi <= margin:
+            _emit(c_psi, c_n, c_pa, c_pb, start, psi, _rot(R1, n), _add(_rot(R1, pa), p1), _add(_rot(R1, pb), p1), flip)
+            return 1
+        return 0
+
+    # a face axis: work in the reference body's frame r; the incident body i maps in by c + M x
+    if kind == 0:
+        hR, hI, M, cI, RR, pR = h1, h2, C, D, R1, p1
+    else:
+        hR, hI, M, cI, RR, pR = h2, h1, _transpose(C), _scale(_rot_t(C, D), -1.0), R2, p2
+    nref, dref = _face_plane(planes, idx)
+    nloc = _rot_t(M, nref)  # the reference normal in the incident frame
+    inc = hI[0]
+    lowest = _INF
+    for f in range(hI[0], hI[0] + hI[1]):
+        m, _ = _face_plane(planes, f)
+        if _dot(m, nloc) < lowest:
+            lowest, inc = _dot(m, nloc), f
+    width = face_verts.shape[1] - 1
+    clip = np.empty((2, 2 * width + 1, 3))
+    buf = np.empty((2 * width + 3, 10))
+    count = face_verts[inc, 0]
+    for c in range(count):
+        y = _add(cI, _rot(M, _vert(verts, face_verts[inc, 1 + c])))
+        for k in range(3):
+            clip[0, c, k] = y[k]
+    cur = np.int64(0)
+    kr = face_verts[idx, 0]
+    for j in range(kr):
+        if count == 0:
+            break
+        A = _vert(verts, face_verts[idx, 1 + j])
+        B = _vert(verts, face_verts[idx, 1 + (j + 1) % kr])
+        side = _cross(_sub(B, A), nref)
+        so = _dot(side, A)
+        nxt = 1 - cur
+        out = np.int64(0)
+        for c in range(count):
+            c2 = c + 1 if c + 1 < count else 0
+            d0 = side[0] * clip[cur, c, 0] + side[1] * clip[cur, c, 1] + side[2] * clip[cur, c, 2] - so
+            d1 = side[0] * clip[cur, c2, 0] + side[1] * clip[cur, c2, 1] + side[2] * clip[cur, c2, 2] - so
+            if d0 <= 0.0:
+                for k in range(3):
+                    clip[nxt, out, k] = clip[cur, c, k]
+                out += 1
+            if (d0 < 0.0 and d1 > 0.0) or (d0 > 0.0 and d1 < 0.0):
+                f = d0 / (d0 - d1)
+                for k in range(3):
+                    clip[nxt, out, k] = clip[cur, c, k] + f * (clip[cur, c2, k] - clip[cur, c, k])
+                out += 1
+        count = out
+        cur = nxt
+    n_ab = _rot(RR, nref) if kind == 0 else _rot(RR, _scale(nref, -1.0))
+    m = np.int64(0)
+    min_sep = _INF
+    for c in range(count):
+        y = (clip[cur, c, 0], clip[cur, c, 1], clip[cur, c, 2])
+        sep = _dot(nref, y) - dref
+        min_sep = min(min_sep, sep)
+        if sep <= margin:
+            yi = _add(_rot(RR, y), pR)
+            yr = _add(_rot(RR, _axpy(y, -sep, nref)), pR)
+            if kind == 0:
+                _store(buf, m, sep, n_ab, yr, yi)
+            else:
+                _store(buf, m, sep, n_ab, yi, yr)
+            m += 1
+    # the incident body's deepest vertex, when it is over the reference face and the clipped
+    # face missed it (the most opposed face need not hold it)
+    yb = cI
+    low = _INF
+    for i in range(hI[6], hI[6] + hI[7]):
+        y = _add(cI, _rot(M, _vert(verts, i)))
+        if _dot(nref, y) < low:
+            low, yb = _dot(nref, y), y
+    sep = low - dref
+    if sep < min_sep - EXACT_TOL and sep <= margin and _in_face(yb, nref, verts, face_verts, idx, EXACT_TOL * (s1 + s2)):
+        min_sep = sep
+        yi = _add(_rot(RR, yb), pR)
+        yr = _add(_rot(RR, _axpy(yb, -sep, nref)), pR)
+        if kind == 0:
+            _store(buf, m, sep, n_ab, yr, yi)
+        else:
+            _store(buf, m, sep, n_ab, yi, yr)
+        m += 1
+    if best > 0.0 and min_sep > best + EXACT_TOL:
+        # apart, and the face points do not realise the axis' separation: the closest features
+        dist, pa, pb, n = _hull_closest(h1, h2, C, D, verts, planes, face_verts, edges)
+        if dist <= CORE_TOL:
+            n = axis
+        if dist <= margin and dist < min_sep - EXACT_TOL:
+            _store(buf, m, dist, _rot(R1, n), _add(_rot(R1, pa), p1), _add(_rot(R1, pb), p1))
+            m += 1
+    return _reduce_emit(buf, m, limit, c_psi, c_n, c_pa, c_pb, start, flip)
+
+
+@numba.njit(cache=True)
+def _collide_hull(ka, pA, RA, ra, hA, sA, kb, pB, RB, rb, hB, sB, verts, planes, face_verts, edges, dirs,
+                  margin, limit, c_psi, c_n, c_pa, c_pb, start):
+    """A pair with a mesh and no plane: hA, hB are (f0, nf, e0, ne, d0, nd, v0, nv); sA, sB the
+    bodies' sizes. The polytope (the mesh, or the box vs a mesh) is body 1."""
+    swapped = kb == SHAPE_MESH and ka != SHAPE_MESH  # body 1 is B
+    if swapped:
+        k2, p1, R1, h1, s1, p2, R2, r2, h2, s2 = ka, pB, RB, hB, sB, pA, RA, ra, hA, sA
+    else:
+        k2, p1, R1, h1, s1, p2, R2, r2, h2, s2 = kb, pA, RA, hA, sA, pB, RB, rb, hB, sB
+    if k2 == SHAPE_SPHERE:
+        return _sphere_hull(_core_point(verts, h2[6], p2, R2), r2, p1, R1, h1, verts, planes, face_verts, edges,
+                            margin, swapped, c_psi, c_n, c_pa, c_pb, start, limit)
+    if k2 == SHAPE_CAPSULE:
+        return _capsule_hull(_core_point(verts, h2[6], p2, R2), _core_point(verts, h2[6] + 1, p2, R2), r2, p1, R1, h1,
+                             verts, planes, face_verts, edges, dirs, margin, swapped, c_psi, c_n, c_pa, c_pb, start, limit)
+    return _hull_hull(p1, R1, h1, s1, p2, R2, h2, s2, verts, planes, face_verts, edges, dirs, margin, swapped,
+                      c_psi, c_n, c_pa, c_pb, start, limit)
+
+
 # ----------------------------------------------------------------------------- entry point
 
 
@@ -1035,8 +1514,8 @@ def collide_pair_3d(S, q, p, margin, c_psi, c_n, c_pa, c_pb, start):
     """Contacts of pair p with psi <= margin, written from index `start` of the output buffers.
 
     Returns how many were written (never more than S.pair_max_contacts[p], nor past the end
-    of the buffers), or -1 if the pair's shape kinds have no compiled test (use
-    `fcl_pair_contacts`). n points from S.pair_a[p] to S.pair_b[p].
+    of the buffers), or -1 if the pair has no compiled test (planar scenes, a mesh or box
+    without hull tables: use `fcl_pair_contacts`). n points from S.pair_a[p] to S.pair_b[p].
 
     A thin entry: it reads the pair's data from S and hands scalars, tuples and only the
     arrays the test needs to `_collide` (a compiled call increments and decrements the
@@ -1047,13 +1526,23 @@ def collide_pair_3d(S, q, p, margin, c_psi, c_n, c_pa, c_pb, start):
         return -1
     A = S.pair_a[p]
     B = S.pair_b[p]
-    if not _compiled(S.kind[A], S.kind[B]):
+    ka = S.kind[A]
+    kb = S.kind[B]
+    if not _compiled(ka, kb, S.hull[A, 1], S.hull[B, 1]):
         return -1
     limit = min(S.pair_max_contacts[p], c_psi.shape[0] - start)
     if limit <= 0:
         return 0
     pA, RA = _pose(S, q, A)
     pB, RB = _pose(S, q, B)
+    if (ka == SHAPE_MESH or kb == SHAPE_MESH) and ka != SHAPE_HALFSPACE and kb != SHAPE_HALFSPACE:
+        return _collide_hull(
+            ka, pA, RA, S.radius[A], (S.hull[A, 0], S.hull[A, 1], S.hull[A, 2], S.hull[A, 3], S.hull[A, 4], S.hull[A, 5],
+                                      S.vstart[A], S.vcount[A]), S.bound_radius[A],
+            kb, pB, RB, S.radius[B], (S.hull[B, 0], S.hull[B, 1], S.hull[B, 2], S.hull[B, 3], S.hull[B, 4], S.hull[B, 5],
+                                      S.vstart[B], S.vcount[B]), S.bound_radius[B],
+            S.verts, S.planes, S.face_verts, S.edges, S.edge_dirs, margin, limit, c_psi, c_n, c_pa, c_pb, start,
+        )
     return _collide(
         S.kind[A], pA, RA, S.radius[A], (S.half_extents[A, 0], S.half_extents[A, 1], S.half_extents[A, 2]),
         (S.hs_normal[A, 0], S.hs_normal[A, 1], S.hs_normal[A, 2]), S.hs_offset[A], S.vstart[A], S.vcount[A],
@@ -1064,11 +1553,16 @@ def collide_pair_3d(S, q, p, margin, c_psi, c_n, c_pa, c_pb, start):
 
 
 @numba.njit(cache=True)
-def _compiled(ka, kb):
-    """Whether a pair of shape kinds has a compiled test (meshes only against planes)."""
+def _compiled(ka, kb, fa, fb):
+    """Whether a pair of shape kinds has a compiled test (fa, fb: the bodies' hull face counts;
+    a mesh or box without hull tables has none, except against a plane)."""
     if ka == SHAPE_HALFSPACE or kb == SHAPE_HALFSPACE:
         return True
-    return SHAPE_SPHERE <= ka < SHAPE_MESH and SHAPE_SPHERE <= kb < SHAPE_MESH
+    if ka < SHAPE_SPHERE or kb < SHAPE_SPHERE:
+        return False
+    if ka == SHAPE_MESH or kb == SHAPE_MESH:
+        return (ka < SHAPE_BOX or fa > 0) and (kb < SHAPE_BOX or fb > 0)
+    return True
 
 
 @numba.njit(cache=True)
@@ -1140,12 +1634,26 @@ def collide_all_3d(S, q, margin, c_psi, c_n, c_pa, c_pb, c_pair, fallback):
     for p in range(S.pair_a.shape[0]):
         A = S.pair_a[p]
         B = S.pair_b[p]
-        fallback[p] = not _compiled(S.kind[A], S.kind[B])
+        ka = S.kind[A]
+        kb = S.kind[B]
+        fallback[p] = not _compiled(ka, kb, S.hull[A, 1], S.hull[B, 1])
         limit = min(S.pair_max_contacts[p], cap - count)
         if fallback[p] or limit <= 0:
             continue
         pA, RA = _pose(S, q, A)
         pB, RB = _pose(S, q, B)
+        if (ka == SHAPE_MESH or kb == SHAPE_MESH) and ka != SHAPE_HALFSPACE and kb != SHAPE_HALFSPACE:
+            k = _collide_hull(
+                ka, pA, RA, S.radius[A], (S.hull[A, 0], S.hull[A, 1], S.hull[A, 2], S.hull[A, 3], S.hull[A, 4], S.hull[A, 5],
+                                          S.vstart[A], S.vcount[A]), S.bound_radius[A],
+                kb, pB, RB, S.radius[B], (S.hull[B, 0], S.hull[B, 1], S.hull[B, 2], S.hull[B, 3], S.hull[B, 4], S.hull[B, 5],
+                                          S.vstart[B], S.vcount[B]), S.bound_radius[B],
+                S.verts, S.planes, S.face_verts, S.edges, S.edge_dirs, margin, limit, c_psi, c_n, c_pa, c_pb, count,
+            )
+            for i in range(count, count + k):
+                c_pair[i] = p
+            count += k
+            continue
         k = _collide(
             S.kind[A], pA, RA, S.radius[A], (S.half_extents[A, 0], S.half_extents[A, 1], S.half_extents[A, 2]),
             (S.hs_normal[A, 0], S.hs_normal[A, 1], S.hs_normal[A, 2]), S.hs_offset[A], S.vstart[A], S.vcount[A],
@@ -1165,7 +1673,10 @@ def collide_all_3d(S, q, margin, c_psi, c_n, c_pa, c_pb, c_pair, fallback):
 def fcl_pair_contacts(scenario, S, q, p, margin):
     """One contact of pair p from python-fcl's signed distance: [(psi, n, pa, pb)] or [] if psi > margin.
 
-    For pairs without a compiled test (meshes). Planes never reach fcl (its distance to a
+    For pairs without a compiled test (none in a spatial scene whose meshes have hull tables,
+    which `compile_scene` always builds: convex meshes are compiled against every shape; this
+    stays as an independent check). Its distance is a GJK upper bound (seen 5e-4 high on
+    mesh-box, more on curved shapes) and its penetration depth good to ~1e-6. Planes never reach fcl (its distance to a
     Halfspace crashes python-fcl 0.7): pairs with a plane use the compiled test.
     """
     a, b = int(S.pair_a[p]), int(S.pair_b[p])

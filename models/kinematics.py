@@ -33,7 +33,7 @@ SHAPE_POINTS = 1  # planar rounded convex core: point, segment or CCW polygon, p
 SHAPE_SPHERE = 2  # spatial: one core point + radius
 SHAPE_CAPSULE = 3  # spatial: segment along body x + radius
 SHAPE_BOX = 4  # spatial: half_extents; verts hold its 8 corners
-SHAPE_MESH = 5  # spatial convex mesh: verts (faces only in the python-fcl fallback)
+SHAPE_MESH = 5  # spatial convex mesh: verts, and hull tables (faces, edges) like boxes
 
 Q_X, Q_Y, Q_Z, Q_ANGLE, Q_QW = 0, 1, 2, 3, 4
 V_X, V_Y, V_Z, V_ANGLE, V_WX = 0, 1, 2, 3, 4
@@ -72,6 +72,14 @@ class SceneData(NamedTuple):
     pair_K: np.ndarray  # float64[np]
     pair_C: np.ndarray  # float64[np]
     pair_max_contacts: np.ndarray  # int64[np] most contacts the pair can produce at once
+    # Convex hulls of boxes and meshes (body frame, from `hull_tables`), for the compiled
+    # polytope tests of meshes. hull[b] = (first face, faces, first edge, edges, first edge
+    # direction, edge directions) into the next four tables; zero counts for other shapes.
+    hull: np.ndarray  # int64[nb, 6]
+    planes: np.ndarray  # float64[nf, 4] outward unit face normal n and offset d: the body is n.x <= d
+    face_verts: np.ndarray  # int64[nf, 1 + w]: vertex count k, then k indices into verts, counterclockwise about n
+    edges: np.ndarray  # int64[ne, 2] end points of each hull edge, indices into verts
+    edge_dirs: np.ndarray  # float64[nd, 3] distinct unit edge directions (up to sign)
     # The same data packed into four tables for the hot paths: numba increfs every array of
     # a tuple that crosses a function boundary, so hot code passes these few instead of S.
     bi: np.ndarray  # int64[nb, BI_COLUMNS]: kind, vstart, vcount, qmap (8), vmap (7)
@@ -98,6 +106,66 @@ def _max_contacts(kind_a: int, count_a: int, kind_b: int, count_b: int, dimensio
     return 4
 
 
+#: Hull triangles whose unit normals differ by less than this (and offsets relative to the
+#: size) are one face; edge directions closer than this are one direction.
+COPLANAR_TOL = 1e-9
+
+
+def hull_tables(core: np.ndarray):
+    """Faces, edges and distinct edge directions of the convex hull of core points (k, 3).
+
+    Returns (planes (nf, 4): outward unit normal, offset; loops: list of vertex index lists,
+    counterclockwise about the normal; edges (ne, 2); dirs (nd, 3)), with indices into core.
+    Coplanar hull triangles are merged, so a quad face gives one plane and four edges.
+    """
+    from scipy.spatial import ConvexHull
+
+    core = np.asarray(core, float)
+    hull = ConvexHull(core)
+    scale = float(np.max(np.linalg.norm(core - core.mean(axis=0), axis=1)))
+    eq = hull.equations  # n.x + c <= 0 inside
+    nt = len(hull.simplices)
+    parent = list(range(nt))
+
+    def find(i):
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    for i in range(nt):
+        for j in hull.neighbors[i]:
+            if np.dot(eq[i, :3], eq[j, :3]) > 1.0 - COPLANAR_TOL and abs(eq[i, 3] - eq[j, 3]) <= COPLANAR_TOL * scale:
+                parent[find(i)] = find(j)
+    groups: dict[int, list[int]] = {}
+    for i in range(nt):
+        groups.setdefault(find(i), []).append(i)
+    planes, loops = [], []
+    for tris in groups.values():
+        n = eq[tris, :3].mean(axis=0)
+        n /= np.linalg.norm(n)
+        idx = sorted({int(v) for t in tris for v in hull.simplices[t]})
+        pts = core[idx]
+        d = float(np.max(pts @ n))
+        # counterclockwise about n: angles in a basis (t, o) with t x o = n
+        t = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
+        t /= np.linalg.norm(t)
+        o = np.cross(n, t)
+        rel = pts - pts.mean(axis=0)
+        order = np.argsort(np.arctan2(rel @ o, rel @ t))
+        planes.append([*n, d])
+        loops.append([idx[k] for k in order])
+    edges = sorted({tuple(sorted((lp[k], lp[(k + 1) % len(lp)]))) for lp in loops for k in range(len(lp))})
+    dirs: list[np.ndarray] = []
+    for a, b in edges:
+        u = core[b] - core[a]
+        u = u / np.linalg.norm(u)
+        if not any(abs(np.dot(u, w)) > 1.0 - COPLANAR_TOL for w in dirs):
+            dirs.append(u)
+    return (np.array(planes, float).reshape(-1, 4), loops, np.array(edges, np.int64).reshape(-1, 2),
+            np.array(dirs, float).reshape(-1, 3))
+
+
 def compile_scene(scenario: Scenario) -> SceneData:
     """Pack a validated scenario into arrays for the compiled kernels."""
     dim = scenario.dimension
@@ -120,6 +188,11 @@ def compile_scene(scenario: Scenario) -> SceneData:
     bound = np.zeros(nb)
     q_index = {name: i for i, name in enumerate(scenario.coordinates)}
     v_index = {name: i for i, name in enumerate(scenario.velocities)}
+    hull = np.zeros((nb, 6), np.int64)
+    planes_list: list[np.ndarray] = []
+    loops_list: list[list[int]] = []
+    edges_list: list[np.ndarray] = []
+    dirs_list: list[np.ndarray] = []
     offset = 0
     for b, body in enumerate(bodies):
         g = scenario.geometries[body.name]
@@ -136,6 +209,14 @@ def compile_scene(scenario: Scenario) -> SceneData:
             if body.shape.type == "box":
                 half_extents[b] = 0.5 * np.asarray(body.shape.size)
         radius[b] = g.radius
+        if dim == 3 and kind[b] in (SHAPE_BOX, SHAPE_MESH):
+            planes, loops, edges, dirs = hull_tables(core)
+            hull[b] = [sum(map(len, planes_list)), len(planes), sum(map(len, edges_list)), len(edges),
+                       sum(map(len, dirs_list)), len(dirs)]
+            planes_list.append(planes)
+            loops_list += [[offset + k for k in lp] for lp in loops]
+            edges_list.append(edges + offset)
+            dirs_list.append(dirs)
         vstart[b], vcount[b] = offset, len(core)
         verts_list.append(core)
         offset += len(core)
@@ -177,6 +258,11 @@ def compile_scene(scenario: Scenario) -> SceneData:
         [_max_contacts(kind[a], vcount[a], kind[b], vcount[b], dim) for a, b in zip(pair_a, pair_b)], np.int64
     )
     verts = np.concatenate(verts_list) if verts_list else np.zeros((0, dim))
+    width = max((len(lp) for lp in loops_list), default=0)
+    face_verts = np.zeros((len(loops_list), 1 + width), np.int64)
+    for f, lp in enumerate(loops_list):
+        face_verts[f, 0] = len(lp)
+        face_verts[f, 1:1 + len(lp)] = lp
     bi = np.concatenate([kind[:, None], vstart[:, None], vcount[:, None], qmap, vmap], axis=1).astype(np.int64)
     normals3 = np.zeros((nb, 3))
     normals3[:, :dim] = hs_normal
@@ -210,6 +296,11 @@ def compile_scene(scenario: Scenario) -> SceneData:
         pair_K=np.array([p.K for p in pairs], float),
         pair_C=np.array([p.C for p in pairs], float),
         pair_max_contacts=max_contacts,
+        hull=hull,
+        planes=np.ascontiguousarray(np.concatenate(planes_list) if planes_list else np.zeros((0, 4))),
+        face_verts=face_verts,
+        edges=np.ascontiguousarray(np.concatenate(edges_list) if edges_list else np.zeros((0, 2), np.int64)),
+        edge_dirs=np.ascontiguousarray(np.concatenate(dirs_list) if dirs_list else np.zeros((0, 3))),
         bi=np.ascontiguousarray(bi),
         bf=np.ascontiguousarray(bf),
         pi=np.ascontiguousarray(

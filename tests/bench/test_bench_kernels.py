@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from models.contact import contact_frames, detect_planar, jacobian_packed, tangents_packed
+from models.contact3d import collide_pair_3d
 from models.lcp import lemke_kernel, pgs_kernel
 from models.rungs import compiled
 from models.scenario import load_scenario
@@ -124,3 +125,60 @@ def test_lcp(benchmark, method, n):
     loop(M, q.copy(), 2)
     benchmark(loop, M, q.copy(), calls)
     benchmark.extra_info["per_call_us"] = benchmark.stats.stats.median / calls * 1e6
+
+
+@numba.njit(cache=True)
+def _collide_loop(S, q, p, margin, calls):
+    cap = 8
+    c_psi = np.zeros(cap)
+    c_n, c_pa, c_pb = np.zeros((cap, 3)), np.zeros((cap, 3)), np.zeros((cap, 3))
+    total = 0
+    for k in range(calls):
+        q[0] += 1e-15  # keep the compiler from hoisting the work
+        total += collide_pair_3d(S, q, p, margin, c_psi, c_n, c_pa, c_pb, 0)
+    return total
+
+
+def box_wedge_poses():
+    """box_push_3d with the box against the wedge: (name, q) for a face contact (the box's +x
+    face 0.1 mm into the wedge's back face, 4 contacts), the tilted box's face 0.1 mm into the
+    slope, a vertical box edge 0.2 mm into the back face, and apart edge to edge (closest
+    features)."""
+    scenario = load_scenario(SCENARIOS / "box_push_3d.toml")
+    q0 = np.array(scenario.start, float)
+    out = []
+
+    def pose(x, y, z, quat):
+        q = q0.copy()
+        q[0:3] = [x, y, z]
+        q[3:7] = np.asarray(quat) / np.linalg.norm(quat)
+        return q
+
+    yaw = lambda a: [np.cos(a / 2), 0.0, 0.0, np.sin(a / 2)]
+    out.append(("face", pose(0.35 - 0.1 + 1e-4, -0.3, 0.05, [1.0, 0, 0, 0])))
+    # tilted above the slope (normal (0.6, 0, 0.8)), 0.1 mm into it
+    out.append(("tilted on slope", pose(0.47 - 0.6 * (0.0362105 + 1e-4), -0.35, 0.25 - 0.8 * (0.0362105 + 1e-4), [0.9, 0.2, -0.3, 0.1])))
+    out.append(("edge", pose(0.35 - 0.1 * np.sqrt(2) + 2e-4, -0.35, 0.06, yaw(np.pi / 4))))
+    # the box's corner edge 0.3 mm off the wedge's vertical edge at (0.35, -0.2) in x and y
+    out.append(("apart", pose(0.25 - 3e-4, -0.1 + 3e-4, 0.05, [1.0, 0, 0, 0])))
+    return scenario, out
+
+
+def test_mesh_box_collide(benchmark):
+    import time
+
+    from models.kinematics import compile_scene
+
+    scenario, poses = box_wedge_poses()
+    S = compile_scene(scenario)
+    names = [b.name for b in scenario.spec.bodies]
+    p = next(i for i, (a, b) in enumerate(zip(S.pair_a, S.pair_b)) if {names[a], names[b]} == {"box", "wedge"})
+    per_call = {}
+    for name, q in poses:
+        _collide_loop(S, q.copy(), p, 1e-2, 10)
+        t0 = time.perf_counter()
+        _collide_loop(S, q.copy(), p, 1e-2, CALLS)
+        per_call[name] = (time.perf_counter() - t0) / CALLS * 1e6
+    q = poses[0][1]
+    benchmark(lambda: _collide_loop(S, q.copy(), p, 1e-2, CALLS))
+    benchmark.extra_info["per_call_us"] = per_call
