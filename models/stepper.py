@@ -69,8 +69,10 @@ ZERO_COLUMN = 1e-12
 PIVOTS_PER_VARIABLE = 50
 #: An LCP solution is accepted while its recomputed residual is below this.
 LCP_TOLERANCE = 1e-7
-#: Relative diagonal added to the contact rows when Lemke fails on a singular (redundant) LCP.
+#: Relative diagonal added to the contact rows when Lemke fails on a singular (redundant) LCP;
+#: each further retry adds 100 times more, up to LCP_REGULARIZATION * 100**(steps - 1) = 1e-5.
 LCP_REGULARIZATION = 1e-9
+LCP_REGULARIZATION_STEPS = 3
 #: A state entry above this in magnitude counts as diverged.
 DIVERGENCE_LIMIT = 1e10
 
@@ -470,11 +472,16 @@ def _contact_solve(compliant, directions, spatial, h, A, Ainv, nu_free, active, 
         qlcp /= scale
     z, w, status, pivots = lemke_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1))
     residual = complementarity_residual(Mlcp, qlcp, z)
-    if (status != STATUS_SOLVED and status != STATUS_SOLVED_INACCURATE) or not (residual <= LCP_TOLERANCE):
+    added = 0.0
+    for k in range(LCP_REGULARIZATION_STEPS):
+        if (status == STATUS_SOLVED or status == STATUS_SOLVED_INACCURATE) and residual <= LCP_TOLERANCE:
+            break
         # redundant rigid contacts make M singular; a tiny compliance on the contact rows
-        # (LCP_REGULARIZATION, relative) restores a unique solution
+        # (relative: LCP_REGULARIZATION, then 100 times more per retry) restores a unique solution
+        target = LCP_REGULARIZATION * 100.0**k
         for r in range(nc + nd):
-            Mlcp[r, r] += LCP_REGULARIZATION
+            Mlcp[r, r] += target - added
+        added = target
         z, w, status, more = lemke_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1))
         pivots += more
         residual = complementarity_residual(Mlcp, qlcp, z)

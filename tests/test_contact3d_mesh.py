@@ -426,7 +426,8 @@ def test_rollout_near_the_wedge_is_no_longer_an_unsupported_pair():
     assert out.t > 1.431 + 0.1
 
 
-@pytest.mark.xfail(strict=True, reason="box-table-pusher contact LCP fails at t = 1.762 (not a mesh pair; see STOPPED_AT_THE_WEDGE)")
 def test_rollout_near_the_wedge_ends_ok():
+    """The box-table-pusher LCP that failed at t = 1.762 is solved by the regularisation
+    ladder (models.stepper: LCP_REGULARIZATION_STEPS)."""
     scenario, out = _box_push(*STOPPED_AT_THE_WEDGE)
     assert out.status == "ok"
