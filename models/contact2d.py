@@ -347,6 +347,22 @@ def _core_vs_core(bi, bf, verts, poses, a, b, margin, c_psi, c_n, c_pa, c_pb, st
         _write(c_psi, c_n, c_pa, c_pb, start, psi_core - ra - rb, nx, ny,
                cpx + ra * nx, cpy + ra * ny, cqx - rb * nx, cqy - rb * ny)
         count = 1
+    elif psi_core > TINY:
+        # apart, every clipped point lies at least the exact distance from the reference face;
+        # its closest one may lie farther when the closest features are not the clipped ones
+        # (a vertex beside the face): that point takes the exact distance, its incident point
+        # moved along the normal, so that the manifold's smallest psi is the signed distance
+        k = start
+        for j in range(start + 1, start + count):
+            if c_psi[j] < c_psi[k]:
+                k = j
+        exact = psi_core - ra - rb
+        if exact < c_psi[k]:
+            c_psi[k] = exact
+            if ref_is_a:
+                c_pb[k, 0], c_pb[k, 1] = c_pa[k, 0] + exact * c_n[k, 0], c_pa[k, 1] + exact * c_n[k, 1]
+            else:
+                c_pa[k, 0], c_pa[k, 1] = c_pb[k, 0] - exact * c_n[k, 0], c_pb[k, 1] - exact * c_n[k, 1]
     return count
 
 

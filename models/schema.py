@@ -357,6 +357,7 @@ class RungSpec(Strict):
         None, description="duration of one planner control, s (default: ladder.control_period)"
     )
     time_limit: Positive | None = Field(None, description="planning time, s (default: ladder's)")
+    iterations: Annotated[int, Field(gt=0)] | None = Field(None, description="planner iterations of this rung (default: ladder's)")
     planner: Literal[PLANNERS] | None = None  # type: ignore[valid-type]
     theta: Annotated[Num, Field(ge=0, le=1)] = Field(
         1.0, description="theta-rule weight: 1 = semi-implicit (paper's scheme)"
@@ -371,6 +372,7 @@ class LadderSpec(Strict):
     planner: Literal[PLANNERS] = "RRT"  # type: ignore[valid-type]
     seed: Annotated[int, Field(ge=0)] = 0
     time_limit: Positive = Field(description="default planning time per rung, s")
+    iterations: Annotated[int, Field(gt=0)] = Field(2000, description="default planner iterations per rung: the reproducible budget")
     control_period: Positive = Field(0.05, description="default duration of one control, s")
 
 
@@ -381,7 +383,9 @@ class ExpectSpec(Strict):
         default_factory=dict, description="outcome of the task's policy under each named rung"
     )
     plan: bool | None = Field(None, description="true: `ladder plan` must find a plan that holds at the top rung")
-    plan_iterations: Annotated[int, Field(gt=0)] = Field(2000, description="planner budget per rung for the plan check")
+    plan_iterations: Annotated[int, Field(gt=0)] | None = Field(
+        None, description="planner iterations per rung for the plan check (default: the ladder's budgets)"
+    )
 
 
 class ScenarioSpec(Strict):

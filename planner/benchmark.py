@@ -26,7 +26,7 @@ class Run:
     rungs: str  # how each rung ended
 
 
-def ladder_vs_flat(scenario: Scenario, seeds, *, iterations: int = 2000, rungs: list[str] | None = None,
+def ladder_vs_flat(scenario: Scenario, seeds, *, iterations: int | None = None, rungs: list[str] | None = None,
                    planner: str | None = None, progress=None) -> dict:
     """Both modes on each seed; see the module docstring. Returns runs and a summary."""
     from planner.ladder import assess, run_ladder

@@ -85,7 +85,8 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument("--rungs", help="comma-separated rungs (default: the scenario's ladder)")
     plan.add_argument("--top", metavar="RUNG", help="stop at this rung")
     plan.add_argument("--seed", type=int, help="seed for OMPL's and our RNG (default: the scenario's)")
-    plan.add_argument("--iterations", type=int, default=2000, help="planner iterations per rung (the budget; default 2000)")
+    plan.add_argument("--iterations", type=int,
+                      help="planner iterations per rung (the budget; default: the scenario's, [ladder] iterations = 2000 unless set)")
     plan.add_argument("--planner", choices=["RRT", "KPIECE1", "EST"], help="control planner (default: the scenario's)")
     plan.add_argument("--time-limit", type=float, help="wall-clock cap per rung in seconds (plans are then not reproducible)")
     plan.add_argument("--flat", action="store_true", help="plan directly at the top rung with the same budget (the baseline)")
@@ -303,19 +304,20 @@ def cmd_plan(args: argparse.Namespace) -> int:
     if problems:
         raise ScenarioError(scenario.path, problems)
 
-    from planner.ladder import run_ladder, step_for
+    from planner.ladder import iterations_for, run_ladder, step_for
     from planner.plots import plot_rollouts
     from models.rungs import rung_for
 
     live = sys.stderr.isatty() and not args.json
-    budget = args.iterations * (len(names) if args.flat else 1)
+    budgets = {n: args.iterations if args.iterations is not None else iterations_for(scenario, n) for n in names}
+    flat_budget = sum(budgets.values())
 
     def progress(name: str, iterations: int, propagations: int) -> None:
         """One live line on a terminal (stderr); one line per rung otherwise."""
         if args.json:
             return
         if live:
-            print(f"\rplanning {name}: {iterations}/{budget} iterations, {propagations} propagations   ", end="", file=sys.stderr, flush=True)
+            print(f"\rplanning {name}: {iterations}/{flat_budget if args.flat else budgets.get(name, 0)} iterations, {propagations} propagations   ", end="", file=sys.stderr, flush=True)
         elif iterations == 0:
             print(f"planning: {name} ...", file=sys.stderr, flush=True)
 

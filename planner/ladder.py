@@ -87,7 +87,7 @@ def run_ladder(
     *,
     rungs: list[str] | None = None,
     seed: int | None = None,
-    iterations: int = 2000,
+    iterations: int | None = None,
     progress=None,
     seeded: bool = True,
     guided: bool = True,
@@ -99,15 +99,18 @@ def run_ladder(
 
     seeded: replanning roots the tree at the previous plan's states replayed under the rung.
     guided: replanning RRT / EST sample near the previous plan's configurations.
-    flat: plan directly at the last rung, with the budget of the whole ladder (iterations and
-    time limit times the number of rungs): the baseline.
+    iterations: planner iterations per rung; None: each rung's budget from the scenario
+    (`iterations` of the rung, else of [ladder], 2000 by default).
+    flat: plan directly at the last rung, with the budget of the whole ladder (the sum of the
+    rungs' iterations, the time limit times the number of rungs): the baseline.
     progress: called as progress(rung, iterations, propagations) while a rung plans.
     """
     check_start(scenario)
     spec = scenario.spec.ladder
     names = rungs or [r.model for r in spec.rungs]
+    budgets = {name: iterations if iterations is not None else iterations_for(scenario, name) for name in names}
     if flat:
-        iterations *= len(names)
+        budgets = {names[-1]: sum(budgets.values())}
         time_limit = None if time_limit is None else time_limit * len(names)
         names = names[-1:]
     seed = spec.seed if seed is None else seed
@@ -118,7 +121,7 @@ def run_ladder(
             progress(name, 0, 0)
         rung = rung_for(scenario, name)
         if not rung.propagates:
-            reports.append(_geometric(scenario, seed, iterations, planner))
+            reports.append(_geometric(scenario, seed, budgets[name], planner))
             previous = reports[-1] if reports[-1].durations else None
             continue
         rung_spec = next((r for r in spec.rungs if r.model == name), None)
@@ -147,7 +150,7 @@ def run_ladder(
             seeds, prefix_controls, prefix_durations = replay.states, replay.controls, np.array(replay.durations)
         # the geometric path moves passive bodies on their own: its states are no guide for physics
         guide = np.array(previous.states) if previous is not None and previous.states and guided and previous.rung != "geometric" else None
-        plan = plan_control(scenario, rung, start, h=h, control_period=period, seed=seed, iterations=iterations,
+        plan = plan_control(scenario, rung, start, h=h, control_period=period, seed=seed, iterations=budgets[name],
                             planner=planner or (rung_spec.planner if rung_spec and rung_spec.planner else spec.planner),
                             extra_starts=seeds, guide=guide, time_limit=time_limit,
                             progress=(lambda i, n, _name=name: progress(_name, i, n)) if progress else None)
@@ -207,6 +210,12 @@ def _same_physics(scenario: Scenario, previous: RungReport, name: str) -> str:
         return ""
     return (f"no contact carries force along the plan under {previous.rung} at the same step, and without contact force "
             f"{name} is the same model: the plan holds as it is")
+
+
+def iterations_for(scenario: Scenario, name: str) -> int:
+    """The rung's planner budget in iterations: the scenario's rung entry, else its ladder's."""
+    rung_spec = next((r for r in scenario.spec.ladder.rungs if r.model == name), None)
+    return rung_spec.iterations if rung_spec and rung_spec.iterations else scenario.spec.ladder.iterations
 
 
 def step_for(scenario: Scenario, name: str) -> float:

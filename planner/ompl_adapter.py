@@ -2,8 +2,11 @@
 
 An OMPL state is the rung's whole state flattened: [q, nu, q_ref, delta_n, delta_t, flag],
 where flag records how the rollout that produced it ended (0 running, 1 goal, 2 unsafe,
-3 numerical failure). The state space is a compound of q (weight 1) and the rest (weight
-1e-6), so nearest neighbours are found in configuration space. One propagate call runs one
+3 numerical failure). The state space is a compound of the steered coordinates of q (weight
+1) and the rest (weight 1e-6), so nearest neighbours are found in the part of configuration
+space the planner can steer (`steered_coordinates`: in a spatial scene the height and
+orientation of a passive body only follow from contact, and uniform samples of them would
+swamp the metric). One propagate call runs one
 control period of physics steps in one compiled rollout (OMPL-CRIB section 8: coarse steps
 keep the Python callback cost small). Validity: flag is neither unsafe nor failure, and q is
 in bounds. The goal region's distance is 0 exactly on states whose rollout reached the goal.
@@ -102,10 +105,29 @@ def _configuration_bounds(ob, scenario: Scenario, q0: np.ndarray):
     return bounds
 
 
+#: Coordinates of a passive body in a spatial scene that the planner does not steer toward:
+#: its height and its orientation quaternion follow from contact (resting, tipping).
+UNSTEERED_DOFS = ("z", "qw", "qx", "qy", "qz")
+
+
+def steered_coordinates(scenario: Scenario) -> list[int]:
+    """Indices of q the planners sample and measure distance in: every coordinate of a planar
+    scene; in a spatial scene all but a passive body's z and orientation (UNSTEERED_DOFS),
+    which keep their start values in the geometric rung and weigh nothing in the control
+    planners' metric."""
+    if scenario.dimension == 2:
+        return list(range(len(scenario.coordinates)))
+    return [i for i, n in enumerate(scenario.coordinates)
+            if n in scenario.actuated or n.rsplit(".", 1)[1] not in UNSTEERED_DOFS]
+
+
 def _projection_coordinates(scenario: Scenario, most: int = 3) -> list[int]:
-    """Indices of up to `most` translational coordinates, passive bodies first."""
-    passive = [i for i, n in enumerate(scenario.coordinates) if n not in scenario.actuated and n.split(".")[1] in ("x", "y", "z")]
-    active = [i for i, n in enumerate(scenario.coordinates) if n in scenario.actuated]
+    """Positions in the steered coordinates (steered_coordinates) of up to `most`
+    translational coordinates, passive bodies first."""
+    steered = steered_coordinates(scenario)
+    names = [scenario.coordinates[i] for i in steered]
+    passive = [k for k, n in enumerate(names) if n not in scenario.actuated and n.split(".")[1] in ("x", "y", "z")]
+    active = [k for k, n in enumerate(names) if n in scenario.actuated]
     return (passive + active)[:most] or [0]
 
 
@@ -146,11 +168,19 @@ def plan_control(
     ou.RNG.setSeed(int(seed) + 1)  # before any planner or sampler exists; OMPL wants > 0
     sizes = _layout(scenario, start)
     nq = sizes[0]
-    n_aux = sum(sizes[1:]) + 1
+    steered = np.array(steered_coordinates(scenario), dtype=int)
+    unsteered = np.array([i for i in range(nq) if i not in set(steered.tolist())], dtype=int)
+    ns = len(steered)
+    n_aux = len(unsteered) + sum(sizes[1:]) + 1  # the unsteered coordinates lead the auxiliary part
+    q_low, q_high = configuration_limits(scenario, start.q)
 
     space = ob.CompoundStateSpace()
-    qspace = ob.RealVectorStateSpace(nq)
-    qspace.setBounds(_configuration_bounds(ob, scenario, start.q))
+    qspace = ob.RealVectorStateSpace(ns)
+    qbounds = ob.RealVectorBounds(ns)
+    for k, i in enumerate(steered):
+        qbounds.setLow(k, float(q_low[i]))
+        qbounds.setHigh(k, float(q_high[i]))
+    qspace.setBounds(qbounds)
     aux = ob.RealVectorStateSpace(n_aux)
     aux.setBounds(-1e9, 1e9)
     space.addSubspace(qspace, 1.0)
@@ -193,21 +223,32 @@ def plan_control(
     si.setMinMaxControlDuration(1, MAX_CONTROL_PERIODS)
     counter = {"propagations": 0, "failures": 0}
 
+    nu_ = len(unsteered)
+    n_flat = nq + n_aux - nu_  # the flattened rung state (flatten)
+
     def read(s) -> np.ndarray:
-        x = np.empty(nq + n_aux)
+        """The flattened rung state held by an OMPL state."""
+        x = np.empty(n_flat)
         q, a = s[0], s[1]
-        for i in range(nq):
-            x[i] = q[i]
-        for i in range(n_aux):
-            x[nq + i] = a[i]
+        for k in range(ns):
+            x[steered[k]] = q[k]
+        for k in range(nu_):
+            x[unsteered[k]] = a[k]
+        for i in range(n_aux - nu_):
+            x[nq + i] = a[nu_ + i]
         return x
 
     def write(s, x: np.ndarray) -> None:
         q, a = s[0], s[1]
-        for i in range(nq):
-            q[i] = float(x[i])
-        for i in range(n_aux):
-            a[i] = float(x[nq + i])
+        for k in range(ns):
+            q[k] = float(x[steered[k]])
+        for k in range(nu_):
+            a[k] = float(x[unsteered[k]])
+        for i in range(n_aux - nu_):
+            a[nu_ + i] = float(x[nq + i])
+
+    def q_of(s) -> np.ndarray:
+        return read(s)[:nq]
 
     def propagate(s, control, duration, result):
         counter["propagations"] += 1
@@ -230,14 +271,19 @@ def plan_control(
 
     def valid(s) -> bool:
         flag = s[1][n_aux - 1]
-        return bool(flag != FLAG_UNSAFE and flag != FLAG_FAILED and qspace.satisfiesBounds(s[0]))
+        if flag == FLAG_UNSAFE or flag == FLAG_FAILED or not qspace.satisfiesBounds(s[0]):
+            return False
+        for k in range(nu_):
+            v = s[1][k]
+            if not q_low[unsteered[k]] <= v <= q_high[unsteered[k]]:
+                return False
+        return True
 
     si.setStatePropagator(propagate)
     si.setStateValidityChecker(valid)
 
     guide_q = None if guide is None or len(guide) == 0 else np.asarray(guide, float).reshape(-1, nq)
     rng = np.random.default_rng(int(seed))
-    q_low, q_high = configuration_limits(scenario, start.q)
     spread = GUIDE_SPREAD * (q_high - q_low)
     blank = flatten(start)[nq:]
     blank[:] = 0.0
@@ -247,7 +293,7 @@ def plan_control(
             return 0.0
         if goal_distance is None:
             return 1.0
-        return float(1e-6 + goal_distance(np.array([s[0][i] for i in range(nq)])))
+        return float(1e-6 + goal_distance(q_of(s)))
 
     class Goal(ob.GoalRegion):
         def __init__(self, si_):
@@ -320,7 +366,7 @@ def plan_control(
     path = ss.getSolutionPath()
     controls = np.array([[c[j] for j in range(na)] for c in path.getControls()]).reshape(-1, na)
     durations = np.array(path.getControlDurations(), dtype=float)
-    states = np.array([[s[0][i] for i in range(nq)] for s in path.getStates()])
+    states = np.array([q_of(s) for s in path.getStates()])
     first = read(path.getState(0))
     start_index = int(np.argmin([np.max(np.abs(first - r)) for r in roots]))
     result = ControlPlan(controls, durations, states, exact, counter["propagations"], done["iterations"], start_index,
@@ -340,7 +386,8 @@ class GeometricPlan:
 
 def plan_geometric(scenario: Scenario, *, seed: int, iterations: int, planner: str = "RRTConnect") -> GeometricPlan:
     """The geometric rung (eq. 9): a path in the C-space of all free DOFs whose states do not
-    penetrate and are not unsafe, ending in the goal set.
+    penetrate and are not unsafe, ending in the goal set. In a spatial scene a passive body's
+    height and orientation stay at their start values (steered_coordinates): it rests.
 
     The goal set is thin (touching within a tolerance), so a tree rarely lands in it by
     chance: goal states are made by projection (`goal_samples`), and the planner (RRTConnect
@@ -356,23 +403,31 @@ def plan_geometric(scenario: Scenario, *, seed: int, iterations: int, planner: s
 
     ou.setLogLevel(ou.LOG_NONE)
     ou.RNG.setSeed(int(seed) + 1)
-    nq = len(scenario.coordinates)
     task = scenario.spec.task
-    space = ob.RealVectorStateSpace(nq)
-    space.setBounds(_configuration_bounds(ob, scenario, scenario.start))
+    steered = steered_coordinates(scenario)  # the others keep their start values
+    ns = len(steered)
+    space = ob.RealVectorStateSpace(ns)
     low, high = configuration_limits(scenario, scenario.start)
+    bounds = ob.RealVectorBounds(ns)
+    for k, i in enumerate(steered):
+        bounds.setLow(k, float(low[i]))
+        bounds.setHigh(k, float(high[i]))
+    space.setBounds(bounds)
     counter = {"checks": 0}
+    x = np.array(scenario.start, float)
 
     def q_of(s) -> np.ndarray:
-        return np.array([s[i] for i in range(nq)])
+        q = np.array(scenario.start, float)
+        for k, i in enumerate(steered):
+            q[i] = s[k]
+        return q
 
     valid_q = geometric_checker(scenario, low, high)
-    x = np.empty(nq)
 
     def valid(s) -> bool:
         counter["checks"] += 1
-        for i in range(nq):
-            x[i] = s[i]
+        for k, i in enumerate(steered):
+            x[i] = s[k]
         return valid_q(x)
 
     ss = og.SimpleSetup(space)
@@ -416,8 +471,8 @@ def plan_geometric(scenario: Scenario, *, seed: int, iterations: int, planner: s
                     pool.append(q)
             q = pool[self.drawn % len(pool)]
             self.drawn += 1
-            for i in range(nq):
-                s[i] = float(q[i])
+            for k, i in enumerate(steered):
+                s[k] = float(q[i])
 
         def maxSampleCount(self):
             return GOAL_POOL
@@ -426,8 +481,8 @@ def plan_geometric(scenario: Scenario, *, seed: int, iterations: int, planner: s
             return True
 
     start = space.allocState()
-    for i in range(nq):
-        start[i] = float(scenario.start[i])
+    for k, i in enumerate(steered):
+        start[k] = float(scenario.start[i])
     ss.setStartState(start)
     if pool:
         ss.setGoal(SampledGoal(si))
@@ -473,7 +528,9 @@ class GoalSampler:
 
     def __init__(self, scenario: Scenario, rng: np.random.Generator, low: np.ndarray, high: np.ndarray, valid) -> None:
         self.scenario, self.rng, self.low, self.high, self.valid = scenario, rng, low, high, valid
-        self.movable = [i for i, n in enumerate(scenario.coordinates) if n.rsplit(".", 1)[1] in ("x", "y", "z", "theta", "yaw")]
+        steered = set(steered_coordinates(scenario))
+        self.movable = [i for i, n in enumerate(scenario.coordinates)
+                        if i in steered and n.rsplit(".", 1)[1] in ("x", "y", "z", "theta", "yaw")]
 
     def _constraints(self, node, boxes, touches) -> None:
         from models.predicates import _pair_index

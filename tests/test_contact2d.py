@@ -4,6 +4,7 @@ differences and rigid-body point velocities, manifolds against closed forms."""
 from __future__ import annotations
 
 import itertools
+import zlib
 
 import numpy as np
 import pytest
@@ -37,7 +38,7 @@ def random_q(rng):
 @pytest.mark.parametrize("a, b", PAIRS, ids=lambda x: x)
 def test_min_psi_matches_reference_on_random_touching_and_penetrating_poses(tmp_path, a, b):
     scenario, S = pair_scene(tmp_path, a, b)
-    rng = np.random.default_rng(hash((a, b)) % 2**32)
+    rng = np.random.default_rng(zlib.crc32(f"{a}-{b}".encode()))  # not hash(): salted per process
     checked = 0
     for _ in range(120):
         q = random_q(rng)
