@@ -8,8 +8,10 @@ space the planner can steer (`steered_coordinates`: in a spatial scene the heigh
 orientation of a passive body only follow from contact, and uniform samples of them would
 swamp the metric). One propagate call runs one
 control period of physics steps in one compiled rollout (OMPL-CRIB section 8: coarse steps
-keep the Python callback cost small). Validity: flag is neither unsafe nor failure, and q is
-in bounds. The goal region's distance is 0 exactly on states whose rollout reached the goal.
+keep the Python callback cost small). Validity: flag is neither unsafe nor failure, q is in
+bounds, and no drive is wound up (its reference leads its position by more than a control
+period of full-speed travel: it is jammed, and the spring released later would throw what it
+touches; kinematic plans that jam a pusher against a wall failed this way under dynamics). The goal region's distance is 0 exactly on states whose rollout reached the goal.
 
 Determinism (OMPL-CRIB section 6): the seed is set before any planner exists and the budget
 is an iteration count, so the same seed gives the same plan.
@@ -269,6 +271,13 @@ def plan_control(
             new_flag = FLAG_UNSAFE
         write(result, flatten(out.state, new_flag))
 
+    # a drive whose reference leads its position by more than one control period of travel at
+    # full speed is jammed against something (in the kinematic rung references never lead)
+    drive_q = np.array([scenario.coordinates.index(n) for n in scenario.actuated], dtype=int)
+    windup = control_period * np.array([scenario.body(n.split(".")[0]).actuators[n.split(".")[1]].max_speed
+                                        for n in scenario.actuated])
+    ref_at = nq + sizes[1]  # q_ref's place in the flattened state
+
     def valid(s) -> bool:
         flag = s[1][n_aux - 1]
         if flag == FLAG_UNSAFE or flag == FLAG_FAILED or not qspace.satisfiesBounds(s[0]):
@@ -276,6 +285,10 @@ def plan_control(
         for k in range(nu_):
             v = s[1][k]
             if not q_low[unsteered[k]] <= v <= q_high[unsteered[k]]:
+                return False
+        if len(drive_q):
+            x = read(s)
+            if np.any(np.abs(x[ref_at : ref_at + len(drive_q)] - x[drive_q]) > windup):
                 return False
         return True
 
