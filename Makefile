@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 OUT    ?= out/demo
 
-.PHONY: demo test schema bench paper clean clean-cache
+.PHONY: demo test schema bench bench-doc paper clean clean-cache
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -42,6 +42,10 @@ paper: $(VENV)/.installed
 
 bench: $(VENV)/.installed-test
 	$(PY) -m pytest -m slow tests/bench --benchmark-enable -s
+
+# ladder bench: work-precision, throughput, scaling, ladder vs flat -> docs/benchmarks.md (about 10 minutes).
+bench-doc: $(VENV)/.installed
+	$(VENV)/bin/ladder bench --out out/bench --doc docs/benchmarks.md
 
 # numba caches compiled kernels beside the sources and does not notice when a kernel's
 # callee in another module changed: clear them after editing models/ by hand.

@@ -134,6 +134,9 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--out", type=Path, default=Path("out/bench"), help="output folder (default out/bench)")
     bench.add_argument("--doc", type=Path, help="also write the markdown report here (make bench-doc: docs/benchmarks.md)")
     bench.add_argument("--json", action="store_true", help="print the results as one JSON object")
+    bench.add_argument("--planning", metavar="SCENE,...",
+                       help="scenes of the ladder-vs-flat section (default: two_finger_triangle, four_finger_grasp, "
+                       "box_push_3d; box_push_3d's flat runs take minutes per seed)")
     bench.set_defaults(handler=cmd_bench)
 
     for name, what in RESERVED.items():
@@ -562,13 +565,19 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    from planner.bench import run_all
+    from planner.bench import PLANNING_SCENES, run_all
+
+    scenes = PLANNING_SCENES if args.planning is None else tuple(s.strip() for s in args.planning.split(",") if s.strip())
+    unknown = [s for s in scenes if s not in PLANNING_SCENES]
+    if unknown or not scenes:
+        raise ScenarioError("ladder bench", [Problem("--planning", f"unknown scene(s) {', '.join(unknown) or '(none)'}; "
+                                                     f"choose from {', '.join(PLANNING_SCENES)}")])
 
     def progress(text: str) -> None:
         if not args.json:
             print(text, file=sys.stderr, flush=True)
 
-    results = run_all(args.out, args.doc, quick=args.quick, progress=progress)
+    results = run_all(args.out, args.doc, quick=args.quick, progress=progress, scenes=scenes)
     if args.json:
         print(json.dumps(results, indent=2))
     else:
