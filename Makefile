@@ -45,7 +45,7 @@ bench: $(VENV)/.installed-test
 
 # ladder bench: work-precision, throughput, scaling, ladder vs flat -> docs/benchmarks.md (about 10 minutes).
 bench-doc: $(VENV)/.installed
-	$(VENV)/bin/ladder bench --out out/bench --doc docs/benchmarks.md
+	$(VENV)/bin/ladder bench --out docs/bench --doc docs/benchmarks.md
 
 # numba caches compiled kernels beside the sources and does not notice when a kernel's
 # callee in another module changed: clear them after editing models/ by hand.

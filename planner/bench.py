@@ -125,6 +125,36 @@ def work_precision(quick: bool = False) -> dict:
     return {"rows": rows}
 
 
+# ----------------------------------------------------------------------------- stability
+
+
+STABILITY_STEPS = (1e-4, 2e-4, 5e-4, 1e-3)
+
+
+def stability(quick: bool = False) -> dict:
+    """The paper's scene (v1 = 0.8, v2 = 1, K = 1e6) under dynamic-compliant with plastic
+    (C = 1e4) and elastic (C = 0) contact, run until the grasp or the unsafe set, at steps up
+    to 1e-3 against h = 1e-5: bounded, same outcome, and the triangle's x where it ends."""
+    from models.scenario import load_scenario
+
+    rows = []
+    for C in (1e4, 0.0):
+        tri = load_scenario(SCENARIOS / "two_finger_triangle.toml", {"v1": 0.8, "C": C, "K": 1e6})
+        x = tri.coordinates.index("triangle.x")
+        controls = np.array([[-0.8, -1.0]])
+        ref = _rollout(tri, "dynamic-compliant", 1e-5, 3.0, controls, stop=True, records=2)
+        for h in STABILITY_STEPS:
+            out = _rollout(tri, "dynamic-compliant", h, 3.0, controls, stop=True, records=2)
+            q = out.state.q
+            rows.append({"C": C, "h": h, "outcome": out.outcome, "status": out.status, "t": float(out.t),
+                         "bounded": bool(np.all(np.isfinite(q)) and np.max(np.abs(q)) < 10.0),
+                         "same_outcome": out.outcome == ref.outcome, "triangle_x": float(q[x]),
+                         "reference_x": float(ref.state.q[x]), "reference_outcome": ref.outcome,
+                         "x_error": float(abs(q[x] - ref.state.q[x]))})
+    return {"scene": "two_finger_triangle, v1 = 0.8, v2 = 1, K = 1e6, dynamic-compliant, until the grasp (reference h = 1e-5)",
+            "rows": rows}
+
+
 def plot_work_precision(data: dict, out: Path) -> list[str]:
     import matplotlib
 
@@ -315,7 +345,7 @@ def write_ompl_log(path: Path, name: str, result: dict) -> Path:
 def run_all(out: Path, doc: Path | None, quick: bool = False, progress=print, scenes=PLANNING_SCENES) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     results = {"machine": machine(), "quick": quick, "date": _dt.datetime.now().isoformat(timespec="seconds")}
-    for name, fn in (("throughput", throughput), ("work_precision", work_precision), ("scaling", scaling)):
+    for name, fn in (("throughput", throughput), ("work_precision", work_precision), ("stability", stability), ("scaling", scaling)):
         t0 = time.perf_counter()
         progress(f"bench: {name} ...")
         results[name] = fn(quick)
@@ -347,6 +377,11 @@ def markdown(r: dict, doc_dir: Path, out: Path) -> str:
     for row in r["work_precision"]["rows"]:
         lines.append(f"| {row['scene']} | {row['rung']} | {row['h']:g} | {row['reference']} | {row['error']:.2e} | {row['wall_s']:.4f} | {row['status']} |")
     lines += [""] + [f"![{Path(p).stem}]({rel(p)})" for p in r["plots"]]
+    lines += ["", f"## Stability at large steps ({r['stability']['scene']})", "",
+              "| C | h | outcome | status | bounded | same outcome as h = 1e-5 | triangle x at the end | error |", "|---|---|---|---|---|---|---|---|"]
+    for row in r["stability"]["rows"]:
+        lines.append(f"| {row['C']:g} | {row['h']:g} | {row['outcome']} (t = {row['t']:.4f}) | {row['status']} | {row['bounded']} | "
+                     f"{row['same_outcome']} | {row['triangle_x']:.6f} | {row['x_error']:.2e} |")
     s = r["scaling"]
     lines += ["", "## Scaling with the number of contacts (boxes resting on a plane, h = 1e-3)", "",
               "| rung | contacts | LCP size | us/step | status |", "|---|---|---|---|---|"]

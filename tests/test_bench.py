@@ -30,6 +30,18 @@ def test_work_precision_is_first_order_against_the_closed_forms(quick):
             assert 5 < coarse / fine < 20, errors  # ten times smaller h, about ten times smaller error
 
 
+def test_large_steps_stay_bounded_and_keep_the_outcome(quick):
+    """The issue's stability claim: dynamic-compliant, K = 1e6, plastic and elastic contact,
+    h up to 1e-3 reaches the grasp like h = 1e-5, with the triangle within a few mm of it."""
+    _, r = quick
+    rows = r["stability"]["rows"]
+    assert {row["C"] for row in rows} == {1e4, 0.0} and max(row["h"] for row in rows) == pytest.approx(1e-3)
+    for row in rows:
+        assert row["bounded"] and row["status"] == "ok" and row["outcome"] == row["reference_outcome"] == "goal"
+        assert row["x_error"] < 5e-3
+    assert "## Stability" in (r_text := (quick[0] / "benchmarks.md").read_text()) and "x at the end" in r_text
+
+
 def test_throughput_and_scaling_report_every_rung(quick):
     _, r = quick
     assert {row["rung"] for row in r["throughput"]["rows"]} >= {"kinematic", "quasistatic-rigid", "dynamic-compliant"}
