@@ -307,7 +307,6 @@ def contact_pgs(
     indices of the active contacts; status PGS_*; sweeps; residual; unknowns: scalar impulses
     solved for).
     """
-    nv = nu_free.shape[0]
     d = directions if spatial else 2
     cosines = np.empty(d)
     sines = np.empty(d)

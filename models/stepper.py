@@ -188,10 +188,6 @@ def contact_solver(
     return Solver(SOLVER_METHODS[name], float(tolerance), int(max_sweeps), int(auto_contacts))
 
 
-def solver_name(solver: Solver) -> str:
-    return next(name for name, method in SOLVER_METHODS.items() if method == solver.method)
-
-
 #: The default: every rung solves its contacts with Lemke unless told otherwise.
 LEMKE = contact_solver("lemke")
 
