@@ -22,6 +22,7 @@ from models.predicates import evaluate, evaluate_with
 from models.stepper import (
     CONTACT_MARGIN,
     QUASISTATIC_INERTIA,
+    SOLVER_LEMKE,
     STEP_OK,
     STEP_SINGULAR,
     STEP_UNSUPPORTED_PAIR,
@@ -74,15 +75,19 @@ def _inverse_or_empty(A):
 
 
 @numba.njit(cache=True)
-def rollout_kernel(S, D, model, goal, unsafe, q, nu, q_ref, delta_n, delta_t, controls, durations, h, record_every, max_records, stop_at_outcome):
+def rollout_kernel(S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, delta_t, controls, durations, h, record_every, max_records, stop_at_outcome):
     """Run the controls from the given state (stopping at goal/unsafe if stop_at_outcome;
     otherwise the returned outcome is the first one met, and the run goes on).
+
+    model: `models.stepper.Model` (what is solved); solver: `models.stepper.Solver` (how the
+    contact problems are solved). PGS warm starts travel from step to step within the call
+    (by contact slot) and start cold in every call, so a rollout depends only on its inputs.
 
     Returns (q, nu, q_ref, delta_n, delta_t, t, outcome, status, steps, lcp_solves, pivots,
     max_residual, max_lcp_size, rec_t (n,), rec_q (n, nq), rec_nu (n, nv), pair_force (n_pairs,):
     the normal contact force of each pair over the last step taken, min_psi: the smallest
     contact signed distance met at the start of any step (inf if none), force_steps: how many
-    steps had a positive normal contact impulse).
+    steps had a positive normal contact impulse, sweeps: PGS sweeps over all steps).
     """
     dimension = S.dimension
     spatial = dimension == 3
@@ -107,6 +112,10 @@ def rollout_kernel(S, D, model, goal, unsafe, q, nu, q_ref, delta_n, delta_t, co
     c_n, c_t, c_o = np.zeros((cap, 3)), np.zeros((cap, 3)), np.zeros((cap, 3))
     c_pa, c_pb = np.zeros((cap, 3)), np.zeros((cap, 3))
     W_n, W_t, W_o = np.zeros((nv, cap)), np.zeros((nv, cap)), np.zeros((nv, cap))
+    warm_n, warm_t = np.zeros(cap), np.zeros((cap, 2))  # PGS: last step's impulses by slot
+    warm_slots = np.zeros(cap, np.int64)  # the slots written last step (reset them, not all cap)
+    n_warm = 0
+    keep_warm = solver.method != SOLVER_LEMKE
     unsupported = np.zeros(max(pi.shape[0], 1), np.int64)
     pair_psi = np.full(max(pi.shape[0], 1), np.inf)
     pair_force = np.zeros(max(pi.shape[0], 1))  # normal force per pair in the last step
@@ -138,6 +147,7 @@ def rollout_kernel(S, D, model, goal, unsafe, q, nu, q_ref, delta_n, delta_t, co
     max_size = 0
     min_psi = np.inf
     force_steps = 0
+    sweeps = 0
     outcome = OUTCOME_NONE
     status = STEP_OK
     if not kinematic and constant_A and Ainv.shape[0] != nv:
@@ -192,11 +202,23 @@ def rollout_kernel(S, D, model, goal, unsafe, q, nu, q_ref, delta_n, delta_t, co
                         jacobian_packed(bi, bf, pi, q, nc, c_pair, c_o, c_pa, c_pb, W_o)
                 if not constant_A:
                     A = system_matrix(bi, bf, q, nv, eps_eff, h, v_index, kp, kd)
-                q2, nu2, q_ref2, dn2, dt2, st, piv, res, size, p_n = dynamics_step(
+                q2, nu2, q_ref2, dn2, dt2, st, piv, res, size, p_n, p_t, sw = dynamics_step(
                     eps, compliant, theta, directions, h, bi, bf, pf, A, Ainv, M_const, rhs_const,
                     q, nu, q_ref, delta_n, delta_t, u, q_index, v_index, kp, kd, lower, upper,
-                    nc, c_pair, c_psi, c_slot, W_n, W_t, W_o, spatial,
+                    nc, c_pair, c_psi, c_slot, W_n, W_t, W_o, spatial, pi, solver, warm_n, warm_t,
                 )
+                sweeps += sw
+                if keep_warm and st == STEP_OK:
+                    for i in range(n_warm):
+                        warm_n[warm_slots[i]] = 0.0
+                        warm_t[warm_slots[i], 0] = 0.0
+                        warm_t[warm_slots[i], 1] = 0.0
+                    for i in range(nc):
+                        warm_slots[i] = c_slot[i]
+                        warm_n[c_slot[i]] = p_n[i]
+                        warm_t[c_slot[i], 0] = p_t[i, 0]
+                        warm_t[c_slot[i], 1] = p_t[i, 1]
+                    n_warm = nc
             if size > 0:
                 lcp_solves += 1
                 if size > max_size:
@@ -240,4 +262,4 @@ def rollout_kernel(S, D, model, goal, unsafe, q, nu, q_ref, delta_n, delta_t, co
         rec_nu[n_rec] = nu
         n_rec += 1
     return (q, nu, q_ref, delta_n, delta_t, t, outcome, status, steps, lcp_solves, pivots, max_residual, max_size,
-            rec_t[:n_rec], rec_q[:n_rec], rec_nu[:n_rec], pair_force, min_psi, force_steps)
+            rec_t[:n_rec], rec_q[:n_rec], rec_nu[:n_rec], pair_force, min_psi, force_steps, sweeps)

@@ -27,7 +27,7 @@ from models.kinematics import PI_INERT
 from models.predicates import OP_TOUCH, Program, compile_predicate, evaluate_with
 from models.rollout import OUTCOME_NAMES, rollout_kernel
 from models.scenario import Scenario
-from models.stepper import STEP_MESSAGES, STEP_NAMES, Drives, Model
+from models.stepper import LEMKE, STEP_MESSAGES, STEP_NAMES, Drives, Model, Solver, contact_solver
 
 #: Tolerance of the geometric rung's non-penetration check (m).
 GEOMETRIC_TOLERANCE = 1e-9
@@ -68,6 +68,7 @@ class RolloutResult:
     pair_force: np.ndarray  # (n_pairs,) normal force of each contact pair in the last step, N
     min_psi: float = np.inf  # smallest contact signed distance met (negative: penetration), m
     force_steps: int = 0  # steps in which some contact carried a positive normal force
+    sweeps: int = 0  # PGS sweeps over all steps (0 with Lemke)
 
     @property
     def max_penetration(self) -> float:
@@ -141,11 +142,13 @@ def compiled(scenario: Scenario) -> Compiled:
 
 @dataclass(frozen=True)
 class Rung:
-    """One model of the family: a name and its physics settings (None: geometric)."""
+    """One model of the family: a name, its physics settings (None: geometric) and how its
+    contact problems are solved (`models.stepper.Solver`; Lemke unless a scenario says)."""
 
     name: str
     model: Model | None
     description: str = field(default="", compare=False)
+    solver: Solver = LEMKE
 
     @property
     def propagates(self) -> bool:
@@ -198,12 +201,12 @@ class Rung:
             record_every = max(1, total // max(max_records - 2, 1))
         start = time.perf_counter()
         out = rollout_kernel(
-            c.scene, c.drives, self.model, c.goal, c.unsafe,
+            c.scene, c.drives, self.model, self.solver, c.goal, c.unsafe,
             state.q.copy(), state.nu.copy(), state.q_ref.copy(), state.delta_n.copy(), state.delta_t.copy(),
             controls, durations, float(h), int(record_every), int(max_records), bool(stop_at_outcome),
         )
         wall = time.perf_counter() - start
-        q, nu, q_ref, dn, dt, t, outcome, status, steps, lcp, piv, res, size, rec_t, rec_q, rec_nu, force, min_psi, force_steps = out
+        q, nu, q_ref, dn, dt, t, outcome, status, steps, lcp, piv, res, size, rec_t, rec_q, rec_nu, force, min_psi, force_steps, sweeps = out
         return RolloutResult(
             state=State(q, nu, q_ref, dn, dt),
             t=float(t),
@@ -222,6 +225,7 @@ class Rung:
             pair_force=force[: len(scenario.pairs)],
             min_psi=float(min_psi),
             force_steps=int(force_steps),
+            sweeps=int(sweeps),
         )
 
     def step(self, scenario: Scenario, state: State, control: np.ndarray, h: float) -> RolloutResult:
@@ -305,7 +309,8 @@ def pair_signed_distances(scenario: Scenario, q: np.ndarray) -> np.ndarray:
 
 
 def rung_for(scenario: Scenario, name: str) -> Rung:
-    """The registry's rung with the scenario's per-rung settings (theta, friction directions)."""
+    """The registry's rung with the scenario's per-rung settings (theta, friction directions,
+    contact solver)."""
     rung = RUNGS[name]
     spec = next((r for r in scenario.spec.ladder.rungs if r.model == name), None)
     if rung.model is None or spec is None:
@@ -313,4 +318,5 @@ def rung_for(scenario: Scenario, name: str) -> Rung:
     model = rung.model._replace(theta=spec.theta)
     if spec.friction_directions is not None:
         model = model._replace(friction_directions=spec.friction_directions)
-    return replace(rung, model=model)
+    solver = rung.solver if spec.contact_solver is None else contact_solver(spec.contact_solver)
+    return replace(rung, model=model, solver=solver)

@@ -39,6 +39,8 @@ RUNGS: tuple[str, ...] = (
     "dynamic-rigid",
     "dynamic-compliant",
 )
+#: Contact solvers a rung may name (models.stepper.SOLVER_METHODS).
+CONTACT_SOLVERS: tuple[str, ...] = ("lemke", "pgs", "auto")
 #: OMPL planners a rung may name (geometric rung: RRTConnect and friends; control rungs: the rest).
 PLANNERS: tuple[str, ...] = ("RRTConnect", "RRT", "RRTstar", "PRM", "KPIECE1", "EST")
 #: Free DOF names per scene dimension, in the canonical order coordinates are stacked.
@@ -364,6 +366,12 @@ class RungSpec(Strict):
     )
     friction_directions: Annotated[int, Field(ge=2, le=64)] | None = Field(
         None, description="directions of the polyhedral friction cone (spatial scenes; planar: 2)"
+    )
+    contact_solver: Literal[CONTACT_SOLVERS] | None = Field(  # type: ignore[valid-type]
+        None,
+        description="how the contact problems are solved: lemke (default, exact), pgs (projected Gauss-Seidel, "
+        "cost linear in the contacts), auto (pgs from a measured contact count on, lemke below and where pgs "
+        "does not converge); the kinematic rung always uses lemke",
     )
 
 

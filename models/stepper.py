@@ -16,7 +16,9 @@ contacts -> assemble -> solve -> integrate:
 3. solve the LCP in (p_n, beta, gamma) (Stewart-Trinkle form) with Lemke. Compliant contact
    (eq. 3, damping read as C/h (delta+ - delta)) adds 1 / (h (h K + C)) to the diagonal of the
    normal and friction blocks and shifts q by the previous deformation; rigid contact (eq. 5)
-   has neither.
+   has neither. Or (`Solver`: how, not what) solve the same problem by projected Gauss-Seidel
+   on the contact impulses, body by body (`models.contact_pgs`): no dense matrix, O(bodies +
+   contacts) per step beyond contact detection, to a tolerance, warm-started by the caller.
 4. integrate: q+ = q + h G(q) (theta nu+ + (1 - theta) nu) (theta = 1: the paper's semi-implicit
    scheme), delta+ = (p + C delta) / (h K + C).
 
@@ -28,8 +30,9 @@ and the contact conditions, the one of least kinetic norm nu^T M nu (the LCP is 
 optimality condition of that QP). Numerically eps = QUASISTATIC_INERTIA and the previous
 velocity is not remembered.
 
-Failures never raise: the step returns a status (STEP_OK or a STEP_* code) and the LCP's
-recomputed residual; the rollout stops on a failure.
+Failures never raise: the step returns a status (STEP_OK or a STEP_* code; PGS that does not
+converge: STEP_CONTACT_NOT_CONVERGED) and the solver's recomputed residual; the rollout stops
+on a failure.
 
 Hot-path note: numba increfs every array of a tuple that crosses a function boundary, so
 these kernels take the packed scene tables (`SceneData.bi/.bf/.pi/.pf`) and plain arrays.
@@ -57,6 +60,7 @@ from models.kinematics import (
     quat_mul,
     quat_to_matrix,
 )
+from models.contact_pgs import PGS_CONVERGED, PGS_NOT_CONVERGED, block_solve, body_blocks, contact_pgs
 from models.lcp import STATUS_SOLVED, STATUS_SOLVED_INACCURATE, complementarity_residual, lemke_kernel
 
 #: Quasistatic rungs: inertia scale standing in for eps -> 0 (times the mass matrix).
@@ -83,6 +87,7 @@ STEP_DIVERGED = 3
 STEP_UNSUPPORTED_PAIR = 4
 STEP_SINGULAR = 5
 STEP_BLOCKED = 6
+STEP_CONTACT_NOT_CONVERGED = 7
 STEP_NAMES = {
     STEP_OK: "ok",
     STEP_LCP_FAILED: "lcp_failed",
@@ -91,6 +96,7 @@ STEP_NAMES = {
     STEP_UNSUPPORTED_PAIR: "unsupported_pair",
     STEP_SINGULAR: "singular",
     STEP_BLOCKED: "blocked",
+    STEP_CONTACT_NOT_CONVERGED: "contact_not_converged",
 }
 STEP_MESSAGES = {
     STEP_OK: "ok",
@@ -100,6 +106,10 @@ STEP_MESSAGES = {
     STEP_UNSUPPORTED_PAIR: "a contact pair needs python-fcl (a mesh against a non-plane), which compiled rollouts cannot call",
     STEP_SINGULAR: "the velocity system is singular (a free DOF with neither inertia nor a drive)",
     STEP_BLOCKED: "kinematic model: the commanded motion would penetrate something nothing can push away",
+    STEP_CONTACT_NOT_CONVERGED: (
+        "PGS reached its sweep limit before the contact impulses met its tolerance; raise max_sweeps, "
+        "loosen the tolerance, or use the lemke (or auto) contact solver"
+    ),
 }
 
 
@@ -123,6 +133,63 @@ class Drives(NamedTuple):
     lower: np.ndarray
     upper: np.ndarray
     gravity: np.ndarray  # (3,)
+
+
+SOLVER_LEMKE = 0
+SOLVER_PGS = 1
+SOLVER_AUTO = 2
+#: Contact solvers by name (the scenario format's `contact_solver` values).
+SOLVER_METHODS = {"lemke": SOLVER_LEMKE, "pgs": SOLVER_PGS, "auto": SOLVER_AUTO}
+#: PGS: accepted residual, relative to the step's impulse scale (models.contact_pgs).
+PGS_TOLERANCE = 1e-6
+#: PGS: sweeps before the step reports STEP_CONTACT_NOT_CONVERGED.
+PGS_MAX_SWEEPS = 1000
+#: auto: PGS from this many detected contacts on. Measured by `ladder bench` (scaling): the
+#: smallest count from which PGS is cheaper per step than Lemke on rigid boxes resting on a
+#: plane (2 contacts: 6.1 us Lemke, 7.2 us PGS; 4: 9.4 against 5.7; 64: 1361 against 57).
+#: On a rigid stack Lemke is cheaper again from 8 contacts: auto then pays PGS's sweeps and,
+#: where PGS does not converge, Lemke's step too.
+AUTO_PGS_CONTACTS = 4
+
+
+class Solver(NamedTuple):
+    """How the contact problem of a step is solved (numerics; `Model` says what is solved).
+
+    lemke: Lemke's method on the dense Stewart-Trinkle LCP (exact up to round-off; the
+    default). pgs: projected Gauss-Seidel on the contact impulses (`models.contact_pgs`),
+    O(contacts) per sweep; a step that does not converge within max_sweeps ends with
+    STEP_CONTACT_NOT_CONVERGED. auto: pgs on steps with at least auto_contacts detected
+    contacts, lemke on the others and on any step where PGS does not converge.
+    The kinematic rung's projection LCP always uses Lemke. Build with `contact_solver`.
+    """
+
+    method: int  # SOLVER_LEMKE, SOLVER_PGS or SOLVER_AUTO
+    tolerance: float  # PGS: accepted residual, relative to the impulse scale (times eps if eps < 1)
+    max_sweeps: int  # PGS: sweep limit per step
+    auto_contacts: int  # auto: PGS from this many detected contacts on
+
+
+def contact_solver(
+    name: str = "lemke",
+    *,
+    tolerance: float = PGS_TOLERANCE,
+    max_sweeps: int = PGS_MAX_SWEEPS,
+    auto_contacts: int = AUTO_PGS_CONTACTS,
+) -> Solver:
+    """A validated `Solver`; raises ValueError on an unknown name or an out-of-range setting."""
+    if name not in SOLVER_METHODS:
+        raise ValueError(f"unknown contact solver {name!r}; expected one of {', '.join(SOLVER_METHODS)}")
+    if not (0.0 < tolerance < 1.0):
+        raise ValueError(f"PGS tolerance must be in (0, 1), got {tolerance!r}")
+    if isinstance(max_sweeps, bool) or int(max_sweeps) != max_sweeps or max_sweeps < 1:
+        raise ValueError(f"PGS max_sweeps must be a positive integer, got {max_sweeps!r}")
+    if isinstance(auto_contacts, bool) or int(auto_contacts) != auto_contacts or auto_contacts < 1:
+        raise ValueError(f"auto_contacts must be a positive integer, got {auto_contacts!r}")
+    return Solver(SOLVER_METHODS[name], float(tolerance), int(max_sweeps), int(auto_contacts))
+
+
+#: The default: every rung solves its contacts with Lemke unless told otherwise.
+LEMKE = contact_solver("lemke")
 
 
 # ----------------------------------------------------------------------------- mass and forces
@@ -150,6 +217,32 @@ def mass_matrix(bi, bf, q, nv):
                         s += R[r, k] * bf[b, BF_INERTIA + k] * R[c, k]
                     M[bi[b, BI_VMAP + V_WX + r], bi[b, BI_VMAP + V_WX + c]] = s
     return M
+
+
+@numba.njit(cache=True)
+def mass_times(bi, bf, q, nu):
+    """M(q) nu body by body (the products of `mass_matrix` without forming it): O(bodies)."""
+    out = np.zeros(nu.shape[0])
+    for b in range(bi.shape[0]):
+        for k in range(3):
+            if bi[b, BI_VMAP + k] >= 0:
+                out[bi[b, BI_VMAP + k]] = bf[b, BF_MASS] * nu[bi[b, BI_VMAP + k]]
+        if bi[b, BI_VMAP + V_ANGLE] >= 0:
+            out[bi[b, BI_VMAP + V_ANGLE]] = bf[b, BF_INERTIA + 2] * nu[bi[b, BI_VMAP + V_ANGLE]]
+        if bi[b, BI_VMAP + V_WX] >= 0:
+            quat = np.empty(4)
+            for k in range(4):
+                quat[k] = q[bi[b, BI_QMAP + Q_QW + k]]
+            R = quat_to_matrix(quat / np.sqrt(np.sum(quat * quat)))
+            for r in range(3):
+                s = 0.0
+                for c in range(3):
+                    m = 0.0
+                    for k in range(3):
+                        m += R[r, k] * bf[b, BF_INERTIA + k] * R[c, k]
+                    s += m * nu[bi[b, BI_VMAP + V_WX + c]]
+                out[bi[b, BI_VMAP + V_WX + r]] = s
+    return out
 
 
 @numba.njit(cache=True)
@@ -283,19 +376,89 @@ def dynamics_step(
     bi, bf, pf, A, Ainv, M_const, rhs_const, q, nu, q_ref, delta_n, delta_t, u,
     q_index, v_index, kp, kd, lower, upper,
     nc, c_pair, c_psi, c_slot, W_n, W_t, W_o, spatial,
+    pi, solver, warm_n, warm_t,
 ):
     """One step of eq. (3) given the contacts at q. Pure: returns new arrays.
 
     A, Ainv: the system matrix and its inverse (Ainv may be empty: then A is solved each call).
     M_const: the mass matrix when it does not depend on q (else empty: computed here).
     rhs_const: h * (gravity force) (the part of the right-hand side that never changes).
-    Returns (q+, nu+, q_ref+, delta_n+, delta_t+, status, pivots, residual, lcp_size, p_n)
-    with p_n (nc,) the normal impulse of each contact (0 where inactive).
+    pi: the scene's pair table (the bodies of each contact); solver: a `Solver`; warm_n
+    (slots,), warm_t (slots, 2): PGS warm start by contact slot (the previous step's p_n, p_t;
+    zeros for a cold start; Lemke ignores them).
+    Returns (q+, nu+, q_ref+, delta_n+, delta_t+, status, pivots, residual, lcp_size, p_n, p_t,
+    sweeps) with p_n (nc,) the normal impulse of each contact and p_t (nc, 2) its friction
+    impulse in the (t, o) basis (0 where inactive), sweeps the PGS sweeps taken. On the PGS
+    path residual is `models.contact_pgs`'s and lcp_size the number of scalar impulses.
     """
-    nv = nu.shape[0]
-    na = v_index.shape[0]
-    quasistatic = model_eps == 0.0
+    use_pgs = solver.method == SOLVER_PGS or (solver.method == SOLVER_AUTO and nc >= solver.auto_contacts)
+    if nc > 0 and use_pgs:
+        out = _pgs_step(
+            model_eps, compliant, theta, directions, h, bi, bf, pi, pf, A, Ainv, rhs_const, q, nu, q_ref, delta_n, delta_t, u,
+            q_index, v_index, kp, kd, lower, upper, nc, c_pair, c_psi, c_slot, W_n, W_t, W_o, spatial, solver, warm_n, warm_t,
+        )
+        if out[5] == STEP_OK or solver.method == SOLVER_PGS:
+            return out
+        r = _lemke_step(
+            model_eps, compliant, theta, directions, h, bi, bf, pf, A, Ainv, M_const, rhs_const, q, nu, q_ref, delta_n, delta_t, u,
+            q_index, v_index, kp, kd, lower, upper, nc, c_pair, c_psi, c_slot, W_n, W_t, W_o, spatial,
+        )
+        return r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], r[8], r[9], r[10], out[11]
+    return _lemke_step(
+        model_eps, compliant, theta, directions, h, bi, bf, pf, A, Ainv, M_const, rhs_const, q, nu, q_ref, delta_n, delta_t, u,
+        q_index, v_index, kp, kd, lower, upper, nc, c_pair, c_psi, c_slot, W_n, W_t, W_o, spatial,
+    )
+
+
+@numba.njit(cache=True)
+def _drives(h, q, q_ref, u, q_index, v_index, kp, kd, lower, upper, rhs):
+    """Advance the drive references (clamped to their limits) and add the PD terms to rhs."""
     q_ref_new = q_ref.copy()
+    for j in range(v_index.shape[0]):
+        q_ref_new[j] = min(max(q_ref[j] + h * u[j], lower[j]), upper[j])
+        rhs[v_index[j]] += h * (kp[j] * (q_ref_new[j] - q[q_index[j]]) + kd[j] * u[j])
+    return q_ref_new
+
+
+@numba.njit(cache=True)
+def _deformations(h, pf, c_pair, c_slot, active, p_n, p_t, delta_n, delta_t):
+    """Compliant contact: delta+ = (p + C delta) / (h K + C) per active contact k (p_n[k], p_t[k])."""
+    delta_n_new = np.zeros_like(delta_n)
+    delta_t_new = np.zeros_like(delta_t)
+    for k in range(active.shape[0]):
+        i = active[k]
+        K, C = pf[c_pair[i], PF_K], pf[c_pair[i], PF_C]
+        slot = c_slot[i]
+        delta_n_new[slot] = (p_n[k] + C * delta_n[slot]) / (h * K + C)
+        for c in range(2):
+            delta_t_new[slot, c] = (p_t[k, c] + C * delta_t[slot, c]) / (h * K + C)
+    return delta_n_new, delta_t_new
+
+
+@numba.njit(cache=True)
+def _integrate_checked(bi, theta, h, q, nu, nu_new):
+    """(q+, status): the position update, STEP_DIVERGED / STEP_NON_FINITE if it left the finite range."""
+    if theta == 1.0:
+        q_new = integrate_positions(bi, q, nu_new, h)
+    else:
+        q_new = integrate_positions(bi, q, theta * nu_new + (1.0 - theta) * nu, h)
+    if not (_finite_and_bounded(q_new) and _finite_and_bounded(nu_new)):
+        if not (np.all(np.isfinite(q_new)) and np.all(np.isfinite(nu_new))):
+            return q_new, STEP_NON_FINITE
+        return q_new, STEP_DIVERGED
+    return q_new, STEP_OK
+
+
+@numba.njit(cache=True)
+def _lemke_step(
+    model_eps, compliant, theta, directions, h,
+    bi, bf, pf, A, Ainv, M_const, rhs_const, q, nu, q_ref, delta_n, delta_t, u,
+    q_index, v_index, kp, kd, lower, upper,
+    nc, c_pair, c_psi, c_slot, W_n, W_t, W_o, spatial,
+):
+    """dynamics_step with the dense LCP solved by Lemke (see `_contact_solve`)."""
+    nv = nu.shape[0]
+    quasistatic = model_eps == 0.0
     rhs = rhs_const.copy()
     eps = QUASISTATIC_INERTIA if quasistatic else model_eps
     if not quasistatic:
@@ -305,9 +468,7 @@ def dynamics_step(
             rhs += eps * (mass_matrix(bi, bf, q, nv) @ nu)
         if spatial:
             rhs += h * eps * gyroscopic_force(bi, bf, q, nu, nv)
-    for j in range(na):
-        q_ref_new[j] = min(max(q_ref[j] + h * u[j], lower[j]), upper[j])
-        rhs[v_index[j]] += h * (kp[j] * (q_ref_new[j] - q[q_index[j]]) + kd[j] * u[j])
+    q_ref_new = _drives(h, q, q_ref, u, q_index, v_index, kp, kd, lower, upper, rhs)
     if Ainv.shape[0] == nv:
         nu_free = Ainv @ rhs
     else:
@@ -323,6 +484,7 @@ def dynamics_step(
     residual = 0.0
     size = 0
     impulses = np.zeros(nc)
+    frictions = np.zeros((nc, 2))
     # contacts that couple to a free DOF; friction only where mu > 0 and the tangent couples
     active = np.empty(nc, np.int64)
     n_act = 0
@@ -336,26 +498,63 @@ def dynamics_step(
         )
         for k in range(n_act):
             impulses[active[k]] = p_n[k]
+            frictions[active[k], 0] = p_t[k, 0]
+            frictions[active[k], 1] = p_t[k, 1]
         if status == STEP_OK and compliant:
-            for k in range(n_act):
-                i = active[k]
-                K, C = pf[c_pair[i], PF_K], pf[c_pair[i], PF_C]
-                slot = c_slot[i]
-                delta_n_new[slot] = (p_n[k] + C * delta_n[slot]) / (h * K + C)
-                for c in range(2):
-                    delta_t_new[slot, c] = (p_t[k, c] + C * delta_t[slot, c]) / (h * K + C)
+            delta_n_new, delta_t_new = _deformations(h, pf, c_pair, c_slot, active[:n_act], p_n, p_t, delta_n, delta_t)
     if status != STEP_OK:
-        return q, nu, q_ref, delta_n, delta_t, status, pivots, residual, size, impulses
-    if theta == 1.0:
-        q_new = integrate_positions(bi, q, nu_new, h)
-    else:
-        q_new = integrate_positions(bi, q, theta * nu_new + (1.0 - theta) * nu, h)
-    if not (_finite_and_bounded(q_new) and _finite_and_bounded(nu_new)):
-        bad = STEP_DIVERGED
-        if not (np.all(np.isfinite(q_new)) and np.all(np.isfinite(nu_new))):
-            bad = STEP_NON_FINITE
-        return q, nu, q_ref, delta_n, delta_t, bad, pivots, residual, size, impulses
-    return q_new, nu_new, q_ref_new, delta_n_new, delta_t_new, STEP_OK, pivots, residual, size, impulses
+        return q, nu, q_ref, delta_n, delta_t, status, pivots, residual, size, impulses, frictions, 0
+    q_new, bad = _integrate_checked(bi, theta, h, q, nu, nu_new)
+    if bad != STEP_OK:
+        return q, nu, q_ref, delta_n, delta_t, bad, pivots, residual, size, impulses, frictions, 0
+    return q_new, nu_new, q_ref_new, delta_n_new, delta_t_new, STEP_OK, pivots, residual, size, impulses, frictions, 0
+
+
+@numba.njit(cache=True)
+def _pgs_step(
+    model_eps, compliant, theta, directions, h,
+    bi, bf, pi, pf, A, Ainv, rhs_const, q, nu, q_ref, delta_n, delta_t, u,
+    q_index, v_index, kp, kd, lower, upper,
+    nc, c_pair, c_psi, c_slot, W_n, W_t, W_o, spatial, solver, warm_n, warm_t,
+):
+    """dynamics_step with PGS on the contact impulses; every product body by body, so the
+    step costs O(bodies + contacts) beyond what the caller built (`models.contact_pgs`)."""
+    nv = nu.shape[0]
+    dofs, count, inv, ok = body_blocks(bi, A, Ainv)
+    if not ok:
+        return q, nu, q_ref, delta_n, delta_t, STEP_SINGULAR, 0, 0.0, 0, np.zeros(nc), np.zeros((nc, 2)), 0
+    quasistatic = model_eps == 0.0
+    eps = QUASISTATIC_INERTIA if quasistatic else model_eps
+    rhs = rhs_const.copy()
+    if not quasistatic:
+        rhs += eps * mass_times(bi, bf, q, nu)
+        if spatial:
+            rhs += h * eps * gyroscopic_force(bi, bf, q, nu, nv)
+    q_ref_new = _drives(h, q, q_ref, u, q_index, v_index, kp, kd, lower, upper, rhs)
+    nu_free = block_solve(dofs, count, inv, rhs)
+    # a passive body's velocity error is its impulse error over eps m: tighten by eps so that
+    # quasistatic rungs (eps -> 0) get velocities as accurate as dynamic ones
+    tolerance = solver.tolerance * min(eps, 1.0)
+    nu_new, p_n, p_t, active, st, sweeps, residual, size = contact_pgs(
+        compliant, directions, spatial, h, pi, pf, nc, c_pair, c_psi, c_slot, W_n, W_t, W_o,
+        delta_n, delta_t, dofs, count, inv, nu_free, warm_n, warm_t, ZERO_COLUMN, tolerance, solver.max_sweeps,
+    )
+    if st != PGS_CONVERGED:
+        bad = STEP_CONTACT_NOT_CONVERGED if st == PGS_NOT_CONVERGED else STEP_NON_FINITE
+        return q, nu, q_ref, delta_n, delta_t, bad, 0, residual, size, p_n, p_t, sweeps
+    delta_n_new, delta_t_new = delta_n, delta_t
+    if compliant:
+        n_act = active.shape[0]
+        pa = np.empty(n_act)
+        ta = np.empty((n_act, 2))
+        for k in range(n_act):
+            pa[k] = p_n[active[k]]
+            ta[k, 0], ta[k, 1] = p_t[active[k], 0], p_t[active[k], 1]
+        delta_n_new, delta_t_new = _deformations(h, pf, c_pair, c_slot, active, pa, ta, delta_n, delta_t)
+    q_new, bad = _integrate_checked(bi, theta, h, q, nu, nu_new)
+    if bad != STEP_OK:
+        return q, nu, q_ref, delta_n, delta_t, bad, 0, residual, size, p_n, p_t, sweeps
+    return q_new, nu_new, q_ref_new, delta_n_new, delta_t_new, STEP_OK, 0, residual, size, p_n, p_t, sweeps
 
 
 @numba.njit(cache=True)

@@ -9,8 +9,9 @@ Sections (each a function returning a JSON-able dict; `run_all` runs them and wr
   much finer step (the paper's scene; the elastically bouncing disc);
 - throughput: steps per second per rung on the paper's scene (h = 1e-4, until the grasp),
   and MuJoCo's on the same scene when the optional peer is installed (else: skipped);
-- scaling: cost per step against the number of contacts (a row of boxes resting on a plane,
-  2 contacts each, up to 64 contacts), with the fitted growth exponent;
+- scaling: cost per step against the number of contacts for Lemke and PGS (a row of boxes
+  resting on a plane, 2 contacts each, up to 64 contacts; a short stack), with the fitted
+  growth exponent per solver and the contact count from which PGS is cheaper;
 - planning: the ladder against planning flat at the top rung over seeds (success rate,
   median wall time), also written as OMPL benchmark logs (``ompl_benchmark_statistics
   LOG -d DB`` turns them into the SQLite database Planner Arena reads).
@@ -246,31 +247,141 @@ dofs = ["x", "y", "theta"]
 """
 
 
-def scaling(quick: bool = False) -> dict:
-    """Boxes resting apart on a plane, 2 contacts each: per-step cost of dynamic-rigid
-    (Lemke) and dynamic-compliant against the number of contacts."""
+STACKED_BOX = """[[bodies]]
+name = "b{i}"
+role = "object"
+mass = 1.0
+inertia = 0.0017
+shape = {{ type = "box", size = [0.1, 0.1] }}
+pose = {{ x = 0.0, y = {y} }}
+dofs = ["x", "y", "theta"]
+"""
+
+SCALING_RUNGS = ("dynamic-rigid", "dynamic-compliant")
+SCALING_SOLVERS = ("lemke", "pgs")
+#: Rollouts timed per measurement (after one warm-up); the best is kept, as other work on the
+#: machine only ever adds time.
+SCALING_REPEATS = 3
+
+
+def box_scene(folder: Path, arrangement: str, n: int):
+    """n boxes (0.1 m, 1 kg) resting on a plane: apart in a row, or in a stack (2 contacts each)."""
     from models.scenario import load_scenario
 
+    if arrangement == "row":
+        boxes = "".join(BOX.format(i=i, x=0.3 * i) for i in range(n))
+    else:
+        boxes = "".join(STACKED_BOX.format(i=i, y=0.05 + 0.1 * i) for i in range(n))
+    path = Path(folder) / f"{arrangement}{n}.toml"
+    path.write_text(ROW_TEMPLATE.format(boxes=boxes))
+    return load_scenario(path)
+
+
+def _per_step(scene, rung_name: str, solver: str, steps: int) -> dict:
+    from dataclasses import replace
+
+    from models.rungs import rung_for
+    from models.stepper import contact_solver
+
+    rung = replace(rung_for(scene, rung_name), solver=contact_solver(solver))
+    state = rung.initial_state(scene)
+    controls = np.zeros((1, len(scene.actuated)))
+
+    def run():
+        return rung.rollout(scene, state, controls, [steps * 1e-3], 1e-3, stop_at_outcome=False, max_records=2)
+
+    out = run()
+    best = math.inf
+    for _ in range(SCALING_REPEATS):
+        t0 = time.perf_counter()
+        out = run()
+        best = min(best, time.perf_counter() - t0)
+    taken = max(out.steps, 1)
+    return {"rung": rung_name, "solver": solver, "lcp_size": out.max_lcp_size,
+            "us_per_step": 1e6 * best / out.steps if out.steps else None, "sweeps_per_step": out.sweeps / taken,
+            "steps": out.steps, "status": out.status, "max_drift": float(np.max(np.abs(out.state.q - scene.start)))}
+
+
+def _growth_exponent(rows: list[dict]) -> float:
+    """Slope of log(us/step) against log(contacts) over the rows with 4 contacts and more."""
+    mine = [r for r in rows if r["contacts"] >= 4 and r["us_per_step"] is not None]
+    if len(mine) < 2:
+        return float("nan")
+    return float(np.polyfit(np.log([r["contacts"] for r in mine]), np.log([r["us_per_step"] for r in mine]), 1)[0])
+
+
+def _cheaper_from(rows: list[dict], rung: str, solver: str) -> int | None:
+    """The smallest contact count from which `solver` is cheaper per step than the other one at
+    that and every larger measured count (a solver whose rollout failed is never cheaper);
+    None if it is not cheaper at the largest count."""
+    other = "lemke" if solver == "pgs" else "pgs"
+    cost = {(r["solver"], r["contacts"]): r["us_per_step"] if r["status"] == "ok" else None for r in rows if r["rung"] == rung}
+    found = None
+    for c in sorted({c for _, c in cost}, reverse=True):
+        mine, theirs = cost[(solver, c)], cost[(other, c)]
+        if mine is None or (theirs is not None and mine >= theirs):
+            break
+        found = c
+    return found
+
+
+def _scaling(quick: bool) -> dict:
+    from models.stepper import AUTO_PGS_CONTACTS
+
     counts = [1, 2, 4, 8, 16] if quick else [1, 2, 4, 8, 16, 32]
-    rows = []
+    stack_counts = [1, 2, 4] if quick else [1, 2, 4, 8]
+    steps = 200 if quick else 1000
+    rows, stack_rows = [], []
     with tempfile.TemporaryDirectory() as tmp:
-        for n in counts:
-            path = Path(tmp) / f"row{n}.toml"
-            path.write_text(ROW_TEMPLATE.format(boxes="".join(BOX.format(i=i, x=0.3 * i) for i in range(n))))
-            scene = load_scenario(path)
-            for rung in ("dynamic-rigid", "dynamic-compliant"):
-                steps = 200 if quick else 1000
-                wall, out = _timed(lambda: _rollout(scene, rung, 1e-3, steps * 1e-3, records=2), repeat=3)
-                rows.append({"rung": rung, "boxes": n, "contacts": 2 * n, "lcp_size": out.max_lcp_size, "us_per_step": 1e6 * wall / out.steps,
-                             "status": out.status, "max_drift": float(np.max(np.abs(out.state.q - scene.start)))})
-    fits = {}
-    for rung in ("dynamic-rigid", "dynamic-compliant"):
-        mine = [r for r in rows if r["rung"] == rung and r["contacts"] >= 4]
-        slope = np.polyfit(np.log([r["contacts"] for r in mine]), np.log([r["us_per_step"] for r in mine]), 1)[0]
-        fits[rung] = float(slope)
-    return {"rows": rows, "growth_exponent": fits,
-            "note": "the stepper solves every contact LCP with Lemke's method; PGS exists in models.lcp but is not wired "
-                    "into the stepper, so there is no solver switch to report yet"}
+        for arrangement, sizes, out in (("row", counts, rows), ("stack", stack_counts, stack_rows)):
+            for n in sizes:
+                scene = box_scene(Path(tmp), arrangement, n)
+                for rung in SCALING_RUNGS:
+                    for solver in SCALING_SOLVERS:
+                        row = _per_step(scene, rung, solver, steps if arrangement == "row" else steps // 2)
+                        out.append({**row, "boxes": n, "contacts": 2 * n})
+    exponents = {rung: {solver: _growth_exponent([r for r in rows if r["rung"] == rung and r["solver"] == solver])
+                        for solver in SCALING_SOLVERS} for rung in SCALING_RUNGS}
+    return {
+        "rows": rows,
+        "stack_rows": stack_rows,
+        "growth_exponent": exponents,
+        "crossover_contacts": {rung: _cheaper_from(rows, rung, "pgs") for rung in SCALING_RUNGS},
+        "stack_lemke_cheaper_from": {rung: _cheaper_from(stack_rows, rung, "lemke") for rung in SCALING_RUNGS},
+        "auto_pgs_contacts": AUTO_PGS_CONTACTS,
+        "blas_threads": os.environ.get("OPENBLAS_NUM_THREADS", "default"),
+        "note": "contact detection (all n (n + 1) / 2 body pairs), Jacobians and the contact solve of a rollout from rest at h = 1e-3 "
+                f"(best of {SCALING_REPEATS} rollouts). Lemke solves the dense Stewart-Trinkle LCP (8 unknowns per box: "
+                "normal, 2 friction directions and a sliding speed per contact); PGS iterates on the contact impulses "
+                "body by body (models.contact_pgs) to a relative residual of 1e-6, warm-started from the previous step",
+    }
+
+
+def scaling(quick: bool = False) -> dict:
+    """Cost per step against the number of contacts, Lemke against PGS (issue 7).
+
+    Row: n boxes resting apart on a plane, 2 contacts each, n up to 32 (64 contacts; --quick: 16).
+    Stack: n boxes stacked on the plane, n up to 8 (--quick: 4): coupled contacts, where PGS needs
+    many sweeps. Per rung, solver and n: us/step, PGS sweeps per step, status. growth_exponent
+    [rung][solver]: slope of log(us/step) against log(contacts) on the row from 4 contacts on;
+    crossover_contacts[rung]: the smallest count from which PGS is cheaper at every larger count
+    (None: never); stack_lemke_cheaper_from[rung]: the same for Lemke on the stack.
+
+    Timed in a child process with one OpenBLAS thread (OPENBLAS_NUM_THREADS=1): numba's matrix
+    products call OpenBLAS, whose worker threads on a machine with other work turn a 2 ms Lemke
+    step on 64 contacts into 20 ms of waiting, and that is noise, not the method's cost.
+    """
+    if os.environ.get("OPENBLAS_NUM_THREADS") == "1":
+        return _scaling(quick)
+    import subprocess
+    import sys
+
+    code = f"import json\nfrom planner.bench import _scaling\nprint(json.dumps(_scaling({bool(quick)})))"
+    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=False,
+                          env={**os.environ, "OPENBLAS_NUM_THREADS": "1"})
+    if done.returncode != 0:
+        raise RuntimeError(f"the scaling benchmark's child process failed:\n{done.stderr[-4000:]}")
+    return json.loads(done.stdout.strip().splitlines()[-1])
 
 
 # ----------------------------------------------------------------------------- planning
@@ -362,6 +473,42 @@ def run_all(out: Path, doc: Path | None, quick: bool = False, progress=print, sc
     return results
 
 
+def _us(value) -> str:
+    return "-" if value is None else f"{value:.1f}"
+
+
+def scaling_markdown(s: dict) -> list[str]:
+    """The scaling section: Lemke and PGS side by side per rung and contact count."""
+
+    def table(rows: list[dict]) -> list[str]:
+        out = ["| rung | boxes | contacts | Lemke us/step | PGS us/step | PGS sweeps/step | Lemke status | PGS status |",
+               "|---|---|---|---|---|---|---|---|"]
+        for rung in dict.fromkeys(r["rung"] for r in rows):
+            for n in dict.fromkeys(r["boxes"] for r in rows if r["rung"] == rung):
+                by = {r["solver"]: r for r in rows if r["rung"] == rung and r["boxes"] == n}
+                lemke, pgs = by["lemke"], by["pgs"]
+                out.append(f"| {rung} | {n} | {lemke['contacts']} | {_us(lemke['us_per_step'])} | {_us(pgs['us_per_step'])} | "
+                           f"{pgs['sweeps_per_step']:.2f} | {lemke['status']} | {pgs['status']} |")
+        return out
+
+    def count(c) -> str:
+        return "at none of the measured counts" if c is None else f"from {c} contacts on"
+
+    lines = ["", "## Scaling with the number of contacts (boxes resting on a plane, h = 1e-3)", "",
+             f"Cost per step: {s['note']}. OpenBLAS threads: {s['blas_threads']}.", "", "Boxes apart in a row:", ""]
+    lines += table(s["rows"])
+    lines += ["", "Fitted growth exponent of cost per step in the number of contacts (4 and more): "
+              + "; ".join(f"{rung}: Lemke {e['lemke']:.2f}, PGS {e['pgs']:.2f}" for rung, e in s["growth_exponent"].items()) + ".",
+              "PGS is cheaper per step than Lemke "
+              + "; ".join(f"{count(c)} ({rung})" for rung, c in s["crossover_contacts"].items())
+              + f". The `auto` contact solver switches to PGS from {s['auto_pgs_contacts']} contacts.", "",
+              "A stack of boxes (every contact coupled to the ones above and below; `-`: the first step did not converge):", ""]
+    lines += table(s["stack_rows"])
+    lines += ["", "On the stack Lemke is cheaper (or PGS fails) "
+              + "; ".join(f"{count(c)} ({rung})" for rung, c in s["stack_lemke_cheaper_from"].items()) + "."]
+    return lines
+
+
 def markdown(r: dict, doc_dir: Path, out: Path) -> str:
     def rel(p) -> str:
         return os.path.relpath(p, doc_dir)
@@ -382,14 +529,8 @@ def markdown(r: dict, doc_dir: Path, out: Path) -> str:
     for row in r["stability"]["rows"]:
         lines.append(f"| {row['C']:g} | {row['h']:g} | {row['outcome']} (t = {row['t']:.4f}) | {row['status']} | {row['bounded']} | "
                      f"{row['same_outcome']} | {row['triangle_x']:.6f} | {row['x_error']:.2e} |")
-    s = r["scaling"]
-    lines += ["", "## Scaling with the number of contacts (boxes resting on a plane, h = 1e-3)", "",
-              "| rung | contacts | LCP size | us/step | status |", "|---|---|---|---|---|"]
-    for row in s["rows"]:
-        lines.append(f"| {row['rung']} | {row['contacts']} | {row['lcp_size']} | {row['us_per_step']:.1f} | {row['status']} |")
-    lines += ["", "Fitted growth exponent of cost per step in the number of contacts (4 and more): "
-              + ", ".join(f"{k}: {v:.2f}" for k, v in s["growth_exponent"].items()) + f". {s['note']}.", "",
-              "## Planning: ladder against flat (equal budgets)", "",
+    lines += scaling_markdown(r["scaling"])
+    lines += ["", "## Planning: ladder against flat (equal budgets)", "",
               "| scene | mode | success | median wall (s) | median propagations |", "|---|---|---|---|---|"]
     for scene, res in r["planning"].items():
         for mode in ("ladder", "flat"):

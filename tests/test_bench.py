@@ -4,6 +4,7 @@ load into OMPL's benchmark database."""
 from __future__ import annotations
 
 import json
+import math
 import sqlite3
 import subprocess
 import sys
@@ -47,10 +48,22 @@ def test_throughput_and_scaling_report_every_rung(quick):
     assert {row["rung"] for row in r["throughput"]["rows"]} >= {"kinematic", "quasistatic-rigid", "dynamic-compliant"}
     assert all(row["outcome"] == "goal" and row["steps_per_s"] > 0 for row in r["throughput"]["rows"])
     assert "skipped" in r["throughput"]["peer"] or "steps_per_s" in r["throughput"]["peer"]
-    rows = r["scaling"]["rows"]
+    s = r["scaling"]
+    rows = s["rows"]
     assert all(row["status"] == "ok" and row["max_drift"] < 1e-3 for row in rows)  # boxes stay at rest
-    assert [row["contacts"] for row in rows if row["rung"] == "dynamic-rigid"] == [2, 4, 8, 16, 32]
-    assert 0.0 < r["scaling"]["growth_exponent"]["dynamic-rigid"] < 3.0
+    for rung in ("dynamic-rigid", "dynamic-compliant"):
+        for solver in ("lemke", "pgs"):
+            mine = [row for row in rows if row["rung"] == rung and row["solver"] == solver]
+            assert [row["contacts"] for row in mine] == [2, 4, 8, 16, 32]
+            assert all(math.isfinite(row["us_per_step"]) and row["us_per_step"] > 0 for row in mine)
+            assert all((row["sweeps_per_step"] >= 1) == (solver == "pgs") for row in mine)
+            assert 0.0 < s["growth_exponent"][rung][solver] < 3.0
+        assert s["crossover_contacts"][rung] in (None, 2, 4, 8, 16, 32)
+        assert s["stack_lemke_cheaper_from"][rung] in (None, 2, 4, 8)
+    for row in s["stack_rows"]:  # a stack PGS cannot converge on is a status, and then has no cost per step
+        assert row["status"] in ("ok", "contact_not_converged")
+        assert (row["us_per_step"] is None) == (row["steps"] == 0)
+    assert {(row["solver"], row["status"]) for row in s["stack_rows"] if row["solver"] == "lemke"} == {("lemke", "ok")}
 
 
 def test_planning_section_and_ompl_logs(quick):
@@ -69,4 +82,5 @@ def test_planning_section_and_ompl_logs(quick):
         assert all(count == 3 for _, count, _ in rows)
     text = (out / "benchmarks.md").read_text()
     assert "## Throughput" in text and "## Work-precision" in text and "ladder against flat" in text
+    assert "## Scaling" in text and "PGS us/step" in text and "Fitted growth exponent" in text and "PGS is cheaper" in text
     assert json.loads((out / "bench.json").read_text())["quick"] is True

@@ -395,7 +395,7 @@ def test_quasistatic_rungs_hold_their_accuracy_at_larger_steps():
 @pytest.mark.parametrize("eps", [1.0, 0.0])
 def test_cheap_free_step_equals_the_full_step_without_contacts(eps):
     from models.rungs import compiled
-    from models.stepper import QUASISTATIC_INERTIA, dynamics_step, free_step, gravity_force, mass_matrix, system_matrix
+    from models.stepper import LEMKE, QUASISTATIC_INERTIA, dynamics_step, free_step, gravity_force, mass_matrix, system_matrix
 
     scenario = load_scenario(SCENARIOS / "free_transfer.toml")
     c = compiled(scenario)
@@ -409,7 +409,8 @@ def test_cheap_free_step_equals_the_full_step_without_contacts(eps):
     fast = free_step(eps, 1.0, h, S.bi, Ainv, M, rhs, q, nu, q_ref, u, *drives)
     empty = np.zeros((S.nv, 1))
     full = dynamics_step(eps, False, 1.0, 2, h, S.bi, S.bf, S.pf, A, Ainv, M, rhs, q, nu, q_ref, np.zeros(1), np.zeros((1, 2)), u,
-                         *drives, 0, np.zeros(1, np.int64), np.zeros(1), np.zeros(1, np.int64), empty, empty, empty, False)
+                         *drives, 0, np.zeros(1, np.int64), np.zeros(1), np.zeros(1, np.int64), empty, empty, empty, False,
+                         S.pi, LEMKE, np.zeros(1), np.zeros((1, 2)))
     for a, b in zip(fast[:3], full[:3]):
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-15)
     assert fast[3] == full[5] == 0

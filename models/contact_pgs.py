@@ -1,0 +1,475 @@
+"""Projected Gauss-Seidel (PGS) on the contact impulses of one step, sparse by body.
+
+The problem is the one `models.stepper.contact_lcp` hands to Lemke (Stewart-Trinkle, the same
+polyhedral friction cone), written in the impulses of each active contact k instead of LCP
+variables. With the free velocity nu_free and A from `models.stepper`,
+
+    nu+ = nu_free + A^-1 sum_k (W_n,k p_n,k + W_t,k f_k[0] + W_o,k f_k[1])
+
+    0 <= p_n,k  _|_  w_k = psi_k / h + W_n,k^T nu+ + c_k (p_n,k + C_k delta_n,k) >= 0
+    f_k in P_k = P(mu_k p_n,k) with u_k^T (f' - f_k) >= 0 for every f' in P_k,
+    u_k = (W_t,k, W_o,k)^T nu+ + c_k f_k - K_k / (h K_k + C_k) delta_t,k
+
+where c_k = 1 / (h (h K + C)) for compliant contact (0 for rigid) and P(r) is the polygon with
+vertices r (cos 2 pi j / d, sin 2 pi j / d), j < d, in the contact's (t, o) basis (planar: the
+segment [-r, r] along t). The variational inequality on f is maximal dissipation over the
+polygon: it is exactly the complementarity of Lemke's (beta, gamma) rows, since the polygon is
+the image of {beta >= 0, sum beta <= mu p_n} under the direction matrix (tests compare them).
+
+A sweep first sets each contact's p_n to the exact minimiser of its scalar problem (clamped at
+0), then each friction impulse f to the exact minimiser of its tangential block over its
+polygon (the unconstrained point if it lies inside, else the best point on an edge), with
+everything else held. Warm start: impulses from the previous step (by contact slot), clipped
+into their cones.
+
+Known limits (tests and `ladder bench` show them): rigid contacts with more impulses than the
+bodies have DOFs (a box flat on a plane: two corners, two frictions, three DOFs) leave a
+workless part of the friction undetermined, and PGS may return any admissible one where
+regularised Lemke returns the smallest; tall rigid stacks and squeezes converge slowly (a
+stack of 8 boxes does not converge in 1000 sweeps from a cold start), which comes back as a
+status.
+
+Sparsity: A is block diagonal by body (the mass matrix is, and each drive acts on one DOF) and a
+contact's Jacobian columns are nonzero only on the DOFs of its two bodies. Each contact keeps
+its Jacobian rows and the matching entries of A^-1 W (at most CONTACT_DOFS numbers), nu+ is kept
+up to date as impulses change, and a sweep costs O(contacts): the Delassus matrix W^T A^-1 W is
+never formed.
+
+Convergence and residual: sweeps stop once the largest impulse change of a sweep is at most
+tolerance times the impulse scale (the largest impulse, or the largest impulse that would stop
+a contact's free approach) *and* the recomputed residual is at most tolerance. The residual is
+the natural-map residual in impulse units, max over contacts of |min(p_n, w / G_nn)| and
+|f - f*| (f* the tangential block minimiser at the current point), divided by the same impulse
+scale. Failing that within max_sweeps comes back as PGS_NOT_CONVERGED, never raised.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from models.kinematics import BI_VMAP, PF_C, PF_K, PF_MU, PI_A, PI_B
+
+#: Velocity slots of a body (x, y, z, angle rate, wx, wy, wz: `models.kinematics` vmap).
+BODY_DOFS = 7
+#: A contact touches the DOFs of at most two bodies.
+CONTACT_DOFS = 2 * BODY_DOFS
+#: A body block of A with a pivot below this times its largest entry counts as singular.
+SINGULAR_PIVOT = 1e-14
+#: A 2x2 tangential block with det <= this times trace^2 counts as singular (rank 1 or 0).
+SINGULAR_BLOCK = 1e-12
+#: A point is inside a friction polygon when no edge has it outside by more than this
+#: (relative to the polygon's radius).
+INSIDE_TOL = 1e-12
+
+PGS_CONVERGED = 0
+PGS_NOT_CONVERGED = 1
+PGS_NON_FINITE = 2
+
+
+# ----------------------------------------------------------------------------- A by body
+
+
+@numba.njit(cache=True)
+def _invert_small(B, m, out):
+    """out[:m, :m] = B[:m, :m]^-1 by Gauss-Jordan with partial pivoting; False if singular."""
+    work = np.zeros((m, 2 * m))
+    big = 0.0
+    for r in range(m):
+        for c in range(m):
+            work[r, c] = B[r, c]
+            big = max(big, abs(B[r, c]))
+        work[r, m + r] = 1.0
+    if not (big > 0.0):
+        return False
+    for k in range(m):
+        p = k
+        for r in range(k + 1, m):
+            if abs(work[r, k]) > abs(work[p, k]):
+                p = r
+        if not (abs(work[p, k]) > SINGULAR_PIVOT * big):
+            return False
+        if p != k:
+            for c in range(2 * m):
+                work[k, c], work[p, c] = work[p, c], work[k, c]
+        inv = 1.0 / work[k, k]
+        for c in range(2 * m):
+            work[k, c] *= inv
+        for r in range(m):
+            if r != k and work[r, k] != 0.0:
+                f = work[r, k]
+                for c in range(2 * m):
+                    work[r, c] -= f * work[k, c]
+    for r in range(m):
+        for c in range(m):
+            out[r, c] = work[r, m + c]
+    return True
+
+
+@numba.njit(cache=True)
+def body_blocks(bi, A, Ainv):
+    """The blocks of A^-1 per body (A is block diagonal by body).
+
+    Returns (dofs (nb, BODY_DOFS) nu indices, -1 padded; count (nb,); inv (nb, BODY_DOFS,
+    BODY_DOFS) with inv[b, :count, :count] = (A restricted to body b's DOFs)^-1; ok). Read from
+    Ainv when it is given (shape (nv, nv)), else each block of A is inverted; ok is False when
+    a block is singular.
+    """
+    nb = bi.shape[0]
+    dofs = np.full((nb, BODY_DOFS), -1, np.int64)
+    count = np.zeros(nb, np.int64)
+    inv = np.zeros((nb, BODY_DOFS, BODY_DOFS))
+    block = np.zeros((BODY_DOFS, BODY_DOFS))
+    have_inverse = Ainv.shape[0] == A.shape[0]
+    for b in range(nb):
+        m = 0
+        for s in range(BODY_DOFS):
+            v = bi[b, BI_VMAP + s]
+            if v >= 0:
+                dofs[b, m] = v
+                m += 1
+        count[b] = m
+        for r in range(m):
+            for c in range(m):
+                if have_inverse:
+                    inv[b, r, c] = Ainv[dofs[b, r], dofs[b, c]]
+                else:
+                    block[r, c] = A[dofs[b, r], dofs[b, c]]
+        if m > 0 and not have_inverse:
+            if not _invert_small(block, m, inv[b]):
+                return dofs, count, inv, False
+    return dofs, count, inv, True
+
+
+@numba.njit(cache=True)
+def block_solve(dofs, count, inv, rhs):
+    """A^-1 rhs from the body blocks of `body_blocks`: O(bodies)."""
+    out = np.zeros(rhs.shape[0])
+    for b in range(count.shape[0]):
+        for r in range(count[b]):
+            s = 0.0
+            for c in range(count[b]):
+                s += inv[b, r, c] * rhs[dofs[b, c]]
+            out[dofs[b, r]] = s
+    return out
+
+
+# ----------------------------------------------------------------------------- one contact's blocks
+
+
+# Rows are passed as (2-D array, row index), not as row views: a view is a new array object
+# whose reference counting costs more than the few products of a contact.
+
+
+@numba.njit(cache=True, inline="always")
+def _dot(J, k, cdof, m, v):
+    """J[k] . v on contact k's DOFs."""
+    s = 0.0
+    for j in range(m):
+        s += J[k, j] * v[cdof[k, j]]
+    return s
+
+
+@numba.njit(cache=True, inline="always")
+def _add(Y, k, cdof, m, scale, v):
+    """v += scale Y[k] on contact k's DOFs."""
+    for j in range(m):
+        v[cdof[k, j]] += scale * Y[k, j]
+
+
+@numba.njit(cache=True)
+def _apply_inverse(inv, a, b, ca, cb, J, Y, k):
+    """Y[k] = A^-1 J[k] on contact k's DOFs (body a's first ca entries, then body b's cb)."""
+    for r in range(ca):
+        s = 0.0
+        for c in range(ca):
+            s += inv[a, r, c] * J[k, c]
+        Y[k, r] = s
+    for r in range(cb):
+        s = 0.0
+        for c in range(cb):
+            s += inv[b, r, c] * J[k, ca + c]
+        Y[k, ca + r] = s
+
+
+@numba.njit(cache=True)
+def _inside(f0, f1, radius, cosines, sines):
+    if not (radius > 0.0):
+        return f0 == 0.0 and f1 == 0.0
+    d = cosines.shape[0]
+    for j in range(d):
+        j2 = (j + 1) % d
+        ax, ay = radius * cosines[j], radius * sines[j]
+        ex, ey = radius * cosines[j2] - ax, radius * sines[j2] - ay
+        if ex * (f1 - ay) - ey * (f0 - ax) < -INSIDE_TOL * radius * radius:
+            return False
+    return True
+
+
+@numba.njit(cache=True)
+def polygon_minimiser(f0, f1, u0, u1, g00, g01, g11, radius, cosines, sines):
+    """argmin over f in P(radius) of u.(f - f_old) + 1/2 (f - f_old)^T G (f - f_old).
+
+    f_old = (f0, f1), u the tangential velocity at f_old, G = [[g00, g01], [g01, g11]] positive
+    semidefinite, P(radius) the convex polygon with vertices radius (cosines[j], sines[j]) in
+    counter-clockwise order. The unconstrained minimiser when G is regular and it lies inside;
+    else the best point on the boundary, which also attains the minimum when G is singular and
+    its line of minimisers meets P.
+    """
+    if not (radius > 0.0):
+        return 0.0, 0.0
+    det = g00 * g11 - g01 * g01
+    trace = g00 + g11
+    if det > SINGULAR_BLOCK * trace * trace:
+        n0 = f0 - (g11 * u0 - g01 * u1) / det
+        n1 = f1 - (g00 * u1 - g01 * u0) / det
+        if _inside(n0, n1, radius, cosines, sines):
+            return n0, n1
+    best, b0, b1 = np.inf, 0.0, 0.0
+    d = cosines.shape[0]
+    for j in range(d):
+        j2 = (j + 1) % d
+        a0, a1 = radius * cosines[j], radius * sines[j]
+        e0, e1 = radius * cosines[j2] - a0, radius * sines[j2] - a1
+        x0, x1 = a0 - f0, a1 - f1  # start of the edge relative to f_old
+        g0 = u0 + g00 * x0 + g01 * x1  # gradient at the start of the edge
+        g1 = u1 + g01 * x0 + g11 * x1
+        slope = g0 * e0 + g1 * e1
+        curve = e0 * (g00 * e0 + g01 * e1) + e1 * (g01 * e0 + g11 * e1)
+        if curve > 0.0:
+            s = min(max(-slope / curve, 0.0), 1.0)
+        else:
+            s = 1.0 if slope < 0.0 else 0.0
+        p0, p1 = x0 + s * e0, x1 + s * e1
+        value = u0 * p0 + u1 * p1 + 0.5 * (p0 * (g00 * p0 + g01 * p1) + p1 * (g01 * p0 + g11 * p1))
+        if value < best:
+            best, b0, b1 = value, f0 + p0, f1 + p1
+    return b0, b1
+
+
+@numba.njit(cache=True)
+def _tangential_update(k, spatial, f, u0, u1, g00, g01, g11, mu, p_n, cosines, sines):
+    """The minimiser of contact k's tangential block with the rest held."""
+    if spatial:
+        return polygon_minimiser(f[k, 0], f[k, 1], u0, u1, g00, g01, g11, mu * p_n, cosines, sines)
+    bound = mu * p_n
+    return min(max(f[k, 0] - u0 / g00, -bound), bound), 0.0
+
+
+@numba.njit(cache=True, inline="always")
+def _normal_update(k, cdof, cm, jn, yn, gnn, comp, bn, p_n, v):
+    """Set contact k's normal impulse to its exact minimiser (clamped at 0); returns |change|."""
+    m = cm[k]
+    w = bn[k] + comp[k] * p_n[k] + _dot(jn, k, cdof, m, v)
+    new = max(p_n[k] - w / gnn[k], 0.0)
+    dp = new - p_n[k]
+    if dp != 0.0:
+        _add(yn, k, cdof, m, dp, v)
+        p_n[k] = new
+    return abs(dp)
+
+
+@numba.njit(cache=True, inline="always")
+def _friction_update(k, spatial, cdof, cm, jt, jo, yt, yo, g00, g01, g11, comp, bt, mu, p_n, f, v, cosines, sines):
+    """Set contact k's friction impulse to its block minimiser over the cone; returns |change|."""
+    m = cm[k]
+    u0 = bt[k, 0] + comp[k] * f[k, 0] + _dot(jt, k, cdof, m, v)
+    u1 = 0.0
+    if spatial:
+        u1 = bt[k, 1] + comp[k] * f[k, 1] + _dot(jo, k, cdof, m, v)
+    n0, n1 = _tangential_update(k, spatial, f, u0, u1, g00[k], g01[k], g11[k], mu[k], p_n[k], cosines, sines)
+    d0, d1 = n0 - f[k, 0], n1 - f[k, 1]
+    if d0 != 0.0 or d1 != 0.0:
+        _add(yt, k, cdof, m, d0, v)
+        if spatial:
+            _add(yo, k, cdof, m, d1, v)
+        f[k, 0], f[k, 1] = n0, n1
+    return np.sqrt(d0 * d0 + d1 * d1)
+
+
+# ----------------------------------------------------------------------------- the solver
+
+
+@numba.njit(cache=True)
+def contact_pgs(
+    compliant, directions, spatial, h, pi, pf, nc, c_pair, c_psi, c_slot, W_n, W_t, W_o,
+    delta_n, delta_t, dofs, count, inv, nu_free, warm_n, warm_t, zero_column, tolerance, max_sweeps,
+):
+    """Solve the contact problem of the module docstring by PGS.
+
+    Contacts 0..nc-1 with Jacobian columns W_n, W_t (W_o in space) of shape (nv, >= nc); a
+    contact is active when its W_n column's norm exceeds zero_column, and has friction when
+    mu > 0 and W_t (or W_o) exceeds it. (dofs, count, inv): `body_blocks` of A. warm_n
+    (slots,), warm_t (slots, 2): the previous step's impulses by contact slot (zeros: a cold
+    start).
+
+    Returns (nu+, p_n (nc,), p_t (nc, 2) in the (t, o) basis, zero where inactive; active: the
+    indices of the active contacts; status PGS_*; sweeps; residual; unknowns: scalar impulses
+    solved for).
+    """
+    d = directions if spatial else 2
+    cosines = np.empty(d)
+    sines = np.empty(d)
+    for j in range(d):
+        cosines[j] = np.cos(2.0 * np.pi * j / d)
+        sines[j] = np.sin(2.0 * np.pi * j / d)
+    # gather each contact's DOFs and Jacobian rows
+    cdof = np.zeros((nc, CONTACT_DOFS), np.int64)
+    cm = np.zeros(nc, np.int64)
+    jn = np.zeros((nc, CONTACT_DOFS))
+    jt = np.zeros((nc, CONTACT_DOFS))
+    jo = np.zeros((nc, CONTACT_DOFS))
+    yn = np.zeros((nc, CONTACT_DOFS))
+    yt = np.zeros((nc, CONTACT_DOFS))
+    yo = np.zeros((nc, CONTACT_DOFS))
+    active = np.empty(nc, np.int64)
+    fric = np.zeros(nc, np.bool_)
+    gnn = np.zeros(nc)
+    g00 = np.zeros(nc)
+    g01 = np.zeros(nc)
+    g11 = np.zeros(nc)
+    comp = np.zeros(nc)
+    bn = np.zeros(nc)
+    bt = np.zeros((nc, 2))
+    mu = np.zeros(nc)
+    n = 0
+    nf = 0
+    for i in range(nc):
+        p = c_pair[i]
+        a, b = pi[p, PI_A], pi[p, PI_B]
+        ca, cb = count[a], count[b]
+        m = ca + cb
+        sn = 0.0
+        st = 0.0
+        so = 0.0
+        for j in range(m):
+            v = dofs[a, j] if j < ca else dofs[b, j - ca]
+            cdof[n, j] = v
+            jn[n, j] = W_n[v, i]
+            jt[n, j] = W_t[v, i]
+            sn += jn[n, j] * jn[n, j]
+            st += jt[n, j] * jt[n, j]
+            if spatial:
+                jo[n, j] = W_o[v, i]
+                so += jo[n, j] * jo[n, j]
+        if not (np.sqrt(sn) > zero_column):
+            continue
+        active[n] = i
+        cm[n] = m
+        K, C = pf[p, PF_K], pf[p, PF_C]
+        if compliant:
+            comp[n] = 1.0 / (h * (h * K + C))
+            bn[n] = comp[n] * C * delta_n[c_slot[i]]
+            for c in range(2):
+                bt[n, c] = -K / (h * K + C) * delta_t[c_slot[i], c]
+        bn[n] += c_psi[i] / h
+        mu[n] = pf[p, PF_MU]
+        fric[n] = mu[n] > 0.0 and (np.sqrt(st) > zero_column or np.sqrt(so) > zero_column)
+        _apply_inverse(inv, a, b, ca, cb, jn, yn, n)
+        for j in range(m):
+            gnn[n] += jn[n, j] * yn[n, j]
+        gnn[n] += comp[n]
+        if fric[n]:
+            nf += 1
+            _apply_inverse(inv, a, b, ca, cb, jt, yt, n)
+            for j in range(m):
+                g00[n] += jt[n, j] * yt[n, j]
+            g00[n] += comp[n]
+            if spatial:
+                _apply_inverse(inv, a, b, ca, cb, jo, yo, n)
+                for j in range(m):
+                    g01[n] += jt[n, j] * yo[n, j]
+                    g11[n] += jo[n, j] * yo[n, j]
+                g11[n] += comp[n]
+        n += 1
+    unknowns = n + nf * (2 if spatial else 1)
+    p_out = np.zeros(nc)
+    t_out = np.zeros((nc, 2))
+    if n == 0:
+        return nu_free.copy(), p_out, t_out, active[:0], PGS_CONVERGED, 0, 0.0, 0
+    # impulse scale: the largest impulse that would stop a contact's free approach
+    scale = 0.0
+    for k in range(n):
+        w = bn[k] + _dot(jn, k, cdof, cm[k], nu_free)
+        scale = max(scale, -w / gnn[k])
+    # warm start, clipped into the cones
+    v = nu_free.copy()
+    p_n = np.zeros(n)
+    f = np.zeros((n, 2))
+    for k in range(n):
+        slot = c_slot[active[k]]
+        p_n[k] = max(warm_n[slot], 0.0)
+        if fric[k]:
+            f0 = warm_t[slot, 0]
+            f1 = warm_t[slot, 1] if spatial else 0.0
+            radius = mu[k] * p_n[k]
+            if spatial and not _inside(f0, f1, radius, cosines, sines):
+                # shrink onto the polygon's inscribed circle (radius mu p_n cos(pi / d))
+                size = np.sqrt(f0 * f0 + f1 * f1)
+                shrink = radius * np.cos(np.pi / d) / size
+                f0, f1 = shrink * f0, shrink * f1
+            elif not spatial:
+                f0 = min(max(f0, -radius), radius)
+            f[k, 0], f[k, 1] = f0, f1
+        _add(yn, k, cdof, cm[k], p_n[k], v)
+        if fric[k]:
+            _add(yt, k, cdof, cm[k], f[k, 0], v)
+            if spatial:
+                _add(yo, k, cdof, cm[k], f[k, 1], v)
+    status = PGS_NOT_CONVERGED
+    sweeps = 0
+    residual = np.inf
+    for sweep in range(max_sweeps):
+        sweeps = sweep + 1
+        change = 0.0
+        # all normal impulses, then all friction impulses: interleaving them per contact lets
+        # the two corners of a box on a plane creep along their (workless) squeeze for
+        # thousands of sweeps after an impact
+        for k in range(n):
+            change = max(change, _normal_update(k, cdof, cm, jn, yn, gnn, comp, bn, p_n, v))
+        for k in range(n):
+            if fric[k]:
+                change = max(change, _friction_update(k, spatial, cdof, cm, jt, jo, yt, yo, g00, g01, g11, comp, bt, mu, p_n, f, v, cosines, sines))
+        if not np.isfinite(change):
+            status = PGS_NON_FINITE
+            break
+        big = scale
+        for k in range(n):
+            big = max(big, p_n[k], np.sqrt(f[k, 0] * f[k, 0] + f[k, 1] * f[k, 1]))
+        if change <= tolerance * big:
+            residual = _residual(n, spatial, cdof, cm, jn, jt, jo, gnn, g00, g01, g11, comp, bn, bt, mu, fric, p_n, f, v, cosines, sines)
+            residual = residual / big if big > 0.0 else residual
+            if residual <= tolerance:
+                status = PGS_CONVERGED
+                break
+    if status != PGS_CONVERGED:
+        big = scale
+        for k in range(n):
+            big = max(big, p_n[k], np.sqrt(f[k, 0] * f[k, 0] + f[k, 1] * f[k, 1]))
+        residual = _residual(n, spatial, cdof, cm, jn, jt, jo, gnn, g00, g01, g11, comp, bn, bt, mu, fric, p_n, f, v, cosines, sines)
+        residual = residual / big if big > 0.0 else residual
+        if not np.isfinite(residual):
+            status = PGS_NON_FINITE
+    for k in range(n):
+        p_out[active[k]] = p_n[k]
+        t_out[active[k], 0] = f[k, 0]
+        t_out[active[k], 1] = f[k, 1]
+    return v, p_out, t_out, active[:n], status, sweeps, residual, unknowns
+
+
+@numba.njit(cache=True)
+def _residual(n, spatial, cdof, cm, jn, jt, jo, gnn, g00, g01, g11, comp, bn, bt, mu, fric, p_n, f, v, cosines, sines):
+    """Natural-map residual in impulse units (see the module docstring), not yet scaled."""
+    r = 0.0
+    for k in range(n):
+        m = cm[k]
+        w = bn[k] + comp[k] * p_n[k] + _dot(jn, k, cdof, m, v)
+        r = max(r, abs(min(p_n[k], w / gnn[k])))
+        if fric[k]:
+            u0 = bt[k, 0] + comp[k] * f[k, 0] + _dot(jt, k, cdof, m, v)
+            u1 = 0.0
+            if spatial:
+                u1 = bt[k, 1] + comp[k] * f[k, 1] + _dot(jo, k, cdof, m, v)
+            n0, n1 = _tangential_update(k, spatial, f, u0, u1, g00[k], g01[k], g11[k], mu[k], p_n[k], cosines, sines)
+            r = max(r, np.sqrt((n0 - f[k, 0]) ** 2 + (n1 - f[k, 1]) ** 2))
+    return r
