@@ -8,7 +8,9 @@ Sections (each a function returning a JSON-able dict; `run_all` runs them and wr
   sliding distance; the disc's free fall and plastic landing), otherwise the same rung at a
   much finer step (the paper's scene; the elastically bouncing disc);
 - throughput: steps per second per rung on the paper's scene (h = 1e-4, until the grasp),
-  and MuJoCo's on the same scene when the optional peer is installed (else: skipped);
+  and, when the optional peer is installed (``peers`` extra; else: skipped), MuJoCo's on the
+  same scene, steps and h (`planner.peers`), with the ratio, where MuJoCo's run ends, and a
+  stability sweep (h = 1e-4 to 1e-3, the policy's full 3 s) of ours and MuJoCo's;
 - scaling: cost per step against the number of contacts for Lemke and PGS (a row of boxes
   resting on a plane, 2 contacts each, up to 64 contacts; a short stack), with the fitted
   growth exponent per solver and the contact count from which PGS is cheaper;
@@ -196,16 +198,121 @@ def throughput(quick: bool = False) -> dict:
         wall, out = _timed(lambda: _rollout(tri, rung, 1e-4, 3.0, controls, stop=True, records=2), repeat=3 if quick else 7)
         rows.append({"rung": rung, "h": 1e-4, "steps": out.steps, "outcome": out.outcome, "median_wall_s": wall,
                      "steps_per_s": out.steps / wall})
-    peer = mujoco_peer()
+    ours = next(row for row in rows if row["rung"] == PEER_RUNG)
+    peer = mujoco_peer(tri, controls[0], ours["steps"], ours["h"],
+                       lambda: _rollout(tri, PEER_RUNG, ours["h"], 3.0, controls, stop=True, records=2), quick)
     return {"scene": "two_finger_triangle (v1 = v2 = 1, until the grasp)", "rows": rows, "peer": peer}
 
 
-def mujoco_peer() -> dict:
+#: The stability sweep: steps h, and the paper's scene at these parameters (the policy's
+#: constant speeds, for the policy's duration).
+STABILITY_STEPS = (1e-4, 2e-4, 5e-4, 1e-3)
+STABILITY_SCENES = (("v1 = v2 = 1", {}), ("v1 = 0.8, v2 = 1", {"v1": 0.8}))
+#: Records of the stability runs are this far apart (s): goal and unsafe are checked on them.
+STABILITY_PERIOD = 1e-3
+#: The rung timed against MuJoCo.
+PEER_RUNG = "dynamic-compliant"
+
+
+def mujoco_peer(scenario, u, steps: int, h: float, ours, quick: bool = False) -> dict:
+    """MuJoCo on the same scene, commanded speeds u, step h and number of steps as our
+    rollout `ours()` (PEER_RUNG): steps/s per contact mapping and the ratio ours / MuJoCo,
+    timed in turns (ours, then each mapping, `repeat` rounds after a warm-up one) so that
+    load from other work on the machine hits both alike; the ratio is the median of the
+    rounds' ratios. Also where MuJoCo's run ends (outcome, touching pairs) and the stability
+    sweep. Skipped without mujoco."""
     try:
-        import mujoco  # noqa: F401
+        from planner import peers
     except ImportError:
         return {"skipped": "mujoco is not installed (pip install 'contact-ladder[peers]'); the peer was not timed"}
-    return {"skipped": "a MuJoCo model of the paper's scene is not built yet; the peer was not timed"}
+    repeat = 3 if quick else 7
+    inert = [f"{p.body_a}-{p.body_b}" for p in peers.inert_pairs(scenario)]
+    built = [peers.build(scenario, h, contact, drop) for contact in peers.CONTACT_MAPPINGS for drop in ((False, True) if inert else (False,))]
+    walls = np.zeros((repeat, 1 + len(built)))
+    ends = [None] * len(built)
+    for round_ in range(-1, repeat):  # round -1 warms up
+        t0 = time.perf_counter()
+        ours()
+        walls[round_, 0] = time.perf_counter() - t0
+        for k, peer in enumerate(built):
+            walls[round_, 1 + k], ends[k] = peers.timed_run(peer, u, steps)
+    median = np.median(walls, axis=0)
+    rows = [{"contact": peer.contact, "inert_pairs_left_out": list(peer.dropped), "steps": steps, "median_wall_s": float(median[1 + k]),
+             "steps_per_s": steps / float(median[1 + k]), "ratio": float(np.median(walls[:, 1 + k] / walls[:, 0])),
+             "end": _end_state(scenario, ends[k])} for k, peer in enumerate(built)]
+    fastest = max(rows, key=lambda row: row["steps_per_s"])
+    return {
+        "version": peers.version(), "integrator": "Euler", "h": h, "steps": steps, "simulated_s": steps * h,
+        "repeat": repeat, "rows": rows, "ours": {"rung": PEER_RUNG, "steps_per_s": steps / float(median[0])},
+        "inert_pairs": inert, "steps_per_s": fastest["steps_per_s"], "ratio": fastest["ratio"],
+        "against": fastest["contact"] + (" without " + ", ".join(fastest["inert_pairs_left_out"]) if fastest["inert_pairs_left_out"] else ""),
+        "mapping": {"force": "solref = -(1 - d) A~ (K, C), solimp d = %g, elliptic cone: f_n = K r + C r' per pair" % peers.FORCE_IMPEDANCE,
+                    "direct": "solref = (-K, -C), MuJoCo's default solimp and (pyramidal) cone"},
+        "stability": stability(peers),
+    }
+
+
+def _end_state(scenario, q) -> dict:
+    """Outcome at q, the object coordinates and which robot-object pairs touch."""
+    from models.rungs import pair_signed_distances
+
+    tol = scenario.spec.contact.touch_tolerance
+    roles = {b.name: b.role for b in scenario.spec.bodies}
+    psi = pair_signed_distances(scenario, q) if np.all(np.isfinite(q)) else np.full(len(scenario.pairs), np.nan)
+    touching = {f"{p.body_a}-{p.body_b}": bool(psi[i] <= tol) for i, p in enumerate(scenario.pairs)
+                if {roles[p.body_a], roles[p.body_b]} == {"robot", "object"}}
+    return {"outcome": _outcome(scenario, q), "q": dict(zip(scenario.coordinates, map(float, q))), "touching": touching}
+
+
+def _outcome(scenario, q, tables=None) -> str:
+    """The task's outcome at q as a rollout classifies it (unsafe before goal); 'diverged'
+    for a q that is not finite or beyond the stepper's divergence limit."""
+    from models.predicates import evaluate
+    from models.rungs import compiled, pair_signed_distances
+    from models.stepper import DIVERGENCE_LIMIT
+
+    if not np.all(np.abs(q) < DIVERGENCE_LIMIT):  # also catches nan
+        return "diverged"
+    c, psi = tables or compiled(scenario), pair_signed_distances(scenario, q)
+    return "unsafe" if evaluate(c.unsafe, q, psi) else "goal" if evaluate(c.goal, q, psi) else "none"
+
+
+def _track(scenario, times, Q) -> dict:
+    """First times the goal and the unsafe set are met along records (times, Q), the outcome
+    and q at the last record, and the largest displacement of the passive coordinates."""
+    from models.rungs import compiled
+
+    tables = compiled(scenario)
+    passive = [i for i, name in enumerate(scenario.coordinates) if name not in scenario.actuated]
+    outcomes = [_outcome(scenario, q, tables) for q in Q]
+    first = {kind: next((float(t) for t, o in zip(times, outcomes) if o == kind), None) for kind in ("goal", "unsafe", "diverged")}
+    finite = Q[np.all(np.isfinite(Q), axis=1)]
+    moved = np.abs(finite[:, passive] - scenario.start[passive]) if passive else np.zeros((1, 1))
+    return {"goal_at": first["goal"], "unsafe_at": first["unsafe"], "diverged_at": first["diverged"], "end": outcomes[-1],
+            "end_q": dict(zip(scenario.coordinates, map(float, Q[-1]))), "max_object_displacement": float(moved.max()),
+            "duration": float(times[-1])}
+
+
+def stability(peers) -> dict:
+    """Ours (dynamic-compliant) and MuJoCo (each contact mapping, default integrator) over the
+    steps STABILITY_STEPS on the paper's scene, running the policy for its duration."""
+    from models.scenario import load_scenario
+
+    rows = []
+    for label, params in STABILITY_SCENES:
+        scene = load_scenario(SCENARIOS / "two_finger_triangle.toml", params)
+        policy = scene.spec.task.policy
+        u = np.array([policy.speeds.get(name, 0.0) for name in scene.actuated])
+        for h in STABILITY_STEPS:
+            out = _rollout(scene, "dynamic-compliant", h, policy.duration, u, records=int(round(policy.duration / STABILITY_PERIOD)) + 2)
+            rows.append({"scene": label, "simulator": "ours (dynamic-compliant)", "h": h, "status": out.status,
+                         **_track(scene, out.times, out.trajectory)})
+            for contact in peers.CONTACT_MAPPINGS:
+                run = peers.run(peers.build(scene, h, contact), u, policy.duration, STABILITY_PERIOD)
+                status = "ok" if run.finite and not run.diverged else "diverged (" + ", ".join(run.diverged or ("non-finite",)) + ")"
+                rows.append({"scene": label, "simulator": f"MuJoCo ({contact})", "h": h, "status": status,
+                             **_track(scene, run.times, run.q)})
+    return {"period": STABILITY_PERIOD, "rows": rows}
 
 
 # ----------------------------------------------------------------------------- scaling
@@ -519,7 +626,7 @@ def markdown(r: dict, doc_dir: Path, out: Path) -> str:
              "## Throughput (paper's scene, h = 1e-4, until the grasp)", "", "| rung | steps | median wall (s) | steps/s |", "|---|---|---|---|"]
     for row in r["throughput"]["rows"]:
         lines.append(f"| {row['rung']} | {row['steps']} | {row['median_wall_s']:.4f} | {row['steps_per_s']:,.0f} |")
-    lines += ["", f"Peer (MuJoCo): {r['throughput']['peer'].get('skipped', r['throughput']['peer'])}", "",
+    lines += [""] + peer_markdown(r["throughput"]["peer"]) + ["",
               "## Work-precision", "", "| scene | rung | h | reference | error | wall (s) | status |", "|---|---|---|---|---|---|---|"]
     for row in r["work_precision"]["rows"]:
         lines.append(f"| {row['scene']} | {row['rung']} | {row['h']:g} | {row['reference']} | {row['error']:.2e} | {row['wall_s']:.4f} | {row['status']} |")
@@ -539,3 +646,41 @@ def markdown(r: dict, doc_dir: Path, out: Path) -> str:
         lines.append(f"| {scene} | speed-up (median wall, flat / ladder) | | {res['summary']['speedup_median_wall']:.2f}x | |")
     lines += ["", f"OMPL benchmark logs: `{rel(out)}/ladder_vs_flat.*.log` (`ompl_benchmark_statistics LOG -d bench.db`).", ""]
     return "\n".join(lines)
+
+
+def peer_markdown(peer: dict) -> list[str]:
+    """The throughput section's MuJoCo part: timing per contact mapping, then the stability sweep."""
+    if "skipped" in peer:
+        return [f"Peer (MuJoCo): skipped: {peer['skipped']}."]
+
+    def q(values: dict) -> str:
+        return ", ".join(f"{k} = {v:.4g}" for k, v in values.items())
+
+    def t(value) -> str:
+        return "-" if value is None else f"{value:.4f}"
+
+    lines = [f"### Peer: MuJoCo {peer['version']}", "",
+             f"The same scene built in MuJoCo (`planner/peers.py`), MuJoCo's default integrator ({peer['integrator']}), "
+             f"h = {peer['h']:g}, the same {peer['steps']} steps ({peer['simulated_s']:.4f} s simulated) in one "
+             f"`mj_step(nstep=...)` call; ours and MuJoCo timed in turns, {peer['repeat']} rounds, medians (the ratio: "
+             "median of the rounds' ratios). Inert pairs (" + (", ".join(peer["inert_pairs"]) or "none") + "): no free DOF "
+             "feels them; our stepper drops their contacts, MuJoCo solves their rows unless they are left out. Contact mappings: "
+             + "; ".join(f"`{k}`: {v}" for k, v in peer["mapping"].items()) + ".", "",
+             f"| contact mapping | inert pairs left out | steps/s | {peer['ours']['rung']} / MuJoCo | outcome at the end | fingers touching | end state |",
+             "|---|---|---|---|---|---|---|"]
+    for row in peer["rows"]:
+        end = row["end"]
+        touching = ", ".join(f"{k}: {'yes' if v else 'no'}" for k, v in end["touching"].items())
+        left_out = ", ".join(row["inert_pairs_left_out"]) or "none"
+        lines.append(f"| {row['contact']} | {left_out} | {row['steps_per_s']:,.0f} | {row['ratio']:.2f}x | {end['outcome']} | {touching} | {q(end['q'])} |")
+    lines += ["", f"Ours ({peer['ours']['rung']}, {peer['ours']['steps_per_s']:,.0f} steps/s in these rounds) against the faster MuJoCo mapping "
+              f"(`{peer['against']}`): **{peer['ratio']:.2f}x**.", ""]
+    st = peer["stability"]
+    lines += ["### Stability over h (the policy for its full duration; goal and unsafe checked every "
+              f"{st['period'] * 1e3:g} ms)", "",
+              "| scene | simulator | h | goal first at (s) | unsafe first at (s) | max abs object displacement (m) | outcome at the end | end state | status |",
+              "|---|---|---|---|---|---|---|---|---|"]
+    for row in st["rows"]:
+        lines.append(f"| {row['scene']} | {row['simulator']} | {row['h']:g} | {t(row['goal_at'])} | {t(row['unsafe_at'])} | "
+                     f"{row['max_object_displacement']:.3g} | {row['end']} | {q(row['end_q'])} | {row['status']} |")
+    return lines

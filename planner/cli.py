@@ -126,7 +126,8 @@ def build_parser() -> argparse.ArgumentParser:
         "bench",
         help="benchmarks: work-precision, throughput, scaling, ladder vs flat",
         description="Measure work-precision (error against closed forms or fine-step references vs wall "
-        "time), throughput (steps/s per rung on the paper's scene), scaling with the number of contacts, "
+        "time), throughput (steps/s per rung on the paper's scene, and MuJoCo's on the same scene with the "
+        "peers extra), scaling with the number of contacts, "
         "and the ladder against flat planning (also as OMPL benchmark logs). Writes bench.json, plots and "
         "docs/benchmarks.md (--doc). --quick is a smoke run of every section.",
     )
@@ -583,6 +584,14 @@ def cmd_bench(args: argparse.Namespace) -> int:
     else:
         for row in results["throughput"]["rows"]:
             print(f"throughput {row['rung']:22s} {row['steps_per_s']:>12,.0f} steps/s")
+        peer = results["throughput"]["peer"]
+        if "skipped" in peer:
+            print(f"peer MuJoCo: skipped: {peer['skipped']}")
+        else:
+            for row in peer["rows"]:
+                left_out = f", without {', '.join(row['inert_pairs_left_out'])}" if row["inert_pairs_left_out"] else ""
+                print(f"throughput MuJoCo {peer['version']} ({row['contact']}{left_out}) {row['steps_per_s']:>12,.0f} steps/s: "
+                      f"dynamic-compliant is {row['ratio']:.2f}x")
         for scene, res in results["planning"].items():
             x = res["summary"]
             print(f"planning {scene}: ladder {x['ladder']['success_rate']:.0%} in {x['ladder']['median_wall_s']:.3f} s, "

@@ -47,7 +47,19 @@ def test_throughput_and_scaling_report_every_rung(quick):
     _, r = quick
     assert {row["rung"] for row in r["throughput"]["rows"]} >= {"kinematic", "quasistatic-rigid", "dynamic-compliant"}
     assert all(row["outcome"] == "goal" and row["steps_per_s"] > 0 for row in r["throughput"]["rows"])
-    assert "skipped" in r["throughput"]["peer"] or "steps_per_s" in r["throughput"]["peer"]
+    peer = r["throughput"]["peer"]
+    assert "skipped" in peer or "steps_per_s" in peer
+    if "skipped" not in peer:
+        assert {row["contact"] for row in peer["rows"]} == {"force", "direct"} and peer["ratio"] > 0
+        assert peer["inert_pairs"] == ["palm-triangle"] and len(peer["rows"]) == 4  # each mapping with and without it
+        assert all(row["steps"] == peer["steps"] and row["end"]["outcome"] == "goal" for row in peer["rows"])  # MuJoCo at the grasp too
+        stability = peer["stability"]["rows"]
+        ours = [row for row in stability if row["simulator"].startswith("ours")]
+        assert len(ours) == 8 and all(row["end"] == "goal" and row["unsafe_at"] is None and row["status"] == "ok" for row in ours)
+        # at h = 1e-4 the direct mapping (MuJoCo's own contact model) reaches the grasp when ours does
+        for row in (row for row in stability if row["h"] == 1e-4 and row["simulator"] == "MuJoCo (direct)"):
+            mine = next(o for o in ours if o["scene"] == row["scene"] and o["h"] == 1e-4)
+            assert row["goal_at"] == pytest.approx(mine["goal_at"], abs=5e-3), row
     s = r["scaling"]
     rows = s["rows"]
     assert all(row["status"] == "ok" and row["max_drift"] < 1e-3 for row in rows)  # boxes stay at rest
@@ -83,4 +95,17 @@ def test_planning_section_and_ompl_logs(quick):
     text = (out / "benchmarks.md").read_text()
     assert "## Throughput" in text and "## Work-precision" in text and "ladder against flat" in text
     assert "## Scaling" in text and "PGS us/step" in text and "Fitted growth exponent" in text and "PGS is cheaper" in text
+    assert ("Peer (MuJoCo): skipped" in text) != ("### Peer: MuJoCo" in text and "### Stability over h" in text)
     assert json.loads((out / "bench.json").read_text())["quick"] is True
+
+
+def test_peer_says_it_skipped_without_mujoco(monkeypatch):
+    import planner
+    from planner import bench
+
+    monkeypatch.setitem(sys.modules, "mujoco", None)  # import mujoco raises ImportError
+    monkeypatch.delitem(sys.modules, "planner.peers", raising=False)
+    monkeypatch.delattr(planner, "peers", raising=False)
+    peer = bench.mujoco_peer(None, None, 0, 1e-4, None)
+    assert set(peer) == {"skipped"} and "not installed" in peer["skipped"]
+    assert bench.peer_markdown(peer) == [f"Peer (MuJoCo): skipped: {peer['skipped']}."]
