@@ -43,9 +43,11 @@ paper: $(VENV)/.installed
 bench: $(VENV)/.installed-test
 	$(PY) -m pytest -m slow tests/bench --benchmark-enable -s
 
-# ladder bench: work-precision, throughput, scaling, ladder vs flat -> docs/benchmarks.md (about 10 minutes).
+# ladder bench: work-precision, throughput, scaling, ladder vs flat -> docs/benchmarks.md (a few minutes;
+# PLANNING=two_finger_triangle,four_finger_grasp,box_push_3d adds box_push_3d, about an hour).
+PLANNING ?= two_finger_triangle,four_finger_grasp
 bench-doc: $(VENV)/.installed
-	$(VENV)/bin/ladder bench --out docs/bench --doc docs/benchmarks.md
+	$(VENV)/bin/ladder bench --planning $(PLANNING) --out docs/bench --doc docs/benchmarks.md
 
 # numba caches compiled kernels beside the sources and does not notice when a kernel's
 # callee in another module changed: clear them after editing models/ by hand.
