@@ -204,9 +204,8 @@ def throughput(quick: bool = False) -> dict:
     return {"scene": "two_finger_triangle (v1 = v2 = 1, until the grasp)", "rows": rows, "peer": peer}
 
 
-#: The stability sweep: steps h, and the paper's scene at these parameters (the policy's
+#: The peer stability sweep (steps STABILITY_STEPS): the paper's scene at these parameters (the policy's
 #: constant speeds, for the policy's duration).
-STABILITY_STEPS = (1e-4, 2e-4, 5e-4, 1e-3)
 STABILITY_SCENES = (("v1 = v2 = 1", {}), ("v1 = 0.8, v2 = 1", {"v1": 0.8}))
 #: Records of the stability runs are this far apart (s): goal and unsafe are checked on them.
 STABILITY_PERIOD = 1e-3
@@ -248,7 +247,7 @@ def mujoco_peer(scenario, u, steps: int, h: float, ours, quick: bool = False) ->
         "against": fastest["contact"] + (" without " + ", ".join(fastest["inert_pairs_left_out"]) if fastest["inert_pairs_left_out"] else ""),
         "mapping": {"force": "solref = -(1 - d) A~ (K, C), solimp d = %g, elliptic cone: f_n = K r + C r' per pair" % peers.FORCE_IMPEDANCE,
                     "direct": "solref = (-K, -C), MuJoCo's default solimp and (pyramidal) cone"},
-        "stability": stability(peers),
+        "stability": peer_stability(peers),
     }
 
 
@@ -293,7 +292,7 @@ def _track(scenario, times, Q) -> dict:
             "duration": float(times[-1])}
 
 
-def stability(peers) -> dict:
+def peer_stability(peers) -> dict:
     """Ours (dynamic-compliant) and MuJoCo (each contact mapping, default integrator) over the
     steps STABILITY_STEPS on the paper's scene, running the policy for its duration."""
     from models.scenario import load_scenario
