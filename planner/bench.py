@@ -531,7 +531,7 @@ def write_ompl_log(path: Path, name: str, result: dict) -> Path:
         f"Running on {socket.gethostname()}",
         f"Starting at {_dt.datetime.now().strftime('%Y-%m-%d %H:%M:%S')}",
         "<<<|",
-        f"ladder vs flat planning on scenarios/{name}.toml, iteration budget {result['iterations']} per rung "
+        f"ladder vs flat planning on scenarios/{name}.toml, iteration budget {result['iterations'] or 'the scenario default'} per rung "
         "(flat: the whole ladder's), seeds " + ", ".join(map(str, seeds)),
         "|>>>",
         "<<<|",
