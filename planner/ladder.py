@@ -33,7 +33,7 @@ from models.predicates import predicate_distance
 from models.rungs import RUNGS, State, pair_signed_distances, rung_for
 from models.scenario import Problem, Scenario, ScenarioError
 from models.schema import RUNGS as RUNG_ORDER
-from planner.ompl_adapter import plan_control, plan_geometric
+from planner.ompl_adapter import plan_control, plan_geometric, steered_coordinates
 
 
 @dataclass
@@ -140,14 +140,17 @@ def run_ladder(
         if previous is not None and previous.durations:
             replay = _replay(scenario, rung, start, previous, h)
             if replay.outcome == "goal" and replay.status == "ok":
+                # the states are this rung's (a geometric path's states move passive bodies on their own)
+                states = [start.q.tolist()] + [s.q.tolist() for s in replay.states] + [replay.state.q.tolist()]
                 reports.append(RungReport(name, "replayed", "the previous plan holds under this rung", wall_s=time.perf_counter() - t0,
-                                          controls=previous.controls, durations=previous.durations, states=previous.states,
+                                          controls=previous.controls, durations=previous.durations, states=states,
                                           **replay.fields(scenario)))
                 previous = reports[-1]
                 continue
         seeds, prefix_controls, prefix_durations = [], [], np.zeros(0)
         if replay is not None and seeded:
-            seeds, prefix_controls, prefix_durations = replay.states, replay.controls, np.array(replay.durations)
+            m = _agreeing(scenario, replay, previous)
+            seeds, prefix_controls, prefix_durations = replay.states[:m], replay.controls[:m], np.array(replay.durations[:m])
         # the geometric path moves passive bodies on their own: its states are no guide for physics
         guide = np.array(previous.states) if previous is not None and previous.states and guided and previous.rung != "geometric" else None
         plan = plan_control(scenario, rung, start, h=h, control_period=period, seed=seed, iterations=budgets[name],
@@ -169,9 +172,12 @@ def run_ladder(
         if not accepted:
             reason = "no exact plan within the iteration budget" if not plan.exact else (
                 f"the plan found does not hold when replayed ({replay['outcome']}, {replay['status']})")
+        # an accepted plan's states are its replay's under this rung, from the start (the tree's
+        # path begins at its root, which may be a seed part-way along the prefix)
+        states = ([start.q.tolist()] + [s.q.tolist() for s in tail.states] + [tail.state.q.tolist()]) if accepted else plan.states.tolist()
         report = RungReport(name, ended, reason, wall_s=wall, propagations=plan.propagations, iterations=plan.iterations,
                             solver_failures=plan.failures, controls=plan.controls.tolist(), durations=plan.durations.tolist(),
-                            states=plan.states.tolist(), **replay)
+                            states=states, **replay)
         reports.append(report)
         if ended == "failed":
             break
@@ -237,12 +243,16 @@ def _geometric(scenario: Scenario, seed: int, iterations: int, planner: str | No
     period = spec.control_period
     index = [scenario.coordinates.index(n) for n in scenario.actuated]
     max_speed = np.array([scenario.body(n.split(".")[0]).actuators[n.split(".")[1]].max_speed for n in scenario.actuated])
-    controls, durations = [], []
+    controls, durations, states = [], [], [path.states[0]]
     for a, b in zip(path.states[:-1], path.states[1:]):
         delta = b[index] - a[index]
         periods = max(1, int(np.ceil(np.max(np.abs(delta) / max_speed / period, initial=0.0) - 1e-9)))
-        controls.append((delta / (periods * period)).tolist())
-        durations.append(periods * period)
+        # one control per period, so that a replay that stops agreeing part-way along a long
+        # segment still leaves the states before that point as seeds
+        for k in range(1, periods + 1):
+            controls.append((delta / (periods * period)).tolist())
+            durations.append(period)
+            states.append(a + (b - a) * (k / periods))
     ended = "planned" if path.exact else "approximate"
     reason = "" if path.exact else "no path into the goal set within the budget; the closest one seeds the next rung"
     if not path.goal_samples:
@@ -250,7 +260,8 @@ def _geometric(scenario: Scenario, seed: int, iterations: int, planner: str | No
     q = path.states[-1]
     distance = float(predicate_distance(scenario, scenario.spec.task.goal, q, pair_signed_distances(scenario, q)))
     return RungReport("geometric", ended, reason, "goal" if path.exact else "none", time.perf_counter() - t0, 0,
-                      path.iterations, goal_distance=distance, controls=controls, durations=durations, states=path.states.tolist())
+                      path.iterations, goal_distance=distance, controls=controls, durations=durations,
+                      states=np.array(states).tolist())
 
 
 @dataclass
@@ -304,6 +315,37 @@ def _replay_controls(scenario, rung, state, controls, durations, h, so_far: _Rep
         run.durations.append(float(d))
         run.steps_min_psi.append((run.min_psi, run.contact_steps))
     return run
+
+
+#: A replayed state agrees with the previous plan's state at the same control switch while
+#: every steered coordinate is within this much of it (m or rad) and every passive body's
+#: orientation within this angle (rad).
+AGREEMENT = 0.05
+
+
+def _agreeing(scenario: Scenario, replay: _Replay, previous: RungReport) -> int:
+    """How many of the replay's states, from the first, still agree with the previous plan
+    (AGREEMENT): the rest have drifted off it (a box the lower rung pushed straight has turned)
+    and root the tree at states the previous plan never went through. A geometric path moves
+    passive bodies on their own, so against it every state agrees."""
+    if previous.rung == "geometric":
+        return len(replay.states)
+    planned = np.asarray(previous.states, float)
+    steered = np.array(steered_coordinates(scenario), dtype=int)
+    names = scenario.coordinates
+    quaternions = [[names.index(f"{b}.{c}") for c in ("qw", "qx", "qy", "qz")]
+                   for b in dict.fromkeys(n.split(".")[0] for n in names) if f"{b}.qw" in names]
+    for k, s in enumerate(replay.states):
+        if k + 1 >= len(planned):
+            return k
+        ref = planned[k + 1]
+        if np.max(np.abs(s.q[steered] - ref[steered]), initial=0.0) > AGREEMENT:
+            return k
+        for quat in quaternions:
+            c = min(1.0, abs(float(np.dot(s.q[quat], ref[quat]))) / max(np.linalg.norm(s.q[quat]) * np.linalg.norm(ref[quat]), 1e-300))
+            if 2.0 * np.arccos(c) > AGREEMENT:
+                return k
+    return len(replay.states)
 
 
 def _replay(scenario, rung, start, previous, h) -> _Replay:

@@ -97,6 +97,58 @@ def configuration_limits(scenario: Scenario, q0: np.ndarray) -> tuple[np.ndarray
     return low, high
 
 
+def _goal_intervals(node, out: dict) -> None:
+    """Every coordinate interval named anywhere in a predicate (all branches of `any`)."""
+    kind = type(node).__name__
+    if kind == "BoxPredicate":
+        for name, (lo, hi) in node.box.items():
+            out.setdefault(name, []).append((lo, hi))
+    for child in getattr(node, "all", None) or getattr(node, "any", None) or ():
+        _goal_intervals(child, out)
+
+
+def sampling_limits(scenario: Scenario, q0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where the planners draw configurations: configuration_limits, with each passive body's
+    translational coordinates narrowed to the workspace on that axis: the span of every
+    bounded body's start position, the drives' position limits along the axis and the goal's
+    intervals on the coordinate, widened by the body's own reach plus the largest robot's (how
+    far from a drive's limit a pushed body's centre can be). A passive body moves
+    only when something pushes it, so samples far outside that box (PASSIVE_RANGE around its
+    start) would only pull the tree toward places it cannot reach."""
+    low, high = configuration_limits(scenario, q0)
+    axes = "xyz"[: scenario.dimension]
+    placements = scenario.placements(np.asarray(q0, float))
+    span = {a: [np.inf, -np.inf] for a in axes}
+    reach, robot_reach = {}, 0.0
+    for name, g in scenario.geometries.items():
+        if g.kind == "halfspace":
+            continue
+        reach[name] = float(np.max(np.linalg.norm(g.core, axis=1), initial=0.0)) + g.radius
+        if scenario.body(name).role == "robot":
+            robot_reach = max(robot_reach, reach[name])
+        for k, a in enumerate(axes):
+            v = float(placements[name].translation[k])
+            span[a] = [min(span[a][0], v), max(span[a][1], v)]
+    for body in scenario.spec.bodies:
+        for dof, drive in body.actuators.items():
+            if dof in span:
+                for v in (drive.lower, drive.upper):
+                    if v is not None:
+                        span[dof] = [min(span[dof][0], v), max(span[dof][1], v)]
+    intervals: dict = {}
+    _goal_intervals(scenario.spec.task.goal, intervals)
+    for i, name in enumerate(scenario.coordinates):
+        dof = name.rsplit(".", 1)[1]
+        if name in scenario.actuated or dof not in span or not np.isfinite(span[dof][0]):
+            continue
+        lo, hi = span[dof]
+        for a, b in intervals.get(name, ()):
+            lo, hi = min(lo, a), max(hi, b)
+        r = reach.get(name.rsplit(".", 1)[0], 0.0) + robot_reach
+        low[i], high[i] = max(low[i], lo - r), min(high[i], hi + r)
+    return low, high
+
+
 def _configuration_bounds(ob, scenario: Scenario, q0: np.ndarray):
     """OMPL bounds on q (configuration_limits)."""
     low, high = configuration_limits(scenario, q0)
@@ -174,14 +226,15 @@ def plan_control(
     unsteered = np.array([i for i in range(nq) if i not in set(steered.tolist())], dtype=int)
     ns = len(steered)
     n_aux = len(unsteered) + sum(sizes[1:]) + 1  # the unsteered coordinates lead the auxiliary part
-    q_low, q_high = configuration_limits(scenario, start.q)
+    q_low, q_high = configuration_limits(scenario, start.q)  # validity
+    s_low, s_high = sampling_limits(scenario, start.q)  # where samples are drawn
 
     space = ob.CompoundStateSpace()
     qspace = ob.RealVectorStateSpace(ns)
     qbounds = ob.RealVectorBounds(ns)
     for k, i in enumerate(steered):
-        qbounds.setLow(k, float(q_low[i]))
-        qbounds.setHigh(k, float(q_high[i]))
+        qbounds.setLow(k, float(s_low[i]))
+        qbounds.setHigh(k, float(s_high[i]))
     qspace.setBounds(qbounds)
     aux = ob.RealVectorStateSpace(n_aux)
     aux.setBounds(-1e9, 1e9)
@@ -280,8 +333,11 @@ def plan_control(
 
     def valid(s) -> bool:
         flag = s[1][n_aux - 1]
-        if flag == FLAG_UNSAFE or flag == FLAG_FAILED or not qspace.satisfiesBounds(s[0]):
+        if flag == FLAG_UNSAFE or flag == FLAG_FAILED:
             return False
+        for k in range(ns):
+            if not q_low[steered[k]] <= s[0][k] <= q_high[steered[k]]:
+                return False
         for k in range(nu_):
             v = s[1][k]
             if not q_low[unsteered[k]] <= v <= q_high[unsteered[k]]:
@@ -297,7 +353,7 @@ def plan_control(
 
     guide_q = None if guide is None or len(guide) == 0 else np.asarray(guide, float).reshape(-1, nq)
     rng = np.random.default_rng(int(seed))
-    spread = GUIDE_SPREAD * (q_high - q_low)
+    spread = GUIDE_SPREAD * (s_high - s_low)
     blank = flatten(start)[nq:]
     blank[:] = 0.0
 
@@ -329,7 +385,7 @@ def plan_control(
         def sampleGoal(self, s):
             # later states more often: they lie closer to the goal
             k = min(int(len(guide_q) * np.sqrt(rng.random())), len(guide_q) - 1)
-            q = np.clip(guide_q[k] + spread * rng.standard_normal(nq), q_low, q_high)
+            q = np.clip(guide_q[k] + spread * rng.standard_normal(nq), s_low, s_high)
             write(s, np.concatenate([q, blank]))
 
         def maxSampleCount(self):
@@ -420,7 +476,7 @@ def plan_geometric(scenario: Scenario, *, seed: int, iterations: int, planner: s
     steered = steered_coordinates(scenario)  # the others keep their start values
     ns = len(steered)
     space = ob.RealVectorStateSpace(ns)
-    low, high = configuration_limits(scenario, scenario.start)
+    low, high = sampling_limits(scenario, scenario.start)  # passive bodies stay where something can reach them
     bounds = ob.RealVectorBounds(ns)
     for k, i in enumerate(steered):
         bounds.setLow(k, float(low[i]))
