@@ -206,17 +206,34 @@ def mass_matrix(bi, bf, q, nv):
         if bi[b, BI_VMAP + V_ANGLE] >= 0:
             M[bi[b, BI_VMAP + V_ANGLE], bi[b, BI_VMAP + V_ANGLE]] = bf[b, BF_INERTIA + 2]
         if bi[b, BI_VMAP + V_WX] >= 0:
-            quat = np.empty(4)
-            for k in range(4):
-                quat[k] = q[bi[b, BI_QMAP + Q_QW + k]]
-            R = quat_to_matrix(quat / np.sqrt(np.sum(quat * quat)))
+            I = world_inertia(bi, bf, q, b)
             for r in range(3):
                 for c in range(3):
-                    s = 0.0
-                    for k in range(3):
-                        s += R[r, k] * bf[b, BF_INERTIA + k] * R[c, k]
-                    M[bi[b, BI_VMAP + V_WX + r], bi[b, BI_VMAP + V_WX + c]] = s
+                    M[bi[b, BI_VMAP + V_WX + r], bi[b, BI_VMAP + V_WX + c]] = I[r, c]
     return M
+
+
+@numba.njit(cache=True)
+def body_rotation(bi, q, b):
+    """Body b's rotation matrix from its (normalised) quaternion coordinates in q."""
+    quat = np.empty(4)
+    for k in range(4):
+        quat[k] = q[bi[b, BI_QMAP + Q_QW + k]]
+    return quat_to_matrix(quat / np.sqrt(np.sum(quat * quat)))
+
+
+@numba.njit(cache=True)
+def world_inertia(bi, bf, q, b):
+    """Body b's inertia about its centre in world axes: R diag(I) R^T."""
+    R = body_rotation(bi, q, b)
+    I = np.empty((3, 3))
+    for r in range(3):
+        for c in range(3):
+            s = 0.0
+            for k in range(3):
+                s += R[r, k] * bf[b, BF_INERTIA + k] * R[c, k]
+            I[r, c] = s
+    return I
 
 
 @numba.njit(cache=True)
@@ -230,17 +247,11 @@ def mass_times(bi, bf, q, nu):
         if bi[b, BI_VMAP + V_ANGLE] >= 0:
             out[bi[b, BI_VMAP + V_ANGLE]] = bf[b, BF_INERTIA + 2] * nu[bi[b, BI_VMAP + V_ANGLE]]
         if bi[b, BI_VMAP + V_WX] >= 0:
-            quat = np.empty(4)
-            for k in range(4):
-                quat[k] = q[bi[b, BI_QMAP + Q_QW + k]]
-            R = quat_to_matrix(quat / np.sqrt(np.sum(quat * quat)))
+            I = world_inertia(bi, bf, q, b)
             for r in range(3):
                 s = 0.0
                 for c in range(3):
-                    m = 0.0
-                    for k in range(3):
-                        m += R[r, k] * bf[b, BF_INERTIA + k] * R[c, k]
-                    s += m * nu[bi[b, BI_VMAP + V_WX + c]]
+                    s += I[r, c] * nu[bi[b, BI_VMAP + V_WX + c]]
                 out[bi[b, BI_VMAP + V_WX + r]] = s
     return out
 
@@ -271,10 +282,7 @@ def gyroscopic_force(bi, bf, q, nu, nv):
     for b in range(bi.shape[0]):
         if bi[b, BI_VMAP + V_WX] < 0:
             continue
-        quat = np.empty(4)
-        for k in range(4):
-            quat[k] = q[bi[b, BI_QMAP + Q_QW + k]]
-        R = quat_to_matrix(quat / np.sqrt(np.sum(quat * quat)))
+        R = body_rotation(bi, q, b)
         w = np.empty(3)
         for k in range(3):
             w[k] = nu[bi[b, BI_VMAP + V_WX + k]]

@@ -348,18 +348,7 @@ role = "object"
 mass = 1.0
 inertia = 0.0017
 shape = {{ type = "box", size = [0.1, 0.1] }}
-pose = {{ x = {x}, y = 0.05 }}
-dofs = ["x", "y", "theta"]
-"""
-
-
-STACKED_BOX = """[[bodies]]
-name = "b{i}"
-role = "object"
-mass = 1.0
-inertia = 0.0017
-shape = {{ type = "box", size = [0.1, 0.1] }}
-pose = {{ x = 0.0, y = {y} }}
+pose = {{ x = {x}, y = {y} }}
 dofs = ["x", "y", "theta"]
 """
 
@@ -375,9 +364,9 @@ def box_scene(folder: Path, arrangement: str, n: int):
     from models.scenario import load_scenario
 
     if arrangement == "row":
-        boxes = "".join(BOX.format(i=i, x=0.3 * i) for i in range(n))
+        boxes = "".join(BOX.format(i=i, x=0.3 * i, y=0.05) for i in range(n))
     else:
-        boxes = "".join(STACKED_BOX.format(i=i, y=0.05 + 0.1 * i) for i in range(n))
+        boxes = "".join(BOX.format(i=i, x=0.0, y=0.05 + 0.1 * i) for i in range(n))
     path = Path(folder) / f"{arrangement}{n}.toml"
     path.write_text(ROW_TEMPLATE.format(boxes=boxes))
     return load_scenario(path)

@@ -141,7 +141,7 @@ def run_ladder(
             replay = _replay(scenario, rung, start, previous, h, period)
             if replay.outcome == "goal" and replay.status == "ok":
                 # the states are this rung's (a geometric path's states move passive bodies on their own)
-                states = [start.q.tolist()] + [s.q.tolist() for s in replay.states] + [replay.state.q.tolist()]
+                states = replay.configurations(start)
                 hold = [[0.0] * len(scenario.actuated)] * replay.held
                 reason = "the previous plan holds under this rung" + (
                     f" (its drives held still for {replay.held} control period(s) at the end)" if replay.held else "")
@@ -177,7 +177,7 @@ def run_ladder(
                 f"the plan found does not hold when replayed ({replay['outcome']}, {replay['status']})")
         # an accepted plan's states are its replay's under this rung, from the start (the tree's
         # path begins at its root, which may be a seed part-way along the prefix)
-        states = ([start.q.tolist()] + [s.q.tolist() for s in tail.states] + [tail.state.q.tolist()]) if accepted else plan.states.tolist()
+        states = tail.configurations(start) if accepted else plan.states.tolist()
         report = RungReport(name, ended, reason, wall_s=wall, propagations=plan.propagations, iterations=plan.iterations,
                             solver_failures=plan.failures, controls=plan.controls.tolist(), durations=plan.durations.tolist(),
                             states=states, **replay)
@@ -202,10 +202,8 @@ RESTART_STRIDE = 7919
 def _plan_with_restarts(scenario, rung, start, *, seed: int, iterations: int, time_limit, **kwargs):
     """plan_control in up to RESTARTS searches when unguided (see RESTARTS); the first exact
     plan, else the last search's; counts summed over the searches."""
-    import math
-
     searches = RESTARTS if kwargs.get("guide") is None else 1
-    share = max(1, math.ceil(iterations / searches))
+    share = max(1, -(-iterations // searches))
     t0, used = time.perf_counter(), {"propagations": 0, "iterations": 0, "failures": 0}
     plan = None
     for attempt in range(searches):
@@ -324,6 +322,10 @@ class _Replay:
         min_psi, contact = self.steps_min_psi[j - 1]
         return _Replay(self.states[j - 1], self.states[:j], self.controls[:j], self.durations[:j], "none", "ok", min_psi, contact,
                        self.steps_min_psi[:j])
+
+    def configurations(self, start: State) -> list:
+        """q at the start, after each control that ran on, and where the replay ended."""
+        return [start.q.tolist()] + [s.q.tolist() for s in self.states] + [self.state.q.tolist()]
 
     def fields(self, scenario: Scenario) -> dict:
         q = self.state.q
