@@ -419,13 +419,13 @@ def plan_control(
 
     deadline = None if time_limit is None else _time.perf_counter() + time_limit
 
-    def stop() -> bool:
+    def stop() -> bool:  # OMPL asks before every iteration: count the ones it is let run
+        if (deadline is not None and _time.perf_counter() > deadline) or done["iterations"] >= iterations or ss.haveExactSolutionPath():
+            return True
         done["iterations"] += 1
         if progress is not None and done["iterations"] % PROGRESS_EVERY == 0:
             progress(done["iterations"], counter["propagations"])
-        if deadline is not None and _time.perf_counter() > deadline:
-            return True
-        return done["iterations"] > iterations or ss.haveExactSolutionPath()
+        return False
 
     ss.solve(ob.PlannerTerminationCondition(stop))
     exact = bool(ss.haveExactSolutionPath())
@@ -562,9 +562,11 @@ def plan_geometric(scenario: Scenario, *, seed: int, iterations: int, planner: s
     ss.setPlanner(chosen)
     done = {"iterations": 0}
 
-    def stop() -> bool:
+    def stop() -> bool:  # OMPL asks before every iteration: count the ones it is let run
+        if done["iterations"] >= iterations or ss.haveExactSolutionPath():
+            return True
         done["iterations"] += 1
-        return done["iterations"] > iterations or ss.haveExactSolutionPath()
+        return False
 
     ss.solve(ob.PlannerTerminationCondition(stop))
     exact = bool(ss.haveExactSolutionPath())
