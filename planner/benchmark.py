@@ -31,6 +31,7 @@ def ladder_vs_flat(scenario: Scenario, seeds, *, iterations: int | None = None, 
     """Both modes on each seed; see the module docstring. Returns runs and a summary."""
     from planner.ladder import assess, run_ladder
 
+    _warm_up(scenario, rungs)
     runs: list[Run] = []
     for seed in seeds:
         for mode in ("ladder", "flat"):
@@ -56,3 +57,16 @@ def ladder_vs_flat(scenario: Scenario, seeds, *, iterations: int | None = None, 
     ladder, flat = summary["ladder"], summary["flat"]
     summary["speedup_median_wall"] = flat["median_wall_s"] / ladder["median_wall_s"] if ladder["median_wall_s"] > 0 else None
     return {"scenario": str(scenario.path), "iterations": iterations, "runs": [asdict(r) for r in runs], "summary": summary}
+
+
+def _warm_up(scenario: Scenario, rungs: list[str] | None) -> None:
+    """One short rollout per rung, so that compiling (or loading) the kernels is not timed in
+    whichever run comes first."""
+    from models.rungs import rung_for
+    from planner.ladder import step_for
+
+    for name in rungs or [r.model for r in scenario.spec.ladder.rungs]:
+        rung = rung_for(scenario, name)
+        if rung.propagates:
+            h = step_for(scenario, name)
+            rung.rollout(scenario, rung.initial_state(scenario), np.zeros((1, len(scenario.actuated))), [2 * h], h)
