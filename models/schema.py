@@ -358,7 +358,9 @@ class RungSpec(Strict):
     control_period: Positive | None = Field(
         None, description="duration of one planner control, s (default: ladder.control_period)"
     )
-    time_limit: Positive | None = Field(None, description="planning time, s (default: ladder's)")
+    time_limit: Positive | None = Field(
+        None, description="wall-clock cap on this rung's planning, s (default: ladder's); see ladder.time_limit"
+    )
     iterations: Annotated[int, Field(gt=0)] | None = Field(None, description="planner iterations of this rung (default: ladder's)")
     planner: Literal[PLANNERS] | None = None  # type: ignore[valid-type]
     theta: Annotated[Num, Field(ge=0, le=1)] = Field(
@@ -379,7 +381,10 @@ class LadderSpec(Strict):
     rungs: tuple[RungSpec, ...] = Field(min_length=1)
     planner: Literal[PLANNERS] = "RRT"  # type: ignore[valid-type]
     seed: Annotated[int, Field(ge=0)] = 0
-    time_limit: Positive = Field(description="default planning time per rung, s")
+    time_limit: Positive = Field(
+        description="default wall-clock cap on a rung's planning, s: a safety net on top of the iteration budget "
+        "(time a rung leaves passes up to the next; a plan is reproducible unless a cap ends a search)"
+    )
     iterations: Annotated[int, Field(gt=0)] = Field(2000, description="default planner iterations per rung: the reproducible budget")
     control_period: Positive = Field(0.05, description="default duration of one control, s")
 

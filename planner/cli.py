@@ -88,7 +88,8 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument("--iterations", type=int,
                       help="planner iterations per rung (the budget; default: the scenario's, [ladder] iterations = 2000 unless set)")
     plan.add_argument("--planner", choices=["RRT", "KPIECE1", "EST"], help="control planner (default: the scenario's)")
-    plan.add_argument("--time-limit", type=float, help="wall-clock cap per rung in seconds (plans are then not reproducible)")
+    plan.add_argument("--time-limit", type=float, help="wall-clock cap per rung in seconds (default: the scenario's time_limit); a safety net on top of "
+                      "the iteration budget: a plan is reproducible unless a cap ends a search")
     plan.add_argument("--flat", action="store_true", help="plan directly at the top rung with the same budget (the baseline)")
     plan.add_argument("--no-seed-roots", action="store_true", help="replan without rooting trees at the previous plan's states")
     plan.add_argument("--no-guide", action="store_true", help="replan without sampling near the previous plan")

@@ -107,19 +107,23 @@ def run_ladder(
     guided: replanning RRT / EST sample near the previous plan's configurations.
     iterations: planner iterations per rung; None: each rung's budget from the scenario
     (`iterations` of the rung, else of [ladder], 2000 by default). A rung may also spend the
-    iterations the rungs below it left unspent (a replayed or skipped rung spends none), and
-    with a time limit per rung, the time they left: the whole ladder never exceeds the sum.
-    flat: plan directly at the last rung, with the budget of the whole ladder (the sum of the
-    rungs' iterations, the time limit times the number of rungs): the baseline.
+    iterations the rungs below it left unspent (a replayed or skipped rung spends none): the
+    whole ladder never exceeds the sum.
+    time_limit: a wall-clock cap per rung in seconds; None: the scenario's (`time_limit` of
+    the rung, else of [ladder]). A safety net on top of the iterations: time a rung leaves
+    passes up too, and a plan is reproducible unless a cap ends a search.
+    flat: plan directly at the last rung, with the budget of the whole ladder (the sums of the
+    rungs' iterations and time limits): the baseline.
     progress: called as progress(rung, iterations, propagations) while a rung plans.
     """
     check_start(scenario)
     spec = scenario.spec.ladder
     names = rungs or [r.model for r in spec.rungs]
     budgets = {name: iterations if iterations is not None else iterations_for(scenario, name) for name in names}
+    limits = {name: time_limit if time_limit is not None else time_limit_for(scenario, name) for name in names}
     if flat:
         budgets = {names[-1]: sum(budgets.values())}
-        time_limit = None if time_limit is None else time_limit * len(names)
+        limits = {names[-1]: sum(limits.values())}
         names = names[-1:]
     seed = spec.seed if seed is None else seed
     reports: list[RungReport] = []
@@ -127,13 +131,14 @@ def run_ladder(
     # a rung may spend what the rungs below left unspent: the ladder's whole budget is the flat
     # baseline's (iterations, and with a time limit, wall time)
     carry = 0
-    ladder_t0 = time.perf_counter()
-    for index, name in enumerate(names):
+    deadline = time.perf_counter()
+    for name in names:
+        deadline += limits[name]
         if progress:
             progress(name, 0, 0)
         rung = rung_for(scenario, name)
         if not rung.propagates:
-            reports.append(_geometric(scenario, seed, budgets[name], planner))
+            reports.append(_geometric(scenario, seed, budgets[name], planner, deadline - time.perf_counter()))
             carry += max(0, budgets[name] - reports[-1].iterations)
             previous = reports[-1] if reports[-1].durations else None
             continue
@@ -174,7 +179,7 @@ def run_ladder(
         plan = _plan_with_restarts(scenario, rung, start, h=h, control_period=period, seed=seed, iterations=budgets[name] + carry,
                                    planner=planner or (rung_spec.planner if rung_spec and rung_spec.planner else spec.planner),
                                    extra_starts=seeds, guide=guide,
-                                   time_limit=None if time_limit is None else ladder_t0 + time_limit * (index + 1) - time.perf_counter(),
+                                   time_limit=deadline - time.perf_counter(),
                                    progress=(lambda i, n, _name=name: progress(_name, i, n)) if progress else None)
         j = plan.start_index
         if j > 0:  # the path starts at a seed: splice the previous prefix in front
@@ -189,7 +194,8 @@ def run_ladder(
         ended = ("planned" if previous is None else "replanned") if accepted else "failed"
         reason = ""
         if not accepted:
-            reason = "no exact plan within the iteration budget" if not plan.exact else (
+            reason = ("no exact plan within the iteration budget" if plan.iterations >= budgets[name] + carry else
+                      f"no exact plan before the time limit ran out ({plan.iterations} of {budgets[name] + carry} iterations)") if not plan.exact else (
                 f"the plan found does not hold when replayed ({replay['outcome']}, {replay['status']})")
         # an accepted plan's states are its replay's under this rung, from the start (the tree's
         # path begins at its root, which may be a seed part-way along the prefix)
@@ -274,13 +280,19 @@ def iterations_for(scenario: Scenario, name: str) -> int:
     return rung_spec.iterations if rung_spec and rung_spec.iterations else scenario.spec.ladder.iterations
 
 
+def time_limit_for(scenario: Scenario, name: str) -> float:
+    """The rung's wall-clock cap in seconds: the scenario's rung entry, else its ladder's."""
+    rung_spec = next((r for r in scenario.spec.ladder.rungs if r.model == name), None)
+    return rung_spec.time_limit if rung_spec and rung_spec.time_limit else scenario.spec.ladder.time_limit
+
+
 def step_for(scenario: Scenario, name: str) -> float:
     """The rung's time step: the scenario's, else the rung's default."""
     rung_spec = next((r for r in scenario.spec.ladder.rungs if r.model == name), None)
     return rung_spec.h if rung_spec and rung_spec.h else _default_step(name)
 
 
-def _geometric(scenario: Scenario, seed: int, iterations: int, planner: str | None) -> RungReport:
+def _geometric(scenario: Scenario, seed: int, iterations: int, planner: str | None, time_limit: float | None = None) -> RungReport:
     """Plan the geometric rung and turn its path into commanded speeds for the actuated DOFs:
     each segment is driven at the speeds that cover it in whole control periods without
     exceeding any drive's max_speed. An approximate path (the goal set is thin: touching
@@ -288,7 +300,7 @@ def _geometric(scenario: Scenario, seed: int, iterations: int, planner: str | No
     spec = scenario.spec.ladder
     rung_spec = next((r for r in spec.rungs if r.model == "geometric"), None)
     t0 = time.perf_counter()
-    path = plan_geometric(scenario, seed=seed, iterations=iterations,
+    path = plan_geometric(scenario, seed=seed, iterations=iterations, time_limit=time_limit,
                           planner=(rung_spec.planner if rung_spec and rung_spec.planner else "RRTConnect"))
     period = spec.control_period
     index = [scenario.coordinates.index(n) for n in scenario.actuated]

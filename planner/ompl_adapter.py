@@ -453,7 +453,8 @@ class GeometricPlan:
     goal_samples: int = 0  # goal states made by projection (0: the planner searched for the goal region)
 
 
-def plan_geometric(scenario: Scenario, *, seed: int, iterations: int, planner: str = "RRTConnect") -> GeometricPlan:
+def plan_geometric(scenario: Scenario, *, seed: int, iterations: int, planner: str = "RRTConnect",
+                   time_limit: float | None = None) -> GeometricPlan:
     """The geometric rung (eq. 9): a path in the C-space of all free DOFs whose states do not
     penetrate and are not unsafe, ending in the goal set. In a spatial scene a passive body's
     height and orientation stay at their start values (steered_coordinates): it rests.
@@ -562,8 +563,12 @@ def plan_geometric(scenario: Scenario, *, seed: int, iterations: int, planner: s
     ss.setPlanner(chosen)
     done = {"iterations": 0}
 
+    import time as _time
+
+    deadline = None if time_limit is None else _time.perf_counter() + time_limit
+
     def stop() -> bool:  # OMPL asks before every iteration: count the ones it is let run
-        if done["iterations"] >= iterations or ss.haveExactSolutionPath():
+        if (deadline is not None and _time.perf_counter() > deadline) or done["iterations"] >= iterations or ss.haveExactSolutionPath():
             return True
         done["iterations"] += 1
         return False

@@ -127,6 +127,16 @@ def test_a_rung_may_spend_what_the_rungs_below_left_and_the_ladder_never_more_th
     assert spent_beyond_own
 
 
+def test_the_scenarios_time_limit_caps_a_search_and_the_report_says_so(tmp_path):
+    """[ladder] time_limit is a wall-clock safety net on top of the iteration budget."""
+    path = tmp_path / "hurried.toml"
+    path.write_text((SCENARIOS / "free_transfer.toml").read_text().replace("time_limit = 10.0", "time_limit = 1e-4"))
+    result = run_ladder(load_scenario(path), seed=3, iterations=100_000)
+    assert not result.top_holds
+    failed = result.rungs[-1]
+    assert failed.ended == "failed" and "time limit ran out" in failed.reason and failed.iterations < 100_000
+
+
 def test_simulate_replays_a_plan_file_under_any_rung(tmp_path):
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     out = tmp_path / "plan"
