@@ -199,6 +199,44 @@ def test_plans_that_hold_at_the_top_rung_in_most_seeds(name):
     assert held >= 8
 
 
+def _holds_at_a_tenth_of_the_step(scenario, report) -> bool:
+    """The rung's accepted plan, replayed under the rung at a tenth of its step, still ends in
+    the goal: it does not rely on the discretisation error (a planner exploits it if it can)."""
+    rung = rung_for(scenario, report.rung)
+    out = rung.rollout(scenario, rung.initial_state(scenario), np.array(report.controls).reshape(len(report.durations), -1),
+                       np.array(report.durations), step_for(scenario, report.rung) / 10)
+    return out.ok and out.outcome == "goal"
+
+
+@pytest.mark.parametrize("name", ["two_finger_triangle", "four_finger_grasp"])
+def test_every_rungs_plan_holds_at_a_tenth_of_its_step(name):
+    scenario = load_scenario(SCENARIOS / f"{name}.toml", {"v1": 0.8} if name == "two_finger_triangle" else {})
+    for seed in (1, 2, 3):
+        result = run_ladder(scenario, seed=seed)
+        assert result.top_holds
+        for report in result.rungs:
+            if rung_for(scenario, report.rung).propagates:
+                assert _holds_at_a_tenth_of_the_step(scenario, report), (seed, report.rung)
+
+
+@pytest.mark.slow
+def test_box_push_plans_mostly_hold_at_a_tenth_of_their_step():
+    """Pushing is unstable and the goal is reached past a wall within a 1e-6 m touch tolerance,
+    so a plan found at one step need not hold at a finer one. Measured over seeds 1-10: the
+    quasistatic plans (h = 1e-3) hold at 1e-4 in 8 of 10 (found at h = 1e-2 instead, 2 of 10:
+    why the scenario steps at 1e-3); the dynamic plans (h = 1e-3) in 10 of 10."""
+    scenario = load_scenario(SCENARIOS / "box_push_3d.toml")
+    fine = {"quasistatic-rigid": 0, "dynamic-rigid": 0}
+    for seed in range(1, 11):
+        result = run_ladder(scenario, seed=seed)
+        assert result.top_holds
+        for report in result.rungs:
+            if report.rung in fine:
+                fine[report.rung] += _holds_at_a_tenth_of_the_step(scenario, report)
+    print(fine)
+    assert fine["quasistatic-rigid"] >= 7 and fine["dynamic-rigid"] >= 7
+
+
 def test_reports_carry_goal_distance_penetration_and_failures():
     scenario = load_scenario(TRIANGLE, {"v1": 0.8})
     result = run_ladder(scenario, seed=2)
