@@ -129,17 +129,16 @@ def run_ladder(
     reports: list[RungReport] = []
     previous: RungReport | None = None
     # a rung may spend what the rungs below left unspent: the ladder's whole budget is the flat
-    # baseline's (iterations, and with a time limit, wall time)
-    carry = 0
-    deadline = time.perf_counter()
+    # baseline's (iterations, and wall time)
+    allowance, deadline = 0, time.perf_counter()
     for name in names:
+        allowance += budgets[name]
         deadline += limits[name]
         if progress:
             progress(name, 0, 0)
         rung = rung_for(scenario, name)
         if not rung.propagates:
             reports.append(_geometric(scenario, seed, budgets[name], planner, deadline - time.perf_counter()))
-            carry += max(0, budgets[name] - reports[-1].iterations)
             previous = reports[-1] if reports[-1].durations else None
             continue
         rung_spec = next((r for r in spec.rungs if r.model == name), None)
@@ -152,7 +151,6 @@ def run_ladder(
             if same:
                 reports.append(replace(previous, rung=name, ended="skipped", reason=same, wall_s=time.perf_counter() - t0,
                                        propagations=0, iterations=0, solver_failures=0))
-                carry += budgets[name]
                 previous = reports[-1]
                 continue
         replay = None
@@ -167,7 +165,6 @@ def run_ladder(
                 reports.append(RungReport(name, "replayed", reason, wall_s=time.perf_counter() - t0,
                                           controls=list(previous.controls) + hold, durations=list(previous.durations) + [period] * replay.held,
                                           states=states, **replay.fields(scenario)))
-                carry += budgets[name]
                 previous = reports[-1]
                 continue
         seeds, prefix_controls, prefix_durations = [], [], np.zeros(0)
@@ -176,7 +173,8 @@ def run_ladder(
             seeds, prefix_controls, prefix_durations = replay.states[:m], replay.controls[:m], np.array(replay.durations[:m])
         # the geometric path moves passive bodies on their own: its states are no guide for physics
         guide = np.array(previous.states) if previous is not None and previous.states and guided and previous.rung != "geometric" else None
-        plan = _plan_with_restarts(scenario, rung, start, h=h, control_period=period, seed=seed, iterations=budgets[name] + carry,
+        budget = allowance - sum(r.iterations for r in reports)
+        plan = _plan_with_restarts(scenario, rung, start, h=h, control_period=period, seed=seed, iterations=budget,
                                    planner=planner or (rung_spec.planner if rung_spec and rung_spec.planner else spec.planner),
                                    extra_starts=seeds, guide=guide,
                                    time_limit=deadline - time.perf_counter(),
@@ -194,8 +192,8 @@ def run_ladder(
         ended = ("planned" if previous is None else "replanned") if accepted else "failed"
         reason = ""
         if not accepted:
-            reason = ("no exact plan within the iteration budget" if plan.iterations >= budgets[name] + carry else
-                      f"no exact plan before the time limit ran out ({plan.iterations} of {budgets[name] + carry} iterations)") if not plan.exact else (
+            reason = ("no exact plan within the iteration budget" if plan.iterations >= budget else
+                      f"no exact plan before the time limit ran out ({plan.iterations} of {budget} iterations)") if not plan.exact else (
                 f"the plan found does not hold when replayed ({replay['outcome']}, {replay['status']})")
         # an accepted plan's states are its replay's under this rung, from the start (the tree's
         # path begins at its root, which may be a seed part-way along the prefix)
@@ -206,7 +204,6 @@ def run_ladder(
         reports.append(report)
         if ended == "failed":
             break
-        carry = max(0, budgets[name] + carry - plan.iterations)
         previous = report
     return LadderResult(str(scenario.path), int(seed), reports)
 

@@ -19,6 +19,7 @@ is an iteration count, so the same seed gives the same plan.
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -183,6 +184,25 @@ def _projection_coordinates(scenario: Scenario, most: int = 3) -> list[int]:
     passive = [k for k, n in enumerate(names) if n not in scenario.actuated and n.split(".")[1] in ("x", "y", "z")]
     active = [k for k, n in enumerate(names) if n in scenario.actuated]
     return (passive + active)[:most] or [0]
+
+
+def _termination(ss, iterations: int, time_limit: float | None, progress=None):
+    """OMPL's termination condition for both planners, and the count it keeps: stop at an exact
+    solution, after `iterations` iterations, or past the wall-clock cap. OMPL asks before every
+    iteration, so the count is of the iterations it let run; progress(count) is called every
+    PROGRESS_EVERY of them."""
+    done = {"iterations": 0}
+    deadline = None if time_limit is None else time.perf_counter() + time_limit
+
+    def stop() -> bool:
+        if (deadline is not None and time.perf_counter() > deadline) or done["iterations"] >= iterations or ss.haveExactSolutionPath():
+            return True
+        done["iterations"] += 1
+        if progress is not None and done["iterations"] % PROGRESS_EVERY == 0:
+            progress(done["iterations"])
+        return False
+
+    return stop, done
 
 
 def plan_control(
@@ -413,20 +433,8 @@ def plan_control(
     else:
         ss.setGoal(Goal(si))
     ss.setPlanner(chosen)
-    done = {"iterations": 0}
-
-    import time as _time
-
-    deadline = None if time_limit is None else _time.perf_counter() + time_limit
-
-    def stop() -> bool:  # OMPL asks before every iteration: count the ones it is let run
-        if (deadline is not None and _time.perf_counter() > deadline) or done["iterations"] >= iterations or ss.haveExactSolutionPath():
-            return True
-        done["iterations"] += 1
-        if progress is not None and done["iterations"] % PROGRESS_EVERY == 0:
-            progress(done["iterations"], counter["propagations"])
-        return False
-
+    stop, done = _termination(ss, iterations, time_limit,
+                              None if progress is None else (lambda i: progress(i, counter["propagations"])))
     ss.solve(ob.PlannerTerminationCondition(stop))
     exact = bool(ss.haveExactSolutionPath())
     if not ss.haveSolutionPath():
@@ -561,18 +569,7 @@ def plan_geometric(scenario: Scenario, *, seed: int, iterations: int, planner: s
         ss.setGoal(Goal(si))
         chosen = og.RRT(si) if planner == "RRTConnect" else getattr(og, planner)(si)
     ss.setPlanner(chosen)
-    done = {"iterations": 0}
-
-    import time as _time
-
-    deadline = None if time_limit is None else _time.perf_counter() + time_limit
-
-    def stop() -> bool:  # OMPL asks before every iteration: count the ones it is let run
-        if (deadline is not None and _time.perf_counter() > deadline) or done["iterations"] >= iterations or ss.haveExactSolutionPath():
-            return True
-        done["iterations"] += 1
-        return False
-
+    stop, done = _termination(ss, iterations, time_limit)
     ss.solve(ob.PlannerTerminationCondition(stop))
     exact = bool(ss.haveExactSolutionPath())
     if ss.haveSolutionPath():
