@@ -1,8 +1,8 @@
 """Readers for the Siconos test-problem files (LCP and 2D frictional contact).
 
 The files come from Siconos's test suite (``numerics/src/LCP/test/data/`` and
-``numerics/src/FrictionContact/test/data/``); the project reads them from a shared folder,
-`default_corpus_dir()`, never from a copy.  Format notes (from Siconos's
+``numerics/src/FrictionContact/test/data/``); the project's copy, with its licence, is test
+data in ``tests/data/siconos/``.  Format notes (from Siconos's
 ``NM_write_in_file`` / ``SBM_write_in_file`` / CSparse's ``cs_print``):
 
 * Dense matrices (storage kind 0): ``size0``, ``size1``, a line ``size0<TAB>size1`` and then
@@ -28,37 +28,21 @@ file; a missing file raises FileNotFoundError.
 
 from __future__ import annotations
 
-import os
 import re
 from pathlib import Path
 
 import numpy as np
 
 __all__ = [
-    "CORPUS_ENV_VAR",
-    "default_corpus_dir",
     "read_fc2d",
     "read_lcp",
 ]
-
-#: Environment variable that overrides the corpus location.
-CORPUS_ENV_VAR = "LADDER_SICONOS_DIR"
 
 STORAGE_DENSE = 0
 STORAGE_SPARSE_BLOCK = 1
 STORAGE_SPARSE = 2
 #: Siconos's code for a compressed-column (CSC) sparse matrix in a kind-2 dump.
 _NSM_CSC = 2
-
-
-def default_corpus_dir() -> Path:
-    """The Siconos corpus folder: ``$LADDER_SICONOS_DIR`` if set, else
-    ``<repo>/../shared/data/siconos`` (``/work/shared/data/siconos`` for ``/work/main``).
-    The folder is not checked for existence here."""
-    env = os.environ.get(CORPUS_ENV_VAR)
-    if env:
-        return Path(env)
-    return Path(__file__).resolve().parents[2] / "shared" / "data" / "siconos"
 
 
 class _Tokens:

@@ -1,14 +1,12 @@
-"""The LCP solvers against Siconos's own test problems (read from the shared corpus folder).
+"""The LCP solvers against Siconos's own test problems (the corpus in ``tests/data/siconos``).
 
-The corpus lives outside the repository, at ``<repo>/../shared/data/siconos`` (override with
-``$LADDER_SICONOS_DIR``).  If it is missing these tests FAIL (they do not skip): the corpus is
-part of the project's test suite.  Expectations come from the corpus README (what Siconos's
+The corpus is test data shipped with the project (Apache-2.0, see its README and licence).  If
+a file is missing these tests FAIL (they do not skip).  Expectations come from the corpus README (what Siconos's
 own suite expects of its Lemke solver) and are checked by recomputing the residual here.
 """
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
@@ -22,13 +20,9 @@ from models.lcp import (
     fc2d_reactions_from_lcp,
     solve_lcp,
 )
-from models.siconos import CORPUS_ENV_VAR, default_corpus_dir, read_fc2d, read_lcp
+from models.siconos import read_fc2d, read_lcp
 
-CORPUS = (
-    Path(os.environ[CORPUS_ENV_VAR])
-    if os.environ.get(CORPUS_ENV_VAR)
-    else Path(__file__).resolve().parents[2] / "shared" / "data" / "siconos"
-)
+CORPUS = Path(__file__).resolve().parent / "data" / "siconos"
 
 # README: what Siconos's suite expects of its Lemke solver.
 README_SOLVED = [
@@ -72,9 +66,7 @@ def natural_residual(M, q, z):
 def corpus() -> Path:
     if not CORPUS.is_dir():
         pytest.fail(
-            f"Siconos corpus not found at {CORPUS}: these tests need the shared data folder "
-            f"(../shared/data/siconos next to the repository) or ${CORPUS_ENV_VAR} pointing "
-            "to a copy of it",
+            f"Siconos corpus not found at {CORPUS}: it is part of the repository's test data",
             pytrace=False,
         )
     return CORPUS
@@ -97,7 +89,6 @@ def fc2d_file(corpus: Path, name: str) -> Path:
 
 
 def test_corpus_location_and_contents(corpus):
-    assert default_corpus_dir().resolve() == corpus.resolve()
     present_lcp = sorted(p.stem for p in (corpus / "lcp").glob("*.dat"))
     present_fc2d = sorted(p.stem for p in (corpus / "fc2d").glob("*.dat"))
     missing = sorted(set(KNOWN_LCP_FILES) - set(present_lcp)) + sorted(
