@@ -25,9 +25,13 @@ from models.contact2d import collide_2d
 from models.contact3d import collide_pair_3d, tangent_basis
 from models.kinematics import (
     BF_BOUND,
+    BF_SPEED,
     BF_HSN,
     BF_HSO,
+    BF_POS,
     BF_QUAT,
+    BF_SCRIPT,
+    BF_SCRIPT_V,
     BI_KIND,
     BI_QMAP,
     BI_VMAP,
@@ -59,7 +63,8 @@ def body_origin(S, q, b):
 
 @numba.njit(cache=True)
 def _speed_bound(bi, bf, nu, b):
-    """Upper bound of the speed of any point of body b (0 for fixed bodies)."""
+    """Upper bound of the speed of any point of body b (0 for fixed bodies; a scripted
+    obstacle's from its script)."""
     v2 = 0.0
     w2 = 0.0
     for k in range(3):
@@ -69,7 +74,7 @@ def _speed_bound(bi, bf, nu, b):
             w2 += nu[bi[b, BI_VMAP + V_WX + k]] ** 2
     if bi[b, BI_VMAP + V_ANGLE] >= 0:
         w2 += nu[bi[b, BI_VMAP + V_ANGLE]] ** 2
-    bound = np.sqrt(v2)
+    bound = np.sqrt(v2) + bf[b, BF_SPEED]
     if w2 > 0.0:
         bound += np.sqrt(w2) * bf[b, BF_BOUND]
     return bound
@@ -263,6 +268,62 @@ def jacobian_packed(bi, bf, pi, q, nc, c_pair, dirs, c_pa, c_pb, W):
                 W[bi[b, BI_VMAP + V_WX], i] += sign * cx
                 W[bi[b, BI_VMAP + V_WX + 1], i] += sign * cy
                 W[bi[b, BI_VMAP + V_WX + 2], i] += sign * cz
+
+
+# ----------------------------------------------------------------------------- scripted obstacles
+
+
+@numba.njit(cache=True)
+def has_script(bf):
+    """True when some obstacle of the scene moves on a script (a constant velocity)."""
+    for b in range(bf.shape[0]):
+        for k in range(4):
+            if bf[b, BF_SCRIPT_V + k] != 0.0:
+                return True
+    return False
+
+
+@numba.njit(cache=True)
+def place_scripted(bf, base_pos, base_quat, t):
+    """Move every scripted obstacle to its pose at time t (pose at 0 plus t times its velocity):
+    the packed table bf and the scene's base_pos / base_quat (both are read by the contact
+    kernels). Writes only scripted bodies; callers pass a scene copy of their own."""
+    for b in range(bf.shape[0]):
+        moving = False
+        for k in range(4):
+            if bf[b, BF_SCRIPT_V + k] != 0.0:
+                moving = True
+        if not moving:
+            continue
+        for k in range(3):
+            x = bf[b, BF_SCRIPT + k] + t * bf[b, BF_SCRIPT_V + k]
+            bf[b, BF_POS + k] = x
+            base_pos[b, k] = x
+        if bf[b, BF_SCRIPT_V + 3] != 0.0:
+            half = 0.5 * (bf[b, BF_SCRIPT + 3] + t * bf[b, BF_SCRIPT_V + 3])
+            bf[b, BF_QUAT], bf[b, BF_QUAT + 1], bf[b, BF_QUAT + 2], bf[b, BF_QUAT + 3] = np.cos(half), 0.0, 0.0, np.sin(half)
+            base_quat[b, 0], base_quat[b, 1], base_quat[b, 2], base_quat[b, 3] = np.cos(half), 0.0, 0.0, np.sin(half)
+
+
+@numba.njit(cache=True)
+def scripted_bias(bf, pi, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, bias):
+    """bias[i] = (n, t, o) . (v_B(pb) - v_A(pa)) of contact i from the scripted motion of its
+    bodies (zero for bodies that are not scripted): the part of the contact's relative velocity
+    that no free DOF carries. It enters the contact problem beside W^T nu."""
+    for i in range(nc):
+        p = c_pair[i]
+        rel = np.zeros(3)
+        for side in range(2):
+            b = pi[p, 1] if side == 0 else pi[p, 0]
+            sign = 1.0 if side == 0 else -1.0
+            pt = c_pb[i] if side == 0 else c_pa[i]
+            w = bf[b, BF_SCRIPT_V + 3]
+            rel[0] += sign * (bf[b, BF_SCRIPT_V] - w * (pt[1] - bf[b, BF_POS + 1]))
+            rel[1] += sign * (bf[b, BF_SCRIPT_V + 1] + w * (pt[0] - bf[b, BF_POS]))
+            rel[2] += sign * bf[b, BF_SCRIPT_V + 2]
+        bias[i, 0] = c_n[i, 0] * rel[0] + c_n[i, 1] * rel[1] + c_n[i, 2] * rel[2]
+        bias[i, 1] = c_t[i, 0] * rel[0] + c_t[i, 1] * rel[1] + c_t[i, 2] * rel[2]
+        bias[i, 2] = c_o[i, 0] * rel[0] + c_o[i, 1] * rel[1] + c_o[i, 2] * rel[2]
 
 
 # ----------------------------------------------------------------------------- Python facing

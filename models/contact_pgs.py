@@ -292,14 +292,15 @@ def _friction_update(k, spatial, cdof, cm, jt, jo, yt, yo, g00, g01, g11, comp, 
 
 @numba.njit(cache=True)
 def contact_pgs(
-    compliant, directions, spatial, h, pi, pf, nc, c_pair, c_psi, c_slot, W_n, W_t, W_o,
+    compliant, directions, spatial, h, pi, pf, nc, c_pair, c_psi, c_slot, W_n, W_t, W_o, c_bias,
     delta_n, delta_t, dofs, count, inv, nu_free, warm_n, warm_t, zero_column, tolerance, max_sweeps,
 ):
     """Solve the contact problem of the module docstring by PGS.
 
     Contacts 0..nc-1 with Jacobian columns W_n, W_t (W_o in space) of shape (nv, >= nc); a
     contact is active when its W_n column's norm exceeds zero_column, and has friction when
-    mu > 0 and W_t (or W_o) exceeds it. (dofs, count, inv): `body_blocks` of A. warm_n
+    mu > 0 and W_t (or W_o) exceeds it. c_bias (>= nc, 3): relative velocity along (n, t, o)
+    from scripted obstacles, added to the contact's velocity. (dofs, count, inv): `body_blocks` of A. warm_n
     (slots,), warm_t (slots, 2): the previous step's impulses by contact slot (zeros: a cold
     start).
 
@@ -362,7 +363,9 @@ def contact_pgs(
             bn[n] = comp[n] * C * delta_n[c_slot[i]]
             for c in range(2):
                 bt[n, c] = -K / (h * K + C) * delta_t[c_slot[i], c]
-        bn[n] += c_psi[i] / h
+        bn[n] += c_psi[i] / h + c_bias[i, 0]
+        bt[n, 0] += c_bias[i, 1]
+        bt[n, 1] += c_bias[i, 2]
         mu[n] = pf[p, PF_MU]
         fric[n] = mu[n] > 0.0 and (np.sqrt(st) > zero_column or np.sqrt(so) > zero_column)
         _apply_inverse(inv, a, b, ca, cb, jn, yn, n)

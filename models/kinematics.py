@@ -40,7 +40,11 @@ V_X, V_Y, V_Z, V_ANGLE, V_WX = 0, 1, 2, 3, 4
 
 # columns of the packed tables (see SceneData.bi, .bf, .pi, .pf)
 BI_KIND, BI_VSTART, BI_VCOUNT, BI_QMAP, BI_VMAP, BI_COLUMNS = 0, 1, 2, 3, 11, 18
-BF_RADIUS, BF_HALF, BF_HSN, BF_HSO, BF_POS, BF_QUAT, BF_MASS, BF_INERTIA, BF_BOUND, BF_COLUMNS = 0, 1, 4, 7, 8, 11, 15, 16, 19, 20
+BF_RADIUS, BF_HALF, BF_HSN, BF_HSO, BF_POS, BF_QUAT, BF_MASS, BF_INERTIA, BF_BOUND = 0, 1, 4, 7, 8, 11, 15, 16, 19
+# scripted obstacles: pose at t = 0 (x, y, z, angle about z) and constant velocity (vx, vy, vz,
+# angular rate about z); zeros for every other body. BF_SPEED bounds the speed of any of the
+# body's points (a scripted body's broadphase reach grows with it).
+BF_SCRIPT, BF_SCRIPT_V, BF_SPEED, BF_COLUMNS = 20, 24, 28, 29
 PI_A, PI_B, PI_MAX, PI_INERT = 0, 1, 2, 3
 PF_MU, PF_K, PF_C = 0, 1, 2
 
@@ -83,7 +87,8 @@ class SceneData(NamedTuple):
     # The same data packed into four tables for the hot paths: numba increfs every array of
     # a tuple that crosses a function boundary, so hot code passes these few instead of S.
     bi: np.ndarray  # int64[nb, BI_COLUMNS]: kind, vstart, vcount, qmap (8), vmap (7)
-    bf: np.ndarray  # float64[nb, BF_COLUMNS]: radius, half extents, hs normal, hs offset, base pos, base quat, mass, inertia, bound
+    bf: np.ndarray  # float64[nb, BF_COLUMNS]: radius, half extents, hs normal, hs offset, base pos, base quat, mass, inertia, bound,
+    #                 scripted pose at t = 0 and velocity, speed bound of a scripted body
     pi: np.ndarray  # int64[np, 4]: a, b, max contacts, inert (1: the pair can never matter; see inert_pairs)
     pf: np.ndarray  # float64[np, 3]: mu, K, C
 
@@ -186,6 +191,7 @@ def compile_scene(scenario: Scenario) -> SceneData:
     mass = np.zeros(nb)
     inertia = np.zeros((nb, 3))
     bound = np.zeros(nb)
+    script = np.zeros((nb, 9))
     q_index = {name: i for i, name in enumerate(scenario.coordinates)}
     v_index = {name: i for i, name in enumerate(scenario.velocities)}
     hull = np.zeros((nb, 6), np.int64)
@@ -243,6 +249,13 @@ def compile_scene(scenario: Scenario) -> SceneData:
                 qmap[b, Q_QW + k] = q_index[f"{body.name}.q{c}"]
             for k, c in enumerate("xyz"):
                 vmap[b, V_WX + k] = v_index[f"{body.name}.w{c}"]
+        if body.velocity:
+            script[b, :3] = base_pos[b]
+            script[b, 3] = float(body.pose.theta or 0.0) if dim == 2 else 0.0
+            for col, name in enumerate(("x", "y", "z", "theta")):
+                script[b, 4 + col] = float(body.velocity.get(name, 0.0))
+            omega = abs(script[b, 7])
+            script[b, 8] = float(np.linalg.norm(script[b, 4:7])) + (omega * bound[b] if omega > 0.0 else 0.0)
         if body.dofs:
             mass[b] = body.mass
             if body.inertia is not None:
@@ -267,7 +280,7 @@ def compile_scene(scenario: Scenario) -> SceneData:
     normals3 = np.zeros((nb, 3))
     normals3[:, :dim] = hs_normal
     bf = np.concatenate(
-        [radius[:, None], half_extents, normals3, hs_offset[:, None], base_pos, base_quat, mass[:, None], inertia, bound[:, None]], axis=1
+        [radius[:, None], half_extents, normals3, hs_offset[:, None], base_pos, base_quat, mass[:, None], inertia, bound[:, None], script], axis=1
     )
     assert bi.shape[1] == BI_COLUMNS and bf.shape[1] == BF_COLUMNS
     pf = np.array([[p.mu, p.K, p.C] for p in pairs], float).reshape(-1, 3)

@@ -17,7 +17,16 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from models.contact import detect_planar, detect_planar_into, detect_spatial, jacobian_packed, tangents_packed
+from models.contact import (
+    detect_planar,
+    detect_planar_into,
+    detect_spatial,
+    has_script,
+    jacobian_packed,
+    place_scripted,
+    scripted_bias,
+    tangents_packed,
+)
 from models.predicates import evaluate, evaluate_with
 from models.stepper import (
     CONTACT_MARGIN,
@@ -26,6 +35,7 @@ from models.stepper import (
     STEP_OK,
     STEP_SINGULAR,
     STEP_UNSUPPORTED_PAIR,
+    any_limited,
     dynamics_step,
     free_step,
     gravity_force,
@@ -75,25 +85,33 @@ def _inverse_or_empty(A):
 
 
 @numba.njit(cache=True)
-def rollout_kernel(S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, delta_t, controls, durations, h, record_every, max_records, stop_at_outcome):
+def rollout_kernel(S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, delta_t, controls, durations, h, record_every, max_records, stop_at_outcome, t0):
     """Run the controls from the given state (stopping at goal/unsafe if stop_at_outcome;
     otherwise the returned outcome is the first one met, and the run goes on).
 
     model: `models.stepper.Model` (what is solved); solver: `models.stepper.Solver` (how the
-    contact problems are solved). PGS warm starts travel from step to step within the call
+    contact problems are solved). t0: the time of the start state, where scripted obstacles
+    are (their poses are written into S's pose tables as time goes on: pass a scene copy of
+    the caller's own when the scene has one). PGS warm starts travel from step to step within the call
     (by contact slot) and start cold in every call, so a rollout depends only on its inputs.
 
     Returns (q, nu, q_ref, delta_n, delta_t, t, outcome, status, steps, lcp_solves, pivots,
     max_residual, max_lcp_size, rec_t (n,), rec_q (n, nq), rec_nu (n, nv), pair_force (n_pairs,):
     the normal contact force of each pair over the last step taken, min_psi: the smallest
     contact signed distance met at the start of any step (inf if none), force_steps: how many
-    steps had a positive normal contact impulse, sweeps: PGS sweeps over all steps).
+    steps had a positive normal contact impulse, sweeps: PGS sweeps over all steps, pair_wrench
+    (n_pairs, 3): the world-frame contact force on each pair's second body over the last step
+    taken, normal plus friction, N; zero in the kinematic rung, which has no forces).
     """
     dimension = S.dimension
     spatial = dimension == 3
     bi, bf, pi, pf, verts = S.bi, S.bf, S.pi, S.pf, S.verts
     nv = S.nv
-    q_index, v_index, kp, kd, lower, upper = D.q_index, D.v_index, D.kp, D.kd, D.lower, D.upper
+    q_index, v_index, kp, kd, lower, upper, max_force = D.q_index, D.v_index, D.kp, D.kd, D.lower, D.upper, D.max_force
+    limited = any_limited(max_force)
+    scripted = has_script(bf)
+    if scripted:
+        place_scripted(bf, S.base_pos, S.base_quat, t0)
     kinematic = model.kinematic
     compliant = model.compliant
     theta = model.theta
@@ -112,6 +130,7 @@ def rollout_kernel(S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, del
     c_n, c_t, c_o = np.zeros((cap, 3)), np.zeros((cap, 3)), np.zeros((cap, 3))
     c_pa, c_pb = np.zeros((cap, 3)), np.zeros((cap, 3))
     W_n, W_t, W_o = np.zeros((nv, cap)), np.zeros((nv, cap)), np.zeros((nv, cap))
+    c_bias = np.zeros((cap, 3))  # contact velocity from scripted obstacles along (n, t, o)
     warm_n, warm_t = np.zeros(cap), np.zeros((cap, 2))  # PGS: last step's impulses by slot
     warm_slots = np.zeros(cap, np.int64)  # the slots written last step (reset them, not all cap)
     n_warm = 0
@@ -119,6 +138,7 @@ def rollout_kernel(S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, del
     unsupported = np.zeros(max(pi.shape[0], 1), np.int64)
     pair_psi = np.full(max(pi.shape[0], 1), np.inf)
     pair_force = np.zeros(max(pi.shape[0], 1))  # normal force per pair in the last step
+    pair_wrench = np.zeros((max(pi.shape[0], 1), 3))  # world-frame force on each pair's body B
     scratch = np.empty((bi.shape[0], 8))
     g_op, g_index, g_lo, g_hi = goal.op, goal.index, goal.lo, goal.hi
     u_op, u_index, u_lo, u_hi = unsafe.op, unsafe.index, unsafe.lo, unsafe.hi
@@ -126,7 +146,7 @@ def rollout_kernel(S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, del
     # what never changes during the rollout
     rhs_const = h * gravity_force(bi, bf, D.gravity, nv)
     constant_A = not has_rotations(bi)
-    A = system_matrix(bi, bf, q, nv, eps_eff, h, v_index, kp, kd)
+    A = system_matrix(bi, bf, q, nv, eps_eff, h, v_index, kp, kd, max_force)
     Ainv = np.zeros((0, 0))
     M_const = np.zeros((0, 0))
     if constant_A:
@@ -158,7 +178,9 @@ def rollout_kernel(S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, del
         n_steps = int(np.round(durations[k] / h))
         u = controls[k]
         for _ in range(n_steps):
-            # contacts at q
+            # contacts at q (scripted obstacles where they are at this time)
+            if scripted:
+                place_scripted(bf, S.base_pos, S.base_quat, t0 + t)
             n_unsupported = 0
             if spatial:
                 nc, n_unsupported = detect_spatial(S, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported)
@@ -181,12 +203,16 @@ def rollout_kernel(S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, del
                 break
             if nc > 0:
                 jacobian_packed(bi, bf, pi, q, nc, c_pair, c_n, c_pa, c_pb, W_n)
+                if scripted:
+                    tangents_packed(dimension, nc, c_n, c_t, c_o)
+                    scripted_bias(bf, pi, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, c_bias)
+            p_t = np.zeros((0, 2))
             if kinematic:
-                q2, nu2, q_ref2, st, piv, res = kinematic_step(bi, h, q, q_ref, u, q_index, v_index, lower, upper, nc, c_psi, W_n, nv)
+                q2, nu2, q_ref2, st, piv, res = kinematic_step(bi, h, q, q_ref, u, q_index, v_index, lower, upper, nc, c_psi, c_bias, W_n, nv)
                 dn2, dt2 = delta_n, delta_t
                 size = nc
                 p_n = np.zeros(nc)
-            elif nc == 0 and constant_A:
+            elif nc == 0 and constant_A and not limited:
                 # the cheap path: no contact, constant system matrix
                 q2, nu2, q_ref2, st = free_step(eps, theta, h, bi, Ainv, M_const, rhs_const, q, nu, q_ref, u, q_index, v_index, kp, kd, lower, upper)
                 dn2, dt2 = delta_n, delta_t
@@ -201,11 +227,11 @@ def rollout_kernel(S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, del
                     if spatial:
                         jacobian_packed(bi, bf, pi, q, nc, c_pair, c_o, c_pa, c_pb, W_o)
                 if not constant_A:
-                    A = system_matrix(bi, bf, q, nv, eps_eff, h, v_index, kp, kd)
+                    A = system_matrix(bi, bf, q, nv, eps_eff, h, v_index, kp, kd, max_force)
                 q2, nu2, q_ref2, dn2, dt2, st, piv, res, size, p_n, p_t, sw = dynamics_step(
                     eps, compliant, theta, directions, h, bi, bf, pf, A, Ainv, M_const, rhs_const,
-                    q, nu, q_ref, delta_n, delta_t, u, q_index, v_index, kp, kd, lower, upper,
-                    nc, c_pair, c_psi, c_slot, W_n, W_t, W_o, spatial, pi, solver, warm_n, warm_t,
+                    q, nu, q_ref, delta_n, delta_t, u, q_index, v_index, kp, kd, lower, upper, max_force,
+                    nc, c_pair, c_psi, c_slot, W_n, W_t, W_o, c_bias, spatial, pi, solver, warm_n, warm_t,
                 )
                 sweeps += sw
                 if keep_warm and st == STEP_OK:
@@ -231,11 +257,17 @@ def rollout_kernel(S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, del
                 break
             q, nu, q_ref, delta_n, delta_t = q2, nu2, q_ref2, dn2, dt2
             pair_force[:] = 0.0
+            pair_wrench[:] = 0.0
             pushed = False
             for i in range(p_n.shape[0]):
                 pair_force[c_pair[i]] += p_n[i] / h
                 if p_n[i] > 0.0:
                     pushed = True
+                for k in range(3):
+                    f = p_n[i] * c_n[i, k]
+                    if p_t.shape[0] > i:
+                        f += p_t[i, 0] * c_t[i, k] + p_t[i, 1] * c_o[i, k]
+                    pair_wrench[c_pair[i], k] += f / h
             if pushed:
                 force_steps += 1
             t += h
@@ -246,6 +278,8 @@ def rollout_kernel(S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, del
                 rec_nu[n_rec] = nu
                 n_rec += 1
     if status == STEP_OK and outcome == OUTCOME_NONE:
+        if scripted:
+            place_scripted(bf, S.base_pos, S.base_quat, t0 + t)
         zero = np.zeros(nv)
         if spatial:
             nc, _ = detect_spatial(S, q, zero, 0.0, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported)
@@ -262,4 +296,4 @@ def rollout_kernel(S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, del
         rec_nu[n_rec] = nu
         n_rec += 1
     return (q, nu, q_ref, delta_n, delta_t, t, outcome, status, steps, lcp_solves, pivots, max_residual, max_size,
-            rec_t[:n_rec], rec_q[:n_rec], rec_nu[:n_rec], pair_force, min_psi, force_steps, sweeps)
+            rec_t[:n_rec], rec_q[:n_rec], rec_nu[:n_rec], pair_force, min_psi, force_steps, sweeps, pair_wrench)

@@ -69,6 +69,7 @@ class RolloutResult:
     min_psi: float = np.inf  # smallest contact signed distance met (negative: penetration), m
     force_steps: int = 0  # steps in which some contact carried a positive normal force
     sweeps: int = 0  # PGS sweeps over all steps (0 with Lemke)
+    pair_wrench: np.ndarray | None = None  # (n_pairs, 3) world force on each pair's second body in the last step, N
 
     @property
     def max_penetration(self) -> float:
@@ -88,6 +89,7 @@ class Compiled:
     goal: Program
     unsafe: Program
     capacity: int
+    scripted: bool  # some obstacle moves on a script (rollouts then work on a copy of the scene's pose tables)
 
 
 _CACHE: dict[int, tuple[Scenario, Compiled]] = {}
@@ -98,7 +100,7 @@ def compiled(scenario: Scenario) -> Compiled:
     if hit is not None and hit[0] is scenario:
         return hit[1]
     S = compile_scene(scenario)
-    q_index, v_index, kp, kd, lower, upper = [], [], [], [], [], []
+    q_index, v_index, kp, kd, lower, upper, max_force = [], [], [], [], [], [], []
     for body in scenario.spec.bodies:
         for dof, drive in body.actuators.items():
             name = f"{body.name}.{dof}"
@@ -108,6 +110,7 @@ def compiled(scenario: Scenario) -> Compiled:
             kd.append(drive.kd)
             lower.append(-np.inf if drive.lower is None else drive.lower)
             upper.append(np.inf if drive.upper is None else drive.upper)
+            max_force.append(np.inf if drive.max_force is None else drive.max_force)
     # drives in the scenario's actuated order
     order = [scenario.coordinates[i] for i in q_index]
     perm = [order.index(name) for name in scenario.actuated]
@@ -121,6 +124,7 @@ def compiled(scenario: Scenario) -> Compiled:
         lower=np.array(lower, float)[perm] if perm else np.zeros(0),
         upper=np.array(upper, float)[perm] if perm else np.zeros(0),
         gravity=gravity,
+        max_force=np.array(max_force, float)[perm] if perm else np.zeros(0),
     )
     goal = compile_predicate(scenario, scenario.spec.task.goal)
     unsafe = compile_predicate(scenario, scenario.spec.task.unsafe)
@@ -135,6 +139,7 @@ def compiled(scenario: Scenario) -> Compiled:
         goal=goal,
         unsafe=unsafe,
         capacity=max(int(S.pair_max_contacts.sum()), 1),
+        scripted=any(b.velocity for b in scenario.spec.bodies),
     )
     _CACHE[id(scenario)] = (scenario, result)
     return result
@@ -157,9 +162,11 @@ class Rung:
     def initial_state(self, scenario: Scenario) -> State:
         c = compiled(scenario)
         q = np.array(scenario.start, dtype=float)
+        # initial velocities are a state of the rungs with inertia; the others have none
+        dynamic = self.model is not None and not self.model.kinematic and self.model.eps > 0.0
         return State(
             q=q,
-            nu=np.zeros(len(scenario.velocities)),
+            nu=np.array(scenario.start_velocity, dtype=float) if dynamic else np.zeros(len(scenario.velocities)),
             q_ref=q[c.drives.q_index].copy(),
             delta_n=np.zeros(c.capacity),
             delta_t=np.zeros((c.capacity, 2)),
@@ -188,7 +195,10 @@ class Rung:
         record_every: int = 0,
         max_records: int = DEFAULT_RECORDS,
         stop_at_outcome: bool = True,
+        t0: float = 0.0,
     ) -> RolloutResult:
+        """Run controls[k] for durations[k] from state, which is at time t0 (where scripted
+        obstacles are); the result's times count from the start of this rollout."""
         if self.model is None:
             raise ValueError("the geometric rung has no dynamics to roll out; use valid()")
         c = compiled(scenario)
@@ -199,14 +209,17 @@ class Rung:
         if record_every <= 0:
             total = int(np.round(durations.sum() / h))
             record_every = max(1, total // max(max_records - 2, 1))
+        scene = c.scene
+        if c.scripted:  # the kernel moves scripted obstacles in the pose tables: its own copy
+            scene = scene._replace(bf=scene.bf.copy(), base_pos=scene.base_pos.copy(), base_quat=scene.base_quat.copy())
         start = time.perf_counter()
         out = rollout_kernel(
-            c.scene, c.drives, self.model, self.solver, c.goal, c.unsafe,
+            scene, c.drives, self.model, self.solver, c.goal, c.unsafe,
             state.q.copy(), state.nu.copy(), state.q_ref.copy(), state.delta_n.copy(), state.delta_t.copy(),
-            controls, durations, float(h), int(record_every), int(max_records), bool(stop_at_outcome),
+            controls, durations, float(h), int(record_every), int(max_records), bool(stop_at_outcome), float(t0),
         )
         wall = time.perf_counter() - start
-        q, nu, q_ref, dn, dt, t, outcome, status, steps, lcp, piv, res, size, rec_t, rec_q, rec_nu, force, min_psi, force_steps, sweeps = out
+        q, nu, q_ref, dn, dt, t, outcome, status, steps, lcp, piv, res, size, rec_t, rec_q, rec_nu, force, min_psi, force_steps, sweeps, wrench = out
         return RolloutResult(
             state=State(q, nu, q_ref, dn, dt),
             t=float(t),
@@ -226,6 +239,7 @@ class Rung:
             min_psi=float(min_psi),
             force_steps=int(force_steps),
             sweeps=int(sweeps),
+            pair_wrench=wrench[: len(scenario.pairs)],
         )
 
     def step(self, scenario: Scenario, state: State, control: np.ndarray, h: float) -> RolloutResult:

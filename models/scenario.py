@@ -84,7 +84,8 @@ class Scenario:
 
     coordinates: generalized coordinate names q in stacking order (body order of the file,
     then x, y, z, theta/yaw, qw..qz within a body); velocities: names of nu (rotation: wx..wz);
-    actuated: the coordinates driven by a robot's actuators; start: q at the start (read-only).
+    actuated: the coordinates driven by a robot's actuators; start: q at the start (read-only);
+    start_velocity: nu at the start (`[task] velocity`; zeros where not given; read-only).
     """
 
     path: Path
@@ -97,6 +98,7 @@ class Scenario:
     geometries: Mapping[str, geo.Geometry]
     pairs: tuple[ContactPair, ...]
     base_placements: Mapping[str, geo.Placement] = field(repr=False)
+    start_velocity: np.ndarray = field(default=None, repr=False)
 
     @property
     def dimension(self) -> int:
@@ -123,6 +125,7 @@ class Scenario:
             "velocities": list(self.velocities),
             "actuated": list(self.actuated),
             "start": {n: float(v) for n, v in zip(self.coordinates, self.start)},
+            "start_velocity": {n: float(v) for n, v in zip(self.velocities, self.start_velocity) if v != 0.0},
             "parameters": dict(self.parameters),
             "bodies": [
                 {
@@ -368,6 +371,13 @@ def _derive(spec: ScenarioSpec, parameters: Mapping[str, float], path: Path) -> 
             start[coordinates.index(name)] = value
             start_overridden.add(name.split(".", 1)[0])
 
+    start_velocity = [0.0] * len(velocities)
+    for name, value in spec.task.velocity.items():
+        if name not in velocities:
+            problems.append(Problem(key_path(("task", "velocity", name)), _unknown_coordinate(name, velocities).replace("coordinate", "velocity")))
+        else:
+            start_velocity[velocities.index(name)] = value
+
     problems += _check_contacts(spec, names)
     problems += _check_task(spec, coordinates, actuated, names)
     problems += _check_ladder(spec)
@@ -388,6 +398,7 @@ def _derive(spec: ScenarioSpec, parameters: Mapping[str, float], path: Path) -> 
         geometries=MappingProxyType(geometries),
         pairs=pairs,
         base_placements=MappingProxyType(base),
+        start_velocity=_frozen(np.array(start_velocity, dtype=float)),
     )
     problems = _check_penetration(scenario, start_overridden)
     if problems:

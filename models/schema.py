@@ -340,6 +340,11 @@ class TaskSpec(Strict):
     start: dict[str, Num] = Field(
         default_factory=dict, description="overrides of initial coordinates (default: body poses)"
     )
+    velocity: dict[str, Num] = Field(
+        default_factory=dict,
+        description="initial velocities by velocity name, e.g. 'box.x' (m/s) or 'disc.theta' (rad/s), "
+        "'ball.wx'..'ball.wz' for a free rotation (world frame); default 0. Only the dynamic rungs have velocity state",
+    )
     goal: Predicate
     unsafe: Predicate | None = None
     control_bounds: dict[str, Interval] = Field(

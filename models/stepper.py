@@ -133,6 +133,7 @@ class Drives(NamedTuple):
     lower: np.ndarray
     upper: np.ndarray
     gravity: np.ndarray  # (3,)
+    max_force: np.ndarray  # force limit per drive, N (inf: unlimited)
 
 
 SOLVER_LEMKE = 0
@@ -298,12 +299,35 @@ def gyroscopic_force(bi, bf, q, nu, nv):
 
 
 @numba.njit(cache=True)
-def system_matrix(bi, bf, q, nv, eps, h, v_index, kp, kd):
-    """A = eps M + h (h kp + kd) on the driven DOFs."""
+def system_matrix(bi, bf, q, nv, eps, h, v_index, kp, kd, max_force):
+    """A = eps M + h (h kp + kd) on the DOFs of unlimited drives (a force-limited drive's
+    impulse is an unknown of the contact problem instead; see `contact_lcp`)."""
     A = eps * mass_matrix(bi, bf, q, nv)
     for j in range(v_index.shape[0]):
-        A[v_index[j], v_index[j]] += h * (h * kp[j] + kd[j])
+        if not np.isfinite(max_force[j]):
+            A[v_index[j], v_index[j]] += h * (h * kp[j] + kd[j])
     return A
+
+
+@numba.njit(cache=True)
+def any_limited(max_force):
+    """True when some drive has a finite force limit."""
+    for j in range(max_force.shape[0]):
+        if np.isfinite(max_force[j]):
+            return True
+    return False
+
+
+@numba.njit(cache=True)
+def drive_reference(h, q_ref, u, lower, upper, j):
+    """(q_ref+, feed-forward speed) of drive j: the reference advances by h u, stopped at the
+    position limits; its speed is u, or the reference's own speed where a limit stopped it
+    (so a drive held at its limit rests at the limit, not kd u / kp past it)."""
+    target = q_ref[j] + h * u[j]
+    new = min(max(target, lower[j]), upper[j])
+    if new == target:
+        return new, u[j]
+    return new, (new - q_ref[j]) / h
 
 
 @numba.njit(cache=True)
@@ -355,6 +379,7 @@ def free_step(eps, theta, h, bi, Ainv, M_const, rhs_const, q, nu, q_ref, u, q_in
     """dynamics_step without contacts and with a constant system matrix: the cheap path.
 
     Returns (q+, nu+, q_ref+, status); equals dynamics_step with nc = 0 (tests check it).
+    Not for scenes with force-limited drives (their impulses need the contact problem).
     """
     quasistatic = eps == 0.0
     rhs = rhs_const.copy()
@@ -362,8 +387,8 @@ def free_step(eps, theta, h, bi, Ainv, M_const, rhs_const, q, nu, q_ref, u, q_in
         rhs += eps * (M_const @ nu)
     q_ref_new = q_ref.copy()
     for j in range(v_index.shape[0]):
-        q_ref_new[j] = min(max(q_ref[j] + h * u[j], lower[j]), upper[j])
-        rhs[v_index[j]] += h * (kp[j] * (q_ref_new[j] - q[q_index[j]]) + kd[j] * u[j])
+        q_ref_new[j], ff = drive_reference(h, q_ref, u, lower, upper, j)
+        rhs[v_index[j]] += h * (kp[j] * (q_ref_new[j] - q[q_index[j]]) + kd[j] * ff)
     nu_new = Ainv @ rhs
     if theta == 1.0:
         q_new = integrate_positions(bi, q, nu_new, h)
@@ -382,8 +407,8 @@ def free_step(eps, theta, h, bi, Ainv, M_const, rhs_const, q, nu, q_ref, u, q_in
 def dynamics_step(
     model_eps, compliant, theta, directions, h,
     bi, bf, pf, A, Ainv, M_const, rhs_const, q, nu, q_ref, delta_n, delta_t, u,
-    q_index, v_index, kp, kd, lower, upper,
-    nc, c_pair, c_psi, c_slot, W_n, W_t, W_o, spatial,
+    q_index, v_index, kp, kd, lower, upper, max_force,
+    nc, c_pair, c_psi, c_slot, W_n, W_t, W_o, c_bias, spatial,
     pi, solver, warm_n, warm_t,
 ):
     """One step of eq. (3) given the contacts at q. Pure: returns new arrays.
@@ -391,6 +416,9 @@ def dynamics_step(
     A, Ainv: the system matrix and its inverse (Ainv may be empty: then A is solved each call).
     M_const: the mass matrix when it does not depend on q (else empty: computed here).
     rhs_const: h * (gravity force) (the part of the right-hand side that never changes).
+    max_force: each drive's force limit (inf: unlimited; a limited drive's impulse is solved
+    with the contacts, by Lemke). c_bias (>= nc, 3): each contact's relative velocity along
+    (n, t, o) from scripted obstacles (`models.contact.scripted_bias`; zeros without them).
     pi: the scene's pair table (the bodies of each contact); solver: a `Solver`; warm_n
     (slots,), warm_t (slots, 2): PGS warm start by contact slot (the previous step's p_n, p_t;
     zeros for a cold start; Lemke ignores them).
@@ -400,32 +428,42 @@ def dynamics_step(
     path residual is `models.contact_pgs`'s and lcp_size the number of scalar impulses.
     """
     use_pgs = solver.method == SOLVER_PGS or (solver.method == SOLVER_AUTO and nc >= solver.auto_contacts)
-    if nc > 0 and use_pgs:
+    if nc > 0 and use_pgs and not any_limited(max_force):
         out = _pgs_step(
             model_eps, compliant, theta, directions, h, bi, bf, pi, pf, A, Ainv, rhs_const, q, nu, q_ref, delta_n, delta_t, u,
-            q_index, v_index, kp, kd, lower, upper, nc, c_pair, c_psi, c_slot, W_n, W_t, W_o, spatial, solver, warm_n, warm_t,
+            q_index, v_index, kp, kd, lower, upper, max_force, nc, c_pair, c_psi, c_slot, W_n, W_t, W_o, c_bias, spatial,
+            solver, warm_n, warm_t,
         )
         if out[5] == STEP_OK or solver.method == SOLVER_PGS:
             return out
         r = _lemke_step(
             model_eps, compliant, theta, directions, h, bi, bf, pf, A, Ainv, M_const, rhs_const, q, nu, q_ref, delta_n, delta_t, u,
-            q_index, v_index, kp, kd, lower, upper, nc, c_pair, c_psi, c_slot, W_n, W_t, W_o, spatial,
+            q_index, v_index, kp, kd, lower, upper, max_force, nc, c_pair, c_psi, c_slot, W_n, W_t, W_o, c_bias, spatial,
         )
         return r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], r[8], r[9], r[10], out[11]
     return _lemke_step(
         model_eps, compliant, theta, directions, h, bi, bf, pf, A, Ainv, M_const, rhs_const, q, nu, q_ref, delta_n, delta_t, u,
-        q_index, v_index, kp, kd, lower, upper, nc, c_pair, c_psi, c_slot, W_n, W_t, W_o, spatial,
+        q_index, v_index, kp, kd, lower, upper, max_force, nc, c_pair, c_psi, c_slot, W_n, W_t, W_o, c_bias, spatial,
     )
 
 
 @numba.njit(cache=True)
-def _drives(h, q, q_ref, u, q_index, v_index, kp, kd, lower, upper, rhs):
-    """Advance the drive references (clamped to their limits) and add the PD terms to rhs."""
+def _drives(h, q, q_ref, u, q_index, v_index, kp, kd, lower, upper, max_force, rhs):
+    """Advance the drive references (stopped at their limits) and add the PD terms of the
+    unlimited drives to rhs. A force-limited drive j instead gets -h max_force[j] (its impulse
+    enters the contact problem shifted to be >= 0) and its PD impulse at nu = 0 in a[j].
+    Returns (q_ref+, a)."""
     q_ref_new = q_ref.copy()
+    a = np.zeros(v_index.shape[0])
     for j in range(v_index.shape[0]):
-        q_ref_new[j] = min(max(q_ref[j] + h * u[j], lower[j]), upper[j])
-        rhs[v_index[j]] += h * (kp[j] * (q_ref_new[j] - q[q_index[j]]) + kd[j] * u[j])
-    return q_ref_new
+        q_ref_new[j], ff = drive_reference(h, q_ref, u, lower, upper, j)
+        pd = h * (kp[j] * (q_ref_new[j] - q[q_index[j]]) + kd[j] * ff)
+        if np.isfinite(max_force[j]):
+            a[j] = pd
+            rhs[v_index[j]] -= h * max_force[j]
+        else:
+            rhs[v_index[j]] += pd
+    return q_ref_new, a
 
 
 @numba.njit(cache=True)
@@ -461,8 +499,8 @@ def _integrate_checked(bi, theta, h, q, nu, nu_new):
 def _lemke_step(
     model_eps, compliant, theta, directions, h,
     bi, bf, pf, A, Ainv, M_const, rhs_const, q, nu, q_ref, delta_n, delta_t, u,
-    q_index, v_index, kp, kd, lower, upper,
-    nc, c_pair, c_psi, c_slot, W_n, W_t, W_o, spatial,
+    q_index, v_index, kp, kd, lower, upper, max_force,
+    nc, c_pair, c_psi, c_slot, W_n, W_t, W_o, c_bias, spatial,
 ):
     """dynamics_step with the dense LCP solved by Lemke (see `_contact_solve`)."""
     nv = nu.shape[0]
@@ -476,7 +514,8 @@ def _lemke_step(
             rhs += eps * (mass_matrix(bi, bf, q, nv) @ nu)
         if spatial:
             rhs += h * eps * gyroscopic_force(bi, bf, q, nu, nv)
-    q_ref_new = _drives(h, q, q_ref, u, q_index, v_index, kp, kd, lower, upper, rhs)
+    q_ref_new, drive_a = _drives(h, q, q_ref, u, q_index, v_index, kp, kd, lower, upper, max_force, rhs)
+    limited = any_limited(max_force)
     if Ainv.shape[0] == nv:
         nu_free = Ainv @ rhs
     else:
@@ -500,9 +539,10 @@ def _lemke_step(
         if _column_norm(W_n, i) > ZERO_COLUMN:
             active[n_act] = i
             n_act += 1
-    if n_act > 0:
+    if n_act > 0 or limited:
         nu_new, p_n, p_t, status, pivots, residual, size = _contact_solve(
-            compliant, directions, spatial, h, A, Ainv, nu_free, active[:n_act], pf, c_pair, c_psi, c_slot, W_n, W_t, W_o, delta_n, delta_t
+            compliant, directions, spatial, h, A, Ainv, nu_free, active[:n_act], pf, c_pair, c_psi, c_slot, W_n, W_t, W_o,
+            c_bias, delta_n, delta_t, v_index, kp, kd, max_force, drive_a,
         )
         for k in range(n_act):
             impulses[active[k]] = p_n[k]
@@ -522,8 +562,8 @@ def _lemke_step(
 def _pgs_step(
     model_eps, compliant, theta, directions, h,
     bi, bf, pi, pf, A, Ainv, rhs_const, q, nu, q_ref, delta_n, delta_t, u,
-    q_index, v_index, kp, kd, lower, upper,
-    nc, c_pair, c_psi, c_slot, W_n, W_t, W_o, spatial, solver, warm_n, warm_t,
+    q_index, v_index, kp, kd, lower, upper, max_force,
+    nc, c_pair, c_psi, c_slot, W_n, W_t, W_o, c_bias, spatial, solver, warm_n, warm_t,
 ):
     """dynamics_step with PGS on the contact impulses; every product body by body, so the
     step costs O(bodies + contacts) beyond what the caller built (`models.contact_pgs`)."""
@@ -538,13 +578,13 @@ def _pgs_step(
         rhs += eps * mass_times(bi, bf, q, nu)
         if spatial:
             rhs += h * eps * gyroscopic_force(bi, bf, q, nu, nv)
-    q_ref_new = _drives(h, q, q_ref, u, q_index, v_index, kp, kd, lower, upper, rhs)
+    q_ref_new, _ = _drives(h, q, q_ref, u, q_index, v_index, kp, kd, lower, upper, max_force, rhs)
     nu_free = block_solve(dofs, count, inv, rhs)
     # a passive body's velocity error is its impulse error over eps m: tighten by eps so that
     # quasistatic rungs (eps -> 0) get velocities as accurate as dynamic ones
     tolerance = solver.tolerance * min(eps, 1.0)
     nu_new, p_n, p_t, active, st, sweeps, residual, size = contact_pgs(
-        compliant, directions, spatial, h, pi, pf, nc, c_pair, c_psi, c_slot, W_n, W_t, W_o,
+        compliant, directions, spatial, h, pi, pf, nc, c_pair, c_psi, c_slot, W_n, W_t, W_o, c_bias,
         delta_n, delta_t, dofs, count, inv, nu_free, warm_n, warm_t, ZERO_COLUMN, tolerance, solver.max_sweeps,
     )
     if st != PGS_CONVERGED:
@@ -566,14 +606,30 @@ def _pgs_step(
 
 
 @numba.njit(cache=True)
-def contact_lcp(compliant, directions, spatial, h, A, Ainv, nu_free, active, pf, c_pair, c_psi, c_slot, W_n, W_t, W_o, delta_n, delta_t):
-    """Assemble the contact LCP of the active contacts.
+def contact_lcp(
+    compliant, directions, spatial, h, A, Ainv, nu_free, active, pf, c_pair, c_psi, c_slot, W_n, W_t, W_o, c_bias,
+    delta_n, delta_t, v_index, kp, kd, max_force, drive_a,
+):
+    """Assemble the contact LCP of the active contacts and the force-limited drives.
 
-    Unknowns z = (p_n (nc), beta (nf * d), gamma (nf)); returns (M, q, A^-1 J, coef, fric, nf)
-    with J = [W_n | D] and coef the friction directions in the (t, o) basis.
+    Unknowns z = (p_n (nc), beta (nf * d), x (nl), gamma (nf), s (nl)); returns (M, q, A^-1 J,
+    coef, fric, nf, lim) with J = [W_n | D | E] and coef the friction directions in the (t, o)
+    basis, lim the indices of the nl force-limited drives.
+
+    A force-limited drive j (limit F, P = h F) is a bounded impulse p = x - P, x in [0, 2P]:
+    unbounded it would be a - b v (a: its PD impulse at v = 0, `_drives`; b = h (h kp + kd); v
+    its DOF's new speed), so its row says r = v + (p - a) / b, with r >= 0 at p = -P, r <= 0 at
+    p = P and r = 0 between: the box split 0 <= x _|_ r + s >= 0, 0 <= s _|_ 2P - x >= 0.
+    nu_free has the -P shift in it already (`_drives`); E's columns are the drives' unit DOFs.
     """
     nc = active.shape[0]
     nv = nu_free.shape[0]
+    nl = 0
+    lim = np.empty(v_index.shape[0], np.int64)
+    for j in range(v_index.shape[0]):
+        if np.isfinite(max_force[j]):
+            lim[nl] = j
+            nl += 1
     d = directions if spatial else 2
     fric = np.empty(nc, np.int64)
     nf = 0
@@ -586,9 +642,10 @@ def contact_lcp(compliant, directions, spatial, h, A, Ainv, nu_free, active, pf,
             fric[nf] = k
             nf += 1
     nd = nf * d
+    m = nc + nd + nl
     # friction directions in the (t, o) basis; a Jacobian column is linear in its direction
     coef = np.zeros((max(nd, 1), 2))
-    J = np.empty((nv, nc + nd))
+    J = np.zeros((nv, m))
     for k in range(nc):
         for v in range(nv):
             J[v, k] = W_n[v, active[k]]
@@ -605,19 +662,21 @@ def contact_lcp(compliant, directions, spatial, h, A, Ainv, nu_free, active, pf,
                 J[v, nc + r] = coef[r, 0] * W_t[v, i]
                 if spatial:
                     J[v, nc + r] += coef[r, 1] * W_o[v, i]
+    for e in range(nl):
+        J[v_index[lim[e]], nc + nd + e] = 1.0
     if Ainv.shape[0] == nv:
         AinvJ = Ainv @ J
     else:
         AinvJ = np.linalg.solve(A, J)
-    n = nc + nd + nf
+    n = m + nf + nl
     Mlcp = np.zeros((n, n))
     qlcp = np.zeros(n)
     Jt = np.ascontiguousarray(J.T)
-    Mlcp[: nc + nd, : nc + nd] = Jt @ AinvJ
+    Mlcp[:m, :m] = Jt @ AinvJ
     Jt_nu = Jt @ nu_free
     for k in range(nc):
         i = active[k]
-        qlcp[k] = c_psi[i] / h + Jt_nu[k]
+        qlcp[k] = c_psi[i] / h + Jt_nu[k] + c_bias[i, 0]
         if compliant:
             K, C = pf[c_pair[i], PF_K], pf[c_pair[i], PF_C]
             comp = 1.0 / (h * (h * K + C))
@@ -627,13 +686,13 @@ def contact_lcp(compliant, directions, spatial, h, A, Ainv, nu_free, active, pf,
         k = fric[f]
         i = active[k]
         p = c_pair[i]
-        g = nc + nd + f
+        g = m + f
         Mlcp[g, k] = pf[p, PF_MU]
         K, C = pf[p, PF_K], pf[p, PF_C]
         slot = c_slot[i]
         for j in range(d):
             r = nc + f * d + j
-            qlcp[r] = Jt_nu[r]
+            qlcp[r] = Jt_nu[r] + coef[r - nc, 0] * c_bias[i, 1] + coef[r - nc, 1] * c_bias[i, 2]
             Mlcp[r, g] = 1.0
             Mlcp[g, r] = -1.0
             if compliant:
@@ -646,7 +705,7 @@ def contact_lcp(compliant, directions, spatial, h, A, Ainv, nu_free, active, pf,
     # with entries mu and +-1: scale its row and column to the contact's friction diagonal
     # (complementarity is kept; gamma is not used afterwards), as Siconos-style LCPs need
     for f in range(nf):
-        g = nc + nd + f
+        g = m + f
         scale = 0.0
         for j in range(d):
             r = nc + f * d + j
@@ -655,18 +714,36 @@ def contact_lcp(compliant, directions, spatial, h, A, Ainv, nu_free, active, pf,
             for r in range(n):
                 Mlcp[r, g] *= scale
                 Mlcp[g, r] *= scale
-    return Mlcp, qlcp, AinvJ, coef, fric, nf
+    # force-limited drives: the box rows (see above); s's row and column scaled like gamma's
+    for e in range(nl):
+        j = lim[e]
+        r = nc + nd + e
+        sx = m + nf + e
+        P = h * max_force[j]
+        b = h * (h * kp[j] + kd[j])
+        Mlcp[r, r] += 1.0 / b
+        qlcp[r] = Jt_nu[r] - (P + drive_a[j]) / b
+        scale = abs(Mlcp[r, r])
+        Mlcp[r, sx] = scale
+        Mlcp[sx, r] = -scale
+        qlcp[sx] = 2.0 * P * scale
+    return Mlcp, qlcp, AinvJ, coef, fric, nf, lim[:nl]
 
 
 @numba.njit(cache=True)
-def _contact_solve(compliant, directions, spatial, h, A, Ainv, nu_free, active, pf, c_pair, c_psi, c_slot, W_n, W_t, W_o, delta_n, delta_t):
+def _contact_solve(
+    compliant, directions, spatial, h, A, Ainv, nu_free, active, pf, c_pair, c_psi, c_slot, W_n, W_t, W_o, c_bias,
+    delta_n, delta_t, v_index, kp, kd, max_force, drive_a,
+):
     """Build and solve the contact LCP. Returns (nu+, p_n, p_t, status, pivots, residual, size)."""
-    Mlcp, qlcp, AinvJ, coef, fric, nf = contact_lcp(
-        compliant, directions, spatial, h, A, Ainv, nu_free, active, pf, c_pair, c_psi, c_slot, W_n, W_t, W_o, delta_n, delta_t
+    Mlcp, qlcp, AinvJ, coef, fric, nf, lim = contact_lcp(
+        compliant, directions, spatial, h, A, Ainv, nu_free, active, pf, c_pair, c_psi, c_slot, W_n, W_t, W_o, c_bias,
+        delta_n, delta_t, v_index, kp, kd, max_force, drive_a,
     )
     nc = active.shape[0]
     d = directions if spatial else 2
     nd = nf * d
+    m = nc + nd + lim.shape[0]
     n = qlcp.shape[0]
     # LCP(s M, s q) has the solutions of LCP(M, q): scale to unit size for Lemke's pivot
     # tolerances (quasistatic rungs make M ~ 1 / QUASISTATIC_INERTIA)
@@ -702,7 +779,7 @@ def _contact_solve(compliant, directions, spatial, h, A, Ainv, nu_free, active, 
             r = nc + f * d + j
             p_t[k, 0] += z[r] * coef[r - nc, 0]
             p_t[k, 1] += z[r] * coef[r - nc, 1]
-    nu_new = nu_free + AinvJ @ z[: nc + nd]
+    nu_new = nu_free + AinvJ @ z[:m]
     return nu_new, p_n, p_t, STEP_OK, pivots, residual, n
 
 
@@ -724,10 +801,12 @@ BLOCKED_BISECTIONS = 30
 
 
 @numba.njit(cache=True)
-def kinematic_step(bi, h, q, q_ref, u, q_index, v_index, lower, upper, nc, c_psi, W_n, nv):
+def kinematic_step(bi, h, q, q_ref, u, q_index, v_index, lower, upper, nc, c_psi, c_bias, W_n, nv):
     """The paper's eq. (8) given the contacts at q. Returns (q+, nu+, q_ref+, status, pivots, residual).
 
-    Actuated DOFs move at the commanded speed (stopping at their position limits); the
+    Actuated DOFs move at the commanded speed (stopping at their position limits; a kinematic
+    model has no forces, so a drive's force limit does not apply); c_bias[i, 0] is contact i's
+    normal speed from scripted obstacles (a scripted obstacle pushes like an actuator); the
     passive speeds v are the least-norm ones keeping every contact's psi + h W_n^T nu >= 0:
     min |v|^2 s.t. W_p^T v >= -(psi / h + W_a^T u). Its dual is the LCP
     0 <= lam _|_ W_p^T W_p lam + (psi / h + W_a^T u) >= 0 with v = W_p lam, solved by Lemke
@@ -756,7 +835,7 @@ def kinematic_step(bi, h, q, q_ref, u, q_index, v_index, lower, upper, nc, c_psi
         psi_h = np.zeros(nc)
         Wa_u = np.zeros(nc)
         for i in range(nc):
-            psi_h[i] = c_psi[i] / h
+            psi_h[i] = c_psi[i] / h + c_bias[i, 0]
             for v in range(nv):
                 if actuated[v]:
                     Wa_u[i] += W_n[v, i] * u_eff[v]

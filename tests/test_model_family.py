@@ -402,14 +402,15 @@ def test_cheap_free_step_equals_the_full_step_without_contacts(eps):
     S, D = c.scene, c.drives
     h = 1e-3
     q, nu, q_ref, u = np.array([0.2, 0.1]), np.array([0.3, -0.2]), np.array([0.25, 0.05]), np.array([0.5, 0.4])
-    A = system_matrix(S.bi, S.bf, q, S.nv, eps or QUASISTATIC_INERTIA, h, D.v_index, D.kp, D.kd)
+    A = system_matrix(S.bi, S.bf, q, S.nv, eps or QUASISTATIC_INERTIA, h, D.v_index, D.kp, D.kd, D.max_force)
     Ainv, M = np.linalg.inv(A), mass_matrix(S.bi, S.bf, q, S.nv)
     rhs = h * gravity_force(S.bi, S.bf, D.gravity, S.nv)
     drives = (D.q_index, D.v_index, D.kp, D.kd, D.lower, D.upper)
     fast = free_step(eps, 1.0, h, S.bi, Ainv, M, rhs, q, nu, q_ref, u, *drives)
     empty = np.zeros((S.nv, 1))
     full = dynamics_step(eps, False, 1.0, 2, h, S.bi, S.bf, S.pf, A, Ainv, M, rhs, q, nu, q_ref, np.zeros(1), np.zeros((1, 2)), u,
-                         *drives, 0, np.zeros(1, np.int64), np.zeros(1), np.zeros(1, np.int64), empty, empty, empty, False,
+                         *drives, D.max_force, 0, np.zeros(1, np.int64), np.zeros(1), np.zeros(1, np.int64), empty, empty, empty,
+                         np.zeros((1, 3)), False,
                          S.pi, LEMKE, np.zeros(1), np.zeros((1, 2)))
     for a, b in zip(fast[:3], full[:3]):
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-15)

@@ -53,7 +53,7 @@ def step(scenario, rung_name: str, solver: str, q, nu, h: float = H, **settings)
     model = rung_for(scenario, rung_name).model
     q = np.ascontiguousarray(q, float)
     nu = np.ascontiguousarray(nu, float)
-    A = system_matrix(S.bi, S.bf, q, S.nv, model.eps or QUASISTATIC_INERTIA, h, D.v_index, D.kp, D.kd)
+    A = system_matrix(S.bi, S.bf, q, S.nv, model.eps or QUASISTATIC_INERTIA, h, D.v_index, D.kp, D.kd, D.max_force)
     Ainv = np.linalg.inv(A)
     M = mass_matrix(S.bi, S.bf, q, S.nv)
     rhs = h * gravity_force(S.bi, S.bf, D.gravity, S.nv)
@@ -65,7 +65,8 @@ def step(scenario, rung_name: str, solver: str, q, nu, h: float = H, **settings)
     out = dynamics_step(
         model.eps, model.compliant, model.theta, model.friction_directions, h, S.bi, S.bf, S.pf, A, Ainv, M, rhs,
         q, nu, q[D.q_index].copy(), np.zeros(nc), np.zeros((nc, 2)), u, D.q_index, D.v_index, D.kp, D.kd, D.lower, D.upper,
-        nc, frames.pair, frames.psi, np.arange(nc, dtype=np.int64), frames.W_n, frames.W_t, W_o, spatial,
+        D.max_force, nc, frames.pair, frames.psi, np.arange(nc, dtype=np.int64), frames.W_n, frames.W_t, W_o,
+        np.zeros((max(nc, 1), 3)), spatial,
         S.pi, contact_solver(solver, **settings), np.zeros(nc), np.zeros((nc, 2)),
     )
     return frames, Ainv, out

@@ -68,13 +68,14 @@ def paper_scene_lcp():
     h = 1e-4
     frames = contact_frames(S, q)
     fingers = np.flatnonzero(np.abs(frames.W_n[1:, :]).sum(axis=0) > 0)  # the two finger contacts
-    A = system_matrix(S.bi, S.bf, q, S.nv, 1.0, h, D.v_index, D.kp, D.kd)
+    A = system_matrix(S.bi, S.bf, q, S.nv, 1.0, h, D.v_index, D.kp, D.kd, D.max_force)
     nu_free = np.linalg.solve(A, np.array([0.0, -0.05, -0.05]))
     slots = np.arange(len(frames.psi))
     M, qv, *_ = contact_lcp(
         True, 2, False, h, A, np.linalg.inv(A), nu_free, fingers.astype(np.int64), S.pf, frames.pair, frames.psi, slots,
         np.ascontiguousarray(frames.W_n), np.ascontiguousarray(frames.W_t), np.zeros_like(frames.W_n),
-        np.zeros(len(slots)), np.zeros((len(slots), 2)),
+        np.zeros((len(slots), 3)), np.zeros(len(slots)), np.zeros((len(slots), 2)),
+        D.v_index, D.kp, D.kd, D.max_force, np.zeros(len(D.v_index)),
     )
     return M, qv
 
