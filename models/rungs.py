@@ -79,6 +79,23 @@ class RolloutResult:
     def ok(self) -> bool:
         return self.status == "ok"
 
+    def contact_forces(self, scenario: Scenario) -> list[dict]:
+        """Per contact pair, the contact force of the last step taken (N, world frame): on the
+        pair's second body, normal plus friction (`force`), and the sum of the normal
+        magnitudes (`normal`); pairs that carried no force are left out. The kinematic rung
+        has no forces: an empty list."""
+        out = []
+        dim = scenario.dimension
+        for k, pair in enumerate(scenario.pairs):
+            if self.pair_wrench is None or self.pair_force[k] == 0.0:
+                continue
+            out.append({
+                "bodies": [pair.body_a, pair.body_b],
+                "normal": float(self.pair_force[k]),
+                "force": [float(v) for v in self.pair_wrench[k][:dim]],
+            })
+        return out
+
 
 @dataclass
 class Compiled:

@@ -264,6 +264,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         "t": result.t,
         "state": result.state.named(scenario),
         "velocity": {n: float(v) for n, v in zip(scenario.velocities, result.state.nu)},
+        "contact_forces": result.contact_forces(scenario),
         "steps": result.steps,
         "wall_s": result.wall_s,
         "steps_per_s": result.steps / result.wall_s if result.wall_s > 0 else None,
@@ -391,7 +392,7 @@ def run_with_progress(rung, scenario, state, controls, duration, h, *, quiet: bo
         done = 0
         for _ in range(chunks):
             n = min(PROGRESS_STEPS, total - done)
-            result = rung.rollout(scenario, state, controls, [n * h], h)
+            result = rung.rollout(scenario, state, controls, [n * h], h, t0=done * h)
             results.append(result)
             done += n
             progress.update(task, completed=done)

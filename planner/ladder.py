@@ -81,7 +81,16 @@ class LadderResult:
 
 
 def check_start(scenario: Scenario) -> None:
-    """A start inside the unsafe set is bad input (penetration is caught by the loader)."""
+    """A start inside the unsafe set is bad input (penetration is caught by the loader), and so
+    is a scripted obstacle: plan states carry no time, so a moving obstacle's pose at a state is
+    unknown (simulate and sweep run such scenes from t = 0)."""
+    moving = [i for i, body in enumerate(scenario.spec.bodies) if body.velocity]
+    if moving:
+        raise ScenarioError(scenario.path, [
+            Problem(f"bodies[{i}].velocity", "planning with a scripted (moving) obstacle is not supported: plan states carry no "
+                    "time; `ladder simulate` and `ladder sweep` run such scenes")
+            for i in moving
+        ])
     rung = RUNGS["kinematic"]
     result = rung.rollout(scenario, rung.initial_state(scenario), np.zeros((1, len(scenario.actuated))), [0.0], 1e-3)
     if result.outcome == "unsafe":
