@@ -349,14 +349,23 @@ def test_spatial_resting_box_forces_balance_gravity(tmp_path, rung, solver):
     assert np.hypot(f[0], f[1]) < (1e-6 if solver == "lemke" else 1e-4)
 
 
-@pytest.mark.parametrize("rung", ["kinematic", "quasistatic-rigid", "dynamic-rigid"])
-def test_spatial_scripted_ram_pushes_box(tmp_path, rung):
+@pytest.mark.parametrize(
+    "rung, solver",
+    [("kinematic", "lemke"), ("quasistatic-rigid", "lemke"), ("dynamic-rigid", "lemke"), ("dynamic-rigid", "pgs"), ("dynamic-compliant", "auto")],
+)
+def test_spatial_scripted_ram_pushes_box(tmp_path, rung, solver):
     """In space too: the ram's face starts 5 cm from the box and moves at 0.5 m/s along x;
     after 0.5 s the box has moved 0.5 (0.5 - 0.1) = 0.2 m, without turning."""
+    from dataclasses import replace
+
+    from models.stepper import contact_solver
+
     path = tmp_path / "spatial.toml"
     path.write_text(SPATIAL.replace("RAM_SPEED", "0.5"))
     scenario = load_scenario(path)
-    out = run(scenario, rung, np.zeros(0), 0.5)
+    r = replace(RUNGS[rung], solver=contact_solver(solver))
+    out = r.rollout(scenario, r.initial_state(scenario), np.zeros((1, 0)), [0.5], STEP[rung], stop_at_outcome=False)
+    assert out.status == "ok", out.message
     named = out.state.named(scenario)
     assert named["box.x"] == pytest.approx(0.2, abs=2e-3)
     assert abs(named["box.y"]) < 1e-6
