@@ -43,7 +43,8 @@ def handler(signum, frame) -> None:
 
 
 def install() -> None:
-    """Use `handler` for SIGINT (main thread only; a no-op elsewhere)."""
+    """Use `handler` for SIGINT (main thread only; a no-op elsewhere), with no Ctrl-C seen yet."""
+    reset()
     try:
         signal.signal(signal.SIGINT, handler)
     except ValueError:  # not the main thread
