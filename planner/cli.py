@@ -489,14 +489,14 @@ def run_with_progress(rung, scenario, state, controls, durations, h, *, live: bo
     if live and total > PROGRESS_STEPS:
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
-        bar = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TextColumn("steps"),
+        bar = Progress(TextColumn("{task.description}"), BarColumn(bar_width=15), MofNCompleteColumn(),
                        TextColumn("{task.fields[rate]}"), TimeRemainingColumn(), console=_console(stderr=True), transient=True)
-        task = bar.add_task(rung.name, total=total, rate="")
+        task = bar.add_task(rung.name, total=total, rate="steps")
         bar.start()
 
     def progress(done: int, total: int, wall: float) -> None:
         if bar is not None:
-            bar.update(task, completed=done, rate=f"{done / wall:,.0f} steps/s" if wall > 0 else "")
+            bar.update(task, completed=done, rate=f"steps, {done / wall:,.0f}/s" if wall > 0 else "steps")
         if interrupt.asked():
             stop = KeyboardInterrupt()
             stop.steps_done = done
