@@ -19,6 +19,7 @@ $(VENV)/.installed-test: pyproject.toml | $(PY)
 	touch $@ $(VENV)/.installed
 
 demo: $(VENV)/.installed
+	@mkdir -p $(OUT)
 	$(VENV)/bin/ladder check scenarios/two_finger_triangle.toml --out $(OUT)/two_finger_triangle.check.json
 	@for f in scenarios/*.toml; do $(VENV)/bin/ladder check $$f --json > /dev/null && echo "ok: $$f"; done
 	@echo "simulating the paper's scene up the model family (the first run compiles the kernels, about 2 minutes)"

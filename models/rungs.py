@@ -259,6 +259,69 @@ class Rung:
             pair_wrench=wrench[: len(scenario.pairs)],
         )
 
+    def rollout_chunked(
+        self,
+        scenario: Scenario,
+        state: State,
+        controls: np.ndarray,
+        durations: np.ndarray,
+        h: float,
+        *,
+        max_records: int = DEFAULT_RECORDS,
+        chunk_s: float = 0.25,
+        first_chunk: int = 2000,
+        progress=None,
+        t0: float = 0.0,
+    ) -> RolloutResult:
+        """`rollout` (stopping at an outcome) in compiled calls of about `chunk_s` seconds of
+        wall time each, so that a long run can report progress and be stopped between them:
+        progress(steps_done, steps_total, wall_s) is called after every chunk and may raise
+        (KeyboardInterrupt) to stop the run. The result equals the one-call rollout's (with
+        the Lemke solver; PGS warm starts restart at a chunk boundary): chunks end on
+        recorded steps, an outcome that only the end-of-call classification of a chunk found
+        is left to the next chunk's first step (as one call would do), and the records are
+        joined and capped as one call's. t0: as in `rollout` (each chunk starts where the time
+        has got to, so scripted obstacles move on)."""
+        durations = np.atleast_1d(np.asarray(durations, float))
+        controls = np.asarray(controls, float).reshape(len(durations), len(scenario.actuated))
+        per_control = [int(np.round(d / h)) for d in durations]
+        total = sum(per_control)
+        record_every = max(1, int(np.round(durations.sum() / h)) // max(max_records - 2, 1))
+        results: list[RolloutResult] = []
+        k, used, done, wall = 0, 0, 0, 0.0  # control index, its steps taken, steps taken
+        target = max(record_every, first_chunk // record_every * record_every)
+        while True:
+            # the next chunk: `target` steps (a multiple of record_every) over the controls left
+            chunk_u, chunk_d, n = [], [], 0
+            while k < len(per_control) and n < target:
+                take = min(per_control[k] - used, target - n)
+                if take > 0:
+                    chunk_u.append(controls[k])
+                    chunk_d.append(take * h)
+                    n += take
+                used += take
+                if used >= per_control[k]:
+                    k, used = k + 1, 0
+            last = done + n >= total
+            if not chunk_d:  # nothing (left) to step: one call classifies the state
+                chunk_u, chunk_d = [controls[min(k, len(controls) - 1)]], [0.0]
+            out = self.rollout(scenario, state, np.array(chunk_u), np.array(chunk_d), h, record_every=record_every,
+                               max_records=n // record_every + 3, stop_at_outcome=True, t0=t0 + done * h)
+            results.append(out)
+            done += out.steps
+            wall += out.wall_s
+            state = out.state
+            if progress is not None:
+                progress(done, total, wall)
+            # a chunk that ran all its steps met no outcome along them; one it reports came from
+            # the classification at the end of the call, which one long call does at the next step
+            stopped = out.steps < n or not out.ok
+            if last or stopped:
+                break
+            rate = out.steps / max(out.wall_s, 1e-6)
+            target = max(record_every, int(rate * chunk_s) // record_every * record_every)
+        return _joined(results, max_records)
+
     def step(self, scenario: Scenario, state: State, control: np.ndarray, h: float) -> RolloutResult:
         """One step of length h under a commanded speed per actuated coordinate."""
         return self.rollout(scenario, state, np.reshape(control, (1, -1)), [h], h, record_every=1, max_records=2)
@@ -273,6 +336,39 @@ class Rung:
             if psi < -tolerance:
                 return False
         return True
+
+
+def _joined(results: list[RolloutResult], max_records: int) -> RolloutResult:
+    """Consecutive chunks of one rollout as one result (see Rung.rollout_chunked)."""
+    last = results[-1]
+    if len(results) == 1:
+        return last
+    offsets = np.cumsum([0.0] + [r.t for r in results[:-1]])
+    times = np.concatenate([results[0].times] + [r.times[1:] + o for r, o in zip(results[1:], offsets[1:])])
+    trajectory = np.concatenate([results[0].trajectory] + [r.trajectory[1:] for r in results[1:]])
+    velocities = np.concatenate([results[0].velocities] + [r.velocities[1:] for r in results[1:]])
+    if len(times) > max_records:  # one call keeps max_records - 1 records and the last state
+        keep = list(range(max_records - 1)) + [len(times) - 1]
+        times, trajectory, velocities = times[keep], trajectory[keep], velocities[keep]
+    stepped = [r for r in results if r.steps > 0]
+    return replace(
+        last,
+        t=float(offsets[-1] + last.t),
+        steps=sum(r.steps for r in results),
+        lcp_solves=sum(r.lcp_solves for r in results),
+        pivots=sum(r.pivots for r in results),
+        max_residual=max(r.max_residual for r in results),
+        max_lcp_size=max(r.max_lcp_size for r in results),
+        wall_s=sum(r.wall_s for r in results),
+        times=times,
+        trajectory=trajectory,
+        velocities=velocities,
+        pair_force=(stepped[-1] if stepped else last).pair_force,
+        pair_wrench=(stepped[-1] if stepped else last).pair_wrench,
+        min_psi=min(r.min_psi for r in results),
+        force_steps=sum(r.force_steps for r in results),
+        sweeps=sum(r.sweeps for r in results),
+    )
 
 
 RUNGS: dict[str, Rung] = {

@@ -7,6 +7,7 @@ Exit codes: 0 ok, 1 the task failed (no plan), 2 bad input (message names file, 
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import os
 import sys
@@ -20,6 +21,8 @@ from models.scenario import Problem, Scenario, ScenarioError, load_scenario, par
 from models.schema import RUNGS as RUNG_NAMES
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
+#: The most runs one sweep may do (planner.sweep.MAX_RUNS, without importing it for --help).
+MAX_RUNS = 1_000_000
 
 #: Subcommands the design reserves whose machinery is not built yet, with what they will do.
 RESERVED = {
@@ -44,7 +47,7 @@ def build_parser() -> argparse.ArgumentParser:
     check.add_argument("file", type=Path, help="scenario file (TOML)")
     _add_param_option(check)
     check.add_argument("--json", action="store_true", help="print one JSON object instead of tables")
-    check.add_argument("--out", type=Path, help="also write the JSON summary to this file")
+    check.add_argument("--out", type=Path, help="also write the JSON summary to this file (its folder must exist)")
     check.set_defaults(handler=cmd_check)
 
     schema = sub.add_parser(
@@ -53,7 +56,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Print (or write) the JSON Schema of the scenario format, for editors such as "
         "Taplo / Even Better TOML (put '#:schema ./scenario.schema.json' on a file's first line).",
     )
-    schema.add_argument("--out", type=Path, help="write the schema to this file instead of printing it")
+    schema.add_argument("--out", type=Path, help="write the schema to this file instead of printing it (its folder must exist)")
     schema.set_defaults(handler=cmd_schema)
 
     simulate = sub.add_parser(
@@ -69,8 +72,9 @@ def build_parser() -> argparse.ArgumentParser:
     simulate.add_argument("--duration", type=float, help="seconds to run (default: the policy's duration)")
     simulate.add_argument("--step", type=float, help="time step h (default: the rung's h in the ladder)")
     simulate.add_argument("--json", action="store_true", help="print one JSON object")
-    simulate.add_argument("--plot", type=Path, help="write a trajectory plot (PNG or SVG) here")
-    simulate.add_argument("--plan", type=Path, help="replay this plan.json's top-rung controls instead of the policy")
+    simulate.add_argument("--plot", type=Path, help="write a trajectory plot (.png or .svg) here; its folder must exist")
+    simulate.add_argument("--plan", type=Path, help="replay this plan.json's top-rung controls instead of the policy "
+                          "(the plan must be of this scene: same scenario, contents after parameters, and driven coordinates)")
     simulate.set_defaults(handler=cmd_simulate)
 
     plan = sub.add_parser(
@@ -93,25 +97,31 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument("--flat", action="store_true", help="plan directly at the top rung with the same budget (the baseline)")
     plan.add_argument("--no-seed-roots", action="store_true", help="replan without rooting trees at the previous plan's states")
     plan.add_argument("--no-guide", action="store_true", help="replan without sampling near the previous plan")
-    plan.add_argument("--out", type=Path, default=Path("out/plan"), help="output folder (default out/plan)")
+    plan.add_argument("--out", type=Path, default=Path("out/plan"), help="output folder, created if missing (default out/plan)")
     plan.add_argument("--json", action="store_true", help="print the plan report as one JSON object")
     plan.set_defaults(handler=cmd_plan)
 
     sweep = sub.add_parser(
         "sweep",
         help="map feasible sets over design parameters (the paper's Fig. 5)",
-        description="Run the scenario's [task.policy] at every point of a grid of design parameters under "
-        "each model and classify the runs as goal (Z_F), unsafe (Z_U) or neither. Writes sweep.json and "
-        "sweep.csv and a map plot (sweep.png). Ctrl-C keeps what was computed, marked incomplete. Exit 0 "
-        "when the sweep completed (runs a solver failure stopped are class neither, with their status), "
-        "2 bad input, 130 interrupted.",
+        description="Run the scenario's [task.policy] at every point of a grid of design parameters under\n"
+        "each model and classify the runs as goal (Z_F), unsafe (Z_U) or neither. Writes sweep.json,\n"
+        "sweep.csv and a map plot (sweep.png). Ctrl-C keeps what was computed, marked incomplete.\n"
+        f"At most {MAX_RUNS:,} runs (grid points x models). Exit 0 when the sweep completed (runs a solver\n"
+        "failure stopped are class neither, with their status), 2 bad input, 130 interrupted.",
+        epilog="models (--model): comma-separated [LABEL=]RUNG[NAME=VALUE,...], a rung with optional\n"
+        "design-parameter overrides in brackets (',' or ';' between them) and a label, each label once.\n"
+        "Example, the paper's plastic and elastic impacts at mu = 0.5:\n\n"
+        "  ladder sweep scenarios/two_finger_triangle.toml --grid v1=0.25:4:41:log --grid mu=0.5 --param v2=1 \\\n"
+        "      --model 'plastic=dynamic-compliant[C=1e4],elastic=dynamic-compliant[C=0,finger_mass=1e3]'",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     sweep.add_argument("file", type=Path, help="scenario file (TOML)")
     sweep.add_argument("--grid", action="append", default=[], required=True, metavar="NAME=START:STOP:COUNT[:log]",
                        help="a grid axis over a design parameter (repeatable); NAME=V1,V2,... lists values")
     _add_param_option(sweep)
-    sweep.add_argument("--model", required=True, metavar="RUNG[,RUNG...]",
-                       help="rungs to run, each optionally with overrides: dynamic-compliant[C=0;finger_mass=1e3]")
+    sweep.add_argument("--model", required=True, metavar="[LABEL=]RUNG[NAME=VALUE,...][,...]",
+                       help="models to run (see below), e.g. quasistatic-rigid,elastic=dynamic-compliant[C=0]")
     where = sweep.add_mutually_exclusive_group()
     where.add_argument("--workers", type=int, help="local worker processes (default: all cores)")
     where.add_argument("--executor", metavar="dask://HOST:PORT", help="run on a Dask distributed scheduler")
@@ -119,7 +129,7 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--tolerance", type=float, default=1e-3, help="refinement bracket (relative on log axes; default 1e-3)")
     sweep.add_argument("--duration", type=float, help="seconds per run (default: the policy's duration)")
     sweep.add_argument("--step", type=float, help="time step h (default: each rung's h in the ladder)")
-    sweep.add_argument("--out", type=Path, default=Path("out/sweep"), help="output folder (default out/sweep)")
+    sweep.add_argument("--out", type=Path, default=Path("out/sweep"), help="output folder, created if missing (default out/sweep)")
     sweep.add_argument("--json", action="store_true", help="print the result as one JSON object")
     sweep.set_defaults(handler=cmd_sweep)
 
@@ -132,13 +142,14 @@ def build_parser() -> argparse.ArgumentParser:
         "and the ladder against flat planning (also as OMPL benchmark logs). Writes bench.json, plots and "
         "docs/benchmarks.md (--doc). --quick is a smoke run of every section.",
     )
-    bench.add_argument("--quick", action="store_true", help="a small version of every section (about a minute)")
-    bench.add_argument("--out", type=Path, default=Path("out/bench"), help="output folder (default out/bench)")
+    bench.add_argument("--quick", action="store_true", help="a small version of every section (a few seconds once the kernels are compiled)")
+    bench.add_argument("--out", type=Path, default=Path("out/bench"), help="output folder, created if missing (default out/bench)")
     bench.add_argument("--doc", type=Path, help="also write the markdown report here (make bench-doc: docs/benchmarks.md)")
     bench.add_argument("--json", action="store_true", help="print the results as one JSON object")
     bench.add_argument("--planning", metavar="SCENE,...",
-                       help="scenes of the ladder-vs-flat section (default: two_finger_triangle, four_finger_grasp, "
-                       "box_push_3d; box_push_3d's flat runs take minutes per seed)")
+                       help="scenes of the ladder-vs-flat section (default: two_finger_triangle,four_finger_grasp, "
+                       "the planar scenes, as make bench-doc; adding box_push_3d takes about an hour: its flat runs "
+                       "take minutes per seed)")
     bench.set_defaults(handler=cmd_bench)
 
     for name, what in RESERVED.items():
@@ -161,12 +172,22 @@ def _add_param_option(parser: argparse.ArgumentParser) -> None:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    from planner import interrupt
+
+    interrupt.install()
     try:
         return args.handler(args)
     except ScenarioError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except SystemError:
+        # Ctrl-C landed inside a compiled kernel outside a deferred block: numba reports "a
+        # result with an exception set"; it is still only an interrupt
+        if not interrupt.asked():
+            raise
         print("interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
     except BrokenPipeError:  # the reader went away (e.g. `| head`): nothing more to say
@@ -177,12 +198,22 @@ def main(argv: list[str] | None = None) -> int:
 # ----------------------------------------------------------------------------- commands
 
 
-def load_from_args(args: argparse.Namespace) -> Scenario:
-    return load_scenario(args.file, parse_overrides(args.param))
+def load_from_args(args: argparse.Namespace, problems: list[Problem] | None = None) -> Scenario:
+    """The scenario of the command line; when it does not load, its problems and `problems`
+    (the other arguments' checked so far) are reported together."""
+    try:
+        return load_scenario(args.file, parse_overrides(args.param))
+    except ScenarioError as exc:
+        if not problems:
+            raise
+        raise ScenarioError(exc.file, exc.problems + problems) from None
 
 
 def cmd_check(args: argparse.Namespace) -> int:
-    scenario = load_from_args(args)
+    problems = check_out_file("--out", args.out)
+    scenario = load_from_args(args, problems)
+    if problems:
+        raise ScenarioError(scenario.path, problems)
     summary = scenario.summary()
     if args.out:
         write_atomic(args.out, json.dumps(summary, indent=2) + "\n")
@@ -198,6 +229,9 @@ def cmd_check(args: argparse.Namespace) -> int:
 def cmd_schema(args: argparse.Namespace) -> int:
     from models.schema import json_schema
 
+    problems = check_out_file("--out", args.out)
+    if problems:
+        raise ScenarioError("ladder schema", problems)
     text = json.dumps(json_schema(), indent=2) + "\n"
     if args.out:
         write_atomic(args.out, text)
@@ -207,54 +241,91 @@ def cmd_schema(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+#: The most steps one simulate run (or one sweep run) may take: more is a typo in --step.
+MAX_STEPS = 10**9
+
+
+def read_plan(path: Path, scenario: Scenario) -> tuple[np.ndarray, np.ndarray]:
+    """The top rung's controls and durations of a plan.json, which must be of this scene
+    (same scenario name, contents after parameters, driven coordinates); else bad input."""
+    from planner.ladder import scene_mismatch
+
+    try:
+        data = json.loads(path.read_text())
+        last = [r for r in data["rungs"] if r.get("durations")][-1]
+        controls = np.array(last["controls"], float).reshape(len(last["durations"]), -1)
+        durations = np.array(last["durations"], float)
+    except (OSError, ValueError, KeyError, IndexError, TypeError, AttributeError) as exc:
+        raise ScenarioError(path, [Problem("rungs", f"not a usable plan file: {exc}")]) from None
+    reasons = scene_mismatch(data.get("scene"), scenario)
+    if reasons:
+        raise ScenarioError(path, [Problem("scene", f"not a plan of {scenario.path}: {reason}") for reason in reasons])
+    return controls, durations
+
+
 def cmd_simulate(args: argparse.Namespace) -> int:
-    scenario = load_from_args(args)
+    problems = check_out_file("--plot", args.plot, PLOT_SUFFIXES)
+    scenario = load_from_args(args, problems)
     policy = scenario.spec.task.policy
-    problems = []
     if args.model not in RUNG_NAMES:
         problems.append(Problem("--model", f"unknown rung {args.model!r}; rungs: {', '.join(RUNG_NAMES)}"))
     elif args.model == "geometric":
         problems.append(Problem("--model", "the geometric rung is a validity check with no dynamics to simulate"))
     plan_controls = None
     if args.plan is not None:
-        try:
-            plan_data = json.loads(args.plan.read_text())
-            last = [r for r in plan_data["rungs"] if r.get("durations")][-1]
-            plan_controls = (np.array(last["controls"], float).reshape(len(last["durations"]), -1), np.array(last["durations"], float))
-            if plan_controls[0].shape[1] != len(scenario.actuated):
-                raise ValueError(f"the plan has {plan_controls[0].shape[1]} controls per step, the scene {len(scenario.actuated)}")
-        except (OSError, ValueError, KeyError, IndexError, TypeError) as exc:
-            raise ScenarioError(args.plan, [Problem("rungs", f"not a usable plan file: {exc}")]) from None
+        plan_controls = read_plan(args.plan, scenario)
+        if args.duration is not None:
+            problems.append(Problem("--duration", "a plan's controls carry their own durations; --duration goes with the policy"))
     elif policy is None:
         problems.append(Problem("task.policy", "simulate runs the scenario's policy, and this file has none"))
     rung_spec = next((r for r in scenario.spec.ladder.rungs if r.model == args.model), None)
     h = args.step if args.step is not None else (rung_spec.h if rung_spec else None)
-    if problems and problems[0].key == "--model":
-        pass  # no step to look for
+    if any(p.key == "--model" for p in problems):
+        h = None  # no step to look for
     elif h is None:
         problems.append(Problem("--step", f"the ladder has no {args.model} rung to take h from; give --step"))
     elif not (h > 0 and h < float("inf")):
         problems.append(Problem("--step", f"must be a positive number, got {h}"))
+        h = None
     duration = args.duration if args.duration is not None else (policy.duration if policy else None)
-    if plan_controls is not None and args.duration is None:
+    if plan_controls is not None:
         duration = float(plan_controls[1].sum())
     if duration is not None and not (duration > 0 and duration < float("inf")):
         problems.append(Problem("--duration", f"must be a positive number, got {duration}"))
+        duration = None
+    total = 0
+    if h is not None and duration is not None:
+        durations = plan_controls[1] if plan_controls is not None else [duration]
+        total = sum(round(d / h) for d in durations)
+        if total > MAX_STEPS:
+            problems.append(Problem("--step", f"{duration:g} s at h = {h:g} is {total:.3g} steps, more than the {MAX_STEPS:.0e} "
+                                              "one run may take; use a larger --step or a shorter --duration"))
     if problems:
         raise ScenarioError(scenario.path, problems)
 
     from models.rungs import rung_for
+    from planner import interrupt
 
     rung = rung_for(scenario, args.model)
     state = rung.initial_state(scenario)
     if plan_controls is not None:
         controls, durations = plan_controls
-        rung.rollout(scenario, state, controls[:1], [h], h)  # load the compiled kernels before timing
-        result = rung.rollout(scenario, state, controls, durations, h)
     else:
         controls = np.array([[policy.speeds.get(name, 0.0) for name in scenario.actuated]])
-        rung.rollout(scenario, state, controls, [h], h)  # load the compiled kernels before timing
-        result = run_with_progress(rung, scenario, state, controls, duration, h, quiet=args.json)
+        durations = np.array([duration])
+    live = sys.stderr.isatty() and not args.json
+    with interrupt.deferred():
+        announce_compile()
+        rung.rollout(scenario, state, controls[:1], [h], h)  # load the compiled kernels before timing
+        if not args.json or total > PROGRESS_STEPS:
+            print(f"simulating {total:,} steps of {args.model} (h = {h:g}, {duration:g} s; Ctrl-C stops)", file=sys.stderr, flush=True)
+        try:
+            interrupt.check()
+            result = run_with_progress(rung, scenario, state, controls, durations, h, live=live)
+        except KeyboardInterrupt as stop:
+            done = getattr(stop, "steps_done", 0)
+            print(f"interrupted after {done:,} of {total:,} steps; nothing written", file=sys.stderr, flush=True)
+            return EXIT_INTERRUPTED
     summary = {
         "file": str(scenario.path),
         "model": args.model,
@@ -289,24 +360,46 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     return EXIT_OK if result.ok else EXIT_FAILED
 
 
+#: --seed's range (OMPL's and numpy's generators take it).
+MAX_SEED = 2**32 - 1
+
+
+def rung_order_problems(key: str, names: list[str]) -> list[Problem]:
+    """The file's check of a ladder's order (low to high fidelity, each rung once), on a list
+    of rung names from the command line, with its message."""
+    from types import SimpleNamespace
+
+    from models.scenario import _check_ladder
+
+    rung = lambda name: SimpleNamespace(model=name, h=None, planner=None, control_period=None)  # noqa: E731
+    stub = SimpleNamespace(ladder=SimpleNamespace(rungs=[rung(n) for n in names], planner="RRT", control_period=1.0))
+    return [Problem(key, p.reason) for p in _check_ladder(stub) if p.key.endswith(".model")]
+
+
 def cmd_plan(args: argparse.Namespace) -> int:
-    scenario = load_from_args(args)
+    problems = check_out_dir("--out", args.out)
+    problems += positive("--iterations", args.iterations, integer=True)
+    problems += positive("--time-limit", args.time_limit)
+    if args.seed is not None and not 0 <= args.seed <= MAX_SEED:
+        problems.append(Problem("--seed", f"must be between 0 and {MAX_SEED}, got {args.seed}"))
+    scenario = load_from_args(args, problems)
     names = [r.model for r in scenario.spec.ladder.rungs]
-    problems = []
-    if args.rungs:
+    if args.rungs is not None:
         names = [n.strip() for n in args.rungs.split(",") if n.strip()]
         bad = [n for n in names if n not in RUNG_NAMES]
         if bad:
             problems.append(Problem("--rungs", f"unknown rung(s) {', '.join(bad)}; rungs: {', '.join(RUNG_NAMES)}"))
+        elif not names:
+            problems.append(Problem("--rungs", "no rungs given"))
+        else:
+            problems += rung_order_problems("--rungs", names)
     if args.top is not None:
         if args.top not in RUNG_NAMES:
             problems.append(Problem("--top", f"unknown rung {args.top!r}"))
         else:
-            names = [n for n in names if RUNG_NAMES.index(n) <= RUNG_NAMES.index(args.top)]
-    if args.iterations is not None and args.iterations <= 0:
-        problems.append(Problem("--iterations", "must be a positive number"))
-    if args.time_limit is not None and not args.time_limit > 0:
-        problems.append(Problem("--time-limit", "must be a positive number of seconds"))
+            names = [n for n in names if n in RUNG_NAMES and RUNG_NAMES.index(n) <= RUNG_NAMES.index(args.top)]
+            if not names:
+                problems.append(Problem("--top", f"no rung of the ladder is at or below {args.top}"))
     if problems:
         raise ScenarioError(scenario.path, problems)
 
@@ -327,13 +420,17 @@ def cmd_plan(args: argparse.Namespace) -> int:
         elif iterations == 0:
             print(f"planning: {name} ...", file=sys.stderr, flush=True)
 
-    result = run_ladder(scenario, rungs=names, seed=args.seed, iterations=args.iterations, progress=progress,
-                        flat=args.flat, planner=args.planner, time_limit=args.time_limit, seeded=not args.no_seed_roots,
-                        guided=not args.no_guide)
+    from planner import interrupt
+
+    with interrupt.deferred():  # Ctrl-C ends the rung under way; the rungs done are kept
+        announce_compile()
+        result = run_ladder(scenario, rungs=names, seed=args.seed, iterations=args.iterations, progress=progress,
+                            flat=args.flat, planner=args.planner, time_limit=args.time_limit, seeded=not args.no_seed_roots,
+                            guided=not args.no_guide, stop=interrupt.asked)
     if live:
         print("\r" + " " * 78 + "\r", end="", file=sys.stderr, flush=True)
     report = result.to_json()
-    args.out.mkdir(parents=True, exist_ok=True)
+    make_out_dir(args.out)
     # plan.json is reproducible (no timings): the same seed gives the same bytes
     write_atomic(args.out / "plan.json", json.dumps(result.to_json(timings=False), indent=1) + "\n")
     write_atomic(args.out / "report.json", json.dumps(report, indent=1) + "\n")
@@ -355,7 +452,6 @@ def cmd_plan(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(report, indent=2))
     else:
-        from rich.console import Console
         from rich.table import Table
 
         table = Table(title=f"ladder on {scenario.path} (seed {result.seed})", title_justify="left")
@@ -365,68 +461,79 @@ def cmd_plan(args: argparse.Namespace) -> int:
             distance = "-" if r.goal_distance is None else f"{r.goal_distance:.2g}"
             table.add_row(r.rung, r.ended, r.outcome, f"{r.wall_s:.2f}", str(r.propagations), str(r.iterations), distance,
                           f"{r.max_penetration:.1e}", str(r.solver_failures), str(len(r.durations)))
-        console = Console(highlight=False, width=max(Console().width, 110))
+        console = _console(width=110)
         console.print(table)
         for r in result.rungs:
             if r.reason:
                 console.print(f"{r.rung}: {r.reason}")
-        print(f"top rung holds: {'yes' if result.top_holds else 'no'}; plan written to {args.out / 'plan.json'}; plots: {', '.join(plots) or 'none'}")
+        if result.complete:
+            print(f"top rung holds: {'yes' if result.top_holds else 'no'}; plan written to {args.out / 'plan.json'}; plots: {', '.join(plots) or 'none'}")
+    if not result.complete:
+        done = ", ".join(r.rung for r in result.rungs) or "none"
+        print(f"interrupted: INCOMPLETE plan (rungs done: {done}) written to {args.out / 'plan.json'}", file=sys.stderr, flush=True)
+        return EXIT_INTERRUPTED
     return EXIT_OK if result.top_holds else EXIT_FAILED
 
 
-#: A rollout longer than this many steps runs in chunks with a progress bar.
+#: A rollout longer than this many steps shows a progress bar (on a terminal).
 PROGRESS_STEPS = 200_000
 
 
-def run_with_progress(rung, scenario, state, controls, duration, h, *, quiet: bool):
-    """One compiled rollout, or chunks of one with a progress bar when it is long."""
-    total = int(round(duration / h))
-    if total <= PROGRESS_STEPS or quiet:
-        return rung.rollout(scenario, state, controls, [duration], h)
-    from rich.progress import Progress
+def run_with_progress(rung, scenario, state, controls, durations, h, *, live: bool):
+    """The rollout in chunks of bounded wall time (`Rung.rollout_chunked`, the same result as
+    one call): Ctrl-C stops it between chunks (KeyboardInterrupt, with `steps_done`), and on a
+    terminal a long one shows steps done / total, the rate and the time left."""
+    from planner import interrupt
 
-    chunks = -(-total // PROGRESS_STEPS)
-    results = []
-    with Progress(transient=True) as progress:
-        task = progress.add_task(f"{rung.name}", total=total)
-        done = 0
-        for _ in range(chunks):
-            n = min(PROGRESS_STEPS, total - done)
-            result = rung.rollout(scenario, state, controls, [n * h], h, t0=done * h)
-            results.append(result)
-            done += n
-            progress.update(task, completed=done)
-            state = result.state
-            if result.outcome != "none" or not result.ok:
-                break
-    return _join(results)
+    total = sum(round(d / h) for d in np.atleast_1d(durations))
+    bar = None
+    if live and total > PROGRESS_STEPS:
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+        bar = Progress(TextColumn("{task.description}"), BarColumn(bar_width=15), MofNCompleteColumn(),
+                       TextColumn("{task.fields[rate]}"), TimeRemainingColumn(), console=_console(stderr=True), transient=True)
+        task = bar.add_task(rung.name, total=total, rate="steps")
+        bar.start()
+
+    def progress(done: int, total: int, wall: float) -> None:
+        if bar is not None:
+            bar.update(task, completed=done, rate=f"steps, {done / wall:,.0f}/s" if wall > 0 else "steps")
+        if interrupt.asked():
+            stop = KeyboardInterrupt()
+            stop.steps_done = done
+            raise stop
+
+    try:
+        return rung.rollout_chunked(scenario, state, controls, durations, h, progress=progress)
+    finally:
+        if bar is not None:
+            bar.stop()
 
 
-def _join(results):
-    from dataclasses import replace
+def announce_compile() -> None:
+    """Say so (on stderr, with --json too) before the first call compiles the physics kernels
+    (numba's cache is cold): otherwise the first run sits silent for minutes."""
+    if kernels_cached():
+        return
+    print("compiling the physics kernels (first run only, about 2 minutes)", file=sys.stderr, flush=True)
 
-    last = results[-1]
-    offsets = np.cumsum([0.0] + [r.t for r in results[:-1]])
-    return replace(
-        last,
-        t=float(sum(r.t for r in results)),
-        steps=sum(r.steps for r in results),
-        lcp_solves=sum(r.lcp_solves for r in results),
-        pivots=sum(r.pivots for r in results),
-        max_residual=max(r.max_residual for r in results),
-        max_lcp_size=max(r.max_lcp_size for r in results),
-        wall_s=sum(r.wall_s for r in results),
-        times=np.concatenate([r.times + o for r, o in zip(results, offsets)]),
-        trajectory=np.concatenate([r.trajectory for r in results]),
-        velocities=np.concatenate([r.velocities for r in results]),
-    )
+
+def kernels_cached() -> bool:
+    """Whether numba's on-disk cache holds the rollout kernel (an index file beside models/)."""
+    try:
+        from models.rollout import rollout_kernel
+
+        return bool(rollout_kernel._cache._cache_file._load_index())  # numba internals: {} when cold or stale
+    except Exception:  # numba changed its internals: look in the default place
+        import models
+
+        return any(Path(models.__file__).parent.joinpath("__pycache__").glob("rollout.rollout_kernel-*.nbi"))
 
 
 def print_simulation(summary: dict[str, Any]) -> None:
-    from rich.console import Console
     from rich.table import Table
 
-    console = Console(highlight=False)
+    console = _console()
     console.print(
         f"[bold]{summary['model']}[/bold] on {summary['file']} (h = {summary['h']:g}, {summary['duration']:g} s): "
         f"outcome [bold]{summary['outcome']}[/bold] at t = {summary['t']:.4f} s, status {summary['status']}"
@@ -455,14 +562,85 @@ def print_simulation(summary: dict[str, Any]) -> None:
         console.print(f"plot written to {summary['plot']}")
 
 
+#: The sweep's check of its grid points stops after this many bad points.
+MAX_BAD_POINTS = 1000
+
+
+def sweep_point_problems(scenario: Scenario, texts: list[str], axes, models, fixed: dict, step, duration) -> list[Problem]:
+    """Every run of a sweep checked before any starts: the scenario with the point's and the
+    model's parameters applied must load (the file's validation), and the run must not take
+    more than MAX_STEPS steps. A problem names the --grid value(s) (or --model, or the step)
+    responsible, the first point it holds at and how many more points it holds at."""
+    from planner import sweep as sw
+
+    found: dict[tuple[str, str, str], list[str]] = {}  # (key, model, reason) -> the points
+    seen, bad = set(), 0
+    for model in models:
+        rung_spec = next((r for r in scenario.spec.ladder.rungs if r.model == model.rung), None)
+        for point in sw.grid_points(axes):
+            params = {**fixed, **point, **dict(model.overrides)}
+            signature = tuple(sorted(params.items()))
+            if signature in seen:
+                continue
+            seen.add(signature)
+            where = ", ".join(f"{k}={v:g}" for k, v in point.items())
+            try:
+                variant = load_scenario(scenario.path, params)
+            except ScenarioError as exc:
+                reasons = "; ".join(f"{p.key}: {p.reason}" if p.key else p.reason for p in exc.problems)
+                blamed = [t for t, a in zip(texts, axes) if f"from '{a.name}'" in reasons and a.name not in dict(model.overrides)]
+                if any(f"from '{name}'" in reasons for name, _ in model.overrides) and not blamed:
+                    key = f"--model {model.label}"
+                else:
+                    key = " ".join(f"--grid {t}" for t in (blamed or texts))
+                found.setdefault((key, model.label, f"the scenario is invalid: {reasons}"), []).append(where)
+                bad += 1
+            else:
+                h = step or (rung_spec.h if rung_spec and rung_spec.h else 1e-4)
+                seconds = duration or (variant.spec.task.policy.duration if variant.spec.task.policy else 0.0)
+                if seconds / h > MAX_STEPS:
+                    key = "--step" if step else "--duration" if duration else "task.policy.duration"
+                    found.setdefault((key, model.label, f"a run of {seconds:g} s at h = {h:g} is {seconds / h:.3g} steps, "
+                                                        f"more than the {MAX_STEPS:.0e} one run may take"), []).append(where)
+                    bad += 1
+            if bad >= MAX_BAD_POINTS:
+                break
+    problems = []
+    for (key, label, reason), points in found.items():
+        n = len(points) - 1
+        more = "" if n == 0 else f" and {n}{' or more' if bad >= MAX_BAD_POINTS else ''} more grid point{'s' if n > 1 else ''}"
+        problems.append(Problem(key, f"{label} at {points[0]}{more}: {reason}"))
+    return problems
+
+
 def cmd_sweep(args: argparse.Namespace) -> int:
     from planner import sweep as sw
 
-    scenario = load_from_args(args)
+    problems = check_out_dir("--out", args.out)
+    if args.workers is not None and args.workers < 1:
+        problems.append(Problem("--workers", f"must be at least 1, got {args.workers}"))
+    if args.executor is not None:
+        if not args.executor.startswith("dask://") or not args.executor.removeprefix("dask://"):
+            problems.append(Problem("--executor", "expected dask://HOST:PORT"))
+        elif importlib.util.find_spec("distributed") is None:
+            problems.append(Problem("--executor", 'a Dask executor needs the dask extra: install the dask extra: pip install "contact-ladder[dask]"'))
+    for key, value in (("--duration", args.duration), ("--step", args.step), ("--tolerance", args.tolerance)):
+        problems += positive(key, value)
+    scenario = load_from_args(args, problems)
     fixed = parse_overrides(args.param)
+    for text in args.grid:
+        try:
+            sw.parse_axis(text)
+        except ScenarioError as exc:
+            problems += exc.problems
+    try:
+        models = sw.parse_models(args.model)
+    except ScenarioError as exc:
+        problems += exc.problems
+        models = []
+    if problems:
+        raise ScenarioError(scenario.path, problems)
     axes = [sw.parse_axis(text) for text in args.grid]
-    models = sw.parse_models(args.model)
-    problems = []
     for axis in axes:
         if axis.name not in scenario.parameters:
             problems.append(Problem(f"--grid {axis.name}", f"not a design parameter of this file; parameters: {', '.join(scenario.parameters)}"))
@@ -474,17 +652,17 @@ def cmd_sweep(args: argparse.Namespace) -> int:
                 problems.append(Problem(f"--model {model.label}", f"{name!r} is not a design parameter of this file"))
     if scenario.spec.task.policy is None:
         problems.append(Problem("task.policy", "a sweep runs the scenario's policy, and this file has none"))
-    if args.workers is not None and args.workers < 1:
-        problems.append(Problem("--workers", "must be at least 1"))
-    if args.executor is not None and not args.executor.startswith("dask://"):
-        problems.append(Problem("--executor", "expected dask://HOST:PORT"))
-    for key, value in (("--duration", args.duration), ("--step", args.step), ("--tolerance", args.tolerance)):
-        if value is not None and not (value > 0 and value < float("inf")):
-            problems.append(Problem(key, f"must be a positive number, got {value}"))
+    runs = sw.grid_size(axes) * len(models)
+    if runs > sw.MAX_RUNS:
+        problems.append(Problem("--grid", f"{' x '.join(str(len(a.values)) for a in axes)} grid points x {len(models)} model(s) = "
+                                          f"{runs:,} runs, more than a sweep may run ({sw.MAX_RUNS:,}); use a coarser grid (and --refine)"))
     if problems:
         raise ScenarioError(scenario.path, problems)
-    for model in models:  # each variant must load (overrides can make a scene invalid)
-        load_scenario(scenario.path, {**scenario.parameters, **fixed, **dict(model.overrides)})
+    if runs > 10_000 and not args.json:
+        print(f"checking the scenario at {runs:,} runs' parameters", file=sys.stderr, flush=True)
+    problems = sweep_point_problems(scenario, list(args.grid), axes, models, fixed, args.step, args.duration)
+    if problems:
+        raise ScenarioError(scenario.path, problems)
 
     live = sys.stderr.isatty() and not args.json
     interrupted = False
@@ -492,53 +670,43 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     if live:
         from rich.progress import Progress
 
-        bar = Progress(transient=True)
+        bar = Progress(transient=True, console=_console(stderr=True))
         bar.start()
         task_id = bar.add_task("sweep", total=None)
 
     # Ctrl-C sets a flag that is acted on between runs: an interrupt inside a compiled kernel
     # cannot be raised cleanly there
-    import signal
-
-    stop = {"asked": False}
-
-    def on_interrupt(signum, frame) -> None:
-        stop["asked"] = True
+    from planner import interrupt
 
     def progress(done: int, total: int) -> None:
         if bar is not None:
             bar.update(task_id, completed=done, total=total)
-        if stop["asked"]:
-            raise KeyboardInterrupt
+        interrupt.check()
 
     def refine_progress(step: int, active: int) -> None:
         if bar is not None:
             bar.update(task_id, description=f"refine step {step}: {active} brackets", completed=0, total=None)
-        if stop["asked"]:
-            raise KeyboardInterrupt
+        interrupt.check()
 
-    previous_handler = signal.signal(signal.SIGINT, on_interrupt)
-
+    where = args.executor or f"{args.workers or os.cpu_count() or 1} local workers"
     if not args.json:
-        runs = len(sw.grid_points(axes)) * len(models)
-        where = args.executor or f"{args.workers or os.cpu_count() or 1} local workers"
         print(f"sweeping {runs} runs on {where} (Ctrl-C stops and keeps what is done)", file=sys.stderr, flush=True)
+        announce_compile()
     try:
-        with sw.Executor(args.workers, args.executor) as executor:
+        with interrupt.deferred(), sw.Executor(args.workers, args.executor) as executor:
             result = sw.sweep(str(scenario.path), axes, models, fixed=fixed, h=args.step, duration=args.duration,
                               executor=executor, progress=progress)
             if result.complete and args.refine:
                 result = sw.refine(result, tolerance=args.tolerance, executor=executor, progress=refine_progress)
     finally:
-        signal.signal(signal.SIGINT, previous_handler)
         if bar is not None:
             bar.stop()
-    interrupted = not result.complete or stop["asked"]
+    interrupted = not result.complete or interrupt.asked()
     result.complete = not interrupted
     data = result.to_json()
     if args.refine and result.boundaries:
         data["bands"] = {a.name: sw.bands(result, a.name) for a in axes}
-    args.out.mkdir(parents=True, exist_ok=True)
+    make_out_dir(args.out)
     write_atomic(args.out / "sweep.json", json.dumps(data, indent=1) + "\n")
     write_atomic(args.out / "sweep.csv", result.to_csv())
     from planner.plots import plot_feasible_sets
@@ -568,13 +736,16 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    from planner.bench import PLANNING_SCENES, run_all
+    from planner.bench import DEFAULT_PLANNING_SCENES, PLANNING_SCENES, run_all
 
-    scenes = PLANNING_SCENES if args.planning is None else tuple(s.strip() for s in args.planning.split(",") if s.strip())
+    problems = check_out_dir("--out", args.out) + check_out_file("--doc", args.doc)
+    scenes = DEFAULT_PLANNING_SCENES if args.planning is None else tuple(s.strip() for s in args.planning.split(",") if s.strip())
     unknown = [s for s in scenes if s not in PLANNING_SCENES]
     if unknown or not scenes:
-        raise ScenarioError("ladder bench", [Problem("--planning", f"unknown scene(s) {', '.join(unknown) or '(none)'}; "
-                                                     f"choose from {', '.join(PLANNING_SCENES)}")])
+        problems.append(Problem("--planning", f"unknown scene(s) {', '.join(unknown) or '(none)'}; choose from {', '.join(PLANNING_SCENES)}"))
+    if problems:
+        raise ScenarioError("ladder bench", problems)
+    announce_compile()
 
     def progress(text: str) -> None:
         if not args.json:
@@ -615,10 +786,12 @@ def cmd_reserved(args: argparse.Namespace) -> int:
 
 
 def write_atomic(path: Path, text: str) -> None:
-    """Write via a temporary file and a rename, so a failure never leaves half a file."""
-    path.parent.mkdir(parents=True, exist_ok=True)
+    """Write via a temporary file and a rename, so a failure never leaves half a file. The
+    folder must exist (the commands check it up front); the file gets the mode any new file
+    gets (0666 less the umask), not mkstemp's 0600."""
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
+        os.fchmod(fd, 0o666 & ~_umask())
         with os.fdopen(fd, "w", encoding="utf-8") as handle:
             handle.write(text)
         os.replace(tmp, path)
@@ -627,11 +800,78 @@ def write_atomic(path: Path, text: str) -> None:
         raise
 
 
-def print_summary(summary: dict[str, Any]) -> None:
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+#: Plot formats --plot writes.
+PLOT_SUFFIXES = (".png", ".svg")
+
+
+def check_out_file(key: str, path: Path | None, suffixes: tuple[str, ...] = ()) -> list[Problem]:
+    """Problems with writing a file at `path`: its folder must exist and be writable (it is not
+    created), it must not be a folder, and its suffix one of `suffixes` when given."""
+    if path is None:
+        return []
+    if path.is_dir():
+        return [Problem(key, f"{path} is a folder; give a file name")]
+    problems = []
+    if suffixes and path.suffix.lower() not in suffixes:
+        problems.append(Problem(key, f"{path}: unsupported file type {path.suffix or '(no suffix)'!r}; use {' or '.join(suffixes)}"))
+    parent = path.parent
+    if not parent.exists():
+        problems.append(Problem(key, f"{path}: the folder {parent} does not exist"))
+    elif not parent.is_dir():
+        problems.append(Problem(key, f"{path}: {parent} is a file, not a folder"))
+    elif not os.access(parent, os.W_OK | os.X_OK):
+        problems.append(Problem(key, f"{path}: the folder {parent} is not writable"))
+    return problems
+
+
+def check_out_dir(key: str, path: Path) -> list[Problem]:
+    """Problems with making `path` an output folder (it and missing parents are created): the
+    nearest existing one of it and its parents must be a writable folder."""
+    existing = path
+    while not os.path.lexists(existing) and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        where = "is a file" if existing == path else f"is under {existing}, which is a file"
+        return [Problem(key, f"{path} {where}, not a folder")]
+    if not os.access(existing, os.W_OK | os.X_OK):
+        return [Problem(key, f"{path}: {existing} is not writable")]
+    return []
+
+
+def make_out_dir(path: Path) -> None:
+    path.mkdir(parents=True, exist_ok=True)
+
+
+def positive(key: str, value, *, integer: bool = False, allow_zero: bool = False) -> list[Problem]:
+    """A problem when a given number is not positive (finite; an integer >= 1 / >= 0)."""
+    if value is None:
+        return []
+    if integer:
+        low = 0 if allow_zero else 1
+        return [] if value >= low else [Problem(key, f"must be {'>= 0' if allow_zero else 'at least 1'}, got {value}")]
+    return [] if (value > 0 and value < float("inf")) else [Problem(key, f"must be a positive number, got {value}")]
+
+
+def _console(stderr: bool = False, width: int | None = None):
+    """A rich console; not on a terminal it does not wrap (a pipe or file gets whole lines)."""
     from rich.console import Console
+
+    stream = sys.stderr if stderr else sys.stdout
+    if stream.isatty():
+        return Console(highlight=False, stderr=stderr, width=max(Console(stderr=stderr).width, width or 0) or None)
+    return Console(highlight=False, stderr=stderr, soft_wrap=True, width=200)
+
+
+def print_summary(summary: dict[str, Any]) -> None:
     from rich.table import Table
 
-    console = Console(highlight=False)
+    console = _console()
     console.print(f"[bold]{summary['name']}[/bold]  ({summary['file']}, {summary['dimension']}D): ok")
     if summary["description"]:
         console.print(summary["description"])

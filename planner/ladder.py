@@ -30,6 +30,8 @@ propagations ended in a solver failure.
 
 from __future__ import annotations
 
+import hashlib
+import json
 import time
 from dataclasses import asdict, dataclass, field, replace
 
@@ -66,10 +68,12 @@ class LadderResult:
     scenario: str
     seed: int
     rungs: list[RungReport]
+    scene: dict = field(default_factory=dict)  # scene_record: what the plan is a plan of
+    complete: bool = True  # False: interrupted; `rungs` are the rungs finished before that
 
     @property
     def top_holds(self) -> bool:
-        return bool(self.rungs) and self.rungs[-1].outcome == "goal"
+        return self.complete and bool(self.rungs) and self.rungs[-1].outcome == "goal"
 
     def to_json(self, timings: bool = True) -> dict:
         """The plan; without timings it is a pure function of the scenario and the seed."""
@@ -77,7 +81,35 @@ class LadderResult:
         if not timings:
             for r in rungs:
                 del r["wall_s"]
-        return {"scenario": self.scenario, "seed": self.seed, "top_holds": self.top_holds, "rungs": rungs}
+        return {"scenario": self.scenario, "scene": self.scene, "seed": self.seed, "complete": self.complete,
+                "top_holds": self.top_holds, "rungs": rungs}
+
+
+def scene_record(scenario: Scenario) -> dict:
+    """What a plan is a plan of: the scenario's name, the sha256 of its contents after the
+    parameters are applied (the validated spec as canonical JSON), the parameter values and
+    the coordinates the controls drive, in the controls' order."""
+    spec = json.dumps(scenario.spec.model_dump(mode="json"), sort_keys=True, separators=(",", ":"))
+    return {"name": scenario.spec.scenario.name, "sha256": hashlib.sha256(spec.encode()).hexdigest(),
+            "parameters": dict(scenario.parameters), "controls": list(scenario.actuated)}
+
+
+def scene_mismatch(record, scenario: Scenario) -> list[str]:
+    """Why a plan with scene `record` cannot be replayed on `scenario` ([] if it can)."""
+    if not isinstance(record, dict) or not {"name", "sha256", "controls"} <= set(record):
+        return ["the plan does not say which scene it is of (plan it again with this version of ladder)"]
+    here = scene_record(scenario)
+    reasons = []
+    if record["name"] != here["name"]:
+        reasons.append(f"it is of scenario {record['name']!r}, this file is {here['name']!r}")
+    if record["controls"] != here["controls"]:
+        reasons.append(f"its controls drive {', '.join(record['controls']) or 'nothing'}, this scene's {', '.join(here['controls']) or 'nothing'}")
+    if record["sha256"] != here["sha256"] and not reasons:
+        theirs = record.get("parameters") or {}
+        changed = [f"{k} = {theirs[k]:g} in the plan, {v:g} here" for k, v in here["parameters"].items() if k in theirs and theirs[k] != v]
+        reasons.append("the scene's contents differ (sha256 of the resolved scenario)"
+                       + (f": parameters {'; '.join(changed)}" if changed else ""))
+    return reasons
 
 
 def check_start(scenario: Scenario) -> None:
@@ -109,6 +141,7 @@ def run_ladder(
     flat: bool = False,
     planner: str | None = None,
     time_limit: float | None = None,
+    stop=None,
 ) -> LadderResult:
     """Plan up the ladder; see the module docstring.
 
@@ -124,6 +157,8 @@ def run_ladder(
     flat: plan directly at the last rung, with the budget of the whole ladder (the sums of the
     rungs' iterations and time limits): the baseline.
     progress: called as progress(rung, iterations, propagations) while a rung plans.
+    stop: a function -> True when the planning should stop (Ctrl-C): the rung under way ends
+    its search and is dropped, and the result holds the rungs finished, complete = False.
     """
     check_start(scenario)
     spec = scenario.spec.ladder
@@ -140,14 +175,23 @@ def run_ladder(
     # a rung may spend what the rungs below left unspent: the ladder's whole budget is the flat
     # baseline's (iterations, and wall time)
     allowance, deadline = 0, time.perf_counter()
+    stopped = stop or (lambda: False)
+    interrupted = False
     for name in names:
+        if stopped():
+            interrupted = True
+            break
         allowance += budgets[name]
         deadline += limits[name]
         if progress:
             progress(name, 0, 0)
         rung = rung_for(scenario, name)
         if not rung.propagates:
-            reports.append(_geometric(scenario, seed, budgets[name], planner, deadline - time.perf_counter()))
+            reports.append(_geometric(scenario, seed, budgets[name], planner, deadline - time.perf_counter(), stop=stop))
+            if stopped():
+                reports.pop()
+                interrupted = True
+                break
             previous = reports[-1] if reports[-1].durations else None
             continue
         rung_spec = next((r for r in spec.rungs if r.model == name), None)
@@ -165,6 +209,9 @@ def run_ladder(
         replay = None
         if previous is not None and previous.durations:
             replay = _replay(scenario, rung, start, previous, h, period)
+            if stopped():
+                interrupted = True
+                break
             if replay.outcome == "goal" and replay.status == "ok":
                 # the states are this rung's (a geometric path's states move passive bodies on their own)
                 states = replay.configurations(start)
@@ -186,8 +233,11 @@ def run_ladder(
         plan = _plan_with_restarts(scenario, rung, start, h=h, control_period=period, seed=seed, iterations=budget,
                                    planner=planner or (rung_spec.planner if rung_spec and rung_spec.planner else spec.planner),
                                    extra_starts=seeds, guide=guide,
-                                   time_limit=deadline - time.perf_counter(),
+                                   time_limit=deadline - time.perf_counter(), stop=stop,
                                    progress=(lambda i, n, _name=name: progress(_name, i, n)) if progress else None)
+        if stopped():
+            interrupted = True
+            break
         j = plan.start_index
         if j > 0:  # the path starts at a seed: splice the previous prefix in front
             plan = replace(plan, controls=np.concatenate([np.array(prefix_controls[:j]).reshape(j, -1), plan.controls]),
@@ -214,7 +264,7 @@ def run_ladder(
         if ended == "failed":
             break
         previous = report
-    return LadderResult(str(scenario.path), int(seed), reports)
+    return LadderResult(str(scenario.path), int(seed), reports, scene_record(scenario), complete=not interrupted)
 
 
 #: An unguided search (no previous plan to draw samples near: the first rung that propagates)
@@ -237,7 +287,7 @@ def _plan_with_restarts(scenario, rung, start, *, seed: int, iterations: int, ti
     plan = None
     for attempt in range(searches):
         left = None if time_limit is None else max(0.0, time_limit - (time.perf_counter() - t0))
-        if left == 0.0 and plan is not None:
+        if (left == 0.0 or (kwargs.get("stop") and kwargs["stop"]())) and plan is not None:
             break
         plan = plan_control(scenario, rung, start, seed=seed + attempt * RESTART_STRIDE, iterations=share, time_limit=left, **kwargs)
         for key in used:
@@ -298,7 +348,8 @@ def step_for(scenario: Scenario, name: str) -> float:
     return rung_spec.h if rung_spec and rung_spec.h else _default_step(name)
 
 
-def _geometric(scenario: Scenario, seed: int, iterations: int, planner: str | None, time_limit: float | None = None) -> RungReport:
+def _geometric(scenario: Scenario, seed: int, iterations: int, planner: str | None, time_limit: float | None = None,
+               stop=None) -> RungReport:
     """Plan the geometric rung and turn its path into commanded speeds for the actuated DOFs:
     each segment is driven at the speeds that cover it in whole control periods without
     exceeding any drive's max_speed. An approximate path (the goal set is thin: touching
@@ -306,7 +357,7 @@ def _geometric(scenario: Scenario, seed: int, iterations: int, planner: str | No
     spec = scenario.spec.ladder
     rung_spec = next((r for r in spec.rungs if r.model == "geometric"), None)
     t0 = time.perf_counter()
-    path = plan_geometric(scenario, seed=seed, iterations=iterations, time_limit=time_limit,
+    path = plan_geometric(scenario, seed=seed, iterations=iterations, time_limit=time_limit, stop=stop,
                           planner=(rung_spec.planner if rung_spec and rung_spec.planner else "RRTConnect"))
     period = spec.control_period
     index = [scenario.coordinates.index(n) for n in scenario.actuated]

@@ -186,23 +186,25 @@ def _projection_coordinates(scenario: Scenario, most: int = 3) -> list[int]:
     return (passive + active)[:most] or [0]
 
 
-def _termination(ss, iterations: int, time_limit: float | None, progress=None):
+def _termination(ss, iterations: int, time_limit: float | None, progress=None, stop=None):
     """OMPL's termination condition for both planners, and the count it keeps: stop at an exact
     solution, after `iterations` iterations, or past the wall-clock cap. OMPL asks before every
     iteration, so the count is of the iterations it let run; progress(count) is called every
-    PROGRESS_EVERY of them."""
+    PROGRESS_EVERY of them. stop() -> True (Ctrl-C) ends the search too."""
     done = {"iterations": 0}
     deadline = None if time_limit is None else time.perf_counter() + time_limit
 
-    def stop() -> bool:
+    def finished() -> bool:
         if (deadline is not None and time.perf_counter() > deadline) or done["iterations"] >= iterations or ss.haveExactSolutionPath():
+            return True
+        if stop is not None and stop():
             return True
         done["iterations"] += 1
         if progress is not None and done["iterations"] % PROGRESS_EVERY == 0:
             progress(done["iterations"])
         return False
 
-    return stop, done
+    return finished, done
 
 
 def plan_control(
@@ -221,6 +223,7 @@ def plan_control(
     guide_bias: float = GUIDE_BIAS,
     time_limit: float | None = None,
     progress=None,
+    stop=None,
 ) -> ControlPlan:
     """Plan commanded speeds from `start` under `rung` with OMPL's control planner.
 
@@ -233,6 +236,7 @@ def plan_control(
     goals, so the guide does not bias it.
     time_limit: a wall-clock cap on top of the iteration budget (then not reproducible).
     progress: called as progress(iterations, propagations) every PROGRESS_EVERY iterations.
+    stop: a function -> True (Ctrl-C) that ends the search early.
     """
     from ompl import base as ob
     from ompl import control as oc
@@ -433,9 +437,9 @@ def plan_control(
     else:
         ss.setGoal(Goal(si))
     ss.setPlanner(chosen)
-    stop, done = _termination(ss, iterations, time_limit,
-                              None if progress is None else (lambda i: progress(i, counter["propagations"])))
-    ss.solve(ob.PlannerTerminationCondition(stop))
+    stop_now, done = _termination(ss, iterations, time_limit,
+                                  None if progress is None else (lambda i: progress(i, counter["propagations"])), stop)
+    ss.solve(ob.PlannerTerminationCondition(stop_now))
     exact = bool(ss.haveExactSolutionPath())
     if not ss.haveSolutionPath():
         return ControlPlan(np.zeros((0, na)), np.zeros(0), start.q[None, :].copy(), False, counter["propagations"], done["iterations"],
@@ -462,7 +466,7 @@ class GeometricPlan:
 
 
 def plan_geometric(scenario: Scenario, *, seed: int, iterations: int, planner: str = "RRTConnect",
-                   time_limit: float | None = None) -> GeometricPlan:
+                   time_limit: float | None = None, stop=None) -> GeometricPlan:
     """The geometric rung (eq. 9): a path in the C-space of all free DOFs whose states do not
     penetrate and are not unsafe, ending in the goal set. In a spatial scene a passive body's
     height and orientation stay at their start values (steered_coordinates): it rests.
@@ -569,8 +573,8 @@ def plan_geometric(scenario: Scenario, *, seed: int, iterations: int, planner: s
         ss.setGoal(Goal(si))
         chosen = og.RRT(si) if planner == "RRTConnect" else getattr(og, planner)(si)
     ss.setPlanner(chosen)
-    stop, done = _termination(ss, iterations, time_limit)
-    ss.solve(ob.PlannerTerminationCondition(stop))
+    stop_now, done = _termination(ss, iterations, time_limit, stop=stop)
+    ss.solve(ob.PlannerTerminationCondition(stop_now))
     exact = bool(ss.haveExactSolutionPath())
     if ss.haveSolutionPath():
         path = ss.getSolutionPath()

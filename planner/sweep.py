@@ -19,6 +19,7 @@ not depend on the executor or on the order runs finish in.
 
 from __future__ import annotations
 
+import itertools
 import math
 import os
 import re
@@ -31,6 +32,9 @@ import numpy as np
 from models.scenario import Problem, ScenarioError
 
 CLASSES = ("goal", "unsafe", "neither")
+#: The most runs one sweep may hold (grid points times models; the points stream, their
+#: results are kept).
+MAX_RUNS = 1_000_000  # planner.cli.MAX_RUNS says the same in --help
 
 
 @dataclass(frozen=True)
@@ -98,6 +102,8 @@ def parse_axis(text: str, key: str = "--grid") -> Axis:
             start, stop, count = float(parts[0]), float(parts[1]), int(parts[2])
             if count < 1:
                 raise ValueError("COUNT must be at least 1")
+            if count > MAX_RUNS:
+                raise ValueError(f"COUNT {count:,} is more than a sweep may run ({MAX_RUNS:,} runs)")
             if not (math.isfinite(start) and math.isfinite(stop)):
                 raise ValueError("START and STOP must be finite")
             if log and (start <= 0 or stop <= 0):
@@ -106,6 +112,8 @@ def parse_axis(text: str, key: str = "--grid") -> Axis:
         else:
             values = np.array([float(v) for v in spec.split(",") if v.strip()])
             log = False
+            if len(values) > MAX_RUNS:
+                raise ValueError(f"{len(values):,} values are more than a sweep may run ({MAX_RUNS:,} runs)")
             if not len(values) or not np.all(np.isfinite(values)):
                 raise ValueError("expected finite values")
     except ValueError as exc:
@@ -121,6 +129,7 @@ def parse_models(text: str) -> list[ModelSpec]:
     optional overrides (separated by ';' or ',' inside the brackets) and an optional label."""
     from models.schema import RUNGS
 
+    syntax = "[LABEL=]RUNG[NAME=VALUE,...], e.g. elastic=dynamic-compliant[C=0,finger_mass=1e3]"
     models, depth, current = [], 0, ""
     for ch in text + ",":
         if ch == "," and depth == 0:
@@ -130,7 +139,13 @@ def parse_models(text: str) -> list[ModelSpec]:
             continue
         depth += ch == "["
         depth -= ch == "]"
+        if depth < 0 or depth > 1:
+            raise ScenarioError(Path("--model"), [Problem(f"--model {text}", f"unbalanced '{ch}' in {(current + ch).strip()!r}; expected {syntax}")])
         current += ch
+    if depth != 0:
+        raise ScenarioError(Path("--model"), [Problem(f"--model {text}", f"a '[' is not closed; expected {syntax}")])
+    if not models:
+        raise ScenarioError(Path("--model"), [Problem(f"--model {text}", f"no model given; expected {syntax}")])
     specs = []
     for item in models:
         m = _MODEL.match(item)
@@ -148,16 +163,28 @@ def parse_models(text: str) -> list[ModelSpec]:
             except ValueError:
                 raise ScenarioError(Path("--model"), [Problem(f"--model {item}", f"override {part!r}: expected NAME=NUMBER")]) from None
             overrides.append((name.strip(), number))
+        names = [name for name, _ in overrides]
+        twice = sorted({n for n in names if names.count(n) > 1})
+        if twice:
+            raise ScenarioError(Path("--model"), [Problem(f"--model {item}", f"{', '.join(twice)} overridden twice")])
         specs.append(ModelSpec(m.group(2), tuple(overrides), m.group(1) or ""))
+    labels = [spec.label for spec in specs]
+    twice = sorted({label for label in labels if labels.count(label) > 1})
+    if twice:
+        raise ScenarioError(Path("--model"), [Problem(f"--model {text}", f"the label {label!r} names two models (or one model is given twice); "
+                                                      "give each model its own label, LABEL=RUNG[...]") for label in twice])
     return specs
 
 
-def grid_points(axes: list[Axis]) -> list[dict]:
-    """Every combination, the first axis varying slowest."""
-    points = [{}]
-    for axis in axes:
-        points = [{**p, axis.name: v} for p in points for v in axis.values]
-    return points
+def grid_points(axes: list[Axis]):
+    """Every combination, the first axis varying slowest, one at a time (a generator)."""
+    names = [a.name for a in axes]
+    for values in itertools.product(*(a.values for a in axes)):
+        yield dict(zip(names, values))
+
+
+def grid_size(axes: list[Axis]) -> int:
+    return math.prod(len(a.values) for a in axes)
 
 
 def run_task(task: Task) -> Point:
@@ -181,8 +208,16 @@ def run_task(task: Task) -> Point:
 
 
 def _warm() -> None:
-    """Load the compiled kernels in a fresh worker before its first timed run."""
+    """Load the compiled kernels in a fresh worker before its first timed run. Ctrl-C at a
+    terminal reaches the workers too: they leave it to the parent, which stops between runs."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     import models.rollout  # noqa: F401
+
+
+#: Runs in flight per worker: the pool is fed from the (lazy) task stream this far ahead.
+WINDOW_PER_WORKER = 4
 
 
 class Executor:
@@ -196,9 +231,15 @@ class Executor:
 
     def __enter__(self) -> "Executor":
         if self.address:
-            from distributed import Client
-
-            self._client = Client(self.address.removeprefix("dask://"), set_as_default=False)
+            try:
+                from distributed import Client
+            except ImportError:
+                raise ScenarioError(Path("--executor"), [Problem(f"--executor {self.address}",
+                                    'install the dask extra: pip install "contact-ladder[dask]"')]) from None
+            try:
+                self._client = Client(self.address.removeprefix("dask://"), set_as_default=False, timeout=10)
+            except (OSError, TimeoutError, ValueError) as exc:
+                raise ScenarioError(Path("--executor"), [Problem(f"--executor {self.address}", f"cannot reach the Dask scheduler: {exc}")]) from None
         elif self.workers > 1:
             self._pool = ProcessPoolExecutor(self.workers, initializer=_warm)
         return self
@@ -209,30 +250,49 @@ class Executor:
         if self._client is not None:
             self._client.close()
 
-    def map(self, tasks: list[Task]):
+    def map(self, tasks):
+        """(index, Point) for each task of the iterable `tasks` as it finishes; at most
+        WINDOW_PER_WORKER runs per worker are submitted ahead, so a long stream is never held."""
+        stream = enumerate(tasks)
+        window = WINDOW_PER_WORKER * self.workers
         if self._client is not None:
             from distributed import as_completed
 
-            futures = self._client.map(run_task, tasks, pure=False)
-            index = {f.key: i for i, f in enumerate(futures)}
+            window = WINDOW_PER_WORKER * max(1, sum(self._client.nthreads().values()))
+            inflight = {}  # key -> (future, index)
+
+            def submit(i, t):
+                future = self._client.submit(run_task, t, pure=False)
+                inflight[future.key] = (future, i)
+                return future
+
             try:
-                for future in as_completed(futures, loop=self._client.loop):
-                    yield index[future.key], future.result()
+                pending = as_completed([submit(i, t) for i, t in itertools.islice(stream, window)], loop=self._client.loop)
+                for future in pending:
+                    _, i = inflight.pop(future.key)
+                    for j, t in itertools.islice(stream, 1):
+                        pending.add(submit(j, t))
+                    yield i, future.result()
             finally:
-                self._client.cancel(futures)
+                if inflight:
+                    self._client.cancel([f for f, _ in inflight.values()])
         elif self._pool is not None:
-            futures = {self._pool.submit(run_task, t): i for i, t in enumerate(tasks)}
-            pending = set(futures)
+            futures = {}
             try:
-                while pending:
-                    done, pending = wait(pending, return_when=FIRST_COMPLETED)
+                for i, t in itertools.islice(stream, window):
+                    futures[self._pool.submit(run_task, t)] = i
+                while futures:
+                    done, _ = wait(futures, return_when=FIRST_COMPLETED)
                     for f in done:
-                        yield futures[f], f.result()
+                        i = futures.pop(f)
+                        for j, t in itertools.islice(stream, 1):
+                            futures[self._pool.submit(run_task, t)] = j
+                        yield i, f.result()
             finally:
-                for f in pending:
+                for f in futures:
                     f.cancel()
         else:
-            for i, t in enumerate(tasks):
+            for i, t in stream:
                 yield i, run_task(t)
 
 
@@ -281,9 +341,11 @@ def sweep(file: str, axes: list[Axis], models: list[ModelSpec], *, fixed: dict |
     """Every grid point under every model. On KeyboardInterrupt the result so far comes back
     with complete = False (the caller writes it)."""
     fixed = dict(fixed or {})
-    points = grid_points(axes)
-    tasks = [Task(str(file), tuple({**fixed, **p}.items()), m, h, duration) for m in models for p in points]
-    result = SweepResult(str(file), axes, models, fixed, h, duration, [None] * len(tasks))
+    runs = grid_size(axes) * len(models)
+    if runs > MAX_RUNS:
+        raise ScenarioError(Path(file), [Problem("--grid", f"{runs:,} runs are more than a sweep may run ({MAX_RUNS:,})")])
+    tasks = (Task(str(file), tuple({**fixed, **p}.items()), m, h, duration) for m in models for p in grid_points(axes))
+    result = SweepResult(str(file), axes, models, fixed, h, duration, [None] * runs)
     own = executor is None
     executor = executor or Executor(1)
     try:
@@ -291,11 +353,10 @@ def sweep(file: str, axes: list[Axis], models: list[ModelSpec], *, fixed: dict |
             executor.__enter__()
         done = 0
         for i, point in executor.map(tasks):
-            point.parameters = dict(tasks[i].parameters)
             result.points[i] = point
             done += 1
             if progress:
-                progress(done, len(tasks))
+                progress(done, runs)
     except KeyboardInterrupt:
         result.complete = False
     finally:

@@ -4,9 +4,12 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 import sys
+import time
 
+import numpy as np
 import pytest
 
 from tests.conftest import DATA, ROOT, SCENARIOS
@@ -51,10 +54,19 @@ def test_check_human_output_names_bodies_and_coordinates():
 
 
 def test_check_out_writes_the_summary(tmp_path):
-    out = tmp_path / "deep" / "summary.json"
+    out = tmp_path / "summary.json"
     result = ladder("check", str(SCENARIOS / "free_transfer.toml"), "--out", str(out))
     assert result.returncode == 0, result.stderr
     assert json.loads(out.read_text())["actuated"] == ["robot.x", "robot.y"]
+
+
+def test_check_out_into_a_missing_folder_is_bad_input(tmp_path):
+    """An output file's folder is not created (a typo would make folders anywhere)."""
+    out = tmp_path / "deep" / "summary.json"
+    result = ladder("check", str(SCENARIOS / "free_transfer.toml"), "--out", str(out))
+    assert result.returncode == 2
+    assert result.stderr.strip().endswith(f"--out: {out}: the folder {out.parent} does not exist")
+    assert "Traceback" not in result.stderr and not out.parent.exists()
 
 
 @pytest.mark.parametrize("name", ["negative_mass", "syntax_error", "start_penetration", "unknown_parameter"])
@@ -121,3 +133,234 @@ def test_simulate_bad_arguments(args, fragment):
     result = ladder("simulate", str(SCENARIOS / "two_finger_triangle.toml"), *args)
     assert result.returncode == 2
     assert fragment in result.stderr and "Traceback" not in result.stderr
+
+
+# ----------------------------------------------------------------------------- robustness
+# Every problem a user met once, as a class: exit code, one message line, no traceback.
+
+TRIANGLE = str(SCENARIOS / "two_finger_triangle.toml")
+
+
+def popen(*args: str) -> subprocess.Popen:
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    return subprocess.Popen([sys.executable, "-m", "planner", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, cwd=ROOT, env=env)
+
+
+def wait_for_line(proc: subprocess.Popen, prefix: str, limit: int = 50) -> list[str]:
+    """stderr lines read until one starts with prefix (what the command said so far)."""
+    lines = []
+    for _ in range(limit):
+        line = proc.stderr.readline()
+        assert line, f"stderr ended before {prefix!r}: {lines}"
+        lines.append(line)
+        if line.startswith(prefix):
+            return lines
+    raise AssertionError(f"no {prefix!r} in {lines}")
+
+
+def test_ctrl_c_during_simulate_is_exit_130_with_one_line(tmp_path):
+    plot = tmp_path / "never.png"
+    # fingers held still: 1e8 free steps, far longer than the test waits
+    proc = popen("simulate", TRIANGLE, "--model", "dynamic-compliant", "--param", "v1=0", "--param", "v2=0",
+                 "--duration", "10000", "--plot", str(plot))
+    before = wait_for_line(proc, "simulating 100,000,000 steps")
+    time.sleep(1.5)
+    proc.send_signal(signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 130, stderr
+    assert "Traceback" not in stderr and "SystemError" not in stderr
+    lines = stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("interrupted after ") and "of 100,000,000 steps" in lines[0], (before, stderr)
+    assert stdout == "" and not plot.exists()
+
+
+def test_ctrl_c_during_plan_keeps_the_rungs_done_marked_incomplete(tmp_path):
+    out = tmp_path / "plan"
+    # box_push_3d seed 3: the dynamic rung replans for tens of seconds after three rungs are done
+    proc = popen("plan", str(SCENARIOS / "box_push_3d.toml"), "--seed", "3", "--out", str(out))
+    wait_for_line(proc, "planning: dynamic-rigid", limit=10)
+    time.sleep(2.0)
+    proc.send_signal(signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=300)
+    assert proc.returncode == 130, stderr
+    assert "Traceback" not in stderr
+    assert stderr.splitlines()[-1] == (f"interrupted: INCOMPLETE plan (rungs done: geometric, kinematic, quasistatic-rigid) "
+                                       f"written to {out / 'plan.json'}")
+    plan = json.loads((out / "plan.json").read_text())
+    assert plan["complete"] is False and plan["top_holds"] is False
+    assert [r["rung"] for r in plan["rungs"]] == ["geometric", "kinematic", "quasistatic-rigid"]
+    assert all(r["outcome"] == "goal" for r in plan["rungs"])
+    assert json.loads((out / "report.json").read_text())["complete"] is False
+
+
+def test_a_chunked_rollout_equals_one_call():
+    from models.rungs import rung_for
+    from models.scenario import load_scenario
+
+    outcomes = []
+    # goal; unsafe; goal; none (3750 steps, more than the 2000 records kept)
+    for params, model, h in [({"v1": 0.8}, "dynamic-compliant", 1e-4), ({"v1": 3.0}, "dynamic-compliant", 1e-4),
+                             ({"v1": 0.8}, "quasistatic-rigid", 1e-3), ({"v1": 0.0, "v2": 0.0}, "kinematic", 1e-3)]:
+        scenario = load_scenario(TRIANGLE, params)
+        rung = rung_for(scenario, model)
+        start = rung.initial_state(scenario)
+        u = np.array([scenario.spec.task.policy.speeds.get(name, 0.0) for name in scenario.actuated])
+        controls, durations = np.array([u, 0.5 * u, u]), np.array([0.5, 0.25, 3.0])
+        whole = rung.rollout(scenario, start, controls, durations, h)
+        outcomes.append(whole.outcome)
+        # chunk_s = 0: every chunk is as short as the records allow (hundreds of chunks)
+        chunked = rung.rollout_chunked(scenario, start, controls, durations, h, chunk_s=0.0, first_chunk=1)
+        assert (chunked.outcome, chunked.status, chunked.steps) == (whole.outcome, whole.status, whole.steps), (params, model)
+        for a, b in zip(whole.state.__dict__.values(), chunked.state.__dict__.values()):
+            assert np.array_equal(a, b), (params, model)
+        assert np.array_equal(whole.trajectory, chunked.trajectory) and np.array_equal(whole.velocities, chunked.velocities)
+        assert chunked.times == pytest.approx(whole.times, rel=1e-12, abs=1e-12)
+        assert chunked.t == pytest.approx(whole.t, rel=1e-12)
+        assert (chunked.lcp_solves, chunked.pivots, chunked.force_steps, chunked.min_psi, chunked.max_lcp_size) == (
+            whole.lcp_solves, whole.pivots, whole.force_steps, whole.min_psi, whole.max_lcp_size)
+        assert np.array_equal(whole.pair_force, chunked.pair_force)
+    assert outcomes == ["goal", "unsafe", "goal", "none"]
+
+
+def test_simulate_says_how_many_steps_up_front():
+    result = ladder("simulate", TRIANGLE, "--model", "kinematic", "--param", "v1=0.8")
+    assert result.returncode == 0, result.stderr
+    assert "simulating 300 steps of kinematic (h = 0.01, 3 s; Ctrl-C stops)" in result.stderr
+
+
+def test_simulate_refuses_an_absurd_number_of_steps():
+    result = ladder("simulate", TRIANGLE, "--model", "dynamic-compliant", "--step", "1e-9")
+    assert result.returncode == 2
+    assert result.stderr == (f"error: {TRIANGLE}: --step: 3 s at h = 1e-09 is 3e+09 steps, more than the 1e+09 one run may take; "
+                             "use a larger --step or a shorter --duration\n")
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["plan", TRIANGLE, "--seed", "-1"], "--seed: must be between 0 and 4294967295, got -1"),
+        (["plan", TRIANGLE, "--iterations", "0"], "--iterations: must be at least 1, got 0"),
+        (["plan", TRIANGLE, "--time-limit", "0"], "--time-limit: must be a positive number, got 0.0"),
+        (["plan", TRIANGLE, "--top", "kinematic", "--rungs", "dynamic-rigid"], "--top: no rung of the ladder is at or below kinematic"),
+        (["plan", TRIANGLE, "--rungs", "dynamic-compliant,kinematic"],
+         "--rungs: 'kinematic' after 'dynamic-compliant': rungs go from low to high fidelity (geometric < kinematic < "
+         "quasistatic-rigid < quasistatic-compliant < dynamic-rigid < dynamic-compliant), each once"),
+        (["plan", TRIANGLE, "--rungs", "kinematic,kinematic"], "--rungs: 'kinematic' after 'kinematic': rungs go from low to high"),
+        (["simulate", TRIANGLE, "--model", "kinematic", "--plot", "{tmp}/x.jpgx"], "--plot: {tmp}/x.jpgx: unsupported file type '.jpgx'; use .png or .svg"),
+        (["simulate", TRIANGLE, "--model", "kinematic", "--plot", "{tmp}/missing/x.png"], "--plot: {tmp}/missing/x.png: the folder {tmp}/missing does not exist"),
+        (["simulate", TRIANGLE, "--model", "kinematic", "--plot", "{tmp}"], "--plot: {tmp} is a folder; give a file name"),
+        (["simulate", TRIANGLE, "--model", "kinematic", "--duration", "0"], "--duration: must be a positive number, got 0.0"),
+        (["simulate", TRIANGLE, "--model", "kinematic", "--step", "0"], "--step: must be a positive number, got 0.0"),
+        (["check", TRIANGLE, "--out", "{tmp}/a_file/x.json"], "--out: {tmp}/a_file/x.json: {tmp}/a_file is a file, not a folder"),
+        (["schema", "--out", "{tmp}/missing/s.json"], "--out: {tmp}/missing/s.json: the folder {tmp}/missing does not exist"),
+        (["bench", "--out", "{tmp}/a_file"], "--out: {tmp}/a_file is a file, not a folder"),
+        (["bench", "--doc", "{tmp}/missing/b.md"], "--doc: {tmp}/missing/b.md: the folder {tmp}/missing does not exist"),
+        (["bench", "--planning", "mars"], "--planning: unknown scene(s) mars"),
+    ],
+)
+def test_every_argument_is_checked_before_any_work(tmp_path, args, message):
+    (tmp_path / "a_file").write_text("")
+    args = [a.replace("{tmp}", str(tmp_path)) for a in args]
+    message = message.replace("{tmp}", str(tmp_path))
+    result = ladder(*args)
+    assert result.returncode == 2, result.stderr
+    assert message in result.stderr and result.stderr.startswith("error: ") and len(result.stderr.splitlines()) == 1, result.stderr
+    assert "Traceback" not in result.stderr and result.stdout == ""
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a_file"]  # nothing written, no folder made
+
+
+@pytest.mark.parametrize("out", ["a_file", "a_file/sub"])
+def test_plan_out_onto_a_file_is_bad_input_before_planning(tmp_path, out):
+    (tmp_path / "a_file").write_text("x")
+    target = tmp_path / out
+    result = ladder("plan", TRIANGLE, "--out", str(target))
+    assert result.returncode == 2
+    where = "is a file" if out == "a_file" else f"is under {tmp_path / 'a_file'}, which is a file"
+    assert result.stderr == f"error: {TRIANGLE}: --out: {target} {where}, not a folder\n"
+    assert (tmp_path / "a_file").read_text() == "x"
+
+
+def _plan(tmp_path, name, *extra):
+    out = tmp_path / name
+    result = ladder("plan", TRIANGLE, "--param", "v1=0.8", "--seed", "2", "--iterations", "300", "--out", str(out), *extra)
+    assert result.returncode == 0, result.stderr
+    return out / "plan.json"
+
+
+def test_plan_json_records_its_scene_and_is_reproducible(tmp_path):
+    import hashlib
+
+    from models.scenario import load_scenario
+
+    first, second = _plan(tmp_path, "a"), _plan(tmp_path, "b")
+    assert first.read_bytes() == second.read_bytes()
+    scene = json.loads(first.read_text())["scene"]
+    scenario = load_scenario(TRIANGLE, {"v1": 0.8})
+    spec = json.dumps(scenario.spec.model_dump(mode="json"), sort_keys=True, separators=(",", ":"))
+    assert scene == {"name": "two_finger_triangle", "sha256": hashlib.sha256(spec.encode()).hexdigest(),
+                     "parameters": dict(scenario.parameters), "controls": ["finger1.y", "finger2.y"]}
+    assert scene["parameters"]["v1"] == 0.8
+    # the plan replays on its own scene
+    replay = ladder("simulate", TRIANGLE, "--param", "v1=0.8", "--plan", str(first), "--model", "dynamic-compliant", "--json")
+    assert replay.returncode == 0, replay.stderr
+    assert json.loads(replay.stdout)["outcome"] == "goal"
+
+
+def test_simulate_plan_of_another_scene_is_bad_input(tmp_path):
+    plan = _plan(tmp_path, "a")
+    other = ladder("simulate", str(SCENARIOS / "four_finger_grasp.toml"), "--plan", str(plan), "--model", "kinematic")
+    assert other.returncode == 2 and "Traceback" not in other.stderr
+    assert f"{plan}: scene: not a plan of {SCENARIOS / 'four_finger_grasp.toml'}: it is of scenario 'two_finger_triangle', " \
+           "this file is 'four_finger_grasp'" in other.stderr
+    changed = ladder("simulate", TRIANGLE, "--param", "v1=0.5", "--plan", str(plan), "--model", "kinematic")
+    assert changed.returncode == 2 and "Traceback" not in changed.stderr
+    assert changed.stderr == (f"error: {plan}: scene: not a plan of {TRIANGLE}: the scene's contents differ (sha256 of the "
+                              "resolved scenario): parameters v1 = 0.8 in the plan, 0.5 here\n")
+    data = json.loads(plan.read_text())
+    del data["scene"]
+    old = tmp_path / "old.json"
+    old.write_text(json.dumps(data))
+    unknown = ladder("simulate", TRIANGLE, "--param", "v1=0.8", "--plan", str(old), "--model", "kinematic")
+    assert unknown.returncode == 2 and "does not say which scene it is of" in unknown.stderr
+
+
+def test_outputs_get_the_usual_file_mode(tmp_path):
+    out = tmp_path / "summary.json"
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    done = subprocess.run([sys.executable, "-m", "planner", "check", TRIANGLE, "--out", str(out)], capture_output=True,
+                          text=True, cwd=ROOT, env=env, timeout=120, preexec_fn=lambda: os.umask(0o022))
+    assert done.returncode == 0, done.stderr
+    assert out.stat().st_mode & 0o777 == 0o644
+
+
+def test_piped_output_is_not_wrapped():
+    env = {k: v for k, v in os.environ.items() if k not in ("COLUMNS", "LINES")}
+    env["PYTHONPATH"] = str(ROOT)
+    done = subprocess.run([sys.executable, "-m", "planner", "check", str(SCENARIOS / "four_finger_grasp.toml")],
+                          capture_output=True, text=True, cwd=ROOT, env=env, timeout=120)
+    assert done.returncode == 0, done.stderr
+    description = "Form-closure grasp with two fixed lower fingers and two descending upper fingers (paper Fig. 2)"
+    assert len(description) > 80 and description in done.stdout.splitlines()
+
+
+def test_bench_help_and_default_scenes():
+    from planner.bench import DEFAULT_PLANNING_SCENES
+
+    result = ladder("bench", "--help")
+    assert result.returncode == 0
+    text = " ".join(result.stdout.split())
+    assert "a few seconds" in text and "about a minute" not in text
+    assert "default: two_finger_triangle,four_finger_grasp" in text and "box_push_3d takes about an hour" in text
+    assert DEFAULT_PLANNING_SCENES == ("two_finger_triangle", "four_finger_grasp")
+
+
+def test_a_cold_kernel_cache_is_announced(monkeypatch, capsys):
+    from planner import cli
+
+    assert cli.kernels_cached()  # the tests above compiled the rollout kernel
+    cli.announce_compile()
+    assert capsys.readouterr().err == ""
+    monkeypatch.setattr(cli, "kernels_cached", lambda: False)
+    cli.announce_compile()
+    assert capsys.readouterr().err == "compiling the physics kernels (first run only, about 2 minutes)\n"

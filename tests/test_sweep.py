@@ -144,6 +144,7 @@ def test_bad_sweep_input_is_exit_2_naming_the_key_and_writes_nothing(tmp_path, a
     out = tmp_path / "s"
     if "--model" not in args:
         args = args + ["--model", "quasistatic-rigid"]
+    assert "Traceback" not in args
     done = subprocess.run([sys.executable, "-m", "planner", "sweep", TRIANGLE, *args, "--out", str(out)],
                           capture_output=True, text=True, env=env, timeout=300)
     assert done.returncode == 2, done.stderr
@@ -157,3 +158,90 @@ def test_parse_axis_values():
     assert sw.parse_axis("mu=0.3,0.5").values == (0.3, 0.5)
     with pytest.raises(ScenarioError):
         sw.parse_axis("mu=")
+
+
+def sweep_command(tmp_path, *args, timeout=120):
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    return subprocess.run([sys.executable, "-m", "planner", "sweep", TRIANGLE, *args, "--out", str(tmp_path / "s")],
+                          capture_output=True, text=True, env=env, timeout=timeout)
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        # 1e8 runs would not fit in memory: refused before any value is made
+        (["--grid", "v1=1:2:100000000", "--model", "kinematic"],
+         "--grid v1=1:2:100000000: COUNT 100,000,000 is more than a sweep may run (1,000,000 runs)"),
+        (["--grid", "v1=1:2:1000", "--grid", "mu=0:1:1001", "--model", "kinematic"],
+         "--grid: 1000 x 1001 grid points x 1 model(s) = 1,001,000 runs, more than a sweep may run (1,000,000)"),
+        # values are checked before the pool starts (it used to die with BrokenProcessPool)
+        (["--grid", "mu=-1:1:3", "--model", "kinematic", "--workers", "2"],
+         "--grid mu=-1:1:3: kinematic at mu=-1: the scenario is invalid: contact.pairs[0].mu: Input should be greater than or equal to 0"),
+        (["--grid", "v1=0.5,1", "--model", "kinematic[mu=-2]", "--workers", "2"],
+         "--model kinematic[mu=-2]: kinematic[mu=-2] at v1=0.5 and 1 more grid point: the scenario is invalid: contact.pairs[0].mu"),
+        (["--grid", "v1=1:2:3", "--model", "dynamic-compliant[C=0"],
+         "--model dynamic-compliant[C=0: a '[' is not closed; expected [LABEL=]RUNG[NAME=VALUE,...]"),
+        (["--grid", "v1=1:2:3", "--model", "dynamic-compliant]C=0["], "--model dynamic-compliant]C=0[: unbalanced ']'"),
+        (["--grid", "v1=1:2:3", "--model", "a=kinematic,a=dynamic-compliant"], "--model a=kinematic,a=dynamic-compliant: the label 'a' names two models"),
+        (["--grid", "v1=1:2:3", "--model", "quasistatic-rigid,quasistatic-rigid"], "the label 'quasistatic-rigid' names two models"),
+        (["--grid", "v1=1:2:3", "--model", "dynamic-rigid[mu=1,mu=2]"], "--model dynamic-rigid[mu=1,mu=2]: mu overridden twice"),
+        (["--grid", "v1=1:2:3", "--model", "kinematic", "--step", "1e-12"], "--step: kinematic at v1=1 and 2 more grid points: a run of 3 s at h = 1e-12 is 3e+12 steps"),
+        (["--grid", "v1=1:2:3", "--model", "kinematic", "--tolerance", "0"], "--tolerance: must be a positive number, got 0.0"),
+        (["--grid", "v1=1:2:3", "--model", "kinematic", "--duration", "-1"], "--duration: must be a positive number, got -1.0"),
+    ],
+)
+def test_every_sweep_problem_is_exit_2_before_any_run(tmp_path, args, message):
+    t0 = time.perf_counter()
+    done = sweep_command(tmp_path, *args)
+    assert done.returncode == 2, done.stderr
+    assert message in done.stderr and done.stderr.startswith("error: ") and "Traceback" not in done.stderr, done.stderr
+    assert len(done.stderr.splitlines()) == 1, done.stderr
+    assert not (tmp_path / "s").exists()
+    assert time.perf_counter() - t0 < 60  # refused up front, not after 1e8 values or runs
+
+
+def test_sweep_out_onto_a_file_is_bad_input(tmp_path):
+    (tmp_path / "s").write_text("x")
+    done = sweep_command(tmp_path, "--grid", "v1=1:2:3", "--model", "kinematic")
+    assert done.returncode == 2
+    assert done.stderr == f"error: {TRIANGLE}: --out: {tmp_path / 's'} is a file, not a folder\n"
+
+
+def test_dask_executor_without_the_extra_says_how_to_install_it(tmp_path):
+    code = ("import sys; sys.modules['distributed'] = None; from planner.cli import main; "
+            f"sys.exit(main(['sweep', {TRIANGLE!r}, '--grid', 'v1=1:2:3', '--model', 'kinematic', "
+            f"'--executor', 'dask://127.0.0.1:8786', '--out', {str(tmp_path / 's')!r}]))")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=dict(os.environ, PYTHONPATH=str(ROOT)),
+                          timeout=120)
+    assert done.returncode == 2
+    assert done.stderr == (f'error: {TRIANGLE}: --executor: a Dask executor needs the dask extra: install the dask extra: '
+                           'pip install "contact-ladder[dask]"\n')
+    assert not (tmp_path / "s").exists()
+
+
+def test_sweep_help_shows_the_model_syntax():
+    done = subprocess.run([sys.executable, "-m", "planner", "sweep", "--help"], capture_output=True, text=True,
+                          env=dict(os.environ, PYTHONPATH=str(ROOT)), timeout=60)
+    text = " ".join(done.stdout.split())
+    assert "[LABEL=]RUNG[NAME=VALUE,...]" in text
+    assert "elastic=dynamic-compliant[C=0,finger_mass=1e3]" in text
+
+
+def test_grid_points_stream_and_the_pool_is_fed_a_bounded_window():
+    axes = [sw.parse_axis("v1=0.25:4:1000"), sw.parse_axis("mu=0:1:1000")]
+    points = sw.grid_points(axes)
+    assert next(points) == {"v1": 0.25, "mu": 0.0} and next(points) == {"v1": 0.25, "mu": pytest.approx(1 / 999)}
+    assert sw.grid_size(axes) == 1_000_000
+    pulled = []
+
+    def tasks():
+        for p in sw.grid_points([sw.parse_axis("v1=0.5:2:40")]):
+            pulled.append(p)
+            yield sw.Task(TRIANGLE, tuple({**p, "v2": 1.0}.items()), sw.ModelSpec("kinematic"), None, 1.0)
+
+    with sw.Executor(2) as pool:
+        results = pool.map(tasks())
+        first = next(results)
+        assert len(pulled) <= sw.WINDOW_PER_WORKER * 2 + 1  # not the whole stream
+        rest = list(results)
+    assert len(pulled) == 40 and sorted(i for i, _ in [first, *rest]) == list(range(40))
