@@ -157,3 +157,14 @@ def test_parse_axis_values():
     assert sw.parse_axis("mu=0.3,0.5").values == (0.3, 0.5)
     with pytest.raises(ScenarioError):
         sw.parse_axis("mu=")
+
+
+@pytest.mark.parametrize(
+    "text, phrase",
+    [("v1=0:1:abc", "COUNT must be an integer, got 'abc'"), ("v1=a:1:3", "START must be a number, got 'a'"), ("mu=0.3,x", "must be a number, got 'x'")],
+)
+def test_parse_axis_says_what_it_expected(text, phrase):
+    with pytest.raises(ScenarioError) as info:
+        sw.parse_axis(text)
+    assert phrase in info.value.problems[0].reason
+    assert "invalid literal" not in str(info.value) and "could not convert" not in str(info.value)
