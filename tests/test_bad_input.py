@@ -7,6 +7,7 @@ from __future__ import annotations
 import pytest
 
 from models.scenario import ScenarioError, load_scenario
+from planner.pytest_plugin import _has_expectations
 from tests.conftest import DATA
 from tests.test_cli import ladder
 from tests.test_scenarios import expectation
@@ -134,6 +135,14 @@ def test_real_booleans_still_work(tmp_path, value):
     assert (frozenset(("finger1", "triangle")) in pairs) == (value == "true")
 
 
+def test_expect_plan_is_a_real_boolean(tmp_path):
+    # (not a file in tests/data/bad: a file with [expect] would be collected by the plugin)
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(_scene(tmp_path, GOOD + "\n[expect]\nplan = 1\n"))
+    assert [(p.key, p.reason) for p in info.value.problems] == [("expect.plan", "expected true or false, got 1")]
+    assert load_scenario(_scene(tmp_path, GOOD + "\n[expect]\nplan = true\n")).spec.expect.plan is True
+
+
 def test_integral_float_is_still_an_integer(tmp_path):
     scenario = load_scenario(_scene(tmp_path, GOOD.replace("time_limit = 5.0", "time_limit = 5.0\niterations = 3e3")))
     assert scenario.spec.ladder.iterations == 3000
@@ -142,3 +151,7 @@ def test_integral_float_is_still_an_integer(tmp_path):
 def test_touch_on_an_enabled_pair_override_is_fine(tmp_path):
     text = GOOD.replace('bodies = ["finger1", "triangle"]\nmu = "mu"', 'bodies = ["finger1", "triangle"]\nmu = "mu"\nenabled = true')
     load_scenario(_scene(tmp_path, text))
+
+
+def test_pytest_plugin_skips_files_too_deep_to_read():
+    assert _has_expectations(BAD / "nesting_too_deep.toml") is False
