@@ -121,8 +121,9 @@ def check_convex_mesh(v: np.ndarray, faces: list[list[int]], name: str) -> None:
             raise GeometryError(f"{name}: mesh is not convex")
 
 
-def make_geometry(shape, dimension: int, base_dir: Path | None = None) -> Geometry:
-    """Build the query geometry of a validated shape spec (see models.schema)."""
+def make_geometry(shape, dimension: int, base_dir: Path | None = None, max_coordinate: float = math.inf) -> Geometry:
+    """Build the query geometry of a validated shape spec (see models.schema); a mesh whose
+    scaled vertices reach beyond ``max_coordinate`` is rejected (the spec bounds the rest)."""
     t = shape.type
     if t in ("halfplane", "plane"):
         n = np.asarray(shape.normal, dtype=float)
@@ -156,6 +157,9 @@ def make_geometry(shape, dimension: int, base_dir: Path | None = None) -> Geomet
         path = (base_dir or Path(".")) / shape.file
         v, faces = read_obj(path)
         v = v * shape.scale
+        if np.max(np.abs(v)) > max_coordinate:
+            raise GeometryError(f"{path.name}: vertex coordinates times scale reach {np.max(np.abs(v)):g}, "
+                                f"beyond the bound on coordinates ({max_coordinate:g} m)")
         check_convex_mesh(v, faces, path.name)
         return Geometry("solid3d", 3, v, fcl_args=("mesh", v, tuple(tuple(f) for f in faces)))
     raise GeometryError(f"shape {t!r} is not spatial")

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 import tomllib
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
@@ -24,9 +24,12 @@ import numpy as np
 from pydantic import ValidationError
 
 from models import geometry as geo
+from models import messages
 from models.expressions import ExpressionError, evaluate
 from models.schema import (
     DOF_NAMES,
+    LIMITS,
+    MAX_PREDICATE_DEPTH,
     PREDICATE_KEYS,
     RUNGS,
     SHAPES_2D,
@@ -65,6 +68,10 @@ class ScenarioError(ValueError):
         if more > 0:
             lines.append(f"{self.file}: ... and {more} more problems")
         super().__init__("\n".join(lines))
+
+    def __reduce__(self):
+        # picklable, so that a worker process's bad input reaches the parent as itself
+        return ScenarioError, (self.file, self.problems)
 
 
 @dataclass(frozen=True)
@@ -186,15 +193,77 @@ def load_scenario(path: str | Path, overrides: Mapping[str, float] | None = None
         raise ScenarioError(path, [Problem("", f"not UTF-8 text ({exc.reason})")]) from None
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(path, [Problem("", f"not valid TOML: {exc}")]) from None
+    except RecursionError:  # the standard library's reader recurses once per level
+        raise ScenarioError(path, [Problem("", _TOO_DEEP)]) from None
     except OSError as exc:
         raise ScenarioError(path, [Problem("", f"cannot read: {exc.strerror}")]) from None
 
-    parameters = _parameters(raw, overrides or {}, path)
+    problems = _check_predicate_depth(raw) or _check_nesting(raw)
+    if problems:
+        raise ScenarioError(path, problems)
+    # Bounds on every number keep derived quantities finite; should one still overflow (or a
+    # structure still be too deep for the checks below), the file is what is wrong with it.
     try:
-        spec = ScenarioSpec.model_validate(raw, context={"parameters": parameters})
-    except ValidationError as exc:
-        raise ScenarioError(path, _pydantic_problems(exc, parameters)) from None
-    return _derive(spec, MappingProxyType(parameters), path)
+        with np.errstate(over="raise", invalid="raise", divide="raise"):
+            parameters = _parameters(raw, overrides or {}, path)
+            try:
+                spec = ScenarioSpec.model_validate(raw, context={"parameters": parameters})
+            except ValidationError as exc:
+                raise ScenarioError(path, _pydantic_problems(exc, parameters)) from None
+            return _derive(spec, MappingProxyType(parameters), path)
+    except (OverflowError, FloatingPointError, ZeroDivisionError) as exc:
+        raise ScenarioError(path, [Problem("", f"a number is too large (or small) to compute with: {exc}")]) from None
+    except RecursionError:
+        raise ScenarioError(path, [Problem("", _TOO_DEEP)]) from None
+
+
+#: Deepest nesting of arrays and tables in a scenario file.
+MAX_NESTING = 100
+_TOO_DEEP = f"nesting deeper than {MAX_NESTING} levels (arrays or tables inside each other); scenario files need far fewer"
+
+
+def _check_nesting(raw: dict) -> list[Problem]:
+    """Arrays and tables nested deeper than MAX_NESTING (walked without recursion)."""
+    stack: list[tuple[Any, tuple, int]] = [(raw, (), 0)]
+    while stack:
+        node, loc, depth = stack.pop()
+        if depth > MAX_NESTING:
+            # the key that holds the deep structure (its own path inside is no help to read)
+            head = next((i for i, part in enumerate(loc) if isinstance(part, int)), len(loc))
+            return [Problem(key_path(loc[: max(1, min(head, 4))]), _TOO_DEEP)]
+        if isinstance(node, dict):
+            stack += [(v, (*loc, k), depth + 1) for k, v in node.items()]
+        elif isinstance(node, list):
+            stack += [(v, (*loc, i), depth + 1) for i, v in enumerate(node)]
+    return []
+
+
+def _check_predicate_depth(raw: dict) -> list[Problem]:
+    """Predicates nested deeper than MAX_PREDICATE_DEPTH, reported at the task's goal or
+    unsafe key (walked without recursion: this runs before anything else looks at them)."""
+    task = raw.get("task")
+    if not isinstance(task, dict):
+        return []
+    out = []
+    for name in ("goal", "unsafe"):
+        deepest = 0
+        stack: list[tuple[Any, int]] = [(task.get(name), 1)]
+        while stack:
+            node, depth = stack.pop()
+            if not isinstance(node, dict):
+                continue
+            deepest = max(deepest, depth)
+            for word in ("all", "any"):
+                if isinstance(node.get(word), list):
+                    stack += [(child, depth + 1) for child in node[word]]
+            if "not" in node:
+                stack.append((node["not"], depth + 1))
+        if deepest > MAX_PREDICATE_DEPTH:
+            out.append(Problem(
+                f"task.{name}",
+                f"predicates nested {deepest} levels deep (all / any / not inside each other); at most {MAX_PREDICATE_DEPTH} levels",
+            ))
+    return out
 
 
 def _parameters(raw: dict, overrides: Mapping[str, float], path: Path) -> dict[str, float]:
@@ -228,21 +297,6 @@ def key_path(loc: tuple) -> str:
     return out
 
 
-def _clean_loc(loc: tuple) -> tuple:
-    """Drop pydantic's union bookkeeping (tags, member types) from an error location."""
-    cleaned: list = []
-    for i, part in enumerate(loc):
-        if isinstance(part, str):
-            if i > 0 and loc[i - 1] == "shape" and part in SHAPES_2D + SHAPES_3D:
-                continue  # discriminated-union tag of a shape
-            if part in PREDICATE_KEYS and i + 1 < len(loc) and loc[i + 1] == part:
-                continue  # tag of a predicate, followed by the field of the same name
-            if any(c in part for c in "[]()") or part in ("float", "int", "none", "tuple", "is-instance"):
-                continue  # union member names
-        cleaned.append(part)
-    return tuple(cleaned)
-
-
 def _shown(value: Any, parameters: Mapping[str, float]) -> str:
     """How a rejected input is quoted: parameter expressions also show their value."""
     if isinstance(value, str):
@@ -250,26 +304,25 @@ def _shown(value: Any, parameters: Mapping[str, float]) -> str:
             return f"{evaluate(value, parameters):g} from {value!r}"
         except ExpressionError:
             pass
-    return repr(value)
+    return messages.got(value)
 
 
 def _pydantic_problems(exc: ValidationError, parameters: Mapping[str, float]) -> list[Problem]:
+    """One problem per key, in plain words (see `models.messages`)."""
+    errors = exc.errors()
+    locs = [err["loc"] for err in errors]
     problems: list[Problem] = []
     seen: set[str] = set()
-    for err in exc.errors():
-        key = key_path(_clean_loc(err["loc"]))
+    for err in errors:
+        loc = err["loc"]
+        if err["type"] in ("too_short", "too_long") and any(len(o) > len(loc) and o[: len(loc)] == loc for o in locs):
+            continue  # entries that failed are reported themselves; the count pydantic then gives is not the user's
+        clean, annotation = messages.walk(ScenarioSpec, loc)
+        suffix, reason = messages.reason(err, annotation, lambda value: _shown(value, parameters))
+        key = key_path(clean) + suffix
         if key in seen:
             continue  # a union reports each member's complaint; one per key is clearer
         seen.add(key)
-        reason = err["msg"]
-        if reason.startswith("Value error, "):
-            reason = reason[len("Value error, ") :]
-        if err["type"] == "extra_forbidden":
-            reason = "unknown key (check the spelling; see the scenario format in README)"
-        elif err["type"] == "missing":
-            reason = "required key is missing"
-        elif "input" in err and not isinstance(err["input"], (dict, list)) and err["type"] not in ("value_error",):
-            reason += f" (got {_shown(err['input'], parameters)})"
         problems.append(Problem(key, reason))
     return problems
 
@@ -324,9 +377,12 @@ def _start_values(body: BodySpec, dimension: int) -> dict[str, float]:
     p = body.pose
     values = {"x": p.x, "y": p.y, "z": p.z or 0.0, "theta": p.theta or 0.0}
     values["yaw"] = p.rpy[2] if p.rpy is not None else 0.0
-    quat = np.array(p.quaternion) / np.linalg.norm(p.quaternion) if p.quaternion else (
-        geo.rpy_quaternion(*p.rpy) if p.rpy else np.array([1.0, 0.0, 0.0, 0.0])
-    )
+    if p.quaternion is not None:
+        norm = float(np.linalg.norm(p.quaternion))
+        # a zero quaternion is reported by _check_body; the start just needs a number here
+        quat = np.array(p.quaternion) / norm if norm > 0.0 else np.array([1.0, 0.0, 0.0, 0.0])
+    else:
+        quat = geo.rpy_quaternion(*p.rpy) if p.rpy else np.array([1.0, 0.0, 0.0, 0.0])
     values.update({f"q{c}": float(v) for c, v in zip("wxyz", quat)})
     return values
 
@@ -345,7 +401,7 @@ def _derive(spec: ScenarioSpec, parameters: Mapping[str, float], path: Path) -> 
         problems += _check_body(body, f"bodies[{i}]", dim)
         if not any(p.key.startswith(f"bodies[{i}].shape") for p in problems):
             try:
-                geometries[body.name] = geo.make_geometry(body.shape, dim, path.parent)
+                geometries[body.name] = geo.make_geometry(body.shape, dim, path.parent, LIMITS["length"].high)
             except geo.GeometryError as exc:
                 sub = {"polygon": ".vertices", "mesh": ".file", "halfplane": ".normal", "plane": ".normal"}
                 problems.append(Problem(f"bodies[{i}].shape{sub.get(body.shape.type, '')}", str(exc)))
@@ -379,9 +435,9 @@ def _derive(spec: ScenarioSpec, parameters: Mapping[str, float], path: Path) -> 
             start_velocity[velocities.index(name)] = value
 
     problems += _check_contacts(spec, names)
-    problems += _check_task(spec, coordinates, actuated, names)
+    problems += _check_task(spec, coordinates, actuated, names, _pair_status(spec))
     problems += _check_ladder(spec)
-    problems += _check_limits(spec, coordinates, start)
+    problems += _check_limits(spec, coordinates, start, dim)
     if problems:
         raise ScenarioError(path, problems)
 
@@ -508,7 +564,25 @@ def _check_contacts(spec: ScenarioSpec, names: list[str]) -> list[Problem]:
     return out
 
 
-def _check_predicate(pred: Predicate, key: str, coordinates: list[str], names: list[str]) -> list[Problem]:
+def _pair_status(spec: ScenarioSpec) -> Callable[[str, str], str | None]:
+    """For two body names: None if they are a contact pair (`_contact_pairs`), else why not."""
+    pairs = {frozenset((p.body_a, p.body_b)) for p in _contact_pairs(spec)}
+    disabled = {frozenset(p.bodies): k for k, p in enumerate(spec.contact.pairs) if not p.enabled}
+
+    def status(a: str, b: str) -> str | None:
+        pair = frozenset((a, b))
+        if pair in pairs:
+            return None
+        if pair in disabled:
+            return (f"the pair {a}-{b} is disabled (contact.pairs[{disabled[pair]}].enabled = false), "
+                    "so they never touch; enable the pair or drop this predicate")
+        return f"neither {a!r} nor {b!r} moves, so they are not a contact pair and their touching never changes"
+
+    return status
+
+
+def _check_predicate(pred: Predicate, key: str, coordinates: list[str], names: list[str],
+                     pair_status: Callable[[str, str], str | None] = lambda a, b: None) -> list[Problem]:
     kind = type(pred).__name__
     out: list[Problem] = []
     if kind == "BoxPredicate":
@@ -524,12 +598,16 @@ def _check_predicate(pred: Predicate, key: str, coordinates: list[str], names: l
                 out.append(Problem(f"{key}.touch", f"no body named {name!r} (bodies: {', '.join(names)})"))
         if pred.touch[0] == pred.touch[1]:
             out.append(Problem(f"{key}.touch", "a body always touches itself; name two bodies"))
+        elif all(name in names for name in pred.touch):
+            why = pair_status(*pred.touch)
+            if why is not None:
+                out.append(Problem(f"{key}.touch", why))
     elif kind in ("AllPredicate", "AnyPredicate"):
         word = "all" if kind == "AllPredicate" else "any"
         for i, sub in enumerate(getattr(pred, word)):
-            out += _check_predicate(sub, f"{key}.{word}[{i}]", coordinates, names)
+            out += _check_predicate(sub, f"{key}.{word}[{i}]", coordinates, names, pair_status)
     else:
-        out += _check_predicate(pred.not_, f"{key}.not", coordinates, names)
+        out += _check_predicate(pred.not_, f"{key}.not", coordinates, names, pair_status)
     return out
 
 
@@ -548,11 +626,12 @@ def _parse_key(key: str) -> tuple:
     return tuple(parts)
 
 
-def _check_task(spec: ScenarioSpec, coordinates: list[str], actuated: list[str], names: list[str]) -> list[Problem]:
+def _check_task(spec: ScenarioSpec, coordinates: list[str], actuated: list[str], names: list[str],
+                pair_status: Callable[[str, str], str | None]) -> list[Problem]:
     task = spec.task
-    out = _check_predicate(task.goal, "task.goal", coordinates, names)
+    out = _check_predicate(task.goal, "task.goal", coordinates, names, pair_status)
     if task.unsafe is not None:
-        out += _check_predicate(task.unsafe, "task.unsafe", coordinates, names)
+        out += _check_predicate(task.unsafe, "task.unsafe", coordinates, names, pair_status)
     for name, (lo, hi) in task.control_bounds.items():
         key = key_path(("task", "control_bounds", name))
         if name not in actuated:
@@ -592,7 +671,9 @@ def _check_ladder(spec: ScenarioSpec) -> list[Problem]:
     return out
 
 
-def _check_limits(spec: ScenarioSpec, coordinates: list[str], start: list[float]) -> list[Problem]:
+def _check_limits(spec: ScenarioSpec, coordinates: list[str], start: list[float], dim: int) -> list[Problem]:
+    """Start values within the drives' limits, reported where the value was written: the
+    `[task] start` entry that overrides it, else the body's pose."""
     out = []
     for i, body in enumerate(spec.bodies):
         for dof, drive in body.actuators.items():
@@ -600,11 +681,25 @@ def _check_limits(spec: ScenarioSpec, coordinates: list[str], start: list[float]
             if name not in coordinates:
                 continue
             value = start[coordinates.index(name)]
+            if name in spec.task.start:
+                key, where = key_path(("task", "start", name)), "task.start"
+            else:
+                key, where = _pose_key(body, i, dof, dim), "the body's pose"
+            limits = f"bodies[{i}].actuators.{dof}"
             if drive.lower is not None and value < drive.lower:
-                out.append(Problem(f"bodies[{i}].actuators.{dof}.lower", f"{name} starts at {value}, below its lower limit {drive.lower}"))
+                out.append(Problem(key, f"{name} starts at {value:g} (from {where}), below its lower limit {drive.lower:g} ({limits}.lower)"))
             if drive.upper is not None and value > drive.upper:
-                out.append(Problem(f"bodies[{i}].actuators.{dof}.upper", f"{name} starts at {value}, above its upper limit {drive.upper}"))
+                out.append(Problem(key, f"{name} starts at {value:g} (from {where}), above its upper limit {drive.upper:g} ({limits}.upper)"))
     return out
+
+
+def _pose_key(body: BodySpec, index: int, dof: str, dim: int) -> str:
+    """The pose key a DOF's start value comes from (the pose itself when it is implicit)."""
+    if dof in ("x", "y", "z", "theta"):
+        return f"bodies[{index}].pose.{dof}"
+    if dof == "yaw" and body.pose.rpy is not None:
+        return f"bodies[{index}].pose.rpy[2]"
+    return f"bodies[{index}].pose"
 
 
 def _contact_pairs(spec: ScenarioSpec) -> tuple[ContactPair, ...]:

@@ -7,7 +7,10 @@ geometry, initial penetration) and reports every problem with the file and the k
 Numbers: every numeric field accepts a number or a string naming a design parameter, or a
 small expression over parameters (``"-v1"``, ``"2 * r"``; see `models.expressions`). The
 parameters come from the validation context (``context={"parameters": {...}}``).
-Non-finite numbers (TOML's ``inf``/``nan``) are rejected everywhere.
+Non-finite numbers (TOML's ``inf``/``nan``) are rejected everywhere, and every number must
+lie within the bound of its quantity class (`LIMITS`: lengths and coordinates within 1e6 m,
+masses, inertias, gains, speeds, times), so nothing derived from it overflows. Booleans are
+TOML booleans only (no ``"no"``, no ``0``) and integers are never booleans.
 
 Units are SI (m, kg, s, rad, N); angles in radians unless a key says ``_deg``.
 """
@@ -18,6 +21,7 @@ import math
 from typing import Annotated, Any, Literal, Union
 
 from pydantic import (
+    AfterValidator,
     BaseModel,
     BeforeValidator,
     ConfigDict,
@@ -27,6 +31,8 @@ from pydantic import (
     ValidationInfo,
     WithJsonSchema,
 )
+from pydantic import Strict as StrictMode
+from pydantic_core import PydanticCustomError
 
 from models.expressions import ExpressionError, evaluate
 
@@ -49,6 +55,39 @@ SHAPES_2D = ("halfplane", "disc", "box", "polygon", "capsule")
 SHAPES_3D = ("plane", "sphere", "box", "capsule", "mesh")
 
 IDENTIFIER = r"^[A-Za-z_][A-Za-z0-9_]*$"
+#: Deepest nesting of predicates (all / any / not inside each other).
+MAX_PREDICATE_DEPTH = 32
+
+
+class Limit:
+    """The range of one quantity class: |value| <= high, and for quantities that get
+    inverted (masses, inertias) value >= low. Keeps every derived quantity finite."""
+
+    def __init__(self, what: str, unit: str, high: float, low: float | None = None):
+        self.what, self.unit, self.high, self.low = what, unit, high, low
+
+    def __call__(self, value: float) -> float:
+        low = -self.high if self.low is None else self.low
+        if not low <= value <= self.high:
+            unit = f" {self.unit}" if self.unit else ""
+            raise ValueError(f"{value:g} is out of range: {self.what} must be between {low:g} and {self.high:g}{unit}")
+        return value
+
+
+#: Bounds per quantity class (SI units).
+LIMITS = {
+    "length": Limit("lengths and coordinates", "m (rad for angles)", 1e6),
+    "speed": Limit("speeds", "m/s (rad/s)", 1e6),
+    "acceleration": Limit("accelerations", "m/s^2", 1e6),
+    "mass": Limit("masses", "kg", 1e6, low=1e-6),
+    "inertia": Limit("inertias", "kg m^2", 1e6, low=1e-12),
+    "gain": Limit("gains, stiffnesses, dampings and forces", "", 1e12),
+    "time": Limit("times", "s", 1e6),
+    "ratio": Limit("friction coefficients, scales and quaternion components", "", 1e6),
+}
+#: Largest planner seed and iteration count (OMPL takes 32-bit seeds).
+MAX_SEED = 10**9
+MAX_ITERATIONS = 10**9
 
 
 def _resolve_number(value: Any, info: ValidationInfo) -> Any:
@@ -82,11 +121,42 @@ def _plain_number(value: Any) -> Any:
     return value
 
 
+def _no_boolean_integer(value: Any) -> Any:
+    """Integers are TOML integers (or integral floats); true / false are not integers."""
+    if isinstance(value, bool):
+        raise PydanticCustomError("int_type", "Input should be a valid integer")
+    return value
+
+
 Num = Annotated[float, BeforeValidator(_resolve_number), WithJsonSchema(_NUMBER_SCHEMA)]
 ParameterValue = Annotated[float, BeforeValidator(_plain_number)]
 Positive = Annotated[Num, Field(gt=0)]
 NonNegative = Annotated[Num, Field(ge=0)]
-Interval = tuple[Num, Num]
+Bool = Annotated[bool, StrictMode()]
+
+
+def _int(**constraints: int) -> Any:
+    """An integer field with `Field` constraints; never a boolean."""
+    return Annotated[int, Field(**constraints), BeforeValidator(_no_boolean_integer)]
+
+
+def _bounded(base: Any, quantity: str) -> Any:
+    return Annotated[base, AfterValidator(LIMITS[quantity])]
+
+
+Length = _bounded(Num, "length")  # also coordinates and angles
+PositiveLength = _bounded(Positive, "length")
+Speed = _bounded(Num, "speed")
+Acceleration = _bounded(Num, "acceleration")
+Mass = _bounded(Positive, "mass")
+Gain = _bounded(Positive, "gain")
+NonNegativeGain = _bounded(NonNegative, "gain")
+Time = _bounded(Positive, "time")
+Ratio = _bounded(Num, "ratio")
+NonNegativeRatio = _bounded(NonNegative, "ratio")
+PositiveRatio = _bounded(Positive, "ratio")
+Interval = tuple[Length, Length]
+SpeedInterval = tuple[Speed, Speed]
 
 
 def _as_tuple(value: Any) -> Any:
@@ -95,7 +165,7 @@ def _as_tuple(value: Any) -> Any:
 
 #: A scalar, or principal moments; stored as a tuple of 1 or 3 numbers.
 Inertia = Annotated[
-    tuple[Positive, ...],
+    tuple[_bounded(Positive, "inertia"), ...],
     BeforeValidator(_as_tuple),
     WithJsonSchema({"anyOf": [_NUMBER_SCHEMA, {"type": "array", "items": _NUMBER_SCHEMA, "minItems": 3, "maxItems": 3}]}),
 ]
@@ -118,32 +188,32 @@ class ScenarioInfo(Strict):
 
 class SceneSpec(Strict):
     dimension: Literal[2, 3] = Field(description="2: planar bodies (x, y, theta); 3: spatial bodies")
-    gravity: tuple[Num, ...] = Field(description="gravity vector, one entry per dimension, m/s^2")
+    gravity: tuple[Acceleration, ...] = Field(description="gravity vector, one entry per dimension, m/s^2")
 
 
 class Material(Strict):
     """Contact material: Coulomb friction mu, stiffness K (N/m) and damping C (N s/m)."""
 
-    mu: NonNegative
-    K: Positive
-    C: NonNegative
+    mu: NonNegativeRatio
+    K: Gain
+    C: NonNegativeGain
 
 
 class PairMaterial(Strict):
     """Overrides of the default material for one pair of bodies (or disables the pair)."""
 
     bodies: tuple[Name, Name]
-    mu: NonNegative | None = None
-    K: Positive | None = None
-    C: NonNegative | None = None
-    enabled: bool = Field(True, description="false: the two bodies never interact")
+    mu: NonNegativeRatio | None = None
+    K: Gain | None = None
+    C: NonNegativeGain | None = None
+    enabled: Bool = Field(True, description="false: the two bodies never interact")
 
 
 class ContactSpec(Strict):
-    mu: NonNegative = Field(description="default friction coefficient")
-    K: Positive = Field(description="default contact stiffness, N/m (compliant rungs)")
-    C: NonNegative = Field(description="default contact damping, N s/m (compliant rungs)")
-    touch_tolerance: Positive = Field(1e-3, description="distance at or below which bodies touch, m")
+    mu: NonNegativeRatio = Field(description="default friction coefficient")
+    K: Gain = Field(description="default contact stiffness, N/m (compliant rungs)")
+    C: NonNegativeGain = Field(description="default contact damping, N s/m (compliant rungs)")
+    touch_tolerance: PositiveLength = Field(1e-3, description="distance at or below which bodies touch, m")
     pairs: tuple[PairMaterial, ...] = ()
 
 
@@ -154,48 +224,48 @@ class HalfPlane(Strict):
     """Planar half-plane {p : normal . p <= offset} in the body frame (solid below the line)."""
 
     type: Literal["halfplane"]
-    normal: tuple[Num, Num]
-    offset: Num = 0.0
+    normal: tuple[Length, Length]
+    offset: Length = 0.0
 
 
 class Disc(Strict):
     type: Literal["disc"]
-    radius: Positive
+    radius: PositiveLength
 
 
 class Polygon(Strict):
     """Convex polygon, vertices in the body frame, either winding (stored counter-clockwise)."""
 
     type: Literal["polygon"]
-    vertices: tuple[tuple[Num, Num], ...] = Field(min_length=3)
+    vertices: tuple[tuple[Length, Length], ...] = Field(min_length=3)
 
 
 class Box(Strict):
     """Box centred on the body frame; ``size`` holds full edge lengths (2 or 3 of them)."""
 
     type: Literal["box"]
-    size: tuple[Positive, ...]
+    size: tuple[PositiveLength, ...]
 
 
 class Capsule(Strict):
     """Segment of ``length`` along the body's x axis, centred, swept by a disc/sphere of ``radius``."""
 
     type: Literal["capsule"]
-    radius: Positive
-    length: Positive
+    radius: PositiveLength
+    length: PositiveLength
 
 
 class Plane(Strict):
     """Spatial half-space {p : normal . p <= offset} in the body frame."""
 
     type: Literal["plane"]
-    normal: tuple[Num, Num, Num]
-    offset: Num = 0.0
+    normal: tuple[Length, Length, Length]
+    offset: Length = 0.0
 
 
 class Sphere(Strict):
     type: Literal["sphere"]
-    radius: Positive
+    radius: PositiveLength
 
 
 class Mesh(Strict):
@@ -203,7 +273,7 @@ class Mesh(Strict):
 
     type: Literal["mesh"]
     file: str
-    scale: Positive = 1.0
+    scale: PositiveRatio = 1.0
 
 
 Shape = Annotated[
@@ -219,24 +289,24 @@ class Pose(Strict):
     """Initial pose. Planar: x, y, theta. Spatial: x, y, z and either quaternion (w, x, y, z)
     or rpy (roll, pitch, yaw, rad). Omitted entries are zero / identity."""
 
-    x: Num = 0.0
-    y: Num = 0.0
-    z: Num | None = None
-    theta: Num | None = None
-    quaternion: tuple[Num, Num, Num, Num] | None = None
-    rpy: tuple[Num, Num, Num] | None = None
+    x: Length = 0.0
+    y: Length = 0.0
+    z: Length | None = None
+    theta: Length | None = None
+    quaternion: tuple[Ratio, Ratio, Ratio, Ratio] | None = None
+    rpy: tuple[Length, Length, Length] | None = None
 
 
 class Drive(Strict):
     """Drive of one actuated DOF: the PD (impedance) law that tracks the commanded motion
     in the quasistatic and dynamic rungs, and its limits."""
 
-    kp: Positive = Field(description="position gain, N/m (N m/rad for angles)")
-    kd: NonNegative = Field(description="velocity gain, N s/m")
-    max_speed: Positive = Field(description="largest commanded speed, m/s (rad/s)")
-    max_force: Positive | None = Field(None, description="actuator force limit, N (none: unlimited)")
-    lower: Num | None = Field(None, description="lower position limit")
-    upper: Num | None = Field(None, description="upper position limit")
+    kp: Gain = Field(description="position gain, N/m (N m/rad for angles)")
+    kd: NonNegativeGain = Field(description="velocity gain, N s/m")
+    max_speed: _bounded(Positive, "speed") = Field(description="largest commanded speed, m/s (rad/s)")
+    max_force: Gain | None = Field(None, description="actuator force limit, N (none: unlimited)")
+    lower: Length | None = Field(None, description="lower position limit")
+    upper: Length | None = Field(None, description="upper position limit")
 
 
 class BodySpec(Strict):
@@ -245,7 +315,7 @@ class BodySpec(Strict):
     shape: Shape
     pose: Pose = Pose()
     dofs: tuple[str, ...] = Field((), description="free DOFs, e.g. ['y'] or ['x', 'y', 'theta']")
-    mass: Positive | None = Field(None, description="kg; required for a body with free DOFs")
+    mass: Mass | None = Field(None, description="kg; required for a body with free DOFs")
     inertia: Inertia | None = Field(
         None,
         description="rotational inertia about the centre of mass (planar: scalar; spatial: "
@@ -254,7 +324,7 @@ class BodySpec(Strict):
     actuators: dict[str, Drive] = Field(
         default_factory=dict, description="robots only: the drive of each actuated DOF"
     )
-    velocity: dict[str, Num] = Field(
+    velocity: dict[str, Speed] = Field(
         default_factory=dict,
         description="obstacles only: constant scripted velocity per pose coordinate",
     )
@@ -273,7 +343,7 @@ class TouchPredicate(Strict):
     """The two bodies are within ``tol`` of each other (signed distance <= tol)."""
 
     touch: tuple[Name, Name]
-    tol: Positive | None = Field(None, description="defaults to contact.touch_tolerance")
+    tol: PositiveLength | None = Field(None, description="defaults to contact.touch_tolerance")
 
 
 class AllPredicate(Strict):
@@ -308,6 +378,30 @@ def _predicate_tag(value: Any) -> str | None:
     return None
 
 
+_COUNT_WORDS = {2: "two", 3: "three", 4: "four", 5: "five"}
+
+
+def _one_predicate_key(value: Any) -> Any:
+    """A predicate table names exactly one kind; say so before the union picks a member."""
+    if isinstance(value, BaseModel):
+        return value
+    if not isinstance(value, dict):
+        got = f"a list of {len(value)} {'entry' if len(value) == 1 else 'entries'}" if isinstance(value, list) else repr(value)
+    else:
+        keys = [k for k in PREDICATE_KEYS if k in value]
+        if len(keys) == 1:
+            return value
+        if keys:
+            got = f"{_COUNT_WORDS.get(len(keys), len(keys))}: {', '.join(keys)}"
+        else:
+            got = f"none (keys: {', '.join(map(str, value))})" if value else "an empty table"
+    raise PydanticCustomError(
+        "predicate",
+        "a predicate is a table with exactly one of the keys box, touch, all, any, not; got {got}",
+        {"got": got},
+    )
+
+
 Predicate = Annotated[
     Union[
         Annotated[BoxPredicate, Tag("box")],
@@ -321,6 +415,7 @@ Predicate = Annotated[
         custom_error_type="predicate",
         custom_error_message="a predicate is a table with one of the keys box, touch, all, any, not",
     ),
+    BeforeValidator(_one_predicate_key),
 ]
 AllPredicate.model_rebuild()
 AnyPredicate.model_rebuild()
@@ -331,13 +426,13 @@ class Policy(Strict):
     """Parametric open-loop policy for sweeps: constant commanded speed per actuated DOF."""
 
     type: Literal["constant_speed"]
-    speeds: dict[str, Num] = Field(description="actuated coordinate name -> commanded speed")
-    duration: Positive = Field(description="how long the policy runs, s")
+    speeds: dict[str, Speed] = Field(description="actuated coordinate name -> commanded speed")
+    duration: Time = Field(description="how long the policy runs, s")
 
 
 class TaskSpec(Strict):
-    horizon: Positive = Field(description="longest plan duration, s")
-    start: dict[str, Num] = Field(
+    horizon: Time = Field(description="longest plan duration, s")
+    start: dict[str, Length] = Field(
         default_factory=dict, description="overrides of initial coordinates (default: body poses)"
     )
     velocity: dict[str, Num] = Field(
@@ -347,7 +442,7 @@ class TaskSpec(Strict):
     )
     goal: Predicate
     unsafe: Predicate | None = None
-    control_bounds: dict[str, Interval] = Field(
+    control_bounds: dict[str, SpeedInterval] = Field(
         default_factory=dict,
         description="commanded speed interval per actuated coordinate (default: +-max_speed)",
     )
@@ -359,19 +454,19 @@ class TaskSpec(Strict):
 
 class RungSpec(Strict):
     model: Literal[RUNGS]  # type: ignore[valid-type]
-    h: Positive | None = Field(None, description="physics time step, s (not for geometric)")
-    control_period: Positive | None = Field(
+    h: Time | None = Field(None, description="physics time step, s (not for geometric)")
+    control_period: Time | None = Field(
         None, description="duration of one planner control, s (default: ladder.control_period)"
     )
-    time_limit: Positive | None = Field(
+    time_limit: Time | None = Field(
         None, description="wall-clock cap on this rung's planning, s (default: ladder's); see ladder.time_limit"
     )
-    iterations: Annotated[int, Field(gt=0)] | None = Field(None, description="planner iterations of this rung (default: ladder's)")
+    iterations: _int(gt=0, le=MAX_ITERATIONS) | None = Field(None, description="planner iterations of this rung (default: ladder's)")
     planner: Literal[PLANNERS] | None = None  # type: ignore[valid-type]
     theta: Annotated[Num, Field(ge=0, le=1)] = Field(
         1.0, description="theta-rule weight: 1 = semi-implicit (paper's scheme)"
     )
-    friction_directions: Annotated[int, Field(ge=2, le=64)] | None = Field(
+    friction_directions: _int(ge=2, le=64) | None = Field(
         None, description="directions of the polyhedral friction cone (spatial scenes; planar: 2)"
     )
     contact_solver: Literal[CONTACT_SOLVERS] | None = Field(  # type: ignore[valid-type]
@@ -385,13 +480,13 @@ class RungSpec(Strict):
 class LadderSpec(Strict):
     rungs: tuple[RungSpec, ...] = Field(min_length=1)
     planner: Literal[PLANNERS] = "RRT"  # type: ignore[valid-type]
-    seed: Annotated[int, Field(ge=0)] = 0
-    time_limit: Positive = Field(
+    seed: _int(ge=0, le=MAX_SEED) = 0
+    time_limit: Time = Field(
         description="default wall-clock cap on a rung's planning, s: a safety net on top of the iteration budget "
         "(time a rung leaves passes up to the next; a plan is reproducible unless a cap ends a search)"
     )
-    iterations: Annotated[int, Field(gt=0)] = Field(2000, description="default planner iterations per rung: the reproducible budget")
-    control_period: Positive = Field(0.05, description="default duration of one control, s")
+    iterations: _int(gt=0, le=MAX_ITERATIONS) = Field(2000, description="default planner iterations per rung: the reproducible budget")
+    control_period: Time = Field(0.05, description="default duration of one control, s")
 
 
 class ExpectSpec(Strict):
@@ -400,8 +495,8 @@ class ExpectSpec(Strict):
     policy: dict[Literal[RUNGS[1:]], Literal["goal", "unsafe", "none"]] = Field(  # type: ignore[valid-type]
         default_factory=dict, description="outcome of the task's policy under each named rung"
     )
-    plan: bool | None = Field(None, description="true: `ladder plan` must find a plan that holds at the top rung")
-    plan_iterations: Annotated[int, Field(gt=0)] | None = Field(
+    plan: Bool | None = Field(None, description="true: `ladder plan` must find a plan that holds at the top rung")
+    plan_iterations: _int(gt=0, le=MAX_ITERATIONS) | None = Field(
         None, description="planner iterations per rung for the plan check (default: the ladder's budgets)"
     )
 

@@ -24,8 +24,8 @@ def pytest_collect_file(file_path, parent):
 def _has_expectations(path) -> bool:
     try:
         return "expect" in tomllib.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
-        return False
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError, RecursionError):
+        return False  # not a scenario this plugin can read (RecursionError: nested too deeply)
 
 
 class ScenarioFile(pytest.File):

@@ -87,6 +87,20 @@ class Point:
     wall_s: float
 
 
+def _number(text: str, what: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise ValueError(f"{what} must be a number, got {text.strip()!r}") from None
+
+
+def _integer(text: str, what: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise ValueError(f"{what} must be an integer, got {text.strip()!r}") from None
+
+
 def parse_axis(text: str, key: str = "--grid") -> Axis:
     """``NAME=START:STOP:COUNT[:log]`` or ``NAME=V1,V2,...``."""
     name, sep, spec = text.partition("=")
@@ -99,7 +113,7 @@ def parse_axis(text: str, key: str = "--grid") -> Axis:
             log = len(parts) == 4 and parts[3].strip().lower() == "log"
             if len(parts) not in (3, 4) or (len(parts) == 4 and not log):
                 raise ValueError("expected START:STOP:COUNT[:log]")
-            start, stop, count = float(parts[0]), float(parts[1]), int(parts[2])
+            start, stop, count = _number(parts[0], "START"), _number(parts[1], "STOP"), _integer(parts[2], "COUNT")
             if count < 1:
                 raise ValueError("COUNT must be at least 1")
             if count > MAX_RUNS:
@@ -110,7 +124,7 @@ def parse_axis(text: str, key: str = "--grid") -> Axis:
                 raise ValueError("a log axis needs START and STOP > 0")
             values = np.geomspace(start, stop, count) if log else np.linspace(start, stop, count)
         else:
-            values = np.array([float(v) for v in spec.split(",") if v.strip()])
+            values = np.array([_number(v, "a value") for v in spec.split(",") if v.strip()])
             log = False
             if len(values) > MAX_RUNS:
                 raise ValueError(f"{len(values):,} values are more than a sweep may run ({MAX_RUNS:,} runs)")

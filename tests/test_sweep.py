@@ -176,7 +176,7 @@ def sweep_command(tmp_path, *args, timeout=120):
          "--grid: 1000 x 1001 grid points x 1 model(s) = 1,001,000 runs, more than a sweep may run (1,000,000)"),
         # values are checked before the pool starts (it used to die with BrokenProcessPool)
         (["--grid", "mu=-1:1:3", "--model", "kinematic", "--workers", "2"],
-         "--grid mu=-1:1:3: kinematic at mu=-1: the scenario is invalid: contact.pairs[0].mu: Input should be greater than or equal to 0"),
+         "--grid mu=-1:1:3: kinematic at mu=-1: the scenario is invalid: contact.pairs[0].mu: must be greater than or equal to 0, got -1 from 'mu'"),
         (["--grid", "v1=0.5,1", "--model", "kinematic[mu=-2]", "--workers", "2"],
          "--model kinematic[mu=-2]: kinematic[mu=-2] at v1=0.5 and 1 more grid point: the scenario is invalid: contact.pairs[0].mu"),
         (["--grid", "v1=1:2:3", "--model", "dynamic-compliant[C=0"],
@@ -245,3 +245,14 @@ def test_grid_points_stream_and_the_pool_is_fed_a_bounded_window():
         assert len(pulled) <= sw.WINDOW_PER_WORKER * 2 + 1  # not the whole stream
         rest = list(results)
     assert len(pulled) == 40 and sorted(i for i, _ in [first, *rest]) == list(range(40))
+
+
+@pytest.mark.parametrize(
+    "text, phrase",
+    [("v1=0:1:abc", "COUNT must be an integer, got 'abc'"), ("v1=a:1:3", "START must be a number, got 'a'"), ("mu=0.3,x", "must be a number, got 'x'")],
+)
+def test_parse_axis_says_what_it_expected(text, phrase):
+    with pytest.raises(ScenarioError) as info:
+        sw.parse_axis(text)
+    assert phrase in info.value.problems[0].reason
+    assert "invalid literal" not in str(info.value) and "could not convert" not in str(info.value)

@@ -1,0 +1,168 @@
+"""Bad scenario input as the user meets it: `ladder check FILE` ends in the expected
+`error: FILE: KEY: reason` line(s) with exit code 2 -- no traceback, no warning, no silent
+acceptance -- and the loader's limits sit where the format says they do."""
+
+from __future__ import annotations
+
+import pytest
+
+from models.scenario import ScenarioError, load_scenario
+from planner.pytest_plugin import _has_expectations
+from tests.conftest import DATA
+from tests.test_cli import ladder
+from tests.test_scenarios import expectation
+
+BAD = DATA / "bad"
+
+#: Bad files for: touch on pairs that never touch, strict booleans and integers, nesting,
+#: bounds on numbers, a zero quaternion, predicate tables with two kinds, start values
+#: outside a drive's limits, and the plain wording of type and shape errors.
+FILES = [
+    "touch_disabled_pair", "touch_disabled_pair_nested", "touch_fixed_pair",
+    "boolean_string", "boolean_integer", "integer_boolean", "integer_not_number",
+    "nesting_too_deep", "array_too_deep", "predicate_too_deep",
+    "huge_vertex", "huge_radius", "huge_mass", "huge_gain", "huge_horizon", "huge_mesh",
+    "zero_quaternion", "predicate_two_keys", "start_above_limit", "pose_below_limit",
+    "number_not_list", "normal_wrong_length", "list_not_number", "string_dimension", "bad_name",
+    "unknown_rung", "unknown_shape", "wrong_type",
+]
+
+
+def expected_lines(path) -> int:
+    line = next((l for l in path.read_text().splitlines() if l.startswith("# expect-lines:")), None)
+    return int(line.split(":", 1)[1]) if line else 1
+
+
+@pytest.mark.parametrize("name", FILES)
+def test_check_reports_the_key_and_reason(name):
+    path = BAD / f"{name}.toml"
+    key, reason = expectation(path)
+    result = ladder("check", str(path))
+    assert result.returncode == 2, result.stdout + result.stderr
+    assert result.stdout == ""
+    assert "Traceback" not in result.stderr and "Warning" not in result.stderr
+    lines = result.stderr.splitlines()
+    assert len(lines) == expected_lines(path), result.stderr
+    prefix = f"error: {path}: {key}: " if key else f"error: {path}: "
+    assert lines[0].startswith(prefix), result.stderr
+    assert reason in lines[0]
+
+
+@pytest.mark.parametrize("command", [["simulate", "--model", "kinematic"], ["plan"]])
+def test_disabled_touch_stops_simulate_and_plan_too(command, tmp_path):
+    path = BAD / "touch_disabled_pair.toml"
+    out = ["--out", str(tmp_path / "plan")] if command == ["plan"] else []
+    result = ladder(command[0], str(path), *command[1:], *out)
+    assert result.returncode == 2
+    assert "Traceback" not in result.stderr + result.stdout
+    assert result.stderr.startswith(f"error: {path}: task.goal.all[0].touch: ")
+    assert "disabled" in result.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+# ----------------------------------------------------------------------------- limits, directly
+
+
+GOOD = (DATA / "good" / "minimal_triangle.toml").read_text()
+UNSAFE = 'unsafe = { not = { box = { "triangle.x" = [-0.51, 0.51] } } }'
+
+
+def _scene(tmp_path, text):
+    path = tmp_path / "scene.toml"
+    path.write_text(text)
+    return path
+
+
+def _nested_unsafe(levels: int) -> str:
+    """An unsafe predicate `levels` predicates deep: nots around a box."""
+    return GOOD.replace(UNSAFE, "unsafe = " + "{ not = " * (levels - 1) + '{ box = { "triangle.x" = [-0.51, 0.51] } }' + " }" * (levels - 1))
+
+
+def test_predicates_32_deep_load_and_33_do_not(tmp_path):
+    scenario = load_scenario(_scene(tmp_path, _nested_unsafe(32)))
+    from models.predicates import compile_predicate
+
+    assert len(compile_predicate(scenario, scenario.spec.task.unsafe).op) == 32
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(_scene(tmp_path, _nested_unsafe(33)))
+    assert [(p.key, "at most 32" in p.reason) for p in info.value.problems] == [("task.unsafe", True)]
+
+
+def test_deep_any_all_nesting_is_counted_too(tmp_path):
+    deep = "{ any = [ " * 20 + "{ all = [ " * 20 + '{ box = { "triangle.x" = [-0.51, 0.51] } }' + " ] }" * 40
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(_scene(tmp_path, GOOD.replace(UNSAFE, f"unsafe = {deep}")))
+    assert info.value.problems[0].key == "task.unsafe"
+    assert "nested 41 levels" in info.value.problems[0].reason
+
+
+@pytest.mark.parametrize(
+    "old, new, key",
+    [
+        ("x = -0.5, y = 2.05", "x = -1e6, y = 2.05", None),
+        ("x = -0.5, y = 2.05", "x = -1.5e6, y = 2.05", "bodies[2].pose.x"),
+        ("radius = 0.05", "radius = 1.01e6", "bodies[2].shape.radius"),
+        ("mass = 1.0", "mass = 1e6", None),
+        ("mass = 1.0", "mass = 2e6", "bodies[1].mass"),
+        ("mass = 1.0", "mass = 1e-7", "bodies[1].mass"),
+        ("K = 1e6", "K = 1e12", None),
+        ("K = 1e6", "K = 1e13", "contact.K"),
+        ("max_speed = 2.0", "max_speed = 1e300", "bodies[2].actuators.y.max_speed"),
+        ("h = 1e-2", "h = 1e300", "ladder.rungs[0].h"),
+        ("gravity = [0.0, -9.81]", "gravity = [0.0, -1e300]", "scene.gravity[1]"),
+        ('speeds = { "finger1.y" = "-v1" }', 'speeds = { "finger1.y" = "-v1 * 1e300" }', 'task.policy.speeds."finger1.y"'),
+    ],
+)
+def test_bounds_per_quantity(tmp_path, old, new, key):
+    assert old in GOOD
+    path = _scene(tmp_path, GOOD.replace(old, new))
+    if key is None:
+        load_scenario(path)  # on the bound: accepted
+        return
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    assert info.value.problems[0].key == key
+    assert "out of range" in info.value.problems[0].reason
+
+
+@pytest.mark.parametrize("value", ["true", "false"])
+def test_real_booleans_still_work(tmp_path, value):
+    text = GOOD.replace('bodies = ["finger1", "triangle"]\nmu = "mu"', f'bodies = ["finger1", "triangle"]\nmu = "mu"\nenabled = {value}')
+    if value == "false":
+        text = text.replace('{ touch = ["finger1", "triangle"] },', "")
+    scenario = load_scenario(_scene(tmp_path, text))
+    pairs = {frozenset((p.body_a, p.body_b)) for p in scenario.pairs}
+    assert (frozenset(("finger1", "triangle")) in pairs) == (value == "true")
+
+
+def test_expect_plan_is_a_real_boolean(tmp_path):
+    # (not a file in tests/data/bad: a file with [expect] would be collected by the plugin)
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(_scene(tmp_path, GOOD + "\n[expect]\nplan = 1\n"))
+    assert [(p.key, p.reason) for p in info.value.problems] == [("expect.plan", "expected true or false, got 1")]
+    assert load_scenario(_scene(tmp_path, GOOD + "\n[expect]\nplan = true\n")).spec.expect.plan is True
+
+
+def test_integral_float_is_still_an_integer(tmp_path):
+    scenario = load_scenario(_scene(tmp_path, GOOD.replace("time_limit = 5.0", "time_limit = 5.0\niterations = 3e3")))
+    assert scenario.spec.ladder.iterations == 3000
+
+
+def test_touch_on_an_enabled_pair_override_is_fine(tmp_path):
+    text = GOOD.replace('bodies = ["finger1", "triangle"]\nmu = "mu"', 'bodies = ["finger1", "triangle"]\nmu = "mu"\nenabled = true')
+    load_scenario(_scene(tmp_path, text))
+
+
+def test_pytest_plugin_skips_files_too_deep_to_read():
+    assert _has_expectations(BAD / "nesting_too_deep.toml") is False
+
+
+def test_scenario_error_survives_a_process_boundary():
+    """A worker's bad input reaches the parent whole (it once broke the process pool)."""
+    import pickle
+
+    from models.scenario import Problem, ScenarioError
+
+    err = ScenarioError("f.toml", [Problem("contact.mu", "must be >= 0")])
+    back = pickle.loads(pickle.dumps(err))
+    assert isinstance(back, ScenarioError) and str(back) == str(err) and back.problems == err.problems
