@@ -149,6 +149,18 @@ def test_scripted_obstacle_moves_with_time(tmp_path, rung):
 
 # ----------------------------------------------------------------------------- force-limited drives
 
+#: A 1 kg box (0.2 m x 0.1 m) resting on the floor: mu m g = 4.905 N.
+SLIDER = """
+[[bodies]]
+name = "box"
+role = "object"
+mass = 1.0
+shape = { type = "box", size = [0.2, 0.1] }
+pose = { x = 0.0, y = 0.05 }
+dofs = ["x", "y"]
+"""
+
+
 def pusher(max_force: float | None, *, box: bool = True, upper: float | None = None) -> str:
     limit = "" if max_force is None else f", max_force = {max_force}"
     bound = "" if upper is None else f", upper = {upper}"
@@ -162,17 +174,7 @@ pose = {{ x = -0.15, y = 0.05 }}
 dofs = ["x"]
 actuators.x = {{ kp = 1e4, kd = 2e2, max_speed = 1.0{limit}{bound} }}
 """
-    if box:
-        text += """
-[[bodies]]
-name = "box"
-role = "object"
-mass = 1.0
-shape = { type = "box", size = [0.2, 0.1] }
-pose = { x = 0.0, y = 0.05 }
-dofs = ["x", "y"]
-"""
-    return text
+    return text + SLIDER if box else text
 
 
 @pytest.mark.parametrize("rung", FORCE_RUNGS)
@@ -217,16 +219,6 @@ def test_drive_driven_into_its_limit_rests_at_it(tmp_path, rung):
 
 
 # ----------------------------------------------------------------------------- initial velocities
-
-SLIDER = """
-[[bodies]]
-name = "box"
-role = "object"
-mass = 1.0
-shape = { type = "box", size = [0.2, 0.1] }
-pose = { x = 0.0, y = 0.05 }
-dofs = ["x", "y"]
-"""
 
 
 @pytest.mark.parametrize("rung", DYNAMIC_RUNGS)
