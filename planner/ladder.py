@@ -116,6 +116,10 @@ def check_start(scenario: Scenario) -> None:
     """A start inside the unsafe set is bad input (penetration is caught by the loader), and so
     is a scripted obstacle: plan states carry no time, so a moving obstacle's pose at a state is
     unknown (simulate and sweep run such scenes from t = 0)."""
+    if not scenario.actuated:
+        raise ScenarioError(scenario.path, [
+            Problem("bodies", "nothing to plan: no body has an actuated DOF (a robot's actuators); `ladder simulate` runs such a scene")
+        ])
     moving = [i for i, body in enumerate(scenario.spec.bodies) if body.velocity]
     if moving:
         raise ScenarioError(scenario.path, [

@@ -166,3 +166,12 @@ def test_scenario_error_survives_a_process_boundary():
     err = ScenarioError("f.toml", [Problem("contact.mu", "must be >= 0")])
     back = pickle.loads(pickle.dumps(err))
     assert isinstance(back, ScenarioError) and str(back) == str(err) and back.problems == err.problems
+
+
+def test_plan_on_a_scene_with_nothing_to_actuate_is_bad_input(tmp_path):
+    """bouncing_disc has no robot: there is nothing to plan (it once ended in a traceback)."""
+    done = ladder("plan", "scenarios/bouncing_disc.toml", "--out", str(tmp_path / "p"))
+    assert done.returncode == 2, done.stderr
+    assert "Traceback" not in done.stderr
+    assert "bodies: nothing to plan: no body has an actuated DOF" in done.stderr
+    assert not (tmp_path / "p").exists()
