@@ -55,13 +55,6 @@ MARGIN_SAFETY = 2.0
 
 
 @numba.njit(cache=True)
-def body_origin(S, q, b):
-    out = np.zeros((S.bi.shape[0], 3))
-    positions(S.bi, S.bf, q, out)
-    return out[b].copy()
-
-
-@numba.njit(cache=True)
 def _speed_bound(bi, bf, nu, b):
     """Upper bound of the speed of any point of body b (0 for fixed bodies; a scripted
     obstacle's from its script)."""
@@ -95,14 +88,6 @@ def _halfspace_normal(bi, bf, q, h, pos):
         nz = 2 * (x * z - w * y) * lx + 2 * (y * z + w * x) * ly + (1 - 2 * (x * x + y * y)) * lz
     off = bf[h, BF_HSO] + nx * pos[h, 0] + ny * pos[h, 1] + nz * pos[h, 2]
     return nx, ny, nz, off
-
-
-@numba.njit(cache=True)
-def broadphase_keep(S, q, p, reach):
-    """False when pair p is certainly farther apart than reach (bounding spheres / half-space)."""
-    pos = np.zeros((S.bi.shape[0], 3))
-    positions(S.bi, S.bf, q, pos)
-    return _keep(S.bi, S.bf, q, pos, S.pi[p, PI_A], S.pi[p, PI_B], reach)
 
 
 @numba.njit(cache=True)

@@ -47,8 +47,8 @@ hull tables): the caller may then use `fcl_pair_contacts` (python-fcl, one conta
 Performance notes: vectors are tuples of three floats and rotations tuples of rows, so the
 compiled path allocates nothing but two small scratch arrays for face clipping (box-box, and
 mesh-box / mesh-mesh face contacts). Calling a compiled function increments and decrements
-the reference count of every array in its arguments (SceneData holds 30): about 0.4 us per
-`collide_pair_3d` call on top of the test itself (0.2-0.5 us; mesh-box about 1-3 us), which
+the reference count of every array in its arguments (SceneData holds 30), a cost per
+`collide_pair_3d` call comparable to the test itself (docs/measurements.md), which
 `collide_all_3d` pays once per scene. Only mesh pairs get the hull tables (`_collide_hull`). Helper calls
 never pass literal constants (numba would compile a specialised copy for each).
 """
@@ -1519,8 +1519,8 @@ def collide_pair_3d(S, q, p, margin, c_psi, c_n, c_pa, c_pb, start):
 
     A thin entry: it reads the pair's data from S and hands scalars, tuples and only the
     arrays the test needs to `_collide` (a compiled call increments and decrements the
-    reference count of every array in its arguments, about 5 ns each: passing the whole scene
-    on costs more than most tests). `collide_all_3d` pays that once for all pairs.
+    reference count of every array in its arguments: passing the whole scene on costs more
+    than most tests; docs/measurements.md). `collide_all_3d` pays that once for all pairs.
     """
     if S.dimension != 3:
         return -1
@@ -1675,9 +1675,9 @@ def fcl_pair_contacts(scenario, S, q, p, margin):
 
     For pairs without a compiled test (none in a spatial scene whose meshes have hull tables,
     which `compile_scene` always builds: convex meshes are compiled against every shape; this
-    stays as an independent check). Its distance is a GJK upper bound (seen 5e-4 high on
-    mesh-box, more on curved shapes) and its penetration depth good to ~1e-6. Planes never reach fcl (its distance to a
-    Halfspace crashes python-fcl 0.7): pairs with a plane use the compiled test.
+    stays as an independent check). Its distance is a GJK upper bound, not exact (how far off:
+    docs/measurements.md). Planes never reach fcl (its distance to a Halfspace crashes
+    python-fcl 0.7): pairs with a plane use the compiled test.
     """
     a, b = int(S.pair_a[p]), int(S.pair_b[p])
     bodies = scenario.spec.bodies
@@ -1689,19 +1689,13 @@ def fcl_pair_contacts(scenario, S, q, p, margin):
         k = collide_pair_3d(S, np.asarray(q, float), p, float(margin), psi, n, pa, pb, 0)
         return [(float(psi[i]), n[i].copy(), pa[i].copy(), pb[i].copy()) for i in range(k)]
 
-    import fcl  # python-fcl: imported only when a pair needs it (see models.geometry)
-
-    from models.geometry import _fcl_object
+    from models.geometry import fcl_nearest_points  # python-fcl, through the one module that imports it
 
     placements = scenario.placements(np.asarray(q, float))
     Xa, Xb = placements[bodies[a].name], placements[bodies[b].name]
-    request = fcl.DistanceRequest(enable_nearest_points=True, enable_signed_distance=True)
-    result = fcl.DistanceResult()
-    psi = float(fcl.distance(_fcl_object(ga, Xa), _fcl_object(gb, Xb), request, result))
+    psi, pa, pb = fcl_nearest_points(ga, Xa, gb, Xb)
     if psi > margin:
         return []
-    pa = np.array(result.nearest_points[0], float)
-    pb = np.array(result.nearest_points[1], float)
     gap = pb - pa
     length = float(np.linalg.norm(gap))
     if length > 1e-9 and abs(psi) > 1e-9:

@@ -380,3 +380,15 @@ def _fcl_signed_distance(ga: Geometry, Xa: Placement, gb: Geometry, Xb: Placemen
     request = fcl.DistanceRequest(enable_signed_distance=True)
     result = fcl.DistanceResult()
     return float(fcl.distance(_fcl_object(ga, Xa), _fcl_object(gb, Xb), request, result))
+
+
+def fcl_nearest_points(ga: Geometry, Xa: Placement, gb: Geometry, Xb: Placement) -> tuple[float, np.ndarray, np.ndarray]:
+    """python-fcl's signed distance of two posed bounded spatial shapes and its nearest points
+    (world frame, on A and on B): (psi, pa, pb). Not for planes (fcl's Halfspace distance
+    crashes python-fcl 0.7)."""
+    import fcl
+
+    request = fcl.DistanceRequest(enable_nearest_points=True, enable_signed_distance=True)
+    result = fcl.DistanceResult()
+    psi = float(fcl.distance(_fcl_object(ga, Xa), _fcl_object(gb, Xb), request, result))
+    return psi, np.array(result.nearest_points[0], float), np.array(result.nearest_points[1], float)

@@ -414,22 +414,6 @@ def quat_to_matrix(q):
 
 
 @numba.njit(cache=True)
-def body_pose_2d(S, q, b):
-    """(px, py, cos theta, sin theta) of planar body b at configuration q (single exit: hot path)."""
-    px = S.base_pos[b, 0]
-    py = S.base_pos[b, 1]
-    # base_quat holds a rotation about z: theta = 2 atan2(z, w)
-    theta = 2.0 * np.arctan2(S.base_quat[b, 3], S.base_quat[b, 0])
-    if S.qmap[b, Q_X] >= 0:
-        px = q[S.qmap[b, Q_X]]
-    if S.qmap[b, Q_Y] >= 0:
-        py = q[S.qmap[b, Q_Y]]
-    if S.qmap[b, Q_ANGLE] >= 0:
-        theta = q[S.qmap[b, Q_ANGLE]]
-    return px, py, np.cos(theta), np.sin(theta)
-
-
-@numba.njit(cache=True)
 def body_pose_3d(S, q, b):
     """(position (3,), rotation matrix (3, 3)) of spatial body b at configuration q."""
     p = S.base_pos[b].copy()
@@ -447,28 +431,6 @@ def body_pose_3d(S, q, b):
     else:
         quat = S.base_quat[b].copy()
     return p, quat_to_matrix(quat)
-
-
-@numba.njit(cache=True)
-def integrate_positions(S, q, nu, h):
-    """q + h G(q) nu, renormalising quaternions (the paper's q^{l+1} = q^l + h G nu^{l+1})."""
-    out = q.copy()
-    for b in range(S.kind.shape[0]):
-        for k in range(4):  # translations and the planar/yaw angle: G = identity
-            if S.qmap[b, k] >= 0:
-                out[S.qmap[b, k]] = q[S.qmap[b, k]] + h * nu[S.vmap[b, k]]
-        if S.qmap[b, Q_QW] >= 0:
-            quat = np.empty(4)
-            for k in range(4):
-                quat[k] = q[S.qmap[b, Q_QW + k]]
-            omega = np.array([0.0, nu[S.vmap[b, V_WX]], nu[S.vmap[b, V_WX + 1]], nu[S.vmap[b, V_WX + 2]]])
-            dq = quat_mul(omega, quat)
-            for k in range(4):
-                quat[k] += 0.5 * h * dq[k]
-            quat /= np.sqrt(np.sum(quat * quat))
-            for k in range(4):
-                out[S.qmap[b, Q_QW + k]] = quat[k]
-    return out
 
 
 def G_matrix(S: SceneData, q: np.ndarray) -> np.ndarray:
