@@ -11,7 +11,8 @@ sets every step without returning to Python:
 
 `touch` needs the pair's signed distance; the rollout passes the per-pair minimum psi of
 the contacts it detected (pairs beyond the detection margin count as apart), so the margin
-must be at least the largest touch tolerance: `max_touch_tolerance` says how large.
+must be at least the largest touch tolerance: the loader (`models.scenario`) refuses a
+larger one.
 """
 
 from __future__ import annotations
@@ -80,11 +81,6 @@ def compile_predicate(scenario: Scenario, predicate) -> Program:
     )
 
 
-def max_touch_tolerance(*programs: Program) -> float:
-    tols = [float(p.lo[i]) for p in programs for i in range(len(p.op)) if p.op[i] == OP_TOUCH]
-    return max(tols, default=0.0)
-
-
 @numba.njit(cache=True)
 def evaluate(P, q, pair_psi):
     """Evaluate program P at configuration q with per-pair minimum distances pair_psi."""
@@ -121,19 +117,6 @@ def evaluate_with(op_codes, index, lo, hi, q, pair_psi, stack):
             stack[top] = result
             top += 1
     return stack[0]
-
-
-def pair_distances(scenario: Scenario, q: np.ndarray) -> np.ndarray:
-    """Signed distance of every contact pair at q (reference geometry, Python: for planners)."""
-    from models import geometry as geo
-
-    placements = scenario.placements(q)
-    return np.array(
-        [
-            geo.signed_distance(scenario.geometries[p.body_a], placements[p.body_a], scenario.geometries[p.body_b], placements[p.body_b])
-            for p in scenario.pairs
-        ]
-    )
 
 
 def predicate_distance(scenario: Scenario, node, q: np.ndarray, pair_psi: np.ndarray) -> float:

@@ -9,12 +9,14 @@ Every rung has the same interface:
   lower rung's state gains zero velocities / zero deformations, a higher rung's loses them;
 - ``valid(scenario, q)``: non-penetration (the geometric rung's whole model, eq. 9).
 
-`RUNGS` is the registry, lowest fidelity first. Adding a rung touches its own entry only.
+`RUNGS` holds the rung objects, lowest fidelity first, built from the family's registry
+(`models.family.FAMILY`): adding a rung touches its entry there only.
 """
 
 from __future__ import annotations
 
 import time
+from collections import OrderedDict
 from dataclasses import dataclass, field, replace
 
 import numba
@@ -22,8 +24,8 @@ import numpy as np
 
 from models import geometry as geo
 from models.contact import pair_min_distances
-from models.kinematics import SceneData, compile_scene
-from models.kinematics import PI_INERT
+from models.family import FAMILY
+from models.kinematics import PI_INERT, SceneData, compile_scene
 from models.predicates import OP_TOUCH, Program, compile_predicate, evaluate_with
 from models.rollout import OUTCOME_NAMES, rollout_kernel
 from models.scenario import Scenario
@@ -109,12 +111,19 @@ class Compiled:
     scripted: bool  # some obstacle moves on a script (rollouts then work on a copy of the scene's pose tables)
 
 
-_CACHE: dict[int, tuple[Scenario, Compiled]] = {}
+#: Scenarios whose compiled data `compiled` keeps (the most recently used). A sweep worker
+#: loads a new scenario per run: the cache keeps the last few, not every one it met.
+CACHE_SIZE = 16
+_CACHE: OrderedDict[int, tuple[Scenario, Compiled]] = OrderedDict()
 
 
 def compiled(scenario: Scenario) -> Compiled:
+    """What `scenario` compiles to, computed once and kept for the CACHE_SIZE scenarios used
+    most recently (keyed by identity: the entry holds the scenario, so its id is not reused
+    while it is cached)."""
     hit = _CACHE.get(id(scenario))
     if hit is not None and hit[0] is scenario:
+        _CACHE.move_to_end(id(scenario))
         return hit[1]
     S = compile_scene(scenario)
     q_index, v_index, kp, kd, lower, upper, max_force = [], [], [], [], [], [], []
@@ -159,6 +168,8 @@ def compiled(scenario: Scenario) -> Compiled:
         scripted=any(b.velocity for b in scenario.spec.bodies),
     )
     _CACHE[id(scenario)] = (scenario, result)
+    while len(_CACHE) > CACHE_SIZE:
+        _CACHE.popitem(last=False)
     return result
 
 
@@ -372,12 +383,7 @@ def _joined(results: list[RolloutResult], max_records: int) -> RolloutResult:
 
 
 RUNGS: dict[str, Rung] = {
-    "geometric": Rung("geometric", None, "eq. (9): non-penetration only"),
-    "kinematic": Rung("kinematic", Model(True, 0.0, False, 1.0, 2), "eq. (8): commanded speeds, min-norm passive speeds"),
-    "quasistatic-rigid": Rung("quasistatic-rigid", Model(False, 0.0, False, 1.0, 4), "eq. (7)"),
-    "quasistatic-compliant": Rung("quasistatic-compliant", Model(False, 0.0, True, 1.0, 4), "eq. (6)"),
-    "dynamic-rigid": Rung("dynamic-rigid", Model(False, 1.0, False, 1.0, 4), "eq. (5)"),
-    "dynamic-compliant": Rung("dynamic-compliant", Model(False, 1.0, True, 1.0, 4), "eq. (3)"),
+    rung.name: Rung(rung.name, None if rung.physics is None else Model(*rung.physics), rung.description) for rung in FAMILY
 }
 
 
@@ -400,14 +406,13 @@ def _geometric_check(S, op, index, lo, hi, q, low, high, tolerance, psi, stack):
 def geometric_checker(scenario: Scenario, low: np.ndarray, high: np.ndarray, tolerance: float = GEOMETRIC_TOLERANCE):
     """A function q -> bool: the geometric rung's validity (bounds, eq. (9) non-penetration,
     not unsafe), compiled, with python-fcl only for the pairs the kernels cannot measure."""
-    from models.predicates import predicate_distance
+    from models.task import Outcome, classify
 
     c = compiled(scenario)
     unsafe = c.unsafe
     psi = np.empty(max(c.scene.pi.shape[0], 1))
     stack = np.zeros(unsafe.op.shape[0] + 1, np.bool_)
     low, high = np.ascontiguousarray(low, float), np.ascontiguousarray(high, float)
-    task = scenario.spec.task
 
     def check(q: np.ndarray) -> bool:
         ok = _geometric_check(c.scene, unsafe.op, unsafe.index, unsafe.lo, unsafe.hi, q, low, high, tolerance, psi, stack)
@@ -416,34 +421,33 @@ def geometric_checker(scenario: Scenario, low: np.ndarray, high: np.ndarray, tol
         d = pair_signed_distances(scenario, q)
         if np.any(d < -tolerance):
             return False
-        return not (task.unsafe is not None and predicate_distance(scenario, task.unsafe, q, d) == 0.0)
+        return classify(scenario, q, d) is not Outcome.UNSAFE
 
     return check
 
 
 def pair_signed_distances(scenario: Scenario, q: np.ndarray) -> np.ndarray:
-    """Every contact pair's signed distance at q: the compiled kernels, python-fcl only for
-    the pairs they cannot measure (inert pairs read inf)."""
-    from models.predicates import pair_distances
-
+    """Every contact pair's signed distance at q, m (negative: penetration depth), in
+    `scenario.pairs` order: the compiled kernels, the reference geometry (`models.geometry`,
+    python-fcl) only for the pairs they cannot measure (inert pairs read inf)."""
     out = np.empty(max(len(scenario.pairs), 1))
     pair_min_distances(compiled(scenario).scene, np.asarray(q, float), 1e9, out)
-    if np.isnan(out).any():
-        reference = pair_distances(scenario, q)
-        missing = np.isnan(out)
-        out[: len(reference)][missing[: len(reference)]] = reference[missing[: len(reference)]]
+    missing = np.flatnonzero(np.isnan(out[: len(scenario.pairs)]))
+    if len(missing):
+        placements = scenario.placements(q)
+        for k in missing:
+            pair = scenario.pairs[k]
+            out[k] = geo.signed_distance(scenario.geometries[pair.body_a], placements[pair.body_a],
+                                         scenario.geometries[pair.body_b], placements[pair.body_b])
     return out[: len(scenario.pairs)]
 
 
 def rung_for(scenario: Scenario, name: str) -> Rung:
-    """The registry's rung with the scenario's per-rung settings (theta, friction directions,
-    contact solver)."""
+    """The registry's rung with the scenario's settings for it (`Scenario.rung_settings`:
+    theta, friction directions, contact solver)."""
     rung = RUNGS[name]
-    spec = next((r for r in scenario.spec.ladder.rungs if r.model == name), None)
-    if rung.model is None or spec is None:
+    if rung.model is None:
         return rung
-    model = rung.model._replace(theta=spec.theta)
-    if spec.friction_directions is not None:
-        model = model._replace(friction_directions=spec.friction_directions)
-    solver = rung.solver if spec.contact_solver is None else contact_solver(spec.contact_solver)
-    return replace(rung, model=model, solver=solver)
+    settings = scenario.rung_settings(name)
+    model = rung.model._replace(theta=settings.theta, friction_directions=settings.friction_directions)
+    return replace(rung, model=model, solver=contact_solver(settings.contact_solver))

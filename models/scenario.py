@@ -26,15 +26,19 @@ from pydantic import ValidationError
 from models import geometry as geo
 from models import messages
 from models.expressions import ExpressionError, evaluate
+from models.family import RUNG_NAMES, definition
 from models.schema import (
+    CONTROL_PLANNERS,
     DOF_NAMES,
+    GEOMETRIC_PLANNERS,
     LIMITS,
     MAX_PREDICATE_DEPTH,
     PREDICATE_KEYS,
-    RUNGS,
     SHAPES_2D,
     SHAPES_3D,
     BodySpec,
+    Drive,
+    LadderSpec,
     Predicate,
     ScenarioSpec,
 )
@@ -47,8 +51,6 @@ QUATERNION_NORM_TOLERANCE = 1e-6
 MAX_PROBLEMS = 20
 
 ROTATIONAL_DOFS = ("theta", "yaw", "rotation")
-GEOMETRIC_PLANNERS = ("RRTConnect", "RRT", "RRTstar", "PRM", "KPIECE1", "EST")
-CONTROL_PLANNERS = ("RRT", "KPIECE1", "EST")
 
 
 @dataclass(frozen=True)
@@ -86,6 +88,51 @@ class ContactPair:
 
 
 @dataclass(frozen=True)
+class RungSettings:
+    """A rung's settings in a scenario, every default resolved: the rung's entry in
+    `[[ladder.rungs]]`, else `[ladder]`, else the rung's own default (`models.family`).
+
+    h: time step, s (None for geometric; a rung the ladder does not list takes its family
+    default); control_period: s per planner control; planner: OMPL planner name (geometric:
+    RRTConnect unless the entry names one; else the ladder's); iterations: planner
+    iterations; time_limit: wall-clock cap on its planning, s; contact_solver: lemke, pgs or
+    auto; friction_directions: sides of the spatial friction cone (None for geometric);
+    theta: theta-rule weight."""
+
+    name: str
+    h: float | None
+    control_period: float
+    planner: str
+    iterations: int
+    time_limit: float
+    contact_solver: str
+    friction_directions: int | None
+    theta: float
+
+
+def resolve_rung_settings(ladder: LadderSpec, name: str) -> RungSettings:
+    """`RungSettings` of rung `name` under a ladder table (see `Scenario.rung_settings`)."""
+    family = definition(name)
+    entry = next((r for r in ladder.rungs if r.model == name), None)
+
+    def given(key: str):
+        return None if entry is None else getattr(entry, key)
+
+    geometric = family.physics is None
+    return RungSettings(
+        name=name,
+        h=None if geometric else (given("h") or family.default_step),
+        control_period=given("control_period") or ladder.control_period,
+        planner=given("planner") or (GEOMETRIC_PLANNERS[0] if geometric else ladder.planner),
+        iterations=given("iterations") or ladder.iterations,
+        time_limit=given("time_limit") or ladder.time_limit,
+        contact_solver=given("contact_solver") or "lemke",
+        friction_directions=given("friction_directions") or family.friction_directions,
+        theta=1.0 if entry is None else entry.theta,
+    )
+
+
+@dataclass(frozen=True)
 class Scenario:
     """A validated scenario: the spec plus everything derived from it.
 
@@ -113,6 +160,21 @@ class Scenario:
 
     def body(self, name: str) -> BodySpec:
         return next(b for b in self.spec.bodies if b.name == name)
+
+    def rung_settings(self, name: str) -> RungSettings:
+        """Rung `name`'s settings with every default resolved (`RungSettings`); any rung of
+        the family, listed in the ladder or not. KeyError for an unknown rung name."""
+        return resolve_rung_settings(self.spec.ladder, name)
+
+    def drive(self, coordinate: str) -> Drive:
+        """The drive of an actuated coordinate (``"finger1.y"``)."""
+        body, dof = coordinate.split(".", 1)
+        return self.body(body).actuators[dof]
+
+    @property
+    def max_speeds(self) -> np.ndarray:
+        """The largest commanded speed of each actuated coordinate, in `actuated` order (m/s or rad/s)."""
+        return np.array([self.drive(name).max_speed for name in self.actuated], dtype=float)
 
     def placements(self, q: np.ndarray) -> dict[str, geo.Placement]:
         """World placement of every body at configuration q."""
@@ -435,6 +497,7 @@ def _derive(spec: ScenarioSpec, parameters: Mapping[str, float], path: Path) -> 
             start_velocity[velocities.index(name)] = value
 
     problems += _check_contacts(spec, names)
+    problems += _check_touch_tolerance("contact.touch_tolerance", spec.contact.touch_tolerance)
     problems += _check_task(spec, coordinates, actuated, names, _pair_status(spec))
     problems += _check_ladder(spec)
     problems += _check_limits(spec, coordinates, start, dim)
@@ -602,6 +665,8 @@ def _check_predicate(pred: Predicate, key: str, coordinates: list[str], names: l
             why = pair_status(*pred.touch)
             if why is not None:
                 out.append(Problem(f"{key}.touch", why))
+        if pred.tol is not None:
+            out += _check_touch_tolerance(f"{key}.tol", pred.tol)
     elif kind in ("AllPredicate", "AnyPredicate"):
         word = "all" if kind == "AllPredicate" else "any"
         for i, sub in enumerate(getattr(pred, word)):
@@ -609,6 +674,18 @@ def _check_predicate(pred: Predicate, key: str, coordinates: list[str], names: l
     else:
         out += _check_predicate(pred.not_, f"{key}.not", coordinates, names, pair_status)
     return out
+
+
+def _check_touch_tolerance(key: str, tol: float) -> list[Problem]:
+    """A touch tolerance may not exceed the contact-detection margin: compiled rollouts
+    measure a pair only while it is within the margin (farther pairs count as apart), so a
+    larger tolerance would make their goal check disagree with `predicate_distance`."""
+    from models.contact import DEFAULT_MARGIN  # the compiled kernels: loaded when a file is checked, not on import
+
+    if tol <= DEFAULT_MARGIN:
+        return []
+    return [Problem(key, f"touch tolerance {tol:g} m is above the contact-detection margin {DEFAULT_MARGIN:g} m "
+                         "(rollouts see a pair only within the margin); use at most that")]
 
 
 def _parse_key(key: str) -> tuple:
@@ -648,11 +725,11 @@ def _check_task(spec: ScenarioSpec, coordinates: list[str], actuated: list[str],
 def _check_ladder(spec: ScenarioSpec) -> list[Problem]:
     out = []
     ladder = spec.ladder
-    order = [RUNGS.index(r.model) for r in ladder.rungs]
+    order = [RUNG_NAMES.index(r.model) for r in ladder.rungs]
     for i, rung in enumerate(ladder.rungs):
         key = f"ladder.rungs[{i}]"
         if i > 0 and order[i] <= order[i - 1]:
-            out.append(Problem(f"{key}.model", f"{rung.model!r} after {ladder.rungs[i - 1].model!r}: rungs go from low to high fidelity ({' < '.join(RUNGS)}), each once"))
+            out.append(Problem(f"{key}.model", f"{rung.model!r} after {ladder.rungs[i - 1].model!r}: rungs go from low to high fidelity ({' < '.join(RUNG_NAMES)}), each once"))
         if rung.model == "geometric":
             if rung.h is not None:
                 out.append(Problem(f"{key}.h", "the geometric rung has no time step"))

@@ -35,20 +35,16 @@ from pydantic import Strict as StrictMode
 from pydantic_core import PydanticCustomError
 
 from models.expressions import ExpressionError, evaluate
+from models.family import PROPAGATING_RUNGS, RUNG_NAMES
+from models.task import OUTCOME_LABELS
 
-#: Rung names, lowest fidelity first. The ladder in a file must respect this order.
-RUNGS: tuple[str, ...] = (
-    "geometric",
-    "kinematic",
-    "quasistatic-rigid",
-    "quasistatic-compliant",
-    "dynamic-rigid",
-    "dynamic-compliant",
-)
 #: Contact solvers a rung may name (models.stepper.SOLVER_METHODS).
 CONTACT_SOLVERS: tuple[str, ...] = ("lemke", "pgs", "auto")
-#: OMPL planners a rung may name (geometric rung: RRTConnect and friends; control rungs: the rest).
-PLANNERS: tuple[str, ...] = ("RRTConnect", "RRT", "RRTstar", "PRM", "KPIECE1", "EST")
+#: OMPL planners of the geometric rung (the first is its default) and of the rungs that
+#: propagate (control planning); a rung may name any of PLANNERS, checked per rung on load.
+GEOMETRIC_PLANNERS: tuple[str, ...] = ("RRTConnect", "RRT", "RRTstar", "PRM", "KPIECE1", "EST")
+CONTROL_PLANNERS: tuple[str, ...] = ("RRT", "KPIECE1", "EST")
+PLANNERS: tuple[str, ...] = tuple(dict.fromkeys(GEOMETRIC_PLANNERS + CONTROL_PLANNERS))
 #: Free DOF names per scene dimension, in the canonical order coordinates are stacked.
 DOF_NAMES: dict[int, tuple[str, ...]] = {2: ("x", "y", "theta"), 3: ("x", "y", "z", "yaw", "rotation")}
 SHAPES_2D = ("halfplane", "disc", "box", "polygon", "capsule")
@@ -189,14 +185,6 @@ class ScenarioInfo(Strict):
 class SceneSpec(Strict):
     dimension: Literal[2, 3] = Field(description="2: planar bodies (x, y, theta); 3: spatial bodies")
     gravity: tuple[Acceleration, ...] = Field(description="gravity vector, one entry per dimension, m/s^2")
-
-
-class Material(Strict):
-    """Contact material: Coulomb friction mu, stiffness K (N/m) and damping C (N s/m)."""
-
-    mu: NonNegativeRatio
-    K: Gain
-    C: NonNegativeGain
 
 
 class PairMaterial(Strict):
@@ -453,7 +441,7 @@ class TaskSpec(Strict):
 
 
 class RungSpec(Strict):
-    model: Literal[RUNGS]  # type: ignore[valid-type]
+    model: Literal[RUNG_NAMES]  # type: ignore[valid-type]
     h: Time | None = Field(None, description="physics time step, s (not for geometric)")
     control_period: Time | None = Field(
         None, description="duration of one planner control, s (default: ladder.control_period)"
@@ -492,7 +480,7 @@ class LadderSpec(Strict):
 class ExpectSpec(Strict):
     """What the scenario must do with its default parameters (run by `pytest scenarios/`)."""
 
-    policy: dict[Literal[RUNGS[1:]], Literal["goal", "unsafe", "none"]] = Field(  # type: ignore[valid-type]
+    policy: dict[Literal[PROPAGATING_RUNGS], Literal[OUTCOME_LABELS]] = Field(  # type: ignore[valid-type]
         default_factory=dict, description="outcome of the task's policy under each named rung"
     )
     plan: Bool | None = Field(None, description="true: `ladder plan` must find a plan that holds at the top rung")

@@ -6,8 +6,10 @@ import numpy as np
 import pytest
 
 from models import geometry as geo
-from models.predicates import compile_predicate, evaluate, max_touch_tolerance
-from models.scenario import load_scenario
+from models.contact import DEFAULT_MARGIN
+from models.predicates import compile_predicate, evaluate
+from models.scenario import ScenarioError, load_scenario
+from models.task import Outcome, classify, goal_distance
 from tests.conftest import SCENARIOS
 
 
@@ -67,6 +69,35 @@ def test_missing_unsafe_set_is_never_true():
     assert not evaluate(program, scenario.start, np.zeros(len(scenario.pairs)))
 
 
-def test_touch_tolerance_is_reported():
+@pytest.mark.parametrize(
+    "old, new, key",
+    [
+        ("touch_tolerance = 1e-3", f"touch_tolerance = {2 * DEFAULT_MARGIN}", "contact.touch_tolerance"),
+        ('{ touch = ["finger2", "triangle"] }', f'{{ touch = ["finger2", "triangle"], tol = {2 * DEFAULT_MARGIN} }}', "task.goal.all[1].tol"),
+    ],
+)
+def test_a_touch_tolerance_above_the_detection_margin_is_bad_input(tmp_path, old, new, key):
+    """Rollouts see a pair only within the contact-detection margin: a wider touch would make
+    the compiled goal check disagree with predicate_distance, so the loader refuses it."""
+    text = (SCENARIOS / "two_finger_triangle.toml").read_text()
+    assert old in text
+    path = tmp_path / "wide.toml"
+    path.write_text(text.replace(old, new))
+    with pytest.raises(ScenarioError) as err:
+        load_scenario(path)
+    assert f"{path}: {key}: touch tolerance" in str(err.value) and "margin" in str(err.value)
+
+
+def test_classify_and_goal_distance_agree():
+    """A configuration is classified GOAL exactly where its goal distance is 0 (and it is not unsafe)."""
     scenario = load_scenario(SCENARIOS / "two_finger_triangle.toml")
-    assert max_touch_tolerance(compile_predicate(scenario, scenario.spec.task.goal)) == 1e-3
+    rng = np.random.default_rng(3)
+    seen = set()
+    for _ in range(200):
+        x = rng.uniform(-0.7, 0.7)
+        q = np.array([x, 0.5 - x + 0.05 * np.sqrt(2), 0.5 + x + 0.05 * np.sqrt(2)]) + rng.normal(scale=2e-3, size=3)
+        outcome = classify(scenario, q)
+        seen.add(outcome)
+        if outcome is not Outcome.UNSAFE:
+            assert (outcome is Outcome.GOAL) == (goal_distance(scenario, q) == 0.0)
+    assert seen == set(Outcome)
