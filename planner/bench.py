@@ -252,7 +252,9 @@ def mujoco_peer(scenario, u, steps: int, h: float, ours, quick: bool = False) ->
 
 
 def _end_state(scenario, q) -> dict:
-    """Outcome at q, the object coordinates and which robot-object pairs touch."""
+    """The outcome at q (None when q diverged: a state that diverged has no outcome, the run
+    has that status), whether it diverged, the object coordinates and which robot-object
+    pairs touch."""
     from models.rungs import pair_signed_distances
 
     tol = scenario.spec.contact.touch_tolerance
@@ -260,34 +262,36 @@ def _end_state(scenario, q) -> dict:
     psi = pair_signed_distances(scenario, q) if np.all(np.isfinite(q)) else np.full(len(scenario.pairs), np.nan)
     touching = {f"{p.body_a}-{p.body_b}": bool(psi[i] <= tol) for i, p in enumerate(scenario.pairs)
                 if {roles[p.body_a], roles[p.body_b]} == {"robot", "object"}}
-    return {"outcome": _outcome(scenario, q), "q": dict(zip(scenario.coordinates, map(float, q))), "touching": touching}
+    return {"outcome": _outcome(scenario, q), "diverged": _diverged(q), "q": dict(zip(scenario.coordinates, map(float, q))),
+            "touching": touching}
 
 
-def _outcome(scenario, q, tables=None) -> str:
-    """The task's outcome at q as a rollout classifies it (unsafe before goal); 'diverged'
-    for a q that is not finite or beyond the stepper's divergence limit."""
-    from models.predicates import evaluate
-    from models.rungs import compiled, pair_signed_distances
+def _diverged(q) -> bool:
+    """q is not finite or beyond the stepper's divergence limit (a run's status, not an outcome)."""
     from models.stepper import DIVERGENCE_LIMIT
 
-    if not np.all(np.abs(q) < DIVERGENCE_LIMIT):  # also catches nan
-        return "diverged"
-    c, psi = tables or compiled(scenario), pair_signed_distances(scenario, q)
-    return "unsafe" if evaluate(c.unsafe, q, psi) else "goal" if evaluate(c.goal, q, psi) else "none"
+    return not np.all(np.abs(q) < DIVERGENCE_LIMIT)  # also catches nan
+
+
+def _outcome(scenario, q) -> str | None:
+    """The task's outcome label at q as a rollout classifies it (`models.task.classify`);
+    None for a q that diverged."""
+    from models.task import classify
+
+    return None if _diverged(q) else classify(scenario, q).label
 
 
 def _track(scenario, times, Q) -> dict:
-    """First times the goal and the unsafe set are met along records (times, Q), the outcome
-    and q at the last record, and the largest displacement of the passive coordinates."""
-    from models.rungs import compiled
-
-    tables = compiled(scenario)
+    """First times the goal and the unsafe set are met along records (times, Q) and the first
+    time the run diverged, the outcome (None: diverged) and q at the last record, and the
+    largest displacement of the passive coordinates."""
     passive = [i for i, name in enumerate(scenario.coordinates) if name not in scenario.actuated]
-    outcomes = [_outcome(scenario, q, tables) for q in Q]
-    first = {kind: next((float(t) for t, o in zip(times, outcomes) if o == kind), None) for kind in ("goal", "unsafe", "diverged")}
+    outcomes = [_outcome(scenario, q) for q in Q]
+    first = {kind: next((float(t) for t, o in zip(times, outcomes) if o == kind), None) for kind in ("goal", "unsafe")}
+    diverged_at = next((float(t) for t, q in zip(times, Q) if _diverged(q)), None)
     finite = Q[np.all(np.isfinite(Q), axis=1)]
     moved = np.abs(finite[:, passive] - scenario.start[passive]) if passive else np.zeros((1, 1))
-    return {"goal_at": first["goal"], "unsafe_at": first["unsafe"], "diverged_at": first["diverged"], "end": outcomes[-1],
+    return {"goal_at": first["goal"], "unsafe_at": first["unsafe"], "diverged_at": diverged_at, "end": outcomes[-1],
             "end_q": dict(zip(scenario.coordinates, map(float, Q[-1]))), "max_object_displacement": float(moved.max()),
             "duration": float(times[-1])}
 
@@ -463,8 +467,8 @@ def scaling(quick: bool = False) -> dict:
     (None: never); stack_lemke_cheaper_from[rung]: the same for Lemke on the stack.
 
     Timed in a child process with one OpenBLAS thread (OPENBLAS_NUM_THREADS=1): numba's matrix
-    products call OpenBLAS, whose worker threads on a machine with other work turn a 2 ms Lemke
-    step on 64 contacts into 20 ms of waiting, and that is noise, not the method's cost.
+    products call OpenBLAS, whose worker threads on a machine with other work add waiting many
+    times the step's own cost (docs/measurements.md), and that is noise, not the method's cost.
     """
     if os.environ.get("OPENBLAS_NUM_THREADS") == "1":
         return _scaling(quick)
@@ -663,7 +667,7 @@ def peer_markdown(peer: dict) -> list[str]:
         end = row["end"]
         touching = ", ".join(f"{k}: {'yes' if v else 'no'}" for k, v in end["touching"].items())
         left_out = ", ".join(row["inert_pairs_left_out"]) or "none"
-        lines.append(f"| {row['contact']} | {left_out} | {row['steps_per_s']:,.0f} | {row['ratio']:.2f}x | {end['outcome']} | {touching} | {q(end['q'])} |")
+        lines.append(f"| {row['contact']} | {left_out} | {row['steps_per_s']:,.0f} | {row['ratio']:.2f}x | {end['outcome'] or '-'} | {touching} | {q(end['q'])} |")
     lines += ["", f"Ours ({peer['ours']['rung']}, {peer['ours']['steps_per_s']:,.0f} steps/s in these rounds) against the faster MuJoCo mapping "
               f"(`{peer['against']}`): **{peer['ratio']:.2f}x**.", ""]
     st = peer["stability"]
@@ -673,5 +677,5 @@ def peer_markdown(peer: dict) -> list[str]:
               "|---|---|---|---|---|---|---|---|---|"]
     for row in st["rows"]:
         lines.append(f"| {row['scene']} | {row['simulator']} | {row['h']:g} | {t(row['goal_at'])} | {t(row['unsafe_at'])} | "
-                     f"{row['max_object_displacement']:.3g} | {row['end']} | {q(row['end_q'])} | {row['status']} |")
+                     f"{row['max_object_displacement']:.3g} | {row['end'] or '-'} | {q(row['end_q'])} | {row['status']} |")
     return lines

@@ -14,6 +14,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from models.scenario import Scenario
+from models.task import Outcome
 
 
 @dataclass
@@ -40,9 +41,9 @@ def ladder_vs_flat(scenario: Scenario, seeds, *, iterations: int | None = None, 
             wall = time.perf_counter() - t0
             top = result.rungs[-1] if result.rungs else None
             holds = bool(result.top_holds and top is not None
-                         and assess(scenario, top.rung, top.controls, top.durations)["outcome"] == "goal")
+                         and assess(scenario, top.rung, top.controls, top.durations)["outcome"] == Outcome.GOAL.label)
             runs.append(Run(mode, int(seed), holds, wall, sum(r.propagations for r in result.rungs),
-                            ", ".join(f"{r.rung}: {r.ended}" for r in result.rungs)))
+                            ", ".join(f"{r.rung}: {r.ended.label}" for r in result.rungs)))
             if progress:
                 progress(runs[-1])
     summary = {}
@@ -63,10 +64,9 @@ def _warm_up(scenario: Scenario, rungs: list[str] | None) -> None:
     """One short rollout per rung, so that compiling (or loading) the kernels is not timed in
     whichever run comes first."""
     from models.rungs import rung_for
-    from planner.ladder import step_for
 
     for name in rungs or [r.model for r in scenario.spec.ladder.rungs]:
         rung = rung_for(scenario, name)
         if rung.propagates:
-            h = step_for(scenario, name)
+            h = scenario.rung_settings(name).h
             rung.rollout(scenario, rung.initial_state(scenario), np.zeros((1, len(scenario.actuated))), [2 * h], h)

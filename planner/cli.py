@@ -17,8 +17,10 @@ from typing import Any
 
 import numpy as np
 
+from models.family import PROPAGATING_RUNGS, RUNG_NAMES
 from models.scenario import Problem, Scenario, ScenarioError, load_scenario, parse_overrides
-from models.schema import RUNGS as RUNG_NAMES
+from models.schema import CONTROL_PLANNERS
+from models.task import OUTCOME_LABELS
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
 #: The most runs one sweep may do (planner.sweep.MAX_RUNS, without importing it for --help).
@@ -67,10 +69,10 @@ def build_parser() -> argparse.ArgumentParser:
         "solver counters. Exit 0 when the run completed, 1 when a numerical failure stopped it.",
     )
     simulate.add_argument("file", type=Path, help="scenario file (TOML)")
-    simulate.add_argument("--model", required=True, metavar="RUNG", help="rung: " + ", ".join(RUNG_NAMES[1:]))
+    simulate.add_argument("--model", required=True, metavar="RUNG", help="rung: " + ", ".join(PROPAGATING_RUNGS))
     _add_param_option(simulate)
     simulate.add_argument("--duration", type=float, help="seconds to run (default: the policy's duration)")
-    simulate.add_argument("--step", type=float, help="time step h (default: the rung's h in the ladder)")
+    simulate.add_argument("--step", type=float, help="time step h (default: the rung's h in the ladder, else the rung's default)")
     simulate.add_argument("--json", action="store_true", help="print one JSON object")
     simulate.add_argument("--plot", type=Path, help="write a trajectory plot (.png or .svg) here; its folder must exist")
     simulate.add_argument("--plan", type=Path, help="replay this plan.json's top-rung controls instead of the policy "
@@ -91,7 +93,7 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument("--seed", type=int, help="seed for OMPL's and our RNG (default: the scenario's)")
     plan.add_argument("--iterations", type=int,
                       help="planner iterations per rung (the budget; default: the scenario's, [ladder] iterations = 2000 unless set)")
-    plan.add_argument("--planner", choices=["RRT", "KPIECE1", "EST"], help="control planner (default: the scenario's)")
+    plan.add_argument("--planner", choices=CONTROL_PLANNERS, help="control planner (default: the scenario's)")
     plan.add_argument("--time-limit", type=float, help="wall-clock cap per rung in seconds (default: the scenario's time_limit); a safety net on top of "
                       "the iteration budget: a plan is reproducible unless a cap ends a search")
     plan.add_argument("--flat", action="store_true", help="plan directly at the top rung with the same budget (the baseline)")
@@ -105,10 +107,10 @@ def build_parser() -> argparse.ArgumentParser:
         "sweep",
         help="map feasible sets over design parameters (the paper's Fig. 5)",
         description="Run the scenario's [task.policy] at every point of a grid of design parameters under\n"
-        "each model and classify the runs as goal (Z_F), unsafe (Z_U) or neither. Writes sweep.json,\n"
+        "each model and classify the runs by outcome: goal (Z_F), unsafe (Z_U) or none. Writes sweep.json,\n"
         "sweep.csv and a map plot (sweep.png). Ctrl-C keeps what was computed, marked incomplete.\n"
         f"At most {MAX_RUNS:,} runs (grid points x models). Exit 0 when the sweep completed (runs a solver\n"
-        "failure stopped are class neither, with their status), 2 bad input, 130 interrupted.",
+        "failure stopped are outcome none, with their status), 2 bad input, 130 interrupted.",
         epilog="models (--model): comma-separated [LABEL=]RUNG[NAME=VALUE,...], a rung with optional\n"
         "design-parameter overrides in brackets (',' or ';' between them) and a label, each label once.\n"
         "Example, the paper's plastic and elastic impacts at mu = 0.5:\n\n"
@@ -128,7 +130,7 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--refine", action="store_true", help="bisect class boundaries along grid lines")
     sweep.add_argument("--tolerance", type=float, default=1e-3, help="refinement bracket (relative on log axes; default 1e-3)")
     sweep.add_argument("--duration", type=float, help="seconds per run (default: the policy's duration)")
-    sweep.add_argument("--step", type=float, help="time step h (default: each rung's h in the ladder)")
+    sweep.add_argument("--step", type=float, help="time step h (default: each rung's h in the ladder, else the rung's default)")
     sweep.add_argument("--out", type=Path, default=Path("out/sweep"), help="output folder, created if missing (default out/sweep)")
     sweep.add_argument("--json", action="store_true", help="print the result as one JSON object")
     sweep.set_defaults(handler=cmd_sweep)
@@ -278,13 +280,11 @@ def cmd_simulate(args: argparse.Namespace) -> int:
             problems.append(Problem("--duration", "a plan's controls carry their own durations; --duration goes with the policy"))
     elif policy is None:
         problems.append(Problem("task.policy", "simulate runs the scenario's policy, and this file has none"))
-    rung_spec = next((r for r in scenario.spec.ladder.rungs if r.model == args.model), None)
-    h = args.step if args.step is not None else (rung_spec.h if rung_spec else None)
     if any(p.key == "--model" for p in problems):
         h = None  # no step to look for
-    elif h is None:
-        problems.append(Problem("--step", f"the ladder has no {args.model} rung to take h from; give --step"))
-    elif not (h > 0 and h < float("inf")):
+    else:
+        h = args.step if args.step is not None else scenario.rung_settings(args.model).h
+    if h is not None and not (h > 0 and h < float("inf")):
         problems.append(Problem("--step", f"must be a positive number, got {h}"))
         h = None
     duration = args.duration if args.duration is not None else (policy.duration if policy else None)
@@ -403,12 +403,12 @@ def cmd_plan(args: argparse.Namespace) -> int:
     if problems:
         raise ScenarioError(scenario.path, problems)
 
-    from planner.ladder import iterations_for, run_ladder, step_for
+    from planner.ladder import run_ladder
     from planner.plots import plot_rollouts
     from models.rungs import rung_for
 
     live = sys.stderr.isatty() and not args.json
-    budgets = {n: args.iterations if args.iterations is not None else iterations_for(scenario, n) for n in names}
+    budgets = {n: args.iterations if args.iterations is not None else scenario.rung_settings(n).iterations for n in names}
     flat_budget = sum(budgets.values())
 
     def progress(name: str, iterations: int, propagations: int) -> None:
@@ -440,7 +440,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
             continue
         rung = rung_for(scenario, rung_report.rung)
         if rung.propagates:
-            h = step_for(scenario, rung_report.rung)
+            h = scenario.rung_settings(rung_report.rung).h
             replay = rung.rollout(scenario, rung.initial_state(scenario), np.array(rung_report.controls), np.array(rung_report.durations), h)
             times, trajectory = replay.times, replay.trajectory
         else:  # the geometric path itself
@@ -459,7 +459,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
             table.add_column(col, no_wrap=True)
         for r in result.rungs:
             distance = "-" if r.goal_distance is None else f"{r.goal_distance:.2g}"
-            table.add_row(r.rung, r.ended, r.outcome, f"{r.wall_s:.2f}", str(r.propagations), str(r.iterations), distance,
+            table.add_row(r.rung, r.ended.label, r.outcome, f"{r.wall_s:.2f}", str(r.propagations), str(r.iterations), distance,
                           f"{r.max_penetration:.1e}", str(r.solver_failures), str(len(r.durations)))
         console = _console(width=110)
         console.print(table)
@@ -576,7 +576,6 @@ def sweep_point_problems(scenario: Scenario, texts: list[str], axes, models, fix
     found: dict[tuple[str, str, str], list[str]] = {}  # (key, model, reason) -> the points
     seen, bad = set(), 0
     for model in models:
-        rung_spec = next((r for r in scenario.spec.ladder.rungs if r.model == model.rung), None)
         for point in sw.grid_points(axes):
             params = {**fixed, **point, **dict(model.overrides)}
             signature = tuple(sorted(params.items()))
@@ -596,7 +595,7 @@ def sweep_point_problems(scenario: Scenario, texts: list[str], axes, models, fix
                 found.setdefault((key, model.label, f"the scenario is invalid: {reasons}"), []).append(where)
                 bad += 1
             else:
-                h = step or (rung_spec.h if rung_spec and rung_spec.h else 1e-4)
+                h = step or variant.rung_settings(model.rung).h
                 seconds = duration or (variant.spec.task.policy.duration if variant.spec.task.policy else 0.0)
                 if seconds / h > MAX_STEPS:
                     key = "--step" if step else "--duration" if duration else "task.policy.duration"
@@ -718,9 +717,9 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         counts = {}
         for p in result.points:
             if p is not None:
-                counts.setdefault(p.model, {c: 0 for c in sw.CLASSES})[p.klass] += 1
+                counts.setdefault(p.model, dict.fromkeys(OUTCOME_LABELS, 0))[p.outcome] += 1
         for model, c in counts.items():
-            print(f"{model}: {c['goal']} goal, {c['unsafe']} unsafe, {c['neither']} neither")
+            print(f"{model}: {c['goal']} goal, {c['unsafe']} unsafe, {c['none']} none")
         if data.get("bands"):  # along the first axis (all axes are in the JSON)
             for axis_name, per_model in list(data["bands"].items())[:1]:
                 for model, rows in per_model.items():
@@ -729,7 +728,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
                         print(f"goal band in {axis_name}, {model}, {rest}: {text}")
         failed = sum(p is not None and p.status != "ok" for p in result.points)
         if failed:
-            print(f"{failed} runs stopped on a solver failure (class neither; their status is in the results)")
+            print(f"{failed} runs stopped on a solver failure (outcome none; their status is in the results)")
         state = "INCOMPLETE (interrupted), " if interrupted else ""
         print(f"{state}results written to {args.out / 'sweep.json'}, {args.out / 'sweep.csv'}" + (f", {plot}" if plot else ""))
     return EXIT_INTERRUPTED if interrupted else EXIT_OK

@@ -18,12 +18,10 @@ For each rung in order:
 - a rung with no usable previous plan plans from scratch ("planned").
 
 The ladder's budget is the flat baseline's: a rung may spend, on top of its own iterations,
-those the rungs below it left unspent (a replayed or skipped rung spends none). Pushing a box
-with a point is unstable, so on box_push_3d the upper rungs often replan most of the way:
-with its own 2000 iterations the dynamic rung ran out in 2 of 10 seeds, with the carried
-budget (one tree, still guided) it planned in all 10.
+those the rungs below it left unspent (a replayed or skipped rung spends none); why, measured:
+docs/measurements.md.
 
-Each rung's report says how it ended, wall time, propagations, planner iterations, how far
+Each rung's report says how it ended (`PlanStatus`), wall time, propagations, planner iterations, how far
 the accepted plan ends from the goal, the largest penetration along it, and how many
 propagations ended in a solver failure.
 """
@@ -37,19 +35,22 @@ from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
-from models.predicates import predicate_distance
-from models.rungs import RUNGS, State, pair_signed_distances, rung_for
+from models.rungs import State, rung_for
 from models.scenario import Problem, Scenario, ScenarioError
-from models.schema import RUNGS as RUNG_ORDER
+from models.task import Outcome, classify, goal_distance
 from planner.ompl_adapter import plan_control, plan_geometric, steered_coordinates
+from planner.plan_status import PlanStatus
+
+#: Words of a rung's outcome and its solver status in a report.
+GOAL, NONE, OK = Outcome.GOAL.label, Outcome.NONE.label, "ok"
 
 
 @dataclass
 class RungReport:
     rung: str
-    ended: str  # replayed, replanned, planned, failed, skipped
-    reason: str = ""
-    outcome: str = "none"  # what the accepted controls reach under this rung
+    ended: PlanStatus  # how the rung ended; its `label` is what the JSON files write
+    reason: str = ""  # why, in words ("" for a plan found with nothing to add)
+    outcome: str = NONE  # what the accepted controls reach under this rung (an Outcome label)
     wall_s: float = 0.0
     propagations: int = 0
     iterations: int = 0
@@ -57,7 +58,7 @@ class RungReport:
     max_penetration: float = 0.0  # along the accepted plan under this rung, m
     contact_steps: int = 0  # steps of that replay in which a contact carried force
     solver_failures: int = 0  # propagations that ended in a numerical failure while planning
-    status: str = "ok"  # the replay's solver status
+    status: str = OK  # the replay's solver status
     controls: list = field(default_factory=list)
     durations: list = field(default_factory=list)
     states: list = field(default_factory=list)
@@ -73,13 +74,14 @@ class LadderResult:
 
     @property
     def top_holds(self) -> bool:
-        return self.complete and bool(self.rungs) and self.rungs[-1].outcome == "goal"
+        return self.complete and bool(self.rungs) and self.rungs[-1].outcome == GOAL
 
     def to_json(self, timings: bool = True) -> dict:
         """The plan; without timings it is a pure function of the scenario and the seed."""
         rungs = [asdict(r) for r in self.rungs]
-        if not timings:
-            for r in rungs:
+        for r in rungs:
+            r["ended"] = r["ended"].label
+            if not timings:
                 del r["wall_s"]
         return {"scenario": self.scenario, "scene": self.scene, "seed": self.seed, "complete": self.complete,
                 "top_holds": self.top_holds, "rungs": rungs}
@@ -127,9 +129,7 @@ def check_start(scenario: Scenario) -> None:
                     "time; `ladder simulate` and `ladder sweep` run such scenes")
             for i in moving
         ])
-    rung = RUNGS["kinematic"]
-    result = rung.rollout(scenario, rung.initial_state(scenario), np.zeros((1, len(scenario.actuated))), [0.0], 1e-3)
-    if result.outcome == "unsafe":
+    if classify(scenario, scenario.start) is Outcome.UNSAFE:
         raise ScenarioError(scenario.path, [Problem("task.start", "the start state is inside the unsafe set; nothing can be planned from it")])
 
 
@@ -167,8 +167,9 @@ def run_ladder(
     check_start(scenario)
     spec = scenario.spec.ladder
     names = rungs or [r.model for r in spec.rungs]
-    budgets = {name: iterations if iterations is not None else iterations_for(scenario, name) for name in names}
-    limits = {name: time_limit if time_limit is not None else time_limit_for(scenario, name) for name in names}
+    settings = {name: scenario.rung_settings(name) for name in names}
+    budgets = {name: iterations if iterations is not None else settings[name].iterations for name in names}
+    limits = {name: time_limit if time_limit is not None else settings[name].time_limit for name in names}
     if flat:
         budgets = {names[-1]: sum(budgets.values())}
         limits = {names[-1]: sum(limits.values())}
@@ -191,22 +192,20 @@ def run_ladder(
             progress(name, 0, 0)
         rung = rung_for(scenario, name)
         if not rung.propagates:
-            reports.append(_geometric(scenario, seed, budgets[name], planner, deadline - time.perf_counter(), stop=stop))
+            reports.append(_geometric(scenario, seed, budgets[name], deadline - time.perf_counter(), stop=stop))
             if stopped():
                 reports.pop()
                 interrupted = True
                 break
             previous = reports[-1] if reports[-1].durations else None
             continue
-        rung_spec = next((r for r in spec.rungs if r.model == name), None)
-        h = step_for(scenario, name)
-        period = (rung_spec.control_period if rung_spec and rung_spec.control_period else None) or spec.control_period
+        h, period = settings[name].h, settings[name].control_period
         start = rung.initial_state(scenario)
         t0 = time.perf_counter()
         if previous is not None and previous.durations:
             same = _same_physics(scenario, previous, name)
             if same:
-                reports.append(replace(previous, rung=name, ended="skipped", reason=same, wall_s=time.perf_counter() - t0,
+                reports.append(replace(previous, rung=name, ended=PlanStatus.SKIPPED, reason=same, wall_s=time.perf_counter() - t0,
                                        propagations=0, iterations=0, solver_failures=0))
                 previous = reports[-1]
                 continue
@@ -216,13 +215,13 @@ def run_ladder(
             if stopped():
                 interrupted = True
                 break
-            if replay.outcome == "goal" and replay.status == "ok":
+            if replay.outcome == GOAL and replay.status == OK:
                 # the states are this rung's (a geometric path's states move passive bodies on their own)
                 states = replay.configurations(start)
                 hold = [[0.0] * len(scenario.actuated)] * replay.held
-                reason = "the previous plan holds under this rung" + (
+                reason = PlanStatus.REPLAYED.message + (
                     f" (its drives held still for {replay.held} control period(s) at the end)" if replay.held else "")
-                reports.append(RungReport(name, "replayed", reason, wall_s=time.perf_counter() - t0,
+                reports.append(RungReport(name, PlanStatus.REPLAYED, reason, wall_s=time.perf_counter() - t0,
                                           controls=list(previous.controls) + hold, durations=list(previous.durations) + [period] * replay.held,
                                           states=states, **replay.fields(scenario)))
                 previous = reports[-1]
@@ -235,7 +234,7 @@ def run_ladder(
         guide = np.array(previous.states) if previous is not None and previous.states and guided and previous.rung != "geometric" else None
         budget = allowance - sum(r.iterations for r in reports)
         plan = _plan_with_restarts(scenario, rung, start, h=h, control_period=period, seed=seed, iterations=budget,
-                                   planner=planner or (rung_spec.planner if rung_spec and rung_spec.planner else spec.planner),
+                                   planner=planner or settings[name].planner,
                                    extra_starts=seeds, guide=guide,
                                    time_limit=deadline - time.perf_counter(), stop=stop,
                                    progress=(lambda i, n, _name=name: progress(_name, i, n)) if progress else None)
@@ -251,13 +250,15 @@ def run_ladder(
         tail = _replay_controls(scenario, rung, head.state, plan.controls[j:], plan.durations[j:], h, head)
         replay = tail.fields(scenario)
         wall = time.perf_counter() - t0
-        accepted = plan.exact and replay["outcome"] == "goal" and replay["status"] == "ok"
-        ended = ("planned" if previous is None else "replanned") if accepted else "failed"
-        reason = ""
-        if not accepted:
-            reason = ("no exact plan within the iteration budget" if plan.iterations >= budget else
-                      f"no exact plan before the time limit ran out ({plan.iterations} of {budget} iterations)") if not plan.exact else (
-                f"the plan found does not hold when replayed ({replay['outcome']}, {replay['status']})")
+        accepted = plan.exact and replay["outcome"] == GOAL and replay["status"] == OK
+        if accepted:
+            ended, reason = (PlanStatus.EXACT if previous is None else PlanStatus.REPLANNED), ""
+        elif not plan.exact:
+            ended = plan.status
+            reason = ended.message + (f" ({plan.iterations} of {budget} iterations)" if ended is PlanStatus.TIMEOUT else "")
+        else:
+            ended = PlanStatus.FAILED
+            reason = f"{ended.message} ({replay['outcome']}, {replay['status']})"
         # an accepted plan's states are its replay's under this rung, from the start (the tree's
         # path begins at its root, which may be a seed part-way along the prefix)
         states = tail.configurations(start) if accepted else plan.states.tolist()
@@ -265,18 +266,16 @@ def run_ladder(
                             solver_failures=plan.failures, controls=plan.controls.tolist(), durations=plan.durations.tolist(),
                             states=states, **replay)
         reports.append(report)
-        if ended == "failed":
+        if not ended.holds:
             break
         previous = report
     return LadderResult(str(scenario.path), int(seed), reports, scene_record(scenario), complete=not interrupted)
 
 
 #: An unguided search (no previous plan to draw samples near: the first rung that propagates)
-#: spends its budget in this many searches with fresh random streams, each with an equal share:
-#: its iteration counts are heavy-tailed (on box_push_3d's kinematic rung most seeds plan in
-#: under 600 iterations, the rest not in 2000; with 4 restarts 10 of 10 seeds plan). A guided
-#: search keeps its whole budget in one tree: with restarts box_push_3d's quasistatic rung
-#: planned in 6 of 10 seeds, not 9.
+#: spends its budget in this many searches with fresh random streams, each with an equal share,
+#: since its iteration counts are heavy-tailed; a guided search keeps its whole budget in one
+#: tree. The measurements behind both: docs/measurements.md.
 RESTARTS = 4
 #: Seed offset between the searches of one rung.
 RESTART_STRIDE = 7919
@@ -284,15 +283,18 @@ RESTART_STRIDE = 7919
 
 def _plan_with_restarts(scenario, rung, start, *, seed: int, iterations: int, time_limit, **kwargs):
     """plan_control in up to RESTARTS searches when unguided (see RESTARTS); the first exact
-    plan, else the last search's; counts summed over the searches."""
+    plan, else the last search's, ending TIMEOUT (or STOPPED) when no time (or a stop) was
+    left for the searches to come; counts summed over the searches."""
     searches = RESTARTS if kwargs.get("guide") is None else 1
     share = max(1, -(-iterations // searches))
     t0, used = time.perf_counter(), {"propagations": 0, "iterations": 0, "failures": 0}
     plan = None
     for attempt in range(searches):
         left = None if time_limit is None else max(0.0, time_limit - (time.perf_counter() - t0))
-        if (left == 0.0 or (kwargs.get("stop") and kwargs["stop"]())) and plan is not None:
-            break
+        if plan is not None and left == 0.0:
+            return replace(plan, status=PlanStatus.TIMEOUT, **used)
+        if plan is not None and kwargs.get("stop") and kwargs["stop"]():
+            return replace(plan, status=PlanStatus.STOPPED, **used)
         plan = plan_control(scenario, rung, start, seed=seed + attempt * RESTART_STRIDE, iterations=share, time_limit=left, **kwargs)
         for key in used:
             used[key] += getattr(plan, key)
@@ -306,13 +308,11 @@ def assess(scenario: Scenario, name: str, controls, durations) -> dict:
     the last state, largest penetration and contact steps, as report fields."""
     rung = rung_for(scenario, name)
     if not len(durations):
-        q = np.array(scenario.start, float)
-        d = pair_signed_distances(scenario, q)
-        return {"outcome": "none", "status": "ok", "goal_distance": float(predicate_distance(scenario, scenario.spec.task.goal, q, d)),
+        return {"outcome": NONE, "status": OK, "goal_distance": goal_distance(scenario, scenario.start),
                 "max_penetration": 0.0, "contact_steps": 0}
-    out = rung.rollout(scenario, rung.initial_state(scenario), np.array(controls, float), np.array(durations, float), step_for(scenario, name))
-    q = out.state.q
-    distance = 0.0 if out.outcome == "goal" else float(predicate_distance(scenario, scenario.spec.task.goal, q, pair_signed_distances(scenario, q)))
+    out = rung.rollout(scenario, rung.initial_state(scenario), np.array(controls, float), np.array(durations, float),
+                       scenario.rung_settings(name).h)
+    distance = 0.0 if out.outcome == GOAL else goal_distance(scenario, out.state.q)
     return {"outcome": out.outcome, "status": out.status, "goal_distance": distance,
             "max_penetration": out.max_penetration, "contact_steps": out.force_steps}
 
@@ -323,9 +323,9 @@ COMPLIANCE_SIBLINGS = ({"quasistatic-rigid", "quasistatic-compliant"}, {"dynamic
 
 def _same_physics(scenario: Scenario, previous: RungReport, name: str) -> str:
     """Why rung `name` would compute exactly what `previous` computed, or "" if it might not."""
-    if previous.outcome != "goal" or previous.status != "ok" or {previous.rung, name} not in COMPLIANCE_SIBLINGS:
+    if previous.outcome != GOAL or previous.status != OK or {previous.rung, name} not in COMPLIANCE_SIBLINGS:
         return ""
-    if previous.contact_steps != 0 or step_for(scenario, previous.rung) != step_for(scenario, name):
+    if previous.contact_steps != 0 or scenario.rung_settings(previous.rung).h != scenario.rung_settings(name).h:
         return ""
     a, b = rung_for(scenario, previous.rung).model, rung_for(scenario, name).model
     if a._replace(compliant=b.compliant) != b:
@@ -334,38 +334,17 @@ def _same_physics(scenario: Scenario, previous: RungReport, name: str) -> str:
             f"{name} is the same model: the plan holds as it is")
 
 
-def iterations_for(scenario: Scenario, name: str) -> int:
-    """The rung's planner budget in iterations: the scenario's rung entry, else its ladder's."""
-    rung_spec = next((r for r in scenario.spec.ladder.rungs if r.model == name), None)
-    return rung_spec.iterations if rung_spec and rung_spec.iterations else scenario.spec.ladder.iterations
-
-
-def time_limit_for(scenario: Scenario, name: str) -> float:
-    """The rung's wall-clock cap in seconds: the scenario's rung entry, else its ladder's."""
-    rung_spec = next((r for r in scenario.spec.ladder.rungs if r.model == name), None)
-    return rung_spec.time_limit if rung_spec and rung_spec.time_limit else scenario.spec.ladder.time_limit
-
-
-def step_for(scenario: Scenario, name: str) -> float:
-    """The rung's time step: the scenario's, else the rung's default."""
-    rung_spec = next((r for r in scenario.spec.ladder.rungs if r.model == name), None)
-    return rung_spec.h if rung_spec and rung_spec.h else _default_step(name)
-
-
-def _geometric(scenario: Scenario, seed: int, iterations: int, planner: str | None, time_limit: float | None = None,
-               stop=None) -> RungReport:
+def _geometric(scenario: Scenario, seed: int, iterations: int, time_limit: float | None = None, stop=None) -> RungReport:
     """Plan the geometric rung and turn its path into commanded speeds for the actuated DOFs:
     each segment is driven at the speeds that cover it in whole control periods without
     exceeding any drive's max_speed. An approximate path (the goal set is thin: touching
     within a tolerance) is still offered to the next rung as a seed."""
-    spec = scenario.spec.ladder
-    rung_spec = next((r for r in spec.rungs if r.model == "geometric"), None)
+    settings = scenario.rung_settings("geometric")
     t0 = time.perf_counter()
-    path = plan_geometric(scenario, seed=seed, iterations=iterations, time_limit=time_limit, stop=stop,
-                          planner=(rung_spec.planner if rung_spec and rung_spec.planner else "RRTConnect"))
-    period = spec.control_period
+    path = plan_geometric(scenario, seed=seed, iterations=iterations, time_limit=time_limit, stop=stop, planner=settings.planner)
+    period = settings.control_period
     index = [scenario.coordinates.index(n) for n in scenario.actuated]
-    max_speed = np.array([scenario.body(n.split(".")[0]).actuators[n.split(".")[1]].max_speed for n in scenario.actuated])
+    max_speed = scenario.max_speeds
     controls, durations, states = [], [], [path.states[0]]
     for a, b in zip(path.states[:-1], path.states[1:]):
         delta = b[index] - a[index]
@@ -376,15 +355,13 @@ def _geometric(scenario: Scenario, seed: int, iterations: int, planner: str | No
             controls.append((delta / (periods * period)).tolist())
             durations.append(period)
             states.append(a + (b - a) * (k / periods))
-    ended = "planned" if path.exact else "approximate"
-    reason = "" if path.exact else "no path into the goal set within the budget; the closest one seeds the next rung"
+    ended = PlanStatus.EXACT if path.exact else PlanStatus.APPROXIMATE
+    reason = "" if path.exact else ended.message
     if not path.goal_samples:
         reason += ("; " if reason else "") + "no goal state could be made by projection, so RRT searched for the goal region"
-    q = path.states[-1]
-    distance = float(predicate_distance(scenario, scenario.spec.task.goal, q, pair_signed_distances(scenario, q)))
-    return RungReport("geometric", ended, reason, "goal" if path.exact else "none", time.perf_counter() - t0, 0,
-                      path.iterations, goal_distance=distance, controls=controls, durations=durations,
-                      states=np.array(states).tolist())
+    return RungReport("geometric", ended, reason, GOAL if path.exact else NONE, time.perf_counter() - t0, 0,
+                      path.iterations, goal_distance=goal_distance(scenario, path.states[-1]), controls=controls,
+                      durations=durations, states=np.array(states).tolist())
 
 
 @dataclass
@@ -396,8 +373,8 @@ class _Replay:
     states: list = field(default_factory=list)
     controls: list = field(default_factory=list)
     durations: list = field(default_factory=list)
-    outcome: str = "none"
-    status: str = "ok"
+    outcome: str = NONE
+    status: str = OK
     min_psi: float = np.inf
     contact_steps: int = 0
     steps_min_psi: list = field(default_factory=list)  # running (min_psi, contact_steps) after each control
@@ -410,7 +387,7 @@ class _Replay:
     def head(self, j: int) -> "_Replay":
         """The first j controls of this replay."""
         min_psi, contact = self.steps_min_psi[j - 1]
-        return _Replay(self.states[j - 1], self.states[:j], self.controls[:j], self.durations[:j], "none", "ok", min_psi, contact,
+        return _Replay(self.states[j - 1], self.states[:j], self.controls[:j], self.durations[:j], NONE, OK, min_psi, contact,
                        self.steps_min_psi[:j])
 
     def configurations(self, start: State) -> list:
@@ -418,9 +395,7 @@ class _Replay:
         return [start.q.tolist()] + [s.q.tolist() for s in self.states] + [self.state.q.tolist()]
 
     def fields(self, scenario: Scenario) -> dict:
-        q = self.state.q
-        distance = 0.0 if self.outcome == "goal" else float(
-            predicate_distance(scenario, scenario.spec.task.goal, q, pair_signed_distances(scenario, q)))
+        distance = 0.0 if self.outcome == GOAL else goal_distance(scenario, self.state.q)
         return {"outcome": self.outcome, "status": self.status, "goal_distance": distance,
                 "max_penetration": float(max(0.0, -self.min_psi)), "contact_steps": int(self.contact_steps)}
 
@@ -428,14 +403,14 @@ class _Replay:
 def _replay_controls(scenario, rung, state, controls, durations, h, so_far: _Replay) -> _Replay:
     """Continue `so_far` with controls, one rollout each, until one ends in the goal, the
     unsafe set or a solver failure."""
-    run = _Replay(state, list(so_far.states), list(so_far.controls), list(so_far.durations), "none", "ok", so_far.min_psi,
+    run = _Replay(state, list(so_far.states), list(so_far.controls), list(so_far.durations), NONE, OK, so_far.min_psi,
                   so_far.contact_steps, list(so_far.steps_min_psi))
     for u, d in zip(controls, durations):
         out = rung.rollout(scenario, run.state, np.array(u, float).reshape(1, -1), [float(d)], h)
         run.min_psi = min(run.min_psi, out.min_psi)
         run.contact_steps += out.force_steps
         run.state = out.state
-        if not out.ok or out.outcome != "none":
+        if not out.ok or out.outcome != NONE:
             run.outcome, run.status = out.outcome, out.status
             break
         run.states.append(out.state)
@@ -490,22 +465,10 @@ def _replay(scenario, rung, start, previous, h, period: float | None = None) -> 
     with the drives held still (SETTLE_PERIODS); it is that one (`held` periods added) if it
     then reaches the goal."""
     run = _replay_controls(scenario, rung, start, previous.controls, previous.durations, h, _Replay.empty(start))
-    if period and run.outcome == "none" and run.status == "ok" and len(run.controls) == len(previous.controls):
+    if period and run.outcome == NONE and run.status == OK and len(run.controls) == len(previous.controls):
         zero = [[0.0] * len(scenario.actuated)] * SETTLE_PERIODS
         settled = _replay_controls(scenario, rung, run.state, zero, [period] * SETTLE_PERIODS, h, run)
-        if settled.outcome == "goal" and settled.status == "ok":
+        if settled.outcome == GOAL and settled.status == OK:
             settled.held = len(settled.controls) - len(run.controls) + 1
             return settled
     return run
-
-
-def _default_step(name: str) -> float:
-    return {"kinematic": 1e-2, "quasistatic-rigid": 1e-3, "quasistatic-compliant": 1e-3}.get(name, 1e-4)
-
-
-def rung_names_until(top: str | None, names: list[str]) -> list[str]:
-    if top is None:
-        return names
-    if top not in RUNG_ORDER:
-        raise ValueError(top)
-    return [n for n in names if RUNG_ORDER.index(n) <= RUNG_ORDER.index(top)]

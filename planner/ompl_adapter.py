@@ -26,6 +26,8 @@ import numpy as np
 
 from models.rungs import Rung, State
 from models.scenario import Scenario
+from models.task import Outcome, goal_distance
+from planner.plan_status import PlanStatus
 
 FLAG_RUNNING, FLAG_GOAL, FLAG_UNSAFE, FLAG_FAILED = 0.0, 1.0, 2.0, 3.0
 #: Distance weight of everything but q in the state metric.
@@ -47,11 +49,15 @@ class ControlPlan:
     controls: np.ndarray  # (k, n_actuated) commanded speeds
     durations: np.ndarray  # (k,) seconds
     states: np.ndarray  # (k + 1, nq) configurations at the control switches
-    exact: bool
+    status: PlanStatus  # how the search ended: EXACT, TIMEOUT, BUDGET_EXHAUSTED, STOPPED or ABORTED
     propagations: int
     iterations: int
     start_index: int = 0  # which start the path begins at (0: the real start; i: extra_starts[i - 1])
     failures: int = 0  # propagations that ended in a numerical failure (a status, pruned from the tree)
+
+    @property
+    def exact(self) -> bool:
+        return self.status is PlanStatus.EXACT
 
 
 def _layout(scenario: Scenario, state: State) -> tuple[int, int, int, int, int]:
@@ -74,12 +80,11 @@ def unflatten(x: np.ndarray, sizes) -> tuple[State, float]:
 
 
 def control_bounds(scenario: Scenario) -> tuple[np.ndarray, np.ndarray]:
+    """Commanded speed bounds per actuated coordinate: `[task] control_bounds`, else +-max_speed."""
     lo, hi = [], []
     bounds = scenario.spec.task.control_bounds
-    for name in scenario.actuated:
-        body, dof = name.split(".")
-        drive = scenario.body(body).actuators[dof]
-        low, high = bounds.get(name, (-drive.max_speed, drive.max_speed))
+    for name, top in zip(scenario.actuated, scenario.max_speeds):
+        low, high = bounds.get(name, (-top, top))
         lo.append(low)
         hi.append(high)
     return np.array(lo), np.array(hi)
@@ -150,16 +155,6 @@ def sampling_limits(scenario: Scenario, q0: np.ndarray) -> tuple[np.ndarray, np.
     return low, high
 
 
-def _configuration_bounds(ob, scenario: Scenario, q0: np.ndarray):
-    """OMPL bounds on q (configuration_limits)."""
-    low, high = configuration_limits(scenario, q0)
-    bounds = ob.RealVectorBounds(len(scenario.coordinates))
-    for i in range(len(low)):
-        bounds.setLow(i, float(low[i]))
-        bounds.setHigh(i, float(high[i]))
-    return bounds
-
-
 #: Coordinates of a passive body in a spatial scene that the planner does not steer toward:
 #: its height and its orientation quaternion follow from contact (resting, tipping).
 UNSTEERED_DOFS = ("z", "qw", "qx", "qy", "qz")
@@ -187,17 +182,25 @@ def _projection_coordinates(scenario: Scenario, most: int = 3) -> list[int]:
 
 
 def _termination(ss, iterations: int, time_limit: float | None, progress=None, stop=None):
-    """OMPL's termination condition for both planners, and the count it keeps: stop at an exact
+    """OMPL's termination condition for both planners, and what it records: stop at an exact
     solution, after `iterations` iterations, or past the wall-clock cap. OMPL asks before every
     iteration, so the count is of the iterations it let run; progress(count) is called every
-    PROGRESS_EVERY of them. stop() -> True (Ctrl-C) ends the search too."""
-    done = {"iterations": 0}
+    PROGRESS_EVERY of them. stop() -> True (Ctrl-C) ends the search too. ``done["ended"]`` is
+    why the condition ended the search (TIMEOUT, BUDGET_EXHAUSTED, STOPPED; None: it did not)."""
+    done = {"iterations": 0, "ended": None}
     deadline = None if time_limit is None else time.perf_counter() + time_limit
 
     def finished() -> bool:
-        if (deadline is not None and time.perf_counter() > deadline) or done["iterations"] >= iterations or ss.haveExactSolutionPath():
+        if ss.haveExactSolutionPath():
+            return True
+        if deadline is not None and time.perf_counter() > deadline:
+            done["ended"] = PlanStatus.TIMEOUT
+            return True
+        if done["iterations"] >= iterations:
+            done["ended"] = PlanStatus.BUDGET_EXHAUSTED
             return True
         if stop is not None and stop():
+            done["ended"] = PlanStatus.STOPPED
             return True
         done["iterations"] += 1
         if progress is not None and done["iterations"] % PROGRESS_EVERY == 0:
@@ -205,6 +208,14 @@ def _termination(ss, iterations: int, time_limit: float | None, progress=None, s
         return False
 
     return finished, done
+
+
+def _search_status(exact: bool, done: dict) -> PlanStatus:
+    """How a search ended: EXACT, else what ended it (`_termination`); a planner that returned
+    without being asked to stop refused its start or goal (ABORTED)."""
+    if exact:
+        return PlanStatus.EXACT
+    return done["ended"] or PlanStatus.ABORTED
 
 
 def plan_control(
@@ -217,7 +228,7 @@ def plan_control(
     seed: int,
     iterations: int,
     planner: str = "RRT",
-    goal_distance=None,
+    goal_heuristic=None,
     extra_starts: list[State] | None = None,
     guide: np.ndarray | None = None,
     guide_bias: float = GUIDE_BIAS,
@@ -227,6 +238,8 @@ def plan_control(
 ) -> ControlPlan:
     """Plan commanded speeds from `start` under `rung` with OMPL's control planner.
 
+    goal_heuristic: q -> a distance to the goal the planner may rank states by (None: every
+    state that has not reached the goal is 1 from it).
     extra_starts: more tree roots (OMPL-CRIB section 5), e.g. the previous plan's states
     replayed under this rung; the result says which root its path starts at.
     guide: configurations (k, nq) of the previous rung's plan. RRT and EST then draw this
@@ -342,17 +355,16 @@ def plan_control(
         if not out.ok:
             new_flag = FLAG_FAILED
             counter["failures"] += 1
-        elif out.outcome == "goal":
+        elif out.outcome == Outcome.GOAL.label:
             new_flag = FLAG_GOAL
-        elif out.outcome == "unsafe":
+        elif out.outcome == Outcome.UNSAFE.label:
             new_flag = FLAG_UNSAFE
         write(result, flatten(out.state, new_flag))
 
     # a drive whose reference leads its position by more than one control period of travel at
     # full speed is jammed against something (in the kinematic rung references never lead)
     drive_q = np.array([scenario.coordinates.index(n) for n in scenario.actuated], dtype=int)
-    windup = control_period * np.array([scenario.body(n.split(".")[0]).actuators[n.split(".")[1]].max_speed
-                                        for n in scenario.actuated])
+    windup = control_period * scenario.max_speeds
     ref_at = nq + sizes[1]  # q_ref's place in the flattened state
 
     def valid(s) -> bool:
@@ -384,9 +396,9 @@ def plan_control(
     def distance_to_goal(s) -> float:
         if s[1][n_aux - 1] == FLAG_GOAL:
             return 0.0
-        if goal_distance is None:
+        if goal_heuristic is None:
             return 1.0
-        return float(1e-6 + goal_distance(q_of(s)))
+        return float(1e-6 + goal_heuristic(q_of(s)))
 
     class Goal(ob.GoalRegion):
         def __init__(self, si_):
@@ -440,9 +452,9 @@ def plan_control(
     stop_now, done = _termination(ss, iterations, time_limit,
                                   None if progress is None else (lambda i: progress(i, counter["propagations"])), stop)
     ss.solve(ob.PlannerTerminationCondition(stop_now))
-    exact = bool(ss.haveExactSolutionPath())
+    status = _search_status(bool(ss.haveExactSolutionPath()), done)
     if not ss.haveSolutionPath():
-        return ControlPlan(np.zeros((0, na)), np.zeros(0), start.q[None, :].copy(), False, counter["propagations"], done["iterations"],
+        return ControlPlan(np.zeros((0, na)), np.zeros(0), start.q[None, :].copy(), status, counter["propagations"], done["iterations"],
                            failures=counter["failures"])
     path = ss.getSolutionPath()
     controls = np.array([[c[j] for j in range(na)] for c in path.getControls()]).reshape(-1, na)
@@ -450,7 +462,7 @@ def plan_control(
     states = np.array([q_of(s) for s in path.getStates()])
     first = read(path.getState(0))
     start_index = int(np.argmin([np.max(np.abs(first - r)) for r in roots]))
-    result = ControlPlan(controls, durations, states, exact, counter["propagations"], done["iterations"], start_index,
+    result = ControlPlan(controls, durations, states, status, counter["propagations"], done["iterations"], start_index,
                          failures=counter["failures"])
     del path, ss, si, space
     return result
@@ -459,10 +471,14 @@ def plan_control(
 @dataclass(frozen=True)
 class GeometricPlan:
     states: np.ndarray  # (k, nq) waypoints
-    exact: bool
+    status: PlanStatus  # how the search ended: EXACT, TIMEOUT, BUDGET_EXHAUSTED, STOPPED or ABORTED
     iterations: int
     checks: int
     goal_samples: int = 0  # goal states made by projection (0: the planner searched for the goal region)
+
+    @property
+    def exact(self) -> bool:
+        return self.status is PlanStatus.EXACT
 
 
 def plan_geometric(scenario: Scenario, *, seed: int, iterations: int, planner: str = "RRTConnect",
@@ -480,12 +496,10 @@ def plan_geometric(scenario: Scenario, *, seed: int, iterations: int, planner: s
     from ompl import geometric as og
     from ompl import util as ou
 
-    from models.predicates import predicate_distance
-    from models.rungs import geometric_checker, pair_signed_distances
+    from models.rungs import geometric_checker
 
     ou.setLogLevel(ou.LOG_NONE)
     ou.RNG.setSeed(int(seed) + 1)
-    task = scenario.spec.task
     steered = steered_coordinates(scenario)  # the others keep their start values
     ns = len(steered)
     space = ob.RealVectorStateSpace(ns)
@@ -520,17 +534,13 @@ def plan_geometric(scenario: Scenario, *, seed: int, iterations: int, planner: s
     pool = [sampler.draw()] if planner == "RRTConnect" else []
     pool = [q for q in pool if q is not None]
 
-    def goal_distance(s) -> float:
-        q = q_of(s)
-        return float(predicate_distance(scenario, task.goal, q, pair_signed_distances(scenario, q)))
-
     class Goal(ob.GoalRegion):
         def __init__(self, si_):
             super().__init__(si_)
             self.setThreshold(1e-12)
 
         def distanceGoal(self, s):
-            return goal_distance(s)
+            return goal_distance(scenario, q_of(s))
 
     class SampledGoal(ob.GoalSampleableRegion):
         """The goal region, with the projected goal states to root a goal tree at."""
@@ -542,7 +552,7 @@ def plan_geometric(scenario: Scenario, *, seed: int, iterations: int, planner: s
             self.growing = True
 
         def distanceGoal(self, s):
-            return goal_distance(s)
+            return goal_distance(scenario, q_of(s))
 
         def sampleGoal(self, s):
             """A new projected goal state while the pool may grow, else one from the pool."""
@@ -575,16 +585,16 @@ def plan_geometric(scenario: Scenario, *, seed: int, iterations: int, planner: s
     ss.setPlanner(chosen)
     stop_now, done = _termination(ss, iterations, time_limit, stop=stop)
     ss.solve(ob.PlannerTerminationCondition(stop_now))
-    exact = bool(ss.haveExactSolutionPath())
+    status = _search_status(bool(ss.haveExactSolutionPath()), done)
     if ss.haveSolutionPath():
         path = ss.getSolutionPath()
-        if exact:
+        if status is PlanStatus.EXACT:
             og.PathSimplifier(si).simplifyMax(path)
         states = np.array([q_of(s) for s in path.getStates()])
         del path
     else:
         states = scenario.start[None, :].copy()
-    result = GeometricPlan(states, exact, done["iterations"], counter["checks"], len(pool))
+    result = GeometricPlan(states, status, done["iterations"], counter["checks"], len(pool))
     del ss, si, space
     return result
 
@@ -626,7 +636,6 @@ class GoalSampler:
             self._constraints(node.any[int(self.rng.integers(len(node.any)))], boxes, touches)
 
     def draw(self) -> np.ndarray | None:
-        from models.predicates import predicate_distance
         from models.rungs import pair_signed_distances
 
         scenario, rng, low, high, movable = self.scenario, self.rng, self.low, self.high, self.movable
@@ -658,6 +667,6 @@ class GoalSampler:
                     J[:, j] = [(de[p] - d[p]) / step if np.isfinite(de[p]) and np.isfinite(d[p]) else 0.0 for p, _ in touches]
                 q[movable] -= J.T @ np.linalg.solve(J @ J.T + 1e-12 * np.eye(len(touches)), r)
                 q = np.clip(q, low, high)
-            if predicate_distance(scenario, goal, q, pair_signed_distances(scenario, q)) == 0.0 and self.valid(q):
+            if goal_distance(scenario, q) == 0.0 and self.valid(q):
                 return q
         return None

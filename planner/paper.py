@@ -110,20 +110,19 @@ def run(out: Path, doc: Path, workers: int | None, progress=print) -> dict:
         for rho in fan_ratios:
             sc = load_scenario(SCENE, {"v1": float(rho), "v2": 1.0, "mu": 0.5, **dict(model.overrides)})
             rung = rung_for(sc, model.rung)
-            h = STEP if model.rung != "quasistatic-rigid" else 1e-3
+            h = STEP if model.rung != "quasistatic-rigid" else sc.rung_settings(model.rung).h
             policy = sc.spec.task.policy
             controls = np.array([[policy.speeds.get(n, 0.0) for n in sc.actuated]])
             res = rung.rollout(sc, rung.initial_state(sc), controls, [DURATION], h, stop_at_outcome=False, max_records=800)
             first = rung.rollout(sc, rung.initial_state(sc), controls, [DURATION], h)
-            klass = first.outcome if first.outcome in ("goal", "unsafe") else "neither"
-            runs.append((float(rho), klass, res.trajectory))
+            runs.append((float(rho), first.outcome, res.trajectory))
         panels.append((TITLES[model.label], runs))
     fig4 = plot_fan(out / "fig4.png", panels, scenario.coordinates, scenario.start,
                     "Fig. 4 analogue: trajectories for speed ratios 0.4 .. 2.5 at mu = 0.5 (green: grasp, red: slipped out)")
 
     mu_edges = {}
     for b in combined.boundaries:
-        if b["axis"] == "mu" and {b["low_class"], b["high_class"]} == {"unsafe", "goal"}:
+        if b["axis"] == "mu" and {b["low_outcome"], b["high_outcome"]} == {"unsafe", "goal"}:
             lo, hi = mu_edges.get(b["model"], (math.inf, -math.inf))
             mu_edges[b["model"]] = (min(lo, b["boundary"]), max(hi, b["boundary"]))
     text = report(bands, derived_band(scenario), timings, total, doc.parent, out, fig4, fig5, len(combined.points), mu_edges)

@@ -32,14 +32,14 @@ What maps to what (the plane of the scene is MuJoCo's x-y plane, z points out of
   f_n = (k r + b r') / ((1 - d) A~), A~ MuJoCo's diagonal approximation of the pair's
   inverse inertia (the two bodies' ``body_invweight0``). So solref = -(1 - d) A~ (K, C) and
   solimp = (d, d, ...), d = FORCE_IMPEDANCE, with the elliptic cone (MuJoCo's pyramidal
-  cone would make the normal law depend on mu). Static force within about 0.2 % of K r
-  (tests/test_peers.py). Friction is MuJoCo's soft Coulomb: viscous, f_t = -C v_t, up to the
+  cone would make the normal law depend on mu). The static force matches K r
+  (tests/test_peers.py bounds the error). Friction is MuJoCo's soft Coulomb: viscous, f_t = -C v_t, up to the
   cone, so a resting contact creeps where ours sticks.
 
   ``direct``: solref = (-K, -C) with MuJoCo's default solimp (0.9, 0.95, 0.001, 0.5, 2) and
   cone (pyramidal): K and C read literally as MuJoCo's direct stiffness and damping, which
   are per unit effective mass, and the impedance d ~ 0.9 makes the constraint nearly rigid
-  (static stiffness about 0.4 K on the paper's finger-triangle pair).
+  (its static stiffness on the paper's finger-triangle pair: docs/measurements.md).
 
   Neither is our model: MuJoCo's contact damping is explicit (the reference acceleration
   uses r and r' at the start of the step), ours is implicit in K and C. With the force

@@ -65,11 +65,12 @@ def plot_rollouts(path: Path, coordinates, start, runs: list[tuple[str, np.ndarr
     return path
 
 
-CLASS_COLOURS = {"goal": "tab:green", "unsafe": "tab:red", "neither": "0.6"}
+#: Colour of each outcome (models.task.Outcome labels) in the sweep and fan plots.
+OUTCOME_COLOURS = {"goal": "tab:green", "unsafe": "tab:red", "none": "0.6"}
 
 
 def plot_feasible_sets(path: Path, result) -> Path:
-    """The Fig. 5 analogue: each grid point coloured by class (Z_F green, Z_U red, neither
+    """The Fig. 5 analogue: each grid point coloured by outcome (Z_F green, Z_U red, none
     grey), one panel per model; refined boundaries as black ticks. Two axes: a map over them;
     one axis: a strip. Writes PNG (and SVG when path ends in .svg)."""
     import matplotlib
@@ -85,11 +86,11 @@ def plot_feasible_sets(path: Path, result) -> Path:
     x_axis = axes[0]
     y_axis = axes[1] if len(axes) > 1 else None
     for panel, model in zip(panels[0], models):
-        for klass, colour in CLASS_COLOURS.items():
-            pts = [p for p in result.points if p is not None and p.model == model and p.klass == klass]
+        for outcome, colour in OUTCOME_COLOURS.items():
+            pts = [p for p in result.points if p is not None and p.model == model and p.outcome == outcome]
             xs = [p.parameters[x_axis.name] for p in pts]
             ys = [p.parameters[y_axis.name] if y_axis else 0.0 for p in pts]
-            panel.scatter(xs, ys, s=14, color=colour, label=f"{klass} ({len(pts)})", marker="s")
+            panel.scatter(xs, ys, s=14, color=colour, label=f"{outcome} ({len(pts)})", marker="s")
         for b in result.boundaries:
             if b["model"] != model:
                 continue
@@ -127,7 +128,7 @@ def _span(axis) -> float:
 
 def plot_fan(path: Path, panels: list[tuple[str, list[tuple[float, str, np.ndarray]]]], coordinates, start, title: str) -> Path:
     """The Fig. 4 analogue: per model a panel of trajectories in (x1, x2, x3) for a fan of
-    speed ratios, each coloured by how it ended. panels: [(model label, [(ratio, class,
+    speed ratios, each coloured by how it ended. panels: [(model label, [(ratio, outcome label,
     trajectory)])]."""
     import matplotlib
 
@@ -139,11 +140,11 @@ def plot_fan(path: Path, panels: list[tuple[str, list[tuple[float, str, np.ndarr
     fig = plt.figure(figsize=(4.6 * len(panels), 4.6))
     for k, (label, runs) in enumerate(panels):
         ax = fig.add_subplot(1, len(panels), k + 1, projection="3d")
-        for ratio, klass, X in runs:
+        for ratio, outcome, X in runs:
             P = paper_coordinates(coordinates, start, X)
             inside = np.abs(P[:, 2]) <= 1.5  # the paper's window; a triangle thrown out leaves it
             P = P[: (np.argmin(inside) if not inside.all() else len(P))]
-            ax.plot(P[:, 0], P[:, 1], P[:, 2], color=CLASS_COLOURS[klass], lw=1.0, ls="-" if klass == "goal" else ":")
+            ax.plot(P[:, 0], P[:, 1], P[:, 2], color=OUTCOME_COLOURS[outcome], lw=1.0, ls="-" if outcome == "goal" else ":")
         ax.plot([1, 2], [2, 1], [-0.5, 0.5], color="tab:blue", lw=3, alpha=0.4)
         ax.set_xlabel("x1")
         ax.set_ylabel("x2")

@@ -74,7 +74,7 @@ class PolicyItem(pytest.Item):
         if spec.task.policy is None:
             raise ScenarioExpectationFailed("[expect.policy] needs a [task.policy]")
         rung = rung_for(self.scenario, self.rung)
-        step = next((r.h for r in spec.ladder.rungs if r.model == self.rung and r.h), 1e-3)
+        step = self.scenario.rung_settings(self.rung).h
         controls = np.array([[spec.task.policy.speeds.get(n, 0.0) for n in self.scenario.actuated]])
         result = rung.rollout(self.scenario, rung.initial_state(self.scenario), controls, [spec.task.policy.duration], step)
         if not result.ok:
@@ -101,7 +101,7 @@ class PlanItem(pytest.Item):
 
         result = run_ladder(self.scenario, iterations=self.iterations)
         if result.top_holds != self.holds:
-            ended = ", ".join(f"{r.rung}: {r.ended}" for r in result.rungs)
+            ended = ", ".join(f"{r.rung}: {r.ended.label}" for r in result.rungs)
             raise ScenarioExpectationFailed(f"top rung holds: {result.top_holds}, expected {self.holds} ({ended})")
 
     def repr_failure(self, excinfo):

@@ -2,13 +2,13 @@
 
 A sweep evaluates the scenario's parametric open-loop policy (``[task.policy]``: constant
 commanded speeds, expressions in the design parameters) at every point of a grid of design
-parameters, under one or more models, and classifies each run as ``goal`` (the paper's Z_F),
-``unsafe`` (Z_U) or ``neither`` (including runs a solver failure stopped: their status says
-so). A model is a rung, optionally with parameter overrides (``dynamic-compliant[C=0]``), so
+parameters, under one or more models, and classifies each run by its outcome
+(`models.task.Outcome`): ``goal`` (the paper's Z_F), ``unsafe`` (Z_U) or ``none`` (including
+runs a solver failure stopped: their status says so). A model is a rung, optionally with parameter overrides (``dynamic-compliant[C=0]``), so
 the paper's variants (plastic or elastic impacts, with or without finger dynamics) are one
 sweep each.
 
-`refine` then finds the boundaries between classes by bisection along grid lines, to a
+`refine` then finds the boundaries between outcomes by bisection along grid lines, to a
 tolerance, instead of leaving them at grid resolution.
 
 Runs are independent, so they go to an executor: a local process pool (default) or a Dask
@@ -30,8 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from models.scenario import Problem, ScenarioError
-
-CLASSES = ("goal", "unsafe", "neither")
+from models.task import Outcome
 #: The most runs one sweep may hold (grid points times models; the points stream, their
 #: results are kept).
 MAX_RUNS = 1_000_000  # planner.cli.MAX_RUNS says the same in --help
@@ -78,8 +77,7 @@ class Task:
 class Point:
     model: str
     parameters: dict
-    outcome: str  # goal, unsafe, none
-    klass: str  # goal, unsafe, neither
+    outcome: str  # an Outcome label: goal, unsafe, none
     t: float
     status: str
     final: dict
@@ -141,7 +139,7 @@ _MODEL = re.compile(r"^\s*(?:([A-Za-z0-9_.-]+)\s*=\s*)?([a-z-]+)\s*(?:\[(.*)\])?
 def parse_models(text: str) -> list[ModelSpec]:
     """``quasistatic-rigid,elastic=dynamic-compliant[C=0;finger_mass=1e3]``: rungs, each with
     optional overrides (separated by ';' or ',' inside the brackets) and an optional label."""
-    from models.schema import RUNGS
+    from models.family import PROPAGATING_RUNGS
 
     syntax = "[LABEL=]RUNG[NAME=VALUE,...], e.g. elastic=dynamic-compliant[C=0,finger_mass=1e3]"
     models, depth, current = [], 0, ""
@@ -163,8 +161,8 @@ def parse_models(text: str) -> list[ModelSpec]:
     specs = []
     for item in models:
         m = _MODEL.match(item)
-        if not m or m.group(2) not in RUNGS[1:]:
-            raise ScenarioError(Path("--model"), [Problem(f"--model {item}", f"expected [LABEL=]RUNG[NAME=VALUE;...], RUNG one of {', '.join(RUNGS[1:])}")])
+        if not m or m.group(2) not in PROPAGATING_RUNGS:
+            raise ScenarioError(Path("--model"), [Problem(f"--model {item}", f"expected [LABEL=]RUNG[NAME=VALUE;...], RUNG one of {', '.join(PROPAGATING_RUNGS)}")])
         overrides = []
         for part in re.split(r"[;,]", m.group(3) or ""):
             if not part.strip():
@@ -211,13 +209,11 @@ def run_task(task: Task) -> Point:
     scenario = load_scenario(task.file, params)
     policy = scenario.spec.task.policy
     rung = rung_for(scenario, task.model.rung)
-    spec = next((r for r in scenario.spec.ladder.rungs if r.model == task.model.rung), None)
-    h = task.h or (spec.h if spec and spec.h else 1e-4)
+    h = task.h or scenario.rung_settings(task.model.rung).h
     duration = task.duration or policy.duration
     controls = np.array([[policy.speeds.get(name, 0.0) for name in scenario.actuated]])
     out = rung.rollout(scenario, rung.initial_state(scenario), controls, [duration], h, max_records=2)
-    klass = out.outcome if out.outcome in ("goal", "unsafe") else "neither"
-    return Point(task.model.label, dict(task.parameters), out.outcome, klass, out.t, out.status,
+    return Point(task.model.label, dict(task.parameters), out.outcome, out.t, out.status,
                  out.state.named(scenario), out.steps, out.wall_s)
 
 
@@ -341,11 +337,11 @@ class SweepResult:
     def to_csv(self) -> str:
         names = [a.name for a in self.axes]
         coords = sorted({k for p in self.points if p is not None for k in p.final})
-        lines = [",".join(["model", *names, "class", "outcome", "t", "status", "steps", *coords])]
+        lines = [",".join(["model", *names, "outcome", "t", "status", "steps", *coords])]
         for p in self.points:
             if p is None:
                 continue
-            lines.append(",".join([p.model, *(repr(p.parameters[n]) for n in names), p.klass, p.outcome, repr(p.t), p.status,
+            lines.append(",".join([p.model, *(repr(p.parameters[n]) for n in names), p.outcome, repr(p.t), p.status,
                                    str(p.steps), *(repr(p.final.get(c, float("nan"))) for c in coords)]))
         return "\n".join(lines) + "\n"
 
@@ -380,9 +376,9 @@ def sweep(file: str, axes: list[Axis], models: list[ModelSpec], *, fixed: dict |
 
 
 def refine(result: SweepResult, *, tolerance: float = 1e-3, executor: Executor | None = None, progress=None) -> SweepResult:
-    """Bisect every pair of grid neighbours (along one axis) whose classes differ, until the
+    """Bisect every pair of grid neighbours (along one axis) whose outcomes differ, until the
     bracket is below `tolerance` (relative on log axes, absolute otherwise). Each boundary
-    records the axis, the other parameters, the two classes and the bracket. Brackets of
+    records the axis, the other parameters, the two outcomes and the bracket. Brackets of
     all boundaries advance together, one batch of runs per bisection step."""
     by_key = {}
     for p in result.points:
@@ -402,10 +398,10 @@ def refine(result: SweepResult, *, tolerance: float = 1e-3, executor: Executor |
                 other = dict(p.parameters)
                 other[axis.name] = axis.values[k + 1]
                 q = by_key.get((model.label, tuple(sorted(other.items()))))
-                if q is not None and q.klass != p.klass:
+                if q is not None and q.outcome != p.outcome:
                     brackets.append({"model": model.label, "axis": axis.name, "log": axis.log, "at": dict(p.parameters),
                                      "grid_low": v, "grid_high": axis.values[k + 1],
-                                     "low": v, "high": axis.values[k + 1], "low_class": p.klass, "high_class": q.klass})
+                                     "low": v, "high": axis.values[k + 1], "low_outcome": p.outcome, "high_outcome": q.outcome})
 
     def width(b) -> float:
         return math.log(b["high"] / b["low"]) if b["log"] else b["high"] - b["low"]
@@ -431,13 +427,13 @@ def refine(result: SweepResult, *, tolerance: float = 1e-3, executor: Executor |
                 outcomes[i] = point
             for b, point in zip(active, outcomes):
                 mid = b.pop("mid")
-                if point.klass == b["low_class"]:
+                if point.outcome == b["low_outcome"]:
                     b["low"] = mid
-                elif point.klass == b["high_class"]:
+                elif point.outcome == b["high_outcome"]:
                     b["high"] = mid
-                else:  # a third class in between: a boundary on each side of it
-                    brackets.append({**b, "low": mid, "low_class": point.klass})
-                    b["high"], b["high_class"] = mid, point.klass
+                else:  # a third outcome in between: a boundary on each side of it
+                    brackets.append({**b, "low": mid, "low_outcome": point.outcome})
+                    b["high"], b["high_outcome"] = mid, point.outcome
             step += 1
             if progress:
                 progress(step, len(active))
@@ -454,9 +450,9 @@ def refine(result: SweepResult, *, tolerance: float = 1e-3, executor: Executor |
     return result
 
 
-def bands(result: SweepResult, axis: str, klass: str = "goal") -> dict:
+def bands(result: SweepResult, axis: str, outcome: str = Outcome.GOAL.label) -> dict:
     """Per model and per value of the other swept parameters: the intervals of `axis` whose
-    grid points are of `klass`, each edge refined where `refine` bracketed it (else the grid
+    grid points end in `outcome` (a label), each edge refined where `refine` bracketed it (else the grid
     point; an edge at the end of the grid is marked so)."""
     others = [a.name for a in result.axes if a.name != axis]
     out: dict = {}
@@ -464,26 +460,26 @@ def bands(result: SweepResult, axis: str, klass: str = "goal") -> dict:
         rows: dict = {}
         for p in result.points:
             if p is not None and p.model == model.label:
-                rows.setdefault(tuple(p.parameters[n] for n in others), []).append((p.parameters[axis], p.klass))
+                rows.setdefault(tuple(p.parameters[n] for n in others), []).append((p.parameters[axis], p.outcome))
         for rest, values in sorted(rows.items()):
             values.sort()
             key = ", ".join(f"{n}={v:g}" for n, v in zip(others, rest)) or "-"
             edges = []
             k = 0
             while k < len(values):
-                if values[k][1] != klass:
+                if values[k][1] != outcome:
                     k += 1
                     continue
                 j = k
-                while j + 1 < len(values) and values[j + 1][1] == klass:
+                while j + 1 < len(values) and values[j + 1][1] == outcome:
                     j += 1
                 lo, hi = values[k][0], values[j][0]
                 for b in result.boundaries:
                     if b["model"] != model.label or b["axis"] != axis or tuple(b["at"][n] for n in others) != rest:
                         continue
-                    if k > 0 and b["grid_high"] == lo and b["high_class"] == klass:
+                    if k > 0 and b["grid_high"] == lo and b["high_outcome"] == outcome:
                         lo = b["boundary"]
-                    if j + 1 < len(values) and b["grid_low"] == hi and b["low_class"] == klass:
+                    if j + 1 < len(values) and b["grid_low"] == hi and b["low_outcome"] == outcome:
                         hi = b["boundary"]
                 edges.append({"from": lo, "to": hi, "from_is_grid_end": k == 0, "to_is_grid_end": j == len(values) - 1})
                 k = j + 1

@@ -120,12 +120,23 @@ def test_simulate_json_on_the_paper_scene(tmp_path):
     assert plot.stat().st_size > 10_000
 
 
+def test_simulate_runs_a_rung_the_ladder_does_not_list_at_the_rungs_default_step():
+    """The paper's scene lists no dynamic-rigid rung: simulate takes its step where plan, sweep
+    and the pytest plugin do (Scenario.rung_settings: the family's default)."""
+    from models.scenario import load_scenario
+
+    scenario = load_scenario(SCENARIOS / "two_finger_triangle.toml")
+    assert "dynamic-rigid" not in [r.model for r in scenario.spec.ladder.rungs]
+    result = ladder("simulate", str(SCENARIOS / "two_finger_triangle.toml"), "--model", "dynamic-rigid", "--json")
+    assert result.returncode == 0, result.stderr
+    assert json.loads(result.stdout)["h"] == scenario.rung_settings("dynamic-rigid").h == 1e-4
+
+
 @pytest.mark.parametrize(
     "args, fragment",
     [
         (["--model", "nonsense"], "--model: unknown rung"),
         (["--model", "geometric"], "no dynamics"),
-        (["--model", "dynamic-rigid"], "--step"),
         (["--model", "kinematic", "--step", "-1"], "--step: must be a positive number"),
     ],
 )

@@ -12,7 +12,8 @@ import pytest
 
 from models.rungs import RUNGS, rung_for
 from models.scenario import ScenarioError, load_scenario
-from planner.ladder import run_ladder, step_for
+from planner.ladder import run_ladder
+from planner.plan_status import PlanStatus
 from tests.conftest import ROOT, SCENARIOS
 
 TRIANGLE = SCENARIOS / "two_finger_triangle.toml"
@@ -42,11 +43,11 @@ def test_same_seed_gives_the_same_plan_different_seed_may_differ():
 def test_free_transfer_higher_rungs_are_accepted_by_replay_without_search():
     scenario = load_scenario(SCENARIOS / "free_transfer.toml")
     result = run_ladder(scenario, rungs=["kinematic", "quasistatic-rigid", "dynamic-rigid", "dynamic-compliant"], seed=3, iterations=3000)
-    assert result.rungs[0].ended == "planned"
+    assert result.rungs[0].ended is PlanStatus.EXACT
     for report in result.rungs[1:]:
-        assert report.ended in ("replayed", "skipped") and report.propagations == 0
+        assert report.ended in (PlanStatus.REPLAYED, PlanStatus.SKIPPED) and report.propagations == 0
     # nothing is touched on the way, so dynamic-compliant (same step as dynamic-rigid) is the same physics
-    assert [r.ended for r in result.rungs[1:]] == ["replayed", "replayed", "skipped"]
+    assert [r.ended for r in result.rungs[1:]] == [PlanStatus.REPLAYED, PlanStatus.REPLAYED, PlanStatus.SKIPPED]
     assert result.rungs[2].contact_steps == 0 and "no contact carries force" in result.rungs[3].reason
     assert result.top_holds
     rung = rung_for(scenario, "dynamic-compliant")  # the skip was right: the plan does hold there
@@ -58,7 +59,7 @@ def test_a_plan_that_pushes_is_not_skipped_between_rigid_and_compliant_contact()
     scenario = load_scenario(TRIANGLE, {"v1": 0.8})
     result = run_ladder(scenario, rungs=["kinematic", "dynamic-rigid", "dynamic-compliant"], seed=1, iterations=2000)
     assert result.rungs[1].contact_steps > 0
-    assert result.rungs[2].ended != "skipped"
+    assert result.rungs[2].ended is not PlanStatus.SKIPPED
 
 
 def test_a_start_inside_the_unsafe_set_is_bad_input(tmp_path):
@@ -123,7 +124,7 @@ def test_a_rung_may_spend_what_the_rungs_below_left_and_the_ladder_never_more_th
         geometric, kinematic = run_ladder(scenario, rungs=["geometric", "kinematic"], seed=seed, iterations=200).rungs
         assert geometric.iterations < 200
         assert geometric.iterations + kinematic.iterations <= 400
-        spent_beyond_own |= kinematic.ended == "replanned" and kinematic.iterations > 200
+        spent_beyond_own |= kinematic.ended is PlanStatus.REPLANNED and kinematic.iterations > 200
     assert spent_beyond_own
 
 
@@ -134,7 +135,8 @@ def test_the_scenarios_time_limit_caps_a_search_and_the_report_says_so(tmp_path)
     result = run_ladder(load_scenario(path), seed=3, iterations=100_000)
     assert not result.top_holds
     failed = result.rungs[-1]
-    assert failed.ended == "failed" and "time limit ran out" in failed.reason and failed.iterations < 100_000
+    assert failed.ended is PlanStatus.TIMEOUT and failed.reason.startswith(PlanStatus.TIMEOUT.message)
+    assert "time limit ran out" in failed.reason and failed.iterations < 100_000
 
 
 def test_simulate_replays_a_plan_file_under_any_rung(tmp_path):
@@ -174,8 +176,8 @@ def test_geometric_rung_plans_free_transfer_and_the_kinematic_rung_replays_it():
     scenario = load_scenario(SCENARIOS / "free_transfer.toml")
     result = run_ladder(scenario, seed=3, iterations=3000)
     geometric, kinematic = result.rungs
-    assert geometric.ended == "planned" and geometric.outcome == "goal"
-    assert kinematic.ended == "replayed" and kinematic.propagations == 0
+    assert geometric.ended is PlanStatus.EXACT and geometric.outcome == "goal"
+    assert kinematic.ended is PlanStatus.REPLAYED and kinematic.propagations == 0
     from planner.ompl_adapter import plan_geometric
 
     path = plan_geometric(scenario, seed=3, iterations=3000)
@@ -194,7 +196,7 @@ def test_plans_that_hold_at_the_top_rung_in_most_seeds(name):
         top = result.rungs[-1]
         rung = rung_for(scenario, top.rung)
         replay = rung.rollout(scenario, rung.initial_state(scenario), np.array(top.controls).reshape(len(top.durations), -1),
-                              np.array(top.durations), step_for(scenario, top.rung)) if top.durations else None
+                              np.array(top.durations), scenario.rung_settings(top.rung).h) if top.durations else None
         held += bool(result.top_holds and replay is not None and replay.outcome == "goal" and replay.ok)
     assert held >= 8
 
@@ -204,7 +206,7 @@ def _holds_at_a_tenth_of_the_step(scenario, report) -> bool:
     the goal: it does not rely on the discretisation error (a planner exploits it if it can)."""
     rung = rung_for(scenario, report.rung)
     out = rung.rollout(scenario, rung.initial_state(scenario), np.array(report.controls).reshape(len(report.durations), -1),
-                       np.array(report.durations), step_for(scenario, report.rung) / 10)
+                       np.array(report.durations), scenario.rung_settings(report.rung).h / 10)
     return out.ok and out.outcome == "goal"
 
 

@@ -50,7 +50,7 @@ def test_with_mu_at_least_one_every_ratio_in_the_quadrant_grasps():
     axes = [sw.parse_axis("v1=0.25:4:13:log"), sw.parse_axis("mu=1.0,1.2")]
     result = sw.sweep(TRIANGLE, axes, sw.parse_models("quasistatic-rigid"), fixed={"v2": 1.0}, duration=8.0)
     assert len(result.points) == 26
-    assert all(p.klass == "goal" for p in result.points), [(p.parameters, p.klass) for p in result.points if p.klass != "goal"]
+    assert all(p.outcome == "goal" for p in result.points), [(p.parameters, p.outcome) for p in result.points if p.outcome != "goal"]
 
 
 def test_elastic_band_lies_inside_the_plastic_band():
@@ -68,10 +68,10 @@ def test_local_pool_and_dask_local_cluster_give_identical_results():
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
         with sw.Executor(address=f"dask://{cluster.scheduler_address}") as dask:
             remote = ratio_sweep("quasistatic-rigid", "0.5,1.2", count=7, tolerance=1e-2, executor=dask)
-    assert [(p.parameters, p.klass, p.status, p.t) for p in local.points] == [(p.parameters, p.klass, p.status, p.t) for p in remote.points]
+    assert [(p.parameters, p.outcome, p.status, p.t) for p in local.points] == [(p.parameters, p.outcome, p.status, p.t) for p in remote.points]
     assert local.boundaries == remote.boundaries
     serial = ratio_sweep("quasistatic-rigid", "0.5,1.2", count=7, tolerance=1e-2)
-    assert [p.klass for p in serial.points] == [p.klass for p in local.points]
+    assert [p.outcome for p in serial.points] == [p.outcome for p in local.points]
 
 
 def test_an_interrupted_sweep_keeps_what_it_computed():
@@ -123,7 +123,7 @@ def test_sweep_command_writes_json_csv_and_plot(tmp_path):
     data = json.loads(done.stdout)
     assert data["complete"] and len(data["points"]) == 10 and data["boundaries"]
     assert json.loads((out / "sweep.json").read_text())["points"] == data["points"]
-    assert (out / "sweep.csv").read_text().splitlines()[0].startswith("model,v1,mu,class,outcome,t,status")
+    assert (out / "sweep.csv").read_text().splitlines()[0].startswith("model,v1,mu,outcome,t,status")
     assert (out / "sweep.png").stat().st_size > 0 and (out / "sweep.svg").exists()
 
 

@@ -1,0 +1,54 @@
+"""How a planning search, and a rung of the ladder, ended: `PlanStatus`."""
+
+from __future__ import annotations
+
+from enum import Enum
+
+
+class PlanStatus(Enum):
+    """How a search ended (after OMPL's ``ompl::base::PlannerStatus``) and how a rung of the
+    ladder ended. Each member's value is its message; `label` is the word plan.json and
+    report.json write in a rung's ``ended`` (the three ways a control rung fails all write
+    ``failed``; the rung's ``reason`` starts with the member's message).
+
+    The adapter (`planner.ompl_adapter`) returns EXACT, TIMEOUT, BUDGET_EXHAUSTED, STOPPED or
+    ABORTED for a search, from what ended it; the ladder adds the rest.
+    """
+
+    EXACT = "a search found a plan into the goal set"
+    REPLANNED = "the previous plan did not hold; a search guided by it found a plan into the goal set"
+    REPLAYED = "the previous plan holds under this rung"
+    SKIPPED = "the rung computes along the plan what the rung below computed: the plan holds as it is"
+    APPROXIMATE = "no path into the goal set within the budget; the closest one seeds the next rung"
+    TIMEOUT = "no exact plan before the time limit ran out"
+    BUDGET_EXHAUSTED = "no exact plan within the iteration budget"
+    FAILED = "the plan found does not hold when replayed"
+    STOPPED = "the search was stopped before it ended (interrupted)"
+    ABORTED = "the planner ended the search by itself, with no plan (OMPL refused the start or the goal)"
+
+    @property
+    def message(self) -> str:
+        return self.value
+
+    @property
+    def label(self) -> str:
+        return _LABELS[self]
+
+    @property
+    def holds(self) -> bool:
+        """The rung accepted a plan that reaches the goal under it."""
+        return self in (PlanStatus.EXACT, PlanStatus.REPLANNED, PlanStatus.REPLAYED, PlanStatus.SKIPPED)
+
+
+_LABELS = {
+    PlanStatus.EXACT: "planned",
+    PlanStatus.REPLANNED: "replanned",
+    PlanStatus.REPLAYED: "replayed",
+    PlanStatus.SKIPPED: "skipped",
+    PlanStatus.APPROXIMATE: "approximate",
+    PlanStatus.TIMEOUT: "failed",
+    PlanStatus.BUDGET_EXHAUSTED: "failed",
+    PlanStatus.FAILED: "failed",
+    PlanStatus.STOPPED: "stopped",
+    PlanStatus.ABORTED: "failed",
+}
