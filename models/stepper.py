@@ -37,10 +37,11 @@ on a failure.
 
 Contracts are named tuples: `Model` (what is solved), `Solver` (how), `Drives`, `SceneTables`
 (the packed scene tables), `System` (A and what never changes), `models.contact.ContactSet`
-(the contacts at q) in; `StepResult` out. Hot-path note: numba increfs every array of a tuple
-that is built or returned across a function boundary, so the tuples a step takes are built
-once per rollout (the contact set is refilled in place, its count nc travels beside it), and
-kernels take the packed scene tables, not `SceneData`.
+(the contacts at q) in; `StepResult` out (`dynamics_step`). Hot-path note: numba increfs and
+decrefs every array of a tuple argument on each call, so the tuples a step takes are built
+once per rollout (the contact set is refilled in place, its count nc travels beside it),
+kernels take the packed scene tables, not `SceneData`, and the two cheap steps (`free_step`,
+`kinematic_step`, about a microsecond each) take plain arrays.
 """
 
 from __future__ import annotations
@@ -429,8 +430,9 @@ def free_step(eps, theta, h, bi, Ainv, M_const, rhs_const, q, nu, q_ref, u, q_in
 
     Returns (q+, nu+, q_ref+, status: a StepStatus value); equals dynamics_step with nc = 0
     (tests check it). Not for scenes with force-limited drives (their impulses need the
-    contact problem). Plain arrays, not `Drives` / `System`: at about a microsecond a step,
-    the reference counts of whole tuples crossing the call would cost ~10% (measured).
+    contact problem). Plain arrays, not `Drives` / `System`: this step takes about a
+    microsecond, and numba reference-counts every array of a tuple argument on each call
+    (measured: whole tuples on the per-step calls made the paper scene's rungs up to 45% slower).
     """
     quasistatic = eps == 0.0
     rhs = rhs_const.copy()
