@@ -219,7 +219,8 @@ def _inverse_or_empty(A):
 def _start_system(S, D, model, h, q):
     """The System at the start of a rollout: A, and A^-1 and M when they never change."""
     bi, bf, nv = S.bi, S.bf, S.nv
-    eps_eff = QUASISTATIC_INERTIA if model.eps == 0.0 else model.eps
+    kinematic, eps, compliant, theta, _ = model
+    eps_eff = QUASISTATIC_INERTIA if eps == 0.0 else eps
     A = system_matrix(bi, bf, q, nv, eps_eff, h, D.v_index, D.kp, D.kd, D.max_force)
     Ainv = np.zeros((0, 0))
     M_const = np.zeros((0, 0))
@@ -266,13 +267,14 @@ def rollout_kernel(S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, del
     system = _start_system(S, D, model, h, q)
     A, Ainv, M_const, rhs_const = system
     constant_A, limited = not has_rotations(bi), any_limited(max_force)
-    eps_eff = QUASISTATIC_INERTIA if model.eps == 0.0 else model.eps
+    kinematic, eps, compliant, theta, _ = model
+    eps_eff = QUASISTATIC_INERTIA if eps == 0.0 else eps
     max_records = max(max_records, 2)
     rec_t, rec_q, rec_nu = np.zeros(max_records), np.zeros((max_records, q.shape[0])), np.zeros((max_records, nv))
     n_rec = _record_state(rec_t, rec_q, rec_nu, 0, 0.0, q, nu)
     t, steps, lcp_solves, pivots, max_residual, max_size, min_psi, force_steps, sweeps = 0.0, 0, 0, 0, 0.0, 0, np.inf, 0, 0
     outcome, status = Outcome.NONE.value, StepStatus.OK.value
-    if not model.kinematic and constant_A and Ainv.shape[0] != nv:
+    if not kinematic and constant_A and Ainv.shape[0] != nv:
         status = StepStatus.SINGULAR.value
     for k in range(controls.shape[0]):
         if status != StepStatus.OK or (outcome != Outcome.NONE and stop_at_outcome):
@@ -298,16 +300,16 @@ def rollout_kernel(S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, del
                 status = StepStatus.UNSUPPORTED_PAIR.value
                 break
             if nc > 0:
-                _assemble(bi, bf, pi, dimension, q, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, W_n, W_t, W_o, c_bias, scripted, not model.kinematic)
+                _assemble(bi, bf, pi, dimension, q, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, W_n, W_t, W_o, c_bias, scripted, not kinematic)
             # stages solve and integrate: the rung's step kernel
             p_t, dn2, dt2, sw = np.zeros((0, 2)), delta_n, delta_t, 0
-            if model.kinematic:
+            if kinematic:
                 q2, nu2, q_ref2, st, piv, res = kinematic_step(bi, h, q, q_ref, u, q_index, v_index, lower, upper, nc, c_psi, c_bias, W_n, nv)
                 size, p_n = nc, np.zeros(nc)
             elif nc == 0 and constant_A and not limited:  # the cheap path: no contact problem
-                q2, nu2, q_ref2, st = free_step(model.eps, model.theta, h, bi, Ainv, M_const, rhs_const, q, nu, q_ref, u,
+                q2, nu2, q_ref2, st = free_step(eps, theta, h, bi, Ainv, M_const, rhs_const, q, nu, q_ref, u,
                                                 q_index, v_index, kp, kd, lower, upper)
-                if model.compliant and (delta_n.any() or delta_t.any()):
+                if compliant and (delta_n.any() or delta_t.any()):
                     dn2, dt2 = np.zeros_like(delta_n), np.zeros_like(delta_t)
                 piv, res, size, p_n = 0, 0.0, 0, np.zeros(0)
             else:
