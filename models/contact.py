@@ -17,6 +17,7 @@ Everything here runs in numba; `contact_frames` is the Python-facing convenience
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -48,10 +49,44 @@ from models.kinematics import (
     positions,
 )
 
-#: Contacts are kept while psi <= this plus what one step can close (m).
-DEFAULT_MARGIN = 1e-3
+#: The one contact margin: contacts are kept while psi <= this plus what one step can close (m).
+#: Rollouts detect with it, and so does `contact_frames` by default.
+CONTACT_MARGIN = 1e-3
 #: The step-closing margin is multiplied by this for safety against curved motion.
 MARGIN_SAFETY = 2.0
+
+
+class ContactSet(NamedTuple):
+    """The contacts of one step as the compiled step reads them: buffers of a capacity (the
+    most contacts the scene's pairs can produce at once, `contact_buffers`), of which the first
+    nc are the step's (nc travels beside the set: the rollout refills the buffers in place, so
+    the hot loop builds no new tuple). Symbols as in the paper: psi the signed distances, W_n,
+    W_t, W_o the contact Jacobians in velocity coordinates (one column per contact). The
+    frames (n, t, o, contact points) stay with the rollout: the step does not read them."""
+
+    pair: np.ndarray  # int64[cap]: contact i's pair (row of SceneData.pi / .pf)
+    psi: np.ndarray  # float64[cap]: signed distance, m (negative: penetration)
+    slot: np.ndarray  # int64[cap]: its deformation / warm-start slot (the pair's first slot + rank in the pair)
+    W_n: np.ndarray  # float64[nv, cap]
+    W_t: np.ndarray  # float64[nv, cap]
+    W_o: np.ndarray  # float64[nv, cap] (space only)
+    bias: np.ndarray  # float64[cap, 3]: velocity along (n, t, o) from scripted obstacles (`scripted_bias`)
+
+
+@numba.njit(cache=True)
+def contact_buffers(pi, nv):
+    """(ContactSet of zeros sized for the scene's pair table pi, first_slot (n_pairs,): each
+    pair's first slot). Capacity: 1 + the pairs' contact counts."""
+    cap = 1
+    first_slot = np.zeros(pi.shape[0], np.int64)
+    for p in range(pi.shape[0]):
+        first_slot[p] = cap - 1
+        cap += pi[p, 2]
+    contacts = ContactSet(
+        np.zeros(cap, np.int64), np.zeros(cap), np.zeros(cap, np.int64),
+        np.zeros((nv, cap)), np.zeros((nv, cap)), np.zeros((nv, cap)), np.zeros((cap, 3)),
+    )
+    return contacts, first_slot
 
 
 @numba.njit(cache=True)
@@ -335,7 +370,7 @@ def capacity(S: SceneData) -> int:
     return int(np.sum(S.pair_max_contacts))
 
 
-def contact_frames(S: SceneData, q: np.ndarray, nu: np.ndarray | None = None, h: float = 0.0, margin: float = DEFAULT_MARGIN) -> Contacts:
+def contact_frames(S: SceneData, q: np.ndarray, nu: np.ndarray | None = None, h: float = 0.0, margin: float = CONTACT_MARGIN) -> Contacts:
     """Detect contacts at q (velocities nu over a step h widen the margin) and assemble W."""
     q = np.ascontiguousarray(q, dtype=np.float64)
     nu = np.zeros(S.nv) if nu is None else np.ascontiguousarray(nu, dtype=np.float64)

@@ -40,10 +40,13 @@ tolerance times the impulse scale (the largest impulse, or the largest impulse t
 a contact's free approach) *and* the recomputed residual is at most tolerance. The residual is
 the natural-map residual in impulse units, max over contacts of |min(p_n, w / G_nn)| and
 |f - f*| (f* the tangential block minimiser at the current point), divided by the same impulse
-scale. Failing that within max_sweeps comes back as PGS_NOT_CONVERGED, never raised.
+scale. Failing that within max_sweeps comes back as PgsStatus.NOT_CONVERGED, never raised.
 """
 
 from __future__ import annotations
+
+from enum import IntEnum
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -62,9 +65,45 @@ SINGULAR_BLOCK = 1e-12
 #: (relative to the polygon's radius).
 INSIDE_TOL = 1e-12
 
-PGS_CONVERGED = 0
-PGS_NOT_CONVERGED = 1
-PGS_NON_FINITE = 2
+
+class PgsStatus(IntEnum):
+    """How a PGS solve ended; only CONVERGED is a success (see `.message`)."""
+
+    CONVERGED = 0
+    NOT_CONVERGED = 1
+    NON_FINITE = 2
+
+    @property
+    def label(self) -> str:
+        return self.name.lower()
+
+    @property
+    def message(self) -> str:
+        return _PGS_MESSAGES[self]
+
+    @property
+    def is_success(self) -> bool:
+        return self is PgsStatus.CONVERGED
+
+
+_PGS_MESSAGES = {
+    PgsStatus.CONVERGED: "converged: the impulse change and the recomputed residual are within the tolerance",
+    PgsStatus.NOT_CONVERGED: "the sweep limit was reached before the impulses met the tolerance",
+    PgsStatus.NON_FINITE: "the impulses or the residual became non-finite",
+}
+
+
+class PgsResult(NamedTuple):
+    """What `contact_pgs` returns."""
+
+    nu: np.ndarray  # (nv,) nu+
+    p_n: np.ndarray  # (nc,) normal impulses, zero where inactive
+    p_t: np.ndarray  # (nc, 2) friction impulses in the (t, o) basis, zero where inactive
+    active: np.ndarray  # int64: indices of the active contacts
+    status: int  # a PgsStatus value
+    sweeps: int
+    residual: float  # natural-map residual over the impulse scale (see the module docstring)
+    unknowns: int  # scalar impulses solved for
 
 
 # ----------------------------------------------------------------------------- A by body
@@ -292,22 +331,24 @@ def _friction_update(k, spatial, cdof, cm, jt, jo, yt, yo, g00, g01, g11, comp, 
 
 @numba.njit(cache=True)
 def contact_pgs(
-    compliant, directions, spatial, h, pi, pf, nc, c_pair, c_psi, c_slot, W_n, W_t, W_o, c_bias,
-    delta_n, delta_t, dofs, count, inv, nu_free, warm_n, warm_t, zero_column, tolerance, max_sweeps,
+    model, spatial, h, pi, pf, contacts, nc, delta_n, delta_t, dofs, count, inv, nu_free, warm_n, warm_t,
+    zero_column, tolerance, max_sweeps,
 ):
     """Solve the contact problem of the module docstring by PGS.
 
-    Contacts 0..nc-1 with Jacobian columns W_n, W_t (W_o in space) of shape (nv, >= nc); a
-    contact is active when its W_n column's norm exceeds zero_column, and has friction when
-    mu > 0 and W_t (or W_o) exceeds it. c_bias (>= nc, 3): relative velocity along (n, t, o)
-    from scripted obstacles, added to the contact's velocity. (dofs, count, inv): `body_blocks` of A. warm_n
-    (slots,), warm_t (slots, 2): the previous step's impulses by contact slot (zeros: a cold
-    start).
+    model: `models.stepper.Model` (compliant, friction_directions); contacts: a
+    `models.contact.ContactSet`, contacts 0..nc-1 with Jacobian columns W_n, W_t (W_o in
+    space) of shape (nv, >= nc); a contact is active when its W_n column's norm exceeds
+    zero_column, and has friction when mu > 0 and W_t (or W_o) exceeds it. bias (>= nc, 3):
+    relative velocity along (n, t, o) from scripted obstacles, added to the contact's
+    velocity. (dofs, count, inv): `body_blocks` of A. warm_n (slots,), warm_t (slots, 2): the
+    previous step's impulses by contact slot (zeros: a cold start).
 
-    Returns (nu+, p_n (nc,), p_t (nc, 2) in the (t, o) basis, zero where inactive; active: the
-    indices of the active contacts; status PGS_*; sweeps; residual; unknowns: scalar impulses
-    solved for).
+    Returns a `PgsResult`.
     """
+    compliant, directions = model.compliant, model.friction_directions
+    c_pair, c_psi, c_slot, c_bias = contacts.pair, contacts.psi, contacts.slot, contacts.bias
+    W_n, W_t, W_o = contacts.W_n, contacts.W_t, contacts.W_o
     d = directions if spatial else 2
     cosines = np.empty(d)
     sines = np.empty(d)
@@ -389,7 +430,7 @@ def contact_pgs(
     p_out = np.zeros(nc)
     t_out = np.zeros((nc, 2))
     if n == 0:
-        return nu_free.copy(), p_out, t_out, active[:0], PGS_CONVERGED, 0, 0.0, 0
+        return PgsResult(nu_free.copy(), p_out, t_out, active[:0], PgsStatus.CONVERGED.value, 0, 0.0, 0)
     # impulse scale: the largest impulse that would stop a contact's free approach
     scale = 0.0
     for k in range(n):
@@ -419,7 +460,7 @@ def contact_pgs(
             _add(yt, k, cdof, cm[k], f[k, 0], v)
             if spatial:
                 _add(yo, k, cdof, cm[k], f[k, 1], v)
-    status = PGS_NOT_CONVERGED
+    status = PgsStatus.NOT_CONVERGED.value
     sweeps = 0
     residual = np.inf
     for sweep in range(max_sweeps):
@@ -434,7 +475,7 @@ def contact_pgs(
             if fric[k]:
                 change = max(change, _friction_update(k, spatial, cdof, cm, jt, jo, yt, yo, g00, g01, g11, comp, bt, mu, p_n, f, v, cosines, sines))
         if not np.isfinite(change):
-            status = PGS_NON_FINITE
+            status = PgsStatus.NON_FINITE.value
             break
         big = scale
         for k in range(n):
@@ -443,21 +484,21 @@ def contact_pgs(
             residual = _residual(n, spatial, cdof, cm, jn, jt, jo, gnn, g00, g01, g11, comp, bn, bt, mu, fric, p_n, f, v, cosines, sines)
             residual = residual / big if big > 0.0 else residual
             if residual <= tolerance:
-                status = PGS_CONVERGED
+                status = PgsStatus.CONVERGED.value
                 break
-    if status != PGS_CONVERGED:
+    if status != PgsStatus.CONVERGED:
         big = scale
         for k in range(n):
             big = max(big, p_n[k], np.sqrt(f[k, 0] * f[k, 0] + f[k, 1] * f[k, 1]))
         residual = _residual(n, spatial, cdof, cm, jn, jt, jo, gnn, g00, g01, g11, comp, bn, bt, mu, fric, p_n, f, v, cosines, sines)
         residual = residual / big if big > 0.0 else residual
         if not np.isfinite(residual):
-            status = PGS_NON_FINITE
+            status = PgsStatus.NON_FINITE.value
     for k in range(n):
         p_out[active[k]] = p_n[k]
         t_out[active[k], 0] = f[k, 0]
         t_out[active[k], 1] = f[k, 1]
-    return v, p_out, t_out, active[:n], status, sweeps, residual, unknowns
+    return PgsResult(v, p_out, t_out, active[:n], status, sweeps, residual, unknowns)
 
 
 @numba.njit(cache=True)

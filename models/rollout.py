@@ -7,6 +7,11 @@ step the model (`models.stepper`). It stops at the first of: unsafe entered, goa
 step failure (status), the end of the controls (the final state is classified once more).
 Every `record_every`-th state, and the last, is recorded for plots and plans.
 
+A step of the rollout reads as its stages, each a function named after it:
+detect (`models.contact`) / `_distances` (contacts at q) -> `_classify_with` (goal / unsafe) -> `_assemble`
+(Jacobians, frames) -> solve and integrate (the rung's step kernel, `models.stepper`:
+`kinematic_step`, `free_step` or `dynamics_step`) -> `_record_forces` / `_record_state`.
+
 Skipping what a scene does not need: with no contact the step is a free update with a
 precomputed inverse system matrix; mu = 0 pairs get no friction variables; rigid models
 carry no deformation; quasistatic models never touch the inertia terms.
@@ -14,10 +19,14 @@ carry no deformation; quasistatic models never touch the inertia terms.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba
 import numpy as np
 
 from models.contact import (
+    CONTACT_MARGIN,
+    contact_buffers,
     detect_planar,
     detect_planar_into,
     detect_spatial,
@@ -29,12 +38,11 @@ from models.contact import (
 )
 from models.predicates import evaluate, evaluate_with
 from models.stepper import (
-    CONTACT_MARGIN,
     QUASISTATIC_INERTIA,
     SOLVER_LEMKE,
-    STEP_OK,
-    STEP_SINGULAR,
-    STEP_UNSUPPORTED_PAIR,
+    SceneTables,
+    StepStatus,
+    System,
     any_limited,
     dynamics_step,
     free_step,
@@ -44,31 +52,154 @@ from models.stepper import (
     mass_matrix,
     system_matrix,
 )
+from models.task import Outcome
 
-OUTCOME_NONE = 0
-OUTCOME_GOAL = 1
-OUTCOME_UNSAFE = 2
-OUTCOME_NAMES = {OUTCOME_NONE: "none", OUTCOME_GOAL: "goal", OUTCOME_UNSAFE: "unsafe"}
+
+class RolloutOutput(NamedTuple):
+    """What `rollout_kernel` returns (read by name in `models.rungs`)."""
+
+    q: np.ndarray  # the final state: (nq,)
+    nu: np.ndarray  # (nv,)
+    q_ref: np.ndarray  # (n_actuated,)
+    delta_n: np.ndarray  # (slots,)
+    delta_t: np.ndarray  # (slots, 2)
+    t: float  # time run, s (from the start of this call)
+    outcome: int  # a models.task.Outcome value: the first class other than NONE met
+    status: int  # a models.stepper.StepStatus value: OK, or the failure that stopped the run
+    steps: int
+    lcp_solves: int  # steps that solved a contact problem
+    pivots: int  # Lemke pivots over all steps
+    max_residual: float  # the largest solver residual of any step
+    max_lcp_size: int  # the most unknowns of any step's contact problem
+    times: np.ndarray  # (n,) recorded times
+    trajectory: np.ndarray  # (n, nq) recorded q
+    velocities: np.ndarray  # (n, nv) recorded nu
+    pair_force: np.ndarray  # (n_pairs,) normal contact force of each pair over the last step taken, N
+    min_psi: float  # smallest contact signed distance met at the start of any step (inf if none), m
+    force_steps: int  # steps with a positive normal contact impulse
+    sweeps: int  # PGS sweeps over all steps
+    pair_wrench: np.ndarray  # (n_pairs, 3) world-frame force on each pair's second body over the last step, N
+
+
+# ----------------------------------------------------------------------------- the stages
+#
+# Hot-path note (`models.stepper`): a stage called every step takes the arrays it reads, not
+# the named tuples holding them: numba increfs and decrefs every array of a tuple argument on
+# each call, which measurably slowed the cheap rungs (about a microsecond a step); the small
+# ones are inlined (numba IR inlining: no call, no reference counting of their arguments).
+
+
+@numba.njit(cache=True, inline="always")
+def _distances(nc, c_pair, c_psi, c_slot, first_slot, pair_psi):
+    """Stage detect (after `models.contact`'s detection into the buffers): each contact's
+    slot, each pair's smallest psi. Returns the
+    smallest psi of any contact (inf without contacts)."""
+    smallest = np.inf
+    pair_psi[:] = np.inf
+    for i in range(nc):
+        p = c_pair[i]
+        if c_psi[i] < smallest:
+            smallest = c_psi[i]
+        if c_psi[i] < pair_psi[p]:
+            pair_psi[p] = c_psi[i]
+        c_slot[i] = first_slot[p] if (i == 0 or c_pair[i - 1] != p) else c_slot[i - 1] + 1
+    return smallest
 
 
 @numba.njit(cache=True)
 def _classify(goal, unsafe, q, pair_psi):
-    outcome = OUTCOME_NONE
+    """Stage classify (allocating its own stack): the Outcome value of q."""
+    outcome = Outcome.NONE.value
     if evaluate(unsafe, q, pair_psi):
-        outcome = OUTCOME_UNSAFE
+        outcome = Outcome.UNSAFE.value
     elif evaluate(goal, q, pair_psi):
-        outcome = OUTCOME_GOAL
+        outcome = Outcome.GOAL.value
     return outcome
 
 
 @numba.njit(cache=True)
 def _classify_with(g_op, g_index, g_lo, g_hi, u_op, u_index, u_lo, u_hi, q, pair_psi, stack):
-    outcome = OUTCOME_NONE
+    """Stage classify on the rollout's stack: unsafe first, then goal."""
+    outcome = Outcome.NONE.value
     if evaluate_with(u_op, u_index, u_lo, u_hi, q, pair_psi, stack):
-        outcome = OUTCOME_UNSAFE
+        outcome = Outcome.UNSAFE.value
     elif evaluate_with(g_op, g_index, g_lo, g_hi, q, pair_psi, stack):
-        outcome = OUTCOME_GOAL
+        outcome = Outcome.GOAL.value
     return outcome
+
+
+@numba.njit(cache=True, inline="always")
+def _assemble(bi, bf, pi, dimension, q, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, W_n, W_t, W_o, c_bias, scripted, with_friction):
+    """Stage assemble: W_n of the first nc (> 0) contacts at q; with scripted obstacles the frames
+    and their velocity bias; with friction (every rung with forces) t, o and W_t, W_o."""
+    jacobian_packed(bi, bf, pi, q, nc, c_pair, c_n, c_pa, c_pb, W_n)
+    if scripted:
+        tangents_packed(dimension, nc, c_n, c_t, c_o)
+        scripted_bias(bf, pi, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, c_bias)
+    if with_friction:
+        tangents_packed(dimension, nc, c_n, c_t, c_o)
+        jacobian_packed(bi, bf, pi, q, nc, c_pair, c_t, c_pa, c_pb, W_t)
+        if dimension == 3:
+            jacobian_packed(bi, bf, pi, q, nc, c_pair, c_o, c_pa, c_pb, W_o)
+
+
+@numba.njit(cache=True, inline="always")
+def _keep_warm(nc, c_slot, p_n, p_t, warm_n, warm_t, warm_slots, n_warm):
+    """PGS warm start for the next step: this step's impulses by slot (the previous step's
+    slots reset, not all of them). Returns the number of slots written."""
+    for i in range(n_warm):
+        warm_n[warm_slots[i]] = 0.0
+        warm_t[warm_slots[i], 0] = 0.0
+        warm_t[warm_slots[i], 1] = 0.0
+    for i in range(nc):
+        warm_slots[i] = c_slot[i]
+        warm_n[c_slot[i]] = p_n[i]
+        warm_t[c_slot[i], 0] = p_t[i, 0]
+        warm_t[c_slot[i], 1] = p_t[i, 1]
+    return nc
+
+
+@numba.njit(cache=True, inline="always")
+def _record_forces(c_pair, c_n, c_t, c_o, p_n, p_t, h, pair_force, pair_wrench):
+    """Stage record: each pair's normal force and world-frame force on its body B over the
+    step. Returns whether some contact carried a positive normal impulse."""
+    pair_force[:] = 0.0
+    pair_wrench[:] = 0.0
+    pushed = False
+    for i in range(p_n.shape[0]):
+        pair_force[c_pair[i]] += p_n[i] / h
+        if p_n[i] > 0.0:
+            pushed = True
+        for k in range(3):
+            f = p_n[i] * c_n[i, k]
+            if p_t.shape[0] > i:
+                f += p_t[i, 0] * c_t[i, k] + p_t[i, 1] * c_o[i, k]
+            pair_wrench[c_pair[i], k] += f / h
+    return pushed
+
+
+@numba.njit(cache=True, inline="always")
+def _record_state(rec_t, rec_q, rec_nu, n_rec, t, q, nu):
+    """Stage record: keep (t, q, nu) as record n_rec; returns the next record's index."""
+    rec_t[n_rec] = t
+    rec_q[n_rec] = q
+    rec_nu[n_rec] = nu
+    return n_rec + 1
+
+
+@numba.njit(cache=True)
+def _final_outcome(S, goal, unsafe, q, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pair_psi):
+    """Classify the state a run ended in (contacts at rest: no broadphase widening)."""
+    zero = np.zeros(S.nv)
+    if S.dimension == 3:
+        nc, _ = detect_spatial(S, q, zero, 0.0, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported)
+    else:
+        nc = detect_planar(S.bi, S.bf, S.verts, S.pi, q, zero, 0.0, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb)
+    pair_psi[:] = np.inf
+    for i in range(nc):
+        if c_psi[i] < pair_psi[c_pair[i]]:
+            pair_psi[c_pair[i]] = c_psi[i]
+    return _classify(goal, unsafe, q, pair_psi)
 
 
 @numba.njit(cache=True)
@@ -85,6 +216,24 @@ def _inverse_or_empty(A):
 
 
 @numba.njit(cache=True)
+def _start_system(S, D, model, h, q):
+    """The System at the start of a rollout: A, and A^-1 and M when they never change."""
+    bi, bf, nv = S.bi, S.bf, S.nv
+    kinematic, eps, compliant, theta, _ = model
+    eps_eff = QUASISTATIC_INERTIA if eps == 0.0 else eps
+    A = system_matrix(bi, bf, q, nv, eps_eff, h, D.v_index, D.kp, D.kd, D.max_force)
+    Ainv = np.zeros((0, 0))
+    M_const = np.zeros((0, 0))
+    if not has_rotations(bi):
+        Ainv = _inverse_or_empty(A)
+        M_const = mass_matrix(bi, bf, q, nv)
+    return System(A, Ainv, M_const, h * gravity_force(bi, bf, D.gravity, nv))
+
+
+# ----------------------------------------------------------------------------- the rollout
+
+
+@numba.njit(cache=True)
 def rollout_kernel(S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, delta_t, controls, durations, h, record_every, max_records, stop_at_outcome, t0):
     """Run the controls from the given state (stopping at goal/unsafe if stop_at_outcome;
     otherwise the returned outcome is the first one met, and the run goes on).
@@ -94,157 +243,84 @@ def rollout_kernel(S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, del
     are (their poses are written into S's pose tables as time goes on: pass a scene copy of
     the caller's own when the scene has one). PGS warm starts travel from step to step within the call
     (by contact slot) and start cold in every call, so a rollout depends only on its inputs.
-
-    Returns (q, nu, q_ref, delta_n, delta_t, t, outcome, status, steps, lcp_solves, pivots,
-    max_residual, max_lcp_size, rec_t (n,), rec_q (n, nq), rec_nu (n, nv), pair_force (n_pairs,):
-    the normal contact force of each pair over the last step taken, min_psi: the smallest
-    contact signed distance met at the start of any step (inf if none), force_steps: how many
-    steps had a positive normal contact impulse, sweeps: PGS sweeps over all steps, pair_wrench
-    (n_pairs, 3): the world-frame contact force on each pair's second body over the last step
-    taken, normal plus friction, N; zero in the kinematic rung, which has no forces).
+    Returns a `RolloutOutput`.
     """
-    dimension = S.dimension
-    spatial = dimension == 3
-    bi, bf, pi, pf, verts = S.bi, S.bf, S.pi, S.pf, S.verts
-    nv = S.nv
-    q_index, v_index, kp, kd, lower, upper, max_force = D.q_index, D.v_index, D.kp, D.kd, D.lower, D.upper, D.max_force
-    limited = any_limited(max_force)
+    bi, bf, pi, verts, nv, dimension = S.bi, S.bf, S.pi, S.verts, S.nv, S.dimension
+    tables = SceneTables(bi, bf, pi, S.pf, dimension == 3)
+    n_pairs = max(pi.shape[0], 1)
     scripted = has_script(bf)
     if scripted:
         place_scripted(bf, S.base_pos, S.base_quat, t0)
-    kinematic = model.kinematic
-    compliant = model.compliant
-    theta = model.theta
-    directions = model.friction_directions
-    eps = model.eps
-    eps_eff = QUASISTATIC_INERTIA if eps == 0.0 else eps
-    # buffers, allocated once
-    cap = 1
-    first_slot = np.zeros(pi.shape[0], np.int64)
-    for p in range(pi.shape[0]):
-        first_slot[p] = cap - 1
-        cap += pi[p, 2]
-    c_pair = np.zeros(cap, np.int64)
-    c_slot = np.zeros(cap, np.int64)
-    c_psi = np.zeros(cap)
-    c_n, c_t, c_o = np.zeros((cap, 3)), np.zeros((cap, 3)), np.zeros((cap, 3))
-    c_pa, c_pb = np.zeros((cap, 3)), np.zeros((cap, 3))
-    W_n, W_t, W_o = np.zeros((nv, cap)), np.zeros((nv, cap)), np.zeros((nv, cap))
-    c_bias = np.zeros((cap, 3))  # contact velocity from scripted obstacles along (n, t, o)
-    warm_n, warm_t = np.zeros(cap), np.zeros((cap, 2))  # PGS: last step's impulses by slot
-    warm_slots = np.zeros(cap, np.int64)  # the slots written last step (reset them, not all cap)
-    n_warm = 0
+    contacts, first_slot = contact_buffers(pi, nv)  # buffers, allocated once
+    c_pair, c_psi, c_slot, W_n, W_t, W_o, c_bias = contacts
+    cap = c_psi.shape[0]
+    c_n, c_t, c_o, c_pa, c_pb = np.zeros((cap, 3)), np.zeros((cap, 3)), np.zeros((cap, 3)), np.zeros((cap, 3)), np.zeros((cap, 3))
+    warm_n, warm_t, warm_slots, n_warm = np.zeros(cap), np.zeros((cap, 2)), np.zeros(cap, np.int64), 0  # PGS: by slot
     keep_warm = solver.method != SOLVER_LEMKE
-    unsupported = np.zeros(max(pi.shape[0], 1), np.int64)
-    pair_psi = np.full(max(pi.shape[0], 1), np.inf)
-    pair_force = np.zeros(max(pi.shape[0], 1))  # normal force per pair in the last step
-    pair_wrench = np.zeros((max(pi.shape[0], 1), 3))  # world-frame force on each pair's body B
+    unsupported = np.zeros(n_pairs, np.int64)
+    pair_psi, pair_force, pair_wrench = np.full(n_pairs, np.inf), np.zeros(n_pairs), np.zeros((n_pairs, 3))
     scratch = np.empty((bi.shape[0], 8))
-    g_op, g_index, g_lo, g_hi = goal.op, goal.index, goal.lo, goal.hi
-    u_op, u_index, u_lo, u_hi = unsafe.op, unsafe.index, unsafe.lo, unsafe.hi
+    g_op, g_index, g_lo, g_hi = goal  # hoisted: reading a tuple's array in the loop costs a reference count
+    u_op, u_index, u_lo, u_hi = unsafe
+    q_index, v_index, kp, kd, lower, upper, _, max_force = D
     stack = np.zeros(max(g_op.shape[0], u_op.shape[0]) + 1, np.bool_)
-    # what never changes during the rollout
-    rhs_const = h * gravity_force(bi, bf, D.gravity, nv)
-    constant_A = not has_rotations(bi)
-    A = system_matrix(bi, bf, q, nv, eps_eff, h, v_index, kp, kd, max_force)
-    Ainv = np.zeros((0, 0))
-    M_const = np.zeros((0, 0))
-    if constant_A:
-        Ainv = _inverse_or_empty(A)
-        M_const = mass_matrix(bi, bf, q, nv)
+    system = _start_system(S, D, model, h, q)
+    A, Ainv, M_const, rhs_const = system
+    constant_A, limited = not has_rotations(bi), any_limited(max_force)
+    kinematic, eps, compliant, theta, _ = model
+    eps_eff = QUASISTATIC_INERTIA if eps == 0.0 else eps
     max_records = max(max_records, 2)
-    rec_t = np.zeros(max_records)
-    rec_q = np.zeros((max_records, q.shape[0]))
-    rec_nu = np.zeros((max_records, nv))
-    rec_q[0] = q
-    rec_nu[0] = nu
-    n_rec = 1
-    t = 0.0
-    steps = 0
-    lcp_solves = 0
-    pivots = 0
-    max_residual = 0.0
-    max_size = 0
-    min_psi = np.inf
-    force_steps = 0
-    sweeps = 0
-    outcome = OUTCOME_NONE
-    status = STEP_OK
+    rec_t, rec_q, rec_nu = np.zeros(max_records), np.zeros((max_records, q.shape[0])), np.zeros((max_records, nv))
+    n_rec = _record_state(rec_t, rec_q, rec_nu, 0, 0.0, q, nu)
+    t, steps, lcp_solves, pivots, max_residual, max_size, min_psi, force_steps, sweeps = 0.0, 0, 0, 0, 0.0, 0, np.inf, 0, 0
+    outcome, status = Outcome.NONE.value, StepStatus.OK.value
     if not kinematic and constant_A and Ainv.shape[0] != nv:
-        status = STEP_SINGULAR
+        status = StepStatus.SINGULAR.value
     for k in range(controls.shape[0]):
-        if status != STEP_OK or (outcome != OUTCOME_NONE and stop_at_outcome):
+        if status != StepStatus.OK or (outcome != Outcome.NONE and stop_at_outcome):
             break
-        n_steps = int(np.round(durations[k] / h))
         u = controls[k]
-        for _ in range(n_steps):
-            # contacts at q (scripted obstacles where they are at this time)
-            if scripted:
+        for _ in range(int(np.round(durations[k] / h))):
+            if scripted:  # obstacles where they are at this time
                 place_scripted(bf, S.base_pos, S.base_quat, t0 + t)
+            # stage detect (SceneData crosses a call only in space, where detection needs it)
             n_unsupported = 0
-            if spatial:
+            if dimension == 3:
                 nc, n_unsupported = detect_spatial(S, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported)
             else:
                 nc = detect_planar_into(bi, bf, verts, pi, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, scratch)
-            pair_psi[:] = np.inf
-            for i in range(nc):
-                p = c_pair[i]
-                if c_psi[i] < min_psi:
-                    min_psi = c_psi[i]
-                if c_psi[i] < pair_psi[p]:
-                    pair_psi[p] = c_psi[i]
-                c_slot[i] = first_slot[p] if (i == 0 or c_pair[i - 1] != p) else c_slot[i - 1] + 1
-            if outcome == OUTCOME_NONE or stop_at_outcome:
+            smallest = _distances(nc, c_pair, c_psi, c_slot, first_slot, pair_psi)
+            if smallest < min_psi:
+                min_psi = smallest
+            if outcome == Outcome.NONE or stop_at_outcome:
                 outcome = _classify_with(g_op, g_index, g_lo, g_hi, u_op, u_index, u_lo, u_hi, q, pair_psi, stack)
-                if outcome != OUTCOME_NONE and stop_at_outcome:
+                if outcome != Outcome.NONE and stop_at_outcome:
                     break
             if n_unsupported > 0:
-                status = STEP_UNSUPPORTED_PAIR
+                status = StepStatus.UNSUPPORTED_PAIR.value
                 break
             if nc > 0:
-                jacobian_packed(bi, bf, pi, q, nc, c_pair, c_n, c_pa, c_pb, W_n)
-                if scripted:
-                    tangents_packed(dimension, nc, c_n, c_t, c_o)
-                    scripted_bias(bf, pi, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, c_bias)
-            p_t = np.zeros((0, 2))
+                _assemble(bi, bf, pi, dimension, q, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, W_n, W_t, W_o, c_bias, scripted, not kinematic)
+            # stages solve and integrate: the rung's step kernel
+            p_t, dn2, dt2, sw = np.zeros((0, 2)), delta_n, delta_t, 0
             if kinematic:
                 q2, nu2, q_ref2, st, piv, res = kinematic_step(bi, h, q, q_ref, u, q_index, v_index, lower, upper, nc, c_psi, c_bias, W_n, nv)
-                dn2, dt2 = delta_n, delta_t
-                size = nc
-                p_n = np.zeros(nc)
-            elif nc == 0 and constant_A and not limited:
-                # the cheap path: no contact, constant system matrix
-                q2, nu2, q_ref2, st = free_step(eps, theta, h, bi, Ainv, M_const, rhs_const, q, nu, q_ref, u, q_index, v_index, kp, kd, lower, upper)
-                dn2, dt2 = delta_n, delta_t
+                size, p_n = nc, np.zeros(nc)
+            elif nc == 0 and constant_A and not limited:  # the cheap path: no contact problem
+                q2, nu2, q_ref2, st = free_step(eps, theta, h, bi, Ainv, M_const, rhs_const, q, nu, q_ref, u,
+                                                q_index, v_index, kp, kd, lower, upper)
                 if compliant and (delta_n.any() or delta_t.any()):
                     dn2, dt2 = np.zeros_like(delta_n), np.zeros_like(delta_t)
-                piv, res, size = 0, 0.0, 0
-                p_n = np.zeros(0)
+                piv, res, size, p_n = 0, 0.0, 0, np.zeros(0)
             else:
-                if nc > 0:
-                    tangents_packed(dimension, nc, c_n, c_t, c_o)
-                    jacobian_packed(bi, bf, pi, q, nc, c_pair, c_t, c_pa, c_pb, W_t)
-                    if spatial:
-                        jacobian_packed(bi, bf, pi, q, nc, c_pair, c_o, c_pa, c_pb, W_o)
                 if not constant_A:
                     A = system_matrix(bi, bf, q, nv, eps_eff, h, v_index, kp, kd, max_force)
-                q2, nu2, q_ref2, dn2, dt2, st, piv, res, size, p_n, p_t, sw = dynamics_step(
-                    eps, compliant, theta, directions, h, bi, bf, pf, A, Ainv, M_const, rhs_const,
-                    q, nu, q_ref, delta_n, delta_t, u, q_index, v_index, kp, kd, lower, upper, max_force,
-                    nc, c_pair, c_psi, c_slot, W_n, W_t, W_o, c_bias, spatial, pi, solver, warm_n, warm_t,
-                )
-                sweeps += sw
-                if keep_warm and st == STEP_OK:
-                    for i in range(n_warm):
-                        warm_n[warm_slots[i]] = 0.0
-                        warm_t[warm_slots[i], 0] = 0.0
-                        warm_t[warm_slots[i], 1] = 0.0
-                    for i in range(nc):
-                        warm_slots[i] = c_slot[i]
-                        warm_n[c_slot[i]] = p_n[i]
-                        warm_t[c_slot[i], 0] = p_t[i, 0]
-                        warm_t[c_slot[i], 1] = p_t[i, 1]
-                    n_warm = nc
+                    system = System(A, Ainv, M_const, rhs_const)
+                r = dynamics_step(model, solver, D, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t)
+                q2, nu2, q_ref2, dn2, dt2, st, piv, res, size, p_n, p_t, sw = r
+                if keep_warm and st == StepStatus.OK:
+                    n_warm = _keep_warm(nc, c_slot, p_n, p_t, warm_n, warm_t, warm_slots, n_warm)
+            sweeps += sw
             if size > 0:
                 lcp_solves += 1
                 if size > max_size:
@@ -252,48 +328,20 @@ def rollout_kernel(S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, del
             pivots += piv
             if res > max_residual:
                 max_residual = res
-            if st != STEP_OK:
+            if st != StepStatus.OK:
                 status = st
                 break
             q, nu, q_ref, delta_n, delta_t = q2, nu2, q_ref2, dn2, dt2
-            pair_force[:] = 0.0
-            pair_wrench[:] = 0.0
-            pushed = False
-            for i in range(p_n.shape[0]):
-                pair_force[c_pair[i]] += p_n[i] / h
-                if p_n[i] > 0.0:
-                    pushed = True
-                for k in range(3):
-                    f = p_n[i] * c_n[i, k]
-                    if p_t.shape[0] > i:
-                        f += p_t[i, 0] * c_t[i, k] + p_t[i, 1] * c_o[i, k]
-                    pair_wrench[c_pair[i], k] += f / h
-            if pushed:
-                force_steps += 1
+            force_steps += _record_forces(c_pair, c_n, c_t, c_o, p_n, p_t, h, pair_force, pair_wrench)
             t += h
             steps += 1
             if record_every > 0 and steps % record_every == 0 and n_rec < max_records - 1:
-                rec_t[n_rec] = t
-                rec_q[n_rec] = q
-                rec_nu[n_rec] = nu
-                n_rec += 1
-    if status == STEP_OK and outcome == OUTCOME_NONE:
+                n_rec = _record_state(rec_t, rec_q, rec_nu, n_rec, t, q, nu)
+    if status == StepStatus.OK and outcome == Outcome.NONE:
         if scripted:
             place_scripted(bf, S.base_pos, S.base_quat, t0 + t)
-        zero = np.zeros(nv)
-        if spatial:
-            nc, _ = detect_spatial(S, q, zero, 0.0, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported)
-        else:
-            nc = detect_planar(bi, bf, verts, pi, q, zero, 0.0, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb)
-        pair_psi[:] = np.inf
-        for i in range(nc):
-            if c_psi[i] < pair_psi[c_pair[i]]:
-                pair_psi[c_pair[i]] = c_psi[i]
-        outcome = _classify(goal, unsafe, q, pair_psi)
+        outcome = _final_outcome(S, goal, unsafe, q, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pair_psi)
     if rec_t[n_rec - 1] != t:
-        rec_t[n_rec] = t
-        rec_q[n_rec] = q
-        rec_nu[n_rec] = nu
-        n_rec += 1
-    return (q, nu, q_ref, delta_n, delta_t, t, outcome, status, steps, lcp_solves, pivots, max_residual, max_size,
-            rec_t[:n_rec], rec_q[:n_rec], rec_nu[:n_rec], pair_force, min_psi, force_steps, sweeps, pair_wrench)
+        n_rec = _record_state(rec_t, rec_q, rec_nu, n_rec, t, q, nu)
+    return RolloutOutput(q, nu, q_ref, delta_n, delta_t, t, outcome, status, steps, lcp_solves, pivots, max_residual, max_size,
+                         rec_t[:n_rec], rec_q[:n_rec], rec_nu[:n_rec], pair_force, min_psi, force_steps, sweeps, pair_wrench)

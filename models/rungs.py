@@ -27,9 +27,10 @@ from models.contact import pair_min_distances
 from models.family import FAMILY
 from models.kinematics import PI_INERT, SceneData, compile_scene
 from models.predicates import OP_TOUCH, Program, compile_predicate, evaluate_with
-from models.rollout import OUTCOME_NAMES, rollout_kernel
+from models.rollout import rollout_kernel
 from models.scenario import Scenario
-from models.stepper import LEMKE, STEP_MESSAGES, STEP_NAMES, Drives, Model, Solver, contact_solver
+from models.stepper import LEMKE, Drives, Model, Solver, StepStatus, contact_solver
+from models.task import Outcome
 
 #: Tolerance of the geometric rung's non-penetration check (m).
 GEOMETRIC_TOLERANCE = 1e-9
@@ -247,27 +248,27 @@ class Rung:
             controls, durations, float(h), int(record_every), int(max_records), bool(stop_at_outcome), float(t0),
         )
         wall = time.perf_counter() - start
-        q, nu, q_ref, dn, dt, t, outcome, status, steps, lcp, piv, res, size, rec_t, rec_q, rec_nu, force, min_psi, force_steps, sweeps, wrench = out
+        status = StepStatus(out.status)
         return RolloutResult(
-            state=State(q, nu, q_ref, dn, dt),
-            t=float(t),
-            outcome=OUTCOME_NAMES[int(outcome)],
-            status=STEP_NAMES[int(status)],
-            message=STEP_MESSAGES[int(status)],
-            steps=int(steps),
-            lcp_solves=int(lcp),
-            pivots=int(piv),
-            max_residual=float(res),
-            max_lcp_size=int(size),
+            state=State(out.q, out.nu, out.q_ref, out.delta_n, out.delta_t),
+            t=float(out.t),
+            outcome=Outcome(out.outcome).label,
+            status=status.label,
+            message=status.message,
+            steps=int(out.steps),
+            lcp_solves=int(out.lcp_solves),
+            pivots=int(out.pivots),
+            max_residual=float(out.max_residual),
+            max_lcp_size=int(out.max_lcp_size),
             wall_s=wall,
-            times=rec_t,
-            trajectory=rec_q,
-            velocities=rec_nu,
-            pair_force=force[: len(scenario.pairs)],
-            min_psi=float(min_psi),
-            force_steps=int(force_steps),
-            sweeps=int(sweeps),
-            pair_wrench=wrench[: len(scenario.pairs)],
+            times=out.times,
+            trajectory=out.trajectory,
+            velocities=out.velocities,
+            pair_force=out.pair_force[: len(scenario.pairs)],
+            min_psi=float(out.min_psi),
+            force_steps=int(out.force_steps),
+            sweeps=int(out.sweeps),
+            pair_wrench=out.pair_wrench[: len(scenario.pairs)],
         )
 
     def rollout_chunked(

@@ -30,16 +30,23 @@ and the contact conditions, the one of least kinetic norm nu^T M nu (the LCP is 
 optimality condition of that QP). Numerically eps = QUASISTATIC_INERTIA and the previous
 velocity is not remembered.
 
-Failures never raise: the step returns a status (STEP_OK or a STEP_* code; PGS that does not
-converge: STEP_CONTACT_NOT_CONVERGED) and the solver's recomputed residual; the rollout stops
+Failures never raise: the step returns a `StepStatus` (OK or a failure whose `.message` says
+why; PGS that does not converge: CONTACT_NOT_CONVERGED) and the solver's recomputed residual,
+in a `StepResult`; the rollout stops
 on a failure.
 
-Hot-path note: numba increfs every array of a tuple that crosses a function boundary, so
-these kernels take the packed scene tables (`SceneData.bi/.bf/.pi/.pf`) and plain arrays.
+Contracts are named tuples: `Model` (what is solved), `Solver` (how), `Drives`, `SceneTables`
+(the packed scene tables), `System` (A and what never changes), `models.contact.ContactSet`
+(the contacts at q) in; `StepResult` out (`dynamics_step`). Hot-path note: numba increfs and
+decrefs every array of a tuple argument on each call, so the tuples a step takes are built
+once per rollout (the contact set is refilled in place, its count nc travels beside it),
+kernels take the packed scene tables, not `SceneData`, and the two cheap steps (`free_step`,
+`kinematic_step`, about a microsecond each) take plain arrays.
 """
 
 from __future__ import annotations
 
+from enum import IntEnum
 from typing import NamedTuple
 
 import numba
@@ -60,13 +67,11 @@ from models.kinematics import (
     quat_mul,
     quat_to_matrix,
 )
-from models.contact_pgs import PGS_CONVERGED, PGS_NOT_CONVERGED, block_solve, body_blocks, contact_pgs
+from models.contact_pgs import PgsStatus, block_solve, body_blocks, contact_pgs
 from models.lcp import STATUS_SOLVED, STATUS_SOLVED_INACCURATE, complementarity_residual, lemke_kernel
 
 #: Quasistatic rungs: inertia scale standing in for eps -> 0 (times the mass matrix).
 QUASISTATIC_INERTIA = 1e-6
-#: Contacts are detected up to this distance beyond what one step can close (m).
-CONTACT_MARGIN = 1e-3
 #: A contact whose Jacobian column is below this does not couple to any free DOF.
 ZERO_COLUMN = 1e-12
 #: Lemke pivots allowed per LCP variable.
@@ -80,33 +85,41 @@ LCP_REGULARIZATION_STEPS = 3
 #: A state entry above this in magnitude counts as diverged.
 DIVERGENCE_LIMIT = 1e10
 
-STEP_OK = 0
-STEP_LCP_FAILED = 1
-STEP_NON_FINITE = 2
-STEP_DIVERGED = 3
-STEP_UNSUPPORTED_PAIR = 4
-STEP_SINGULAR = 5
-STEP_BLOCKED = 6
-STEP_CONTACT_NOT_CONVERGED = 7
-STEP_NAMES = {
-    STEP_OK: "ok",
-    STEP_LCP_FAILED: "lcp_failed",
-    STEP_NON_FINITE: "non_finite",
-    STEP_DIVERGED: "diverged",
-    STEP_UNSUPPORTED_PAIR: "unsupported_pair",
-    STEP_SINGULAR: "singular",
-    STEP_BLOCKED: "blocked",
-    STEP_CONTACT_NOT_CONVERGED: "contact_not_converged",
-}
-STEP_MESSAGES = {
-    STEP_OK: "ok",
-    STEP_LCP_FAILED: "the contact LCP could not be solved (Lemke failed or its residual is too large); try a smaller step",
-    STEP_NON_FINITE: "the state became non-finite",
-    STEP_DIVERGED: "the state diverged (an entry exceeded 1e10); try a smaller step",
-    STEP_UNSUPPORTED_PAIR: "a contact pair needs python-fcl (a mesh against a non-plane), which compiled rollouts cannot call",
-    STEP_SINGULAR: "the velocity system is singular (a free DOF with neither inertia nor a drive)",
-    STEP_BLOCKED: "kinematic model: the commanded motion would penetrate something nothing can push away",
-    STEP_CONTACT_NOT_CONVERGED: (
+class StepStatus(IntEnum):
+    """How a step ended. Only OK is a success; `.label` is the name files and the CLI print,
+    `.message` says why (and what to try). Compiled code compares and stores the values."""
+
+    OK = 0
+    LCP_FAILED = 1
+    NON_FINITE = 2
+    DIVERGED = 3
+    UNSUPPORTED_PAIR = 4
+    SINGULAR = 5
+    BLOCKED = 6
+    CONTACT_NOT_CONVERGED = 7
+
+    @property
+    def label(self) -> str:
+        return self.name.lower()
+
+    @property
+    def message(self) -> str:
+        return _STEP_MESSAGES[self]
+
+    @property
+    def is_success(self) -> bool:
+        return self is StepStatus.OK
+
+
+_STEP_MESSAGES = {
+    StepStatus.OK: "ok",
+    StepStatus.LCP_FAILED: "the contact LCP could not be solved (Lemke failed or its residual is too large); try a smaller step",
+    StepStatus.NON_FINITE: "the state became non-finite",
+    StepStatus.DIVERGED: "the state diverged (an entry exceeded 1e10); try a smaller step",
+    StepStatus.UNSUPPORTED_PAIR: "a contact pair needs python-fcl (a mesh against a non-plane), which compiled rollouts cannot call",
+    StepStatus.SINGULAR: "the velocity system is singular (a free DOF with neither inertia nor a drive)",
+    StepStatus.BLOCKED: "kinematic model: the commanded motion would penetrate something nothing can push away",
+    StepStatus.CONTACT_NOT_CONVERGED: (
         "PGS reached its sweep limit before the contact impulses met its tolerance; raise max_sweeps, "
         "loosen the tolerance, or use the lemke (or auto) contact solver"
     ),
@@ -143,7 +156,7 @@ SOLVER_AUTO = 2
 SOLVER_METHODS = {"lemke": SOLVER_LEMKE, "pgs": SOLVER_PGS, "auto": SOLVER_AUTO}
 #: PGS: accepted residual, relative to the step's impulse scale (models.contact_pgs).
 PGS_TOLERANCE = 1e-6
-#: PGS: sweeps before the step reports STEP_CONTACT_NOT_CONVERGED.
+#: PGS: sweeps before the step reports StepStatus.CONTACT_NOT_CONVERGED.
 PGS_MAX_SWEEPS = 1000
 #: auto: PGS from this many detected contacts on. Measured by `ladder bench` (scaling): the
 #: smallest count from which PGS is cheaper per step than Lemke on rigid boxes resting on a
@@ -159,7 +172,7 @@ class Solver(NamedTuple):
     lemke: Lemke's method on the dense Stewart-Trinkle LCP (exact up to round-off; the
     default). pgs: projected Gauss-Seidel on the contact impulses (`models.contact_pgs`),
     O(contacts) per sweep; a step that does not converge within max_sweeps ends with
-    STEP_CONTACT_NOT_CONVERGED. auto: pgs on steps with at least auto_contacts detected
+    StepStatus.CONTACT_NOT_CONVERGED. auto: pgs on steps with at least auto_contacts detected
     contacts, lemke on the others and on any step where PGS does not converge.
     The kinematic rung's projection LCP always uses Lemke. Build with `contact_solver`.
     """
@@ -191,6 +204,43 @@ def contact_solver(
 
 #: The default: every rung solves its contacts with Lemke unless told otherwise.
 LEMKE = contact_solver("lemke")
+
+
+class SceneTables(NamedTuple):
+    """The packed scene tables a step reads (`models.kinematics.SceneData`'s bi, bf, pi, pf)."""
+
+    bi: np.ndarray  # int64[nb, BI_COLUMNS]
+    bf: np.ndarray  # float64[nb, BF_COLUMNS]
+    pi: np.ndarray  # int64[n_pairs, 4]: bodies a, b of each pair
+    pf: np.ndarray  # float64[n_pairs, 3]: mu, K, C
+    spatial: bool  # a 3-D scene (friction cones, W_o, gyroscopic terms)
+
+
+class System(NamedTuple):
+    """The step's linear system: A nu+ = rhs (+ contact impulses), see the module docstring."""
+
+    A: np.ndarray  # (nv, nv) eps M + h (h kp + kd) on the unlimited drives' DOFs
+    Ainv: np.ndarray  # A^-1, or (0, 0) when A changes with q (then A is solved each step)
+    M_const: np.ndarray  # the mass matrix when it does not depend on q, else (0, 0)
+    rhs_const: np.ndarray  # (nv,) h * gravity force: the part of rhs that never changes
+
+
+class StepResult(NamedTuple):
+    """What `dynamics_step` returns. On a failure (status != StepStatus.OK) the state fields
+    are the step's input state."""
+
+    q: np.ndarray  # (nq,) q+
+    nu: np.ndarray  # (nv,) nu+
+    q_ref: np.ndarray  # (n_actuated,) the drives' references, advanced
+    delta_n: np.ndarray  # (slots,) normal deformations (compliant contact; zeros when rigid)
+    delta_t: np.ndarray  # (slots, 2) tangential deformations in the (t, o) basis
+    status: int  # a StepStatus value
+    pivots: int  # Lemke pivots taken
+    residual: float  # the solver's recomputed residual (Lemke: LCP; PGS: `models.contact_pgs`)
+    lcp_size: int  # unknowns of the contact problem (0: none solved)
+    p_n: np.ndarray  # (nc,) normal impulse of each contact, N s
+    p_t: np.ndarray  # (nc, 2) friction impulse in the (t, o) basis, zero where inactive ((0, 2): none)
+    sweeps: int  # PGS sweeps taken
 
 
 # ----------------------------------------------------------------------------- mass and forces
@@ -378,8 +428,11 @@ def _finite_and_bounded(x):
 def free_step(eps, theta, h, bi, Ainv, M_const, rhs_const, q, nu, q_ref, u, q_index, v_index, kp, kd, lower, upper):
     """dynamics_step without contacts and with a constant system matrix: the cheap path.
 
-    Returns (q+, nu+, q_ref+, status); equals dynamics_step with nc = 0 (tests check it).
-    Not for scenes with force-limited drives (their impulses need the contact problem).
+    Returns (q+, nu+, q_ref+, status: a StepStatus value); equals dynamics_step with nc = 0
+    (tests check it). Not for scenes with force-limited drives (their impulses need the
+    contact problem). Plain arrays, not `Drives` / `System`: this step takes about a
+    microsecond, and numba reference-counts every array of a tuple argument on each call
+    (measured: whole tuples on the per-step calls made the paper scene's rungs up to 45% slower).
     """
     quasistatic = eps == 0.0
     rhs = rhs_const.copy()
@@ -394,69 +447,48 @@ def free_step(eps, theta, h, bi, Ainv, M_const, rhs_const, q, nu, q_ref, u, q_in
         q_new = integrate_positions(bi, q, nu_new, h)
     else:
         q_new = integrate_positions(bi, q, theta * nu_new + (1.0 - theta) * nu, h)
-    status = STEP_OK
+    status = StepStatus.OK.value
     if not (_finite_and_bounded(q_new) and _finite_and_bounded(nu_new)):
-        status = STEP_DIVERGED
+        status = StepStatus.DIVERGED.value
         if not (np.all(np.isfinite(q_new)) and np.all(np.isfinite(nu_new))):
-            status = STEP_NON_FINITE
+            status = StepStatus.NON_FINITE.value
         return q, nu, q_ref, status
     return q_new, nu_new, q_ref_new, status
 
 
 @numba.njit(cache=True)
-def dynamics_step(
-    model_eps, compliant, theta, directions, h,
-    bi, bf, pf, A, Ainv, M_const, rhs_const, q, nu, q_ref, delta_n, delta_t, u,
-    q_index, v_index, kp, kd, lower, upper, max_force,
-    nc, c_pair, c_psi, c_slot, W_n, W_t, W_o, c_bias, spatial,
-    pi, solver, warm_n, warm_t,
-):
-    """One step of eq. (3) given the contacts at q. Pure: returns new arrays.
+def dynamics_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t):
+    """One step of eq. (3) given the contacts at q. Pure: returns a new StepResult.
 
-    A, Ainv: the system matrix and its inverse (Ainv may be empty: then A is solved each call).
-    M_const: the mass matrix when it does not depend on q (else empty: computed here).
-    rhs_const: h * (gravity force) (the part of the right-hand side that never changes).
-    max_force: each drive's force limit (inf: unlimited; a limited drive's impulse is solved
-    with the contacts, by Lemke). c_bias (>= nc, 3): each contact's relative velocity along
-    (n, t, o) from scripted obstacles (`models.contact.scripted_bias`; zeros without them).
-    pi: the scene's pair table (the bodies of each contact); solver: a `Solver`; warm_n
-    (slots,), warm_t (slots, 2): PGS warm start by contact slot (the previous step's p_n, p_t;
-    zeros for a cold start; Lemke ignores them).
-    Returns (q+, nu+, q_ref+, delta_n+, delta_t+, status, pivots, residual, lcp_size, p_n, p_t,
-    sweeps) with p_n (nc,) the normal impulse of each contact and p_t (nc, 2) its friction
-    impulse in the (t, o) basis (0 where inactive), sweeps the PGS sweeps taken. On the PGS
-    path residual is `models.contact_pgs`'s and lcp_size the number of scalar impulses.
+    model, solver, drives: `Model`, `Solver`, `Drives`; tables: `SceneTables`; system: the
+    `System` at q; contacts: a `models.contact.ContactSet` whose first nc entries are the
+    contacts at q (bias: zeros without scripted obstacles); warm_n (slots,), warm_t (slots,
+    2): PGS warm start by contact slot (the previous step's p_n, p_t; zeros for a cold start;
+    Lemke ignores them). A force-limited drive's impulse is solved with the contacts, by
+    Lemke. On the PGS path residual is `models.contact_pgs`'s and lcp_size the number of
+    scalar impulses; where auto falls back to Lemke, sweeps still counts PGS's.
     """
     use_pgs = solver.method == SOLVER_PGS or (solver.method == SOLVER_AUTO and nc >= solver.auto_contacts)
-    if nc > 0 and use_pgs and not any_limited(max_force):
-        out = _pgs_step(
-            model_eps, compliant, theta, directions, h, bi, bf, pi, pf, A, Ainv, rhs_const, q, nu, q_ref, delta_n, delta_t, u,
-            q_index, v_index, kp, kd, lower, upper, max_force, nc, c_pair, c_psi, c_slot, W_n, W_t, W_o, c_bias, spatial,
-            solver, warm_n, warm_t,
-        )
-        if out[5] == STEP_OK or solver.method == SOLVER_PGS:
+    if nc > 0 and use_pgs and not any_limited(drives.max_force):
+        out = _pgs_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t)
+        if out.status == StepStatus.OK or solver.method == SOLVER_PGS:
             return out
-        r = _lemke_step(
-            model_eps, compliant, theta, directions, h, bi, bf, pf, A, Ainv, M_const, rhs_const, q, nu, q_ref, delta_n, delta_t, u,
-            q_index, v_index, kp, kd, lower, upper, max_force, nc, c_pair, c_psi, c_slot, W_n, W_t, W_o, c_bias, spatial,
-        )
-        return r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], r[8], r[9], r[10], out[11]
-    return _lemke_step(
-        model_eps, compliant, theta, directions, h, bi, bf, pf, A, Ainv, M_const, rhs_const, q, nu, q_ref, delta_n, delta_t, u,
-        q_index, v_index, kp, kd, lower, upper, max_force, nc, c_pair, c_psi, c_slot, W_n, W_t, W_o, c_bias, spatial,
-    )
+        r = _lemke_step(model, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc)
+        return StepResult(r.q, r.nu, r.q_ref, r.delta_n, r.delta_t, r.status, r.pivots, r.residual, r.lcp_size, r.p_n, r.p_t, out.sweeps)
+    return _lemke_step(model, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc)
 
 
 @numba.njit(cache=True)
-def _drives(h, q, q_ref, u, q_index, v_index, kp, kd, lower, upper, max_force, rhs):
+def _drives(h, q, q_ref, u, drives, rhs):
     """Advance the drive references (stopped at their limits) and add the PD terms of the
     unlimited drives to rhs. A force-limited drive j instead gets -h max_force[j] (its impulse
     enters the contact problem shifted to be >= 0) and its PD impulse at nu = 0 in a[j].
     Returns (q_ref+, a)."""
+    q_index, v_index, kp, kd, max_force = drives.q_index, drives.v_index, drives.kp, drives.kd, drives.max_force
     q_ref_new = q_ref.copy()
     a = np.zeros(v_index.shape[0])
     for j in range(v_index.shape[0]):
-        q_ref_new[j], ff = drive_reference(h, q_ref, u, lower, upper, j)
+        q_ref_new[j], ff = drive_reference(h, q_ref, u, drives.lower, drives.upper, j)
         pd = h * (kp[j] * (q_ref_new[j] - q[q_index[j]]) + kd[j] * ff)
         if np.isfinite(max_force[j]):
             a[j] = pd
@@ -483,133 +515,137 @@ def _deformations(h, pf, c_pair, c_slot, active, p_n, p_t, delta_n, delta_t):
 
 @numba.njit(cache=True)
 def _integrate_checked(bi, theta, h, q, nu, nu_new):
-    """(q+, status): the position update, STEP_DIVERGED / STEP_NON_FINITE if it left the finite range."""
+    """(q+, status): the position update, DIVERGED / NON_FINITE if it left the finite range."""
     if theta == 1.0:
         q_new = integrate_positions(bi, q, nu_new, h)
     else:
         q_new = integrate_positions(bi, q, theta * nu_new + (1.0 - theta) * nu, h)
     if not (_finite_and_bounded(q_new) and _finite_and_bounded(nu_new)):
         if not (np.all(np.isfinite(q_new)) and np.all(np.isfinite(nu_new))):
-            return q_new, STEP_NON_FINITE
-        return q_new, STEP_DIVERGED
-    return q_new, STEP_OK
+            return q_new, StepStatus.NON_FINITE.value
+        return q_new, StepStatus.DIVERGED.value
+    return q_new, StepStatus.OK.value
 
 
 @numba.njit(cache=True)
-def _lemke_step(
-    model_eps, compliant, theta, directions, h,
-    bi, bf, pf, A, Ainv, M_const, rhs_const, q, nu, q_ref, delta_n, delta_t, u,
-    q_index, v_index, kp, kd, lower, upper, max_force,
-    nc, c_pair, c_psi, c_slot, W_n, W_t, W_o, c_bias, spatial,
-):
-    """dynamics_step with the dense LCP solved by Lemke (see `_contact_solve`)."""
+def _free_velocity(model, drives, tables, system, h, q, nu, q_ref, u):
+    """Stage assemble, without contacts: (nu_free = A^-1 rhs, q_ref+, a: the force-limited
+    drives' PD impulses at nu = 0, see `_drives`)."""
+    bi, bf = tables.bi, tables.bf
     nv = nu.shape[0]
-    quasistatic = model_eps == 0.0
-    rhs = rhs_const.copy()
-    eps = QUASISTATIC_INERTIA if quasistatic else model_eps
+    quasistatic = model.eps == 0.0
+    rhs = system.rhs_const.copy()
+    eps = QUASISTATIC_INERTIA if quasistatic else model.eps
     if not quasistatic:
-        if M_const.shape[0] == nv:
-            rhs += eps * (M_const @ nu)
+        if system.M_const.shape[0] == nv:
+            rhs += eps * (system.M_const @ nu)
         else:
             rhs += eps * (mass_matrix(bi, bf, q, nv) @ nu)
-        if spatial:
+        if tables.spatial:
             rhs += h * eps * gyroscopic_force(bi, bf, q, nu, nv)
-    q_ref_new, drive_a = _drives(h, q, q_ref, u, q_index, v_index, kp, kd, lower, upper, max_force, rhs)
-    limited = any_limited(max_force)
-    if Ainv.shape[0] == nv:
-        nu_free = Ainv @ rhs
+    q_ref_new, drive_a = _drives(h, q, q_ref, u, drives, rhs)
+    if system.Ainv.shape[0] == nv:
+        nu_free = system.Ainv @ rhs
     else:
-        nu_free = np.linalg.solve(A, rhs)
-    nu_new = nu_free
-    delta_n_new = delta_n  # rigid models keep them zero; compliant ones get new arrays below
-    delta_t_new = delta_t
-    if compliant:
-        delta_n_new = np.zeros_like(delta_n)
-        delta_t_new = np.zeros_like(delta_t)
-    status = STEP_OK
-    pivots = 0
-    residual = 0.0
-    size = 0
-    impulses = np.zeros(nc)
-    frictions = np.zeros((nc, 2))
-    # contacts that couple to a free DOF; friction only where mu > 0 and the tangent couples
+        nu_free = np.linalg.solve(system.A, rhs)
+    return nu_free, q_ref_new, drive_a
+
+
+@numba.njit(cache=True)
+def _active_contacts(W_n, nc):
+    """The contacts that couple to a free DOF (W_n column above ZERO_COLUMN)."""
     active = np.empty(nc, np.int64)
     n_act = 0
     for i in range(nc):
         if _column_norm(W_n, i) > ZERO_COLUMN:
             active[n_act] = i
             n_act += 1
-    if n_act > 0 or limited:
+    return active[:n_act]
+
+
+@numba.njit(cache=True)
+def _lemke_step(model, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc):
+    """dynamics_step with the dense LCP solved by Lemke (see `_contact_solve`)."""
+    nu_free, q_ref_new, drive_a = _free_velocity(model, drives, tables, system, h, q, nu, q_ref, u)
+    nu_new = nu_free
+    delta_n_new = delta_n  # rigid models keep them zero; compliant ones get new arrays below
+    delta_t_new = delta_t
+    if model.compliant:
+        delta_n_new = np.zeros_like(delta_n)
+        delta_t_new = np.zeros_like(delta_t)
+    status = StepStatus.OK.value
+    pivots = 0
+    residual = 0.0
+    size = 0
+    impulses = np.zeros(nc)
+    frictions = np.zeros((nc, 2))
+    # contacts that couple to a free DOF; friction only where mu > 0 and the tangent couples
+    active = _active_contacts(contacts.W_n, nc)
+    n_act = active.shape[0]
+    if n_act > 0 or any_limited(drives.max_force):
         nu_new, p_n, p_t, status, pivots, residual, size = _contact_solve(
-            compliant, directions, spatial, h, A, Ainv, nu_free, active[:n_act], pf, c_pair, c_psi, c_slot, W_n, W_t, W_o,
-            c_bias, delta_n, delta_t, v_index, kp, kd, max_force, drive_a,
+            model, tables.spatial, h, system.A, system.Ainv, nu_free, active, tables.pf, contacts, delta_n, delta_t, drives, drive_a,
         )
         for k in range(n_act):
             impulses[active[k]] = p_n[k]
             frictions[active[k], 0] = p_t[k, 0]
             frictions[active[k], 1] = p_t[k, 1]
-        if status == STEP_OK and compliant:
-            delta_n_new, delta_t_new = _deformations(h, pf, c_pair, c_slot, active[:n_act], p_n, p_t, delta_n, delta_t)
-    if status != STEP_OK:
-        return q, nu, q_ref, delta_n, delta_t, status, pivots, residual, size, impulses, frictions, 0
-    q_new, bad = _integrate_checked(bi, theta, h, q, nu, nu_new)
-    if bad != STEP_OK:
-        return q, nu, q_ref, delta_n, delta_t, bad, pivots, residual, size, impulses, frictions, 0
-    return q_new, nu_new, q_ref_new, delta_n_new, delta_t_new, STEP_OK, pivots, residual, size, impulses, frictions, 0
+        if status == StepStatus.OK and model.compliant:
+            delta_n_new, delta_t_new = _deformations(h, tables.pf, contacts.pair, contacts.slot, active, p_n, p_t, delta_n, delta_t)
+    if status != StepStatus.OK:
+        return StepResult(q, nu, q_ref, delta_n, delta_t, status, pivots, residual, size, impulses, frictions, 0)
+    q_new, bad = _integrate_checked(tables.bi, model.theta, h, q, nu, nu_new)
+    if bad != StepStatus.OK:
+        return StepResult(q, nu, q_ref, delta_n, delta_t, bad, pivots, residual, size, impulses, frictions, 0)
+    return StepResult(q_new, nu_new, q_ref_new, delta_n_new, delta_t_new, status, pivots, residual, size, impulses, frictions, 0)
 
 
 @numba.njit(cache=True)
-def _pgs_step(
-    model_eps, compliant, theta, directions, h,
-    bi, bf, pi, pf, A, Ainv, rhs_const, q, nu, q_ref, delta_n, delta_t, u,
-    q_index, v_index, kp, kd, lower, upper, max_force,
-    nc, c_pair, c_psi, c_slot, W_n, W_t, W_o, c_bias, spatial, solver, warm_n, warm_t,
-):
+def _pgs_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t):
     """dynamics_step with PGS on the contact impulses; every product body by body, so the
     step costs O(bodies + contacts) beyond what the caller built (`models.contact_pgs`)."""
+    bi, bf = tables.bi, tables.bf
     nv = nu.shape[0]
-    dofs, count, inv, ok = body_blocks(bi, A, Ainv)
+    dofs, count, inv, ok = body_blocks(bi, system.A, system.Ainv)
     if not ok:
-        return q, nu, q_ref, delta_n, delta_t, STEP_SINGULAR, 0, 0.0, 0, np.zeros(nc), np.zeros((nc, 2)), 0
-    quasistatic = model_eps == 0.0
-    eps = QUASISTATIC_INERTIA if quasistatic else model_eps
-    rhs = rhs_const.copy()
+        return StepResult(q, nu, q_ref, delta_n, delta_t, StepStatus.SINGULAR.value, 0, 0.0, 0, np.zeros(nc), np.zeros((nc, 2)), 0)
+    quasistatic = model.eps == 0.0
+    eps = QUASISTATIC_INERTIA if quasistatic else model.eps
+    rhs = system.rhs_const.copy()
     if not quasistatic:
         rhs += eps * mass_times(bi, bf, q, nu)
-        if spatial:
+        if tables.spatial:
             rhs += h * eps * gyroscopic_force(bi, bf, q, nu, nv)
-    q_ref_new, _ = _drives(h, q, q_ref, u, q_index, v_index, kp, kd, lower, upper, max_force, rhs)
+    q_ref_new, _ = _drives(h, q, q_ref, u, drives, rhs)
     nu_free = block_solve(dofs, count, inv, rhs)
     # a passive body's velocity error is its impulse error over eps m: tighten by eps so that
     # quasistatic rungs (eps -> 0) get velocities as accurate as dynamic ones
     tolerance = solver.tolerance * min(eps, 1.0)
-    nu_new, p_n, p_t, active, st, sweeps, residual, size = contact_pgs(
-        compliant, directions, spatial, h, pi, pf, nc, c_pair, c_psi, c_slot, W_n, W_t, W_o, c_bias,
-        delta_n, delta_t, dofs, count, inv, nu_free, warm_n, warm_t, ZERO_COLUMN, tolerance, solver.max_sweeps,
+    r = contact_pgs(
+        model, tables.spatial, h, tables.pi, tables.pf, contacts, nc, delta_n, delta_t, dofs, count, inv, nu_free,
+        warm_n, warm_t, ZERO_COLUMN, tolerance, solver.max_sweeps,
     )
-    if st != PGS_CONVERGED:
-        bad = STEP_CONTACT_NOT_CONVERGED if st == PGS_NOT_CONVERGED else STEP_NON_FINITE
-        return q, nu, q_ref, delta_n, delta_t, bad, 0, residual, size, p_n, p_t, sweeps
+    if r.status != PgsStatus.CONVERGED:
+        bad = StepStatus.CONTACT_NOT_CONVERGED.value if r.status == PgsStatus.NOT_CONVERGED else StepStatus.NON_FINITE.value
+        return StepResult(q, nu, q_ref, delta_n, delta_t, bad, 0, r.residual, r.unknowns, r.p_n, r.p_t, r.sweeps)
     delta_n_new, delta_t_new = delta_n, delta_t
-    if compliant:
+    if model.compliant:
+        active = r.active
         n_act = active.shape[0]
         pa = np.empty(n_act)
         ta = np.empty((n_act, 2))
         for k in range(n_act):
-            pa[k] = p_n[active[k]]
-            ta[k, 0], ta[k, 1] = p_t[active[k], 0], p_t[active[k], 1]
-        delta_n_new, delta_t_new = _deformations(h, pf, c_pair, c_slot, active, pa, ta, delta_n, delta_t)
-    q_new, bad = _integrate_checked(bi, theta, h, q, nu, nu_new)
-    if bad != STEP_OK:
-        return q, nu, q_ref, delta_n, delta_t, bad, 0, residual, size, p_n, p_t, sweeps
-    return q_new, nu_new, q_ref_new, delta_n_new, delta_t_new, STEP_OK, 0, residual, size, p_n, p_t, sweeps
+            pa[k] = r.p_n[active[k]]
+            ta[k, 0], ta[k, 1] = r.p_t[active[k], 0], r.p_t[active[k], 1]
+        delta_n_new, delta_t_new = _deformations(h, tables.pf, contacts.pair, contacts.slot, active, pa, ta, delta_n, delta_t)
+    q_new, bad = _integrate_checked(bi, model.theta, h, q, nu, r.nu)
+    if bad != StepStatus.OK:
+        return StepResult(q, nu, q_ref, delta_n, delta_t, bad, 0, r.residual, r.unknowns, r.p_n, r.p_t, r.sweeps)
+    return StepResult(q_new, r.nu, q_ref_new, delta_n_new, delta_t_new, StepStatus.OK.value, 0, r.residual, r.unknowns, r.p_n, r.p_t, r.sweeps)
 
 
 @numba.njit(cache=True)
-def contact_lcp(
-    compliant, directions, spatial, h, A, Ainv, nu_free, active, pf, c_pair, c_psi, c_slot, W_n, W_t, W_o, c_bias,
-    delta_n, delta_t, v_index, kp, kd, max_force, drive_a,
-):
+def contact_lcp(model, spatial, h, A, Ainv, nu_free, active, pf, contacts, delta_n, delta_t, drives, drive_a):
     """Assemble the contact LCP of the active contacts and the force-limited drives.
 
     Unknowns z = (p_n (nc), beta (nf * d), x (nl), gamma (nf), s (nl)); returns (M, q, A^-1 J,
@@ -622,6 +658,10 @@ def contact_lcp(
     p = P and r = 0 between: the box split 0 <= x _|_ r + s >= 0, 0 <= s _|_ 2P - x >= 0.
     nu_free has the -P shift in it already (`_drives`); E's columns are the drives' unit DOFs.
     """
+    compliant, directions = model.compliant, model.friction_directions
+    c_pair, c_psi, c_slot, c_bias = contacts.pair, contacts.psi, contacts.slot, contacts.bias
+    W_n, W_t, W_o = contacts.W_n, contacts.W_t, contacts.W_o
+    v_index, kp, kd, max_force = drives.v_index, drives.kp, drives.kd, drives.max_force
     nc = active.shape[0]
     nv = nu_free.shape[0]
     nl = 0
@@ -731,17 +771,11 @@ def contact_lcp(
 
 
 @numba.njit(cache=True)
-def _contact_solve(
-    compliant, directions, spatial, h, A, Ainv, nu_free, active, pf, c_pair, c_psi, c_slot, W_n, W_t, W_o, c_bias,
-    delta_n, delta_t, v_index, kp, kd, max_force, drive_a,
-):
+def _contact_solve(model, spatial, h, A, Ainv, nu_free, active, pf, contacts, delta_n, delta_t, drives, drive_a):
     """Build and solve the contact LCP. Returns (nu+, p_n, p_t, status, pivots, residual, size)."""
-    Mlcp, qlcp, AinvJ, coef, fric, nf, lim = contact_lcp(
-        compliant, directions, spatial, h, A, Ainv, nu_free, active, pf, c_pair, c_psi, c_slot, W_n, W_t, W_o, c_bias,
-        delta_n, delta_t, v_index, kp, kd, max_force, drive_a,
-    )
+    Mlcp, qlcp, AinvJ, coef, fric, nf, lim = contact_lcp(model, spatial, h, A, Ainv, nu_free, active, pf, contacts, delta_n, delta_t, drives, drive_a)
     nc = active.shape[0]
-    d = directions if spatial else 2
+    d = model.friction_directions if spatial else 2
     nd = nf * d
     m = nc + nd + lim.shape[0]
     n = qlcp.shape[0]
@@ -772,7 +806,7 @@ def _contact_solve(
     p_n = z[:nc].copy()
     p_t = np.zeros((nc, 2))
     if (status != STATUS_SOLVED and status != STATUS_SOLVED_INACCURATE) or not (residual <= LCP_TOLERANCE):
-        return nu_free, p_n, p_t, STEP_LCP_FAILED, pivots, residual, n
+        return nu_free, p_n, p_t, StepStatus.LCP_FAILED.value, pivots, residual, n
     for f in range(nf):
         k = fric[f]
         for j in range(d):
@@ -780,7 +814,7 @@ def _contact_solve(
             p_t[k, 0] += z[r] * coef[r - nc, 0]
             p_t[k, 1] += z[r] * coef[r - nc, 1]
     nu_new = nu_free + AinvJ @ z[:m]
-    return nu_new, p_n, p_t, STEP_OK, pivots, residual, n
+    return nu_new, p_n, p_t, StepStatus.OK.value, pivots, residual, n
 
 
 @numba.njit(cache=True)
@@ -801,8 +835,45 @@ BLOCKED_BISECTIONS = 30
 
 
 @numba.njit(cache=True)
+def _passive_problem(nc, h, c_psi, c_bias, W_n, u_eff, actuated, nv):
+    """Eq. (8)'s data: (W_p: W_n on the passive DOFs, psi / h + bias, W_a^T u)."""
+    Wp = np.zeros((nv, nc))
+    psi_h = np.zeros(nc)
+    Wa_u = np.zeros(nc)
+    for i in range(nc):
+        psi_h[i] = c_psi[i] / h + c_bias[i, 0]
+        for v in range(nv):
+            if actuated[v]:
+                Wa_u[i] += W_n[v, i] * u_eff[v]
+            else:
+                Wp[v, i] = W_n[v, i]
+    return Wp, psi_h, Wa_u
+
+
+@numba.njit(cache=True)
+def _largest_feasible(Wp, psi_h, Wa_u, nc, residual):
+    """A blocked kinematic command: the largest feasible fraction alpha of it, by bisection.
+    Returns (alpha, passive speeds, feasible: standing still is, pivots, residual: the last
+    feasible solve's, else the one passed in)."""
+    lo, hi = 0.0, 1.0
+    v_lo, ok_lo, pivots, res = _min_norm_passive(Wp, psi_h, Wa_u, 0.0, nc)
+    if not ok_lo:
+        return 0.0, v_lo, False, pivots, residual
+    for _ in range(BLOCKED_BISECTIONS):
+        mid = 0.5 * (lo + hi)
+        v_mid, ok_mid, piv, res = _min_norm_passive(Wp, psi_h, Wa_u, mid, nc)
+        pivots += piv
+        if ok_mid:
+            lo, v_lo, residual = mid, v_mid, res
+        else:
+            hi = mid
+    return lo, v_lo, True, pivots, residual
+
+
+@numba.njit(cache=True)
 def kinematic_step(bi, h, q, q_ref, u, q_index, v_index, lower, upper, nc, c_psi, c_bias, W_n, nv):
-    """The paper's eq. (8) given the contacts at q. Returns (q+, nu+, q_ref+, status, pivots, residual).
+    """The paper's eq. (8) given the contacts at q. Returns (q+, nu+, q_ref+, status: a
+    StepStatus value, pivots, residual). Plain arrays, as `free_step` (a cheap step).
 
     Actuated DOFs move at the commanded speed (stopping at their position limits; a kinematic
     model has no forces, so a drive's force limit does not apply); c_bias[i, 0] is contact i's
@@ -815,7 +886,7 @@ def kinematic_step(bi, h, q, q_ref, u, q_index, v_index, lower, upper, nc, c_psi
     A command that pushes into something nothing can move (the two fingers closing on the
     triangle: form closure) has no solution. The kinematic model then moves the actuators by
     the largest feasible fraction of the step (bisection), so the world jams: a state, not an
-    error. STEP_BLOCKED only when not even standing still is feasible.
+    error. StepStatus.BLOCKED only when not even standing still is feasible.
     """
     na = v_index.shape[0]
     nu = np.zeros(nv)
@@ -828,37 +899,17 @@ def kinematic_step(bi, h, q, q_ref, u, q_index, v_index, lower, upper, nc, c_psi
     pivots = 0
     residual = 0.0
     alpha = 1.0
-    status = STEP_OK
+    status = StepStatus.OK.value
     v_passive = np.zeros(nv)
     if nc > 0:
-        Wp = np.zeros((nv, nc))
-        psi_h = np.zeros(nc)
-        Wa_u = np.zeros(nc)
-        for i in range(nc):
-            psi_h[i] = c_psi[i] / h + c_bias[i, 0]
-            for v in range(nv):
-                if actuated[v]:
-                    Wa_u[i] += W_n[v, i] * u_eff[v]
-                else:
-                    Wp[v, i] = W_n[v, i]
+        Wp, psi_h, Wa_u = _passive_problem(nc, h, c_psi, c_bias, W_n, u_eff, actuated, nv)
         v_passive, ok, pivots, residual = _min_norm_passive(Wp, psi_h, Wa_u, 1.0, nc)
         if not ok:
-            lo, hi = 0.0, 1.0
-            v_lo, ok_lo, piv, res = _min_norm_passive(Wp, psi_h, Wa_u, 0.0, nc)
-            pivots += piv
-            if not ok_lo:
-                status = STEP_BLOCKED
-            else:
-                for _ in range(BLOCKED_BISECTIONS):
-                    mid = 0.5 * (lo + hi)
-                    v_mid, ok_mid, piv, res = _min_norm_passive(Wp, psi_h, Wa_u, mid, nc)
-                    pivots += piv
-                    if ok_mid:
-                        lo, v_lo, residual = mid, v_mid, res
-                    else:
-                        hi = mid
-                alpha, v_passive = lo, v_lo
-    if status != STEP_OK:
+            alpha, v_passive, feasible, more, residual = _largest_feasible(Wp, psi_h, Wa_u, nc, residual)
+            pivots += more
+            if not feasible:
+                status = StepStatus.BLOCKED.value
+    if status != StepStatus.OK:
         return q, nu, q_ref, status, pivots, residual
     q_ref_new = q_ref.copy()
     for j in range(na):
@@ -867,5 +918,5 @@ def kinematic_step(bi, h, q, q_ref, u, q_index, v_index, lower, upper, nc, c_psi
         nu[v] = alpha * u_eff[v] if actuated[v] else v_passive[v]
     q_new = integrate_positions(bi, q, nu, h)
     if not (_finite_and_bounded(q_new) and _finite_and_bounded(nu)):
-        return q, nu, q_ref, STEP_NON_FINITE, pivots, residual
-    return q_new, nu, q_ref_new, STEP_OK, pivots, residual
+        return q, nu, q_ref, StepStatus.NON_FINITE.value, pivots, residual
+    return q_new, nu, q_ref_new, status, pivots, residual

@@ -16,18 +16,19 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from models.contact import contact_frames
+from models.contact import CONTACT_MARGIN, ContactSet, contact_frames
 from models.contact_pgs import polygon_minimiser
 from models.rungs import RUNGS, compiled, rung_for
 from models.scenario import ScenarioError, load_scenario
 from models.schema import CONTACT_SOLVERS
 from models.stepper import (
-    CONTACT_MARGIN,
     LEMKE,
     PGS_TOLERANCE,
     QUASISTATIC_INERTIA,
     SOLVER_METHODS,
-    STEP_OK,
+    SceneTables,
+    StepStatus,
+    System,
     contact_solver,
     dynamics_step,
     gravity_force,
@@ -45,14 +46,13 @@ SOLVERS = ("lemke", "pgs")
 def step(scenario, rung_name: str, solver: str, q, nu, h: float = H, **settings):
     """One dynamics_step at (q, nu) with the rung's model and the named solver, cold-started.
 
-    Returns (contacts, Ainv, out) with out = dynamics_step's tuple (q+, nu+, ..., status at 5,
-    p_n at 9, p_t at 10, sweeps at 11).
+    Returns (contacts, Ainv, out) with out = dynamics_step's StepResult.
     """
     c = compiled(scenario)
     S, D = c.scene, c.drives
     model = rung_for(scenario, rung_name).model
-    q = np.ascontiguousarray(q, float)
-    nu = np.ascontiguousarray(nu, float)
+    q = np.array(q, float)  # writable: StepResult unifies only with writable state arrays
+    nu = np.array(nu, float)
     A = system_matrix(S.bi, S.bf, q, S.nv, model.eps or QUASISTATIC_INERTIA, h, D.v_index, D.kp, D.kd, D.max_force)
     Ainv = np.linalg.inv(A)
     M = mass_matrix(S.bi, S.bf, q, S.nv)
@@ -62,12 +62,12 @@ def step(scenario, rung_name: str, solver: str, q, nu, h: float = H, **settings)
     spatial = S.dimension == 3
     W_o = frames.W_o if spatial else np.zeros_like(frames.W_n)
     u = np.zeros(len(D.v_index))
+    contacts = ContactSet(
+        frames.pair, frames.psi, np.arange(nc, dtype=np.int64), frames.W_n, frames.W_t, W_o, np.zeros((max(nc, 1), 3)),
+    )
     out = dynamics_step(
-        model.eps, model.compliant, model.theta, model.friction_directions, h, S.bi, S.bf, S.pf, A, Ainv, M, rhs,
-        q, nu, q[D.q_index].copy(), np.zeros(nc), np.zeros((nc, 2)), u, D.q_index, D.v_index, D.kp, D.kd, D.lower, D.upper,
-        D.max_force, nc, frames.pair, frames.psi, np.arange(nc, dtype=np.int64), frames.W_n, frames.W_t, W_o,
-        np.zeros((max(nc, 1), 3)), spatial,
-        S.pi, contact_solver(solver, **settings), np.zeros(nc), np.zeros((nc, 2)),
+        model, contact_solver(solver, **settings), D, SceneTables(S.bi, S.bf, S.pi, S.pf, spatial), System(A, Ainv, M, rhs), h,
+        q, nu, q[D.q_index].copy(), np.zeros(nc), np.zeros((nc, 2)), u, contacts, nc, np.zeros(nc), np.zeros((nc, 2)),
     )
     return frames, Ainv, out
 
@@ -101,8 +101,8 @@ def per_body_normal(scenario, frames, p_n):
 def test_resting_boxes_normal_impulse_is_m_g_h(tmp_path, rung, solver):
     sc, masses = resting_boxes(tmp_path)
     frames, _, out = step(sc, rung, solver, sc.start, np.zeros(len(sc.velocities)))
-    assert out[5] == STEP_OK
-    p_n, p_t, nu_new = out[9], out[10], out[1]
+    assert out.status == StepStatus.OK
+    p_n, p_t, nu_new = out.p_n, out.p_t, out.nu
     assert len(frames.psi) == 6  # two corners per box
     np.testing.assert_allclose(per_body_normal(sc, frames, p_n), np.array(masses) * G * H, rtol=10 * PGS_TOLERANCE)
     assert np.all(p_n > 0.0)
@@ -143,13 +143,13 @@ def sliding_box(tmp_path, mu):
 def test_sliding_box_friction_is_mu_times_normal(tmp_path, mu, solver):
     sc = sliding_box(tmp_path, mu)
     frames, _, out = step(sc, "dynamic-rigid", solver, sc.start, np.array([1.0, 0.0, 0.0]))
-    assert out[5] == STEP_OK
-    p_n, p_t = out[9], out[10][:, 0]
+    assert out.status == StepStatus.OK
+    p_n, p_t = out.p_n, out.p_t[:, 0]
     tangent_x = frames.t[:, 0]  # the contacts' tangent directions along x
     friction_x = float(np.sum(p_t * tangent_x))
     assert p_n.sum() == pytest.approx(G * H, rel=10 * PGS_TOLERANCE)
     assert friction_x == pytest.approx(-mu * p_n.sum(), rel=10 * PGS_TOLERANCE)  # opposes the sliding
-    assert out[1][0] == pytest.approx(1.0 - mu * G * H, rel=1e-7)
+    assert out.nu[0] == pytest.approx(1.0 - mu * G * H, rel=1e-7)
 
 
 @pytest.mark.parametrize("solver", SOLVERS)
@@ -218,7 +218,7 @@ def test_polygon_minimiser_satisfies_its_variational_inequality(d):
 def coulomb_residual(frames, Ainv, out, mu):
     """Natural-map residuals of a planar step's impulses in impulse units, relative to the
     largest impulse: Signorini and Coulomb with maximal dissipation per contact."""
-    nu_new, p_n, p_t = out[1], out[9], out[10][:, 0]
+    nu_new, p_n, p_t = out.nu, out.p_n, out.p_t[:, 0]
     w_n = frames.psi / H + frames.W_n.T @ nu_new
     v_t = frames.W_t.T @ nu_new
     g_nn = np.einsum("vi,vw,wi->i", frames.W_n, Ainv, frames.W_n)
@@ -257,8 +257,8 @@ def test_random_scene_pgs_satisfies_coulomb_within_its_tolerance(tmp_path, seed)
     mu = sc.spec.contact.mu
     for solver, tolerance in (("lemke", 1e-9), ("pgs", 10 * PGS_TOLERANCE)):
         frames, Ainv, out = step(sc, "dynamic-rigid", solver, sc.start, nu)
-        assert out[5] == STEP_OK
-        assert np.abs(out[9]).max() > 0.0  # something is hit
+        assert out.status == StepStatus.OK
+        assert np.abs(out.p_n).max() > 0.0  # something is hit
         assert coulomb_residual(frames, Ainv, out, mu) <= tolerance, solver
 
 
@@ -286,11 +286,11 @@ def test_random_frictionless_discs_pgs_normal_impulses_equal_lemkes(tmp_path, se
     nu[1::3] = -rng.uniform(0.4, 1.0, len(nu[1::3]))
     frames, _, lemke = step(sc, "dynamic-rigid", "lemke", sc.start, nu)
     _, _, pgs = step(sc, "dynamic-rigid", "pgs", sc.start, nu)
-    assert lemke[5] == STEP_OK and pgs[5] == STEP_OK
+    assert lemke.status == StepStatus.OK and pgs.status == StepStatus.OK
     assert np.linalg.matrix_rank(frames.W_n) == len(frames.psi)  # non-degenerate: independent contacts
-    assert np.count_nonzero(lemke[9]) >= 2
-    np.testing.assert_allclose(pgs[9], lemke[9], rtol=0, atol=1e-4 * np.abs(lemke[9]).max())
-    np.testing.assert_allclose(pgs[1], lemke[1], rtol=0, atol=1e-4 * np.abs(nu).max())
+    assert np.count_nonzero(lemke.p_n) >= 2
+    np.testing.assert_allclose(pgs.p_n, lemke.p_n, rtol=0, atol=1e-4 * np.abs(lemke.p_n).max())
+    np.testing.assert_allclose(pgs.nu, lemke.nu, rtol=0, atol=1e-4 * np.abs(nu).max())
 
 
 @pytest.mark.parametrize("solver", ["pgs", "auto"])
@@ -311,7 +311,7 @@ def test_random_scenes_keep_the_stress_invariants(tmp_path, solver):
 def test_a_sweep_limit_too_small_is_a_status_not_an_exception(tmp_path):
     sc, _ = resting_boxes(tmp_path)
     _, _, out = step(sc, "dynamic-rigid", "pgs", sc.start, np.zeros(len(sc.velocities)), max_sweeps=2)
-    assert out[5] != STEP_OK and out[11] == 2
+    assert out.status != StepStatus.OK and out.sweeps == 2
     rung = with_solver(sc, "dynamic-rigid", "pgs", max_sweeps=2)
     result = rung.rollout(sc, rung.initial_state(sc), np.zeros((1, 0)), [0.1], H)
     assert result.status == "contact_not_converged" and result.steps == 0

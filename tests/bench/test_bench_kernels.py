@@ -11,10 +11,10 @@ import numba
 import numpy as np
 import pytest
 
-from models.contact import contact_frames, detect_planar, jacobian_packed, tangents_packed
+from models.contact import ContactSet, contact_frames, detect_planar, jacobian_packed, tangents_packed
 from models.contact3d import collide_pair_3d
 from models.lcp import lemke_kernel, pgs_kernel
-from models.rungs import compiled
+from models.rungs import RUNGS, compiled
 from models.scenario import load_scenario
 from models.stepper import contact_lcp, system_matrix
 from tests.conftest import SCENARIOS
@@ -71,11 +71,12 @@ def paper_scene_lcp():
     A = system_matrix(S.bi, S.bf, q, S.nv, 1.0, h, D.v_index, D.kp, D.kd, D.max_force)
     nu_free = np.linalg.solve(A, np.array([0.0, -0.05, -0.05]))
     slots = np.arange(len(frames.psi))
+    contacts = ContactSet(
+        frames.pair, frames.psi, slots, np.ascontiguousarray(frames.W_n), np.ascontiguousarray(frames.W_t), np.zeros_like(frames.W_n), np.zeros((len(slots), 3)),
+    )
     M, qv, *_ = contact_lcp(
-        True, 2, False, h, A, np.linalg.inv(A), nu_free, fingers.astype(np.int64), S.pf, frames.pair, frames.psi, slots,
-        np.ascontiguousarray(frames.W_n), np.ascontiguousarray(frames.W_t), np.zeros_like(frames.W_n),
-        np.zeros((len(slots), 3)), np.zeros(len(slots)), np.zeros((len(slots), 2)),
-        D.v_index, D.kp, D.kd, D.max_force, np.zeros(len(D.v_index)),
+        RUNGS["dynamic-compliant"].model, False, h, A, np.linalg.inv(A), nu_free, fingers.astype(np.int64), S.pf, contacts,
+        np.zeros(len(slots)), np.zeros((len(slots), 2)), D, np.zeros(len(D.v_index)),
     )
     return M, qv
 

@@ -9,7 +9,7 @@ import numpy as np
 
 from models.rungs import rung_for
 from models.scenario import load_scenario
-from models.stepper import STEP_NAMES
+from models.stepper import StepStatus
 
 #: Rigid rungs: the largest penetration a run may show (m). The time-stepper keeps the
 #: predicted gap psi + h W^T v >= 0, so what remains is O(h^2 g) drift and rounding.
@@ -100,7 +100,7 @@ def run(scenario, rung_name: str, h: float, duration: float, *, controls=None, e
 def check_invariants(result, *, rigid: bool, passive: bool, scenario=None, energy_from: int = 0) -> None:
     """No non-finite number, every failure a known status, rigid penetration below the
     tolerance, energy never increasing in passive rigid scenes (checked record to record)."""
-    assert result.status in STEP_NAMES.values(), result.status
+    assert result.status in {s.label for s in StepStatus}, result.status
     for array in (result.state.q, result.state.nu, result.trajectory, result.velocities):
         assert np.all(np.isfinite(array)), "non-finite numbers in a run"
     if result.status != "ok":
