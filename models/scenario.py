@@ -680,11 +680,11 @@ def _check_touch_tolerance(key: str, tol: float) -> list[Problem]:
     """A touch tolerance may not exceed the contact-detection margin: compiled rollouts
     measure a pair only while it is within the margin (farther pairs count as apart), so a
     larger tolerance would make their goal check disagree with `predicate_distance`."""
-    from models.contact import DEFAULT_MARGIN  # the compiled kernels: loaded when a file is checked, not on import
+    from models.contact import CONTACT_MARGIN  # the compiled kernels: loaded when a file is checked, not on import
 
-    if tol <= DEFAULT_MARGIN:
+    if tol <= CONTACT_MARGIN:
         return []
-    return [Problem(key, f"touch tolerance {tol:g} m is above the contact-detection margin {DEFAULT_MARGIN:g} m "
+    return [Problem(key, f"touch tolerance {tol:g} m is above the contact-detection margin {CONTACT_MARGIN:g} m "
                          "(rollouts see a pair only within the margin); use at most that")]
 
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from models import geometry as geo
-from models.contact import DEFAULT_MARGIN
+from models.contact import CONTACT_MARGIN
 from models.predicates import compile_predicate, evaluate
 from models.scenario import ScenarioError, load_scenario
 from models.task import Outcome, classify, goal_distance
@@ -72,8 +72,8 @@ def test_missing_unsafe_set_is_never_true():
 @pytest.mark.parametrize(
     "old, new, key",
     [
-        ("touch_tolerance = 1e-3", f"touch_tolerance = {2 * DEFAULT_MARGIN}", "contact.touch_tolerance"),
-        ('{ touch = ["finger2", "triangle"] }', f'{{ touch = ["finger2", "triangle"], tol = {2 * DEFAULT_MARGIN} }}', "task.goal.all[1].tol"),
+        ("touch_tolerance = 1e-3", f"touch_tolerance = {2 * CONTACT_MARGIN}", "contact.touch_tolerance"),
+        ('{ touch = ["finger2", "triangle"] }', f'{{ touch = ["finger2", "triangle"], tol = {2 * CONTACT_MARGIN} }}', "task.goal.all[1].tol"),
     ],
 )
 def test_a_touch_tolerance_above_the_detection_margin_is_bad_input(tmp_path, old, new, key):
