@@ -4,7 +4,8 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 OUT    ?= out/demo
 
-.PHONY: demo test schema bench bench-doc paper clean clean-cache
+# Lint and format check (CI runs it before the tests):  make lint
+.PHONY: demo test lint schema bench bench-doc paper clean clean-cache
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -33,6 +34,10 @@ demo: $(VENV)/.installed
 
 test: $(VENV)/.installed-test
 	$(PY) -m pytest
+
+lint: $(VENV)/.installed-test
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
 
 schema: $(VENV)/.installed
 	$(VENV)/bin/ladder schema --out scenarios/scenario.schema.json

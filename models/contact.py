@@ -26,13 +26,13 @@ from models.contact2d import collide_2d
 from models.contact3d import collide_pair_3d, tangent_basis
 from models.kinematics import (
     BF_BOUND,
-    BF_SPEED,
     BF_HSN,
     BF_HSO,
     BF_POS,
     BF_QUAT,
     BF_SCRIPT,
     BF_SCRIPT_V,
+    BF_SPEED,
     BI_KIND,
     BI_QMAP,
     BI_VMAP,
@@ -83,8 +83,13 @@ def contact_buffers(pi, nv):
         first_slot[p] = cap - 1
         cap += pi[p, 2]
     contacts = ContactSet(
-        np.zeros(cap, np.int64), np.zeros(cap), np.zeros(cap, np.int64),
-        np.zeros((nv, cap)), np.zeros((nv, cap)), np.zeros((nv, cap)), np.zeros((cap, 3)),
+        np.zeros(cap, np.int64),
+        np.zeros(cap),
+        np.zeros(cap, np.int64),
+        np.zeros((nv, cap)),
+        np.zeros((nv, cap)),
+        np.zeros((nv, cap)),
+        np.zeros((cap, 3)),
     )
     return contacts, first_slot
 

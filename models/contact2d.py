@@ -109,7 +109,6 @@ def _closest_features(P, Q):
     """Distance between two convex cores and witness points (cp on P, cq on Q)."""
     best = np.inf
     cpx = cpy = cqx = cqy = 0.0
-    kp, kq = P.shape[0], Q.shape[0]
     for swap in range(2):
         A = P if swap == 0 else Q
         B = Q if swap == 0 else P
@@ -282,8 +281,7 @@ def _core_vs_core(bi, bf, verts, poses, a, b, margin, c_psi, c_n, c_pa, c_pb, st
         if max(al_a, al_b) < FACE_ALIGNMENT:
             single = True
     if single:
-        _write(c_psi, c_n, c_pa, c_pb, start, psi_core - ra - rb, nx, ny,
-               cpx + ra * nx, cpy + ra * ny, cqx - rb * nx, cqy - rb * ny)
+        _write(c_psi, c_n, c_pa, c_pb, start, psi_core - ra - rb, nx, ny, cpx + ra * nx, cpy + ra * ny, cqx - rb * nx, cqy - rb * ny)
         return 1
     # reference face on A (normal m = its outward normal) or on B
     ref_is_a = al_a + REFERENCE_BIAS >= al_b
@@ -334,8 +332,8 @@ def _core_vs_core(bi, bf, verts, poses, a, b, margin, c_psi, c_n, c_pa, c_pb, st
         refx, refy = cx - sep_core * mx + r_ref * mx, cy - sep_core * my + r_ref * my
         if count == 1:
             prev = start
-            dx = (incx - (c_pb[prev, 0] if ref_is_a else c_pa[prev, 0]))
-            dy = (incy - (c_pb[prev, 1] if ref_is_a else c_pa[prev, 1]))
+            dx = incx - (c_pb[prev, 0] if ref_is_a else c_pa[prev, 0])
+            dy = incy - (c_pb[prev, 1] if ref_is_a else c_pa[prev, 1])
             if dx * dx + dy * dy <= TINY * TINY:
                 continue  # both clip bounds landed on one point
         if ref_is_a:
@@ -344,8 +342,7 @@ def _core_vs_core(bi, bf, verts, poses, a, b, margin, c_psi, c_n, c_pa, c_pb, st
             _write(c_psi, c_n, c_pa, c_pb, start + count, sep, -mx, -my, incx, incy, refx, refy)
         count += 1
     if count == 0:
-        _write(c_psi, c_n, c_pa, c_pb, start, psi_core - ra - rb, nx, ny,
-               cpx + ra * nx, cpy + ra * ny, cqx - rb * nx, cqy - rb * ny)
+        _write(c_psi, c_n, c_pa, c_pb, start, psi_core - ra - rb, nx, ny, cpx + ra * nx, cpy + ra * ny, cqx - rb * nx, cqy - rb * ny)
         count = 1
     elif psi_core > TINY:
         # apart, every clipped point lies at least the exact distance from the reference face;

@@ -417,8 +417,18 @@ def _reduce_emit(buf, m, limit, c_psi, c_n, c_pa, c_pb, start, flip):
     most area to that triangle."""
     if m <= limit:
         for k in range(m):
-            _emit(c_psi, c_n, c_pa, c_pb, start + k, buf[k, 0], (buf[k, 1], buf[k, 2], buf[k, 3]),
-                  (buf[k, 4], buf[k, 5], buf[k, 6]), (buf[k, 7], buf[k, 8], buf[k, 9]), flip)
+            _emit(
+                c_psi,
+                c_n,
+                c_pa,
+                c_pb,
+                start + k,
+                buf[k, 0],
+                (buf[k, 1], buf[k, 2], buf[k, 3]),
+                (buf[k, 4], buf[k, 5], buf[k, 6]),
+                (buf[k, 7], buf[k, 8], buf[k, 9]),
+                flip,
+            )
         return m
     i0 = np.int64(0)
     for k in range(1, m):
@@ -466,8 +476,18 @@ def _reduce_emit(buf, m, limit, c_psi, c_n, c_pa, c_pb, start, flip):
         k = i0 if j == 0 else (i1 if j == 1 else (i2 if j == 2 else i3))
         if k < 0:
             continue
-        _emit(c_psi, c_n, c_pa, c_pb, start + count, buf[k, 0], (buf[k, 1], buf[k, 2], buf[k, 3]),
-              (buf[k, 4], buf[k, 5], buf[k, 6]), (buf[k, 7], buf[k, 8], buf[k, 9]), flip)
+        _emit(
+            c_psi,
+            c_n,
+            c_pa,
+            c_pb,
+            start + count,
+            buf[k, 0],
+            (buf[k, 1], buf[k, 2], buf[k, 3]),
+            (buf[k, 4], buf[k, 5], buf[k, 6]),
+            (buf[k, 7], buf[k, 8], buf[k, 9]),
+            flip,
+        )
         count += 1
     return count
 
@@ -794,13 +814,11 @@ def _capsule_box(a0w, a1w, r, cb, Rb, h, margin, flip, c_psi, c_n, c_pa, c_pb, s
                     T = _capsule_exit(core, _scale(nf, -1.0), a, b, r)
                     psi, nn, p1, p2 = (psi0 if j == 0 else psi1), nf, _with(core, face, sg * h[face]), _axpy(core, -T, nf)
                 if psi <= margin:
-                    _emit(c_psi, c_n, c_pa, c_pb, start + count, psi, _rot(Rb, nn),
-                          _add(_rot(Rb, p1), cb), _add(_rot(Rb, p2), cb), flip)
+                    _emit(c_psi, c_n, c_pa, c_pb, start + count, psi, _rot(Rb, nn), _add(_rot(Rb, p1), cb), _add(_rot(Rb, p2), cb), flip)
                     count += 1
             return count
     if psi_e <= margin and limit >= 1:
-        _emit(c_psi, c_n, c_pa, c_pb, start, psi_e, _rot(Rb, n), _add(_rot(Rb, pbox_e), cb),
-              _add(_rot(Rb, pcap_e), cb), flip)
+        _emit(c_psi, c_n, c_pa, c_pb, start, psi_e, _rot(Rb, n), _add(_rot(Rb, pbox_e), cb), _add(_rot(Rb, pcap_e), cb), flip)
         return 1
     return 0
 
@@ -1161,8 +1179,7 @@ def _support_edge(verts, edges, e0, ne, u, axis, M, c):
 
 
 @numba.njit(cache=True)
-def _capsule_hull(a0w, a1w, r, p1, R1, hb, verts, planes, face_verts, edges, dirs, margin, flip,
-                  c_psi, c_n, c_pa, c_pb, start, limit):
+def _capsule_hull(a0w, a1w, r, p1, R1, hb, verts, planes, face_verts, edges, dirs, margin, flip, c_psi, c_n, c_pa, c_pb, start, limit):
     """Polytope (body 1) vs capsule (body 2, axis a0w a1w), in the polytope's frame: one contact
     (closest features when apart; separating axes over the faces and the crossings of the edge
     directions with the axis when the axis meets the polytope)."""
@@ -1322,8 +1339,7 @@ def _hull_closest(h1, h2, C, D, verts, planes, face_verts, edges):
 
 
 @numba.njit(cache=True)
-def _hull_hull(p1, R1, h1, s1, p2, R2, h2, s2, verts, planes, face_verts, edges, dirs, margin, flip,
-               c_psi, c_n, c_pa, c_pb, start, limit):
+def _hull_hull(p1, R1, h1, s1, p2, R2, h2, s2, verts, planes, face_verts, edges, dirs, margin, flip, c_psi, c_n, c_pa, c_pb, start, limit):
     """Polytope 1 vs polytope 2 (s1, s2: their sizes, for tolerances). Separating axes in frame 1
     over the faces of both and the crossings of their edge directions, then contacts: a face
     axis clips the most opposed face of the other body against the face's side planes (points
@@ -1384,8 +1400,7 @@ def _hull_hull(p1, R1, h1, s1, p2, R2, h2, s2, verts, planes, face_verts, edges,
         lo2, _ = _dot_range(verts, h2[6], h2[7], _rot_t(C, axis))
         lo2 += _dot(axis, D)
         slack = EDGE_AXIS_TOL * (s1 + s2)
-        supported = (min(_dot(P, axis), _dot(Q, axis)) >= hi1 - slack
-                     and max(_dot(U, axis), _dot(V, axis)) <= lo2 + slack)
+        supported = min(_dot(P, axis), _dot(Q, axis)) >= hi1 - slack and max(_dot(U, axis), _dot(V, axis)) <= lo2 + slack
         if best > 0.0 and not (supported and 0.0 < s < 1.0 and 0.0 < t < 1.0):
             psi, pa, pb, n = _hull_closest(h1, h2, C, D, verts, planes, face_verts, edges)
             if psi <= CORE_TOL:
@@ -1397,9 +1412,9 @@ def _hull_hull(p1, R1, h1, s1, p2, R2, h2, s2, verts, planes, face_verts, edges,
 
     # a face axis: work in the reference body's frame r; the incident body i maps in by c + M x
     if kind == 0:
-        hR, hI, M, cI, RR, pR = h1, h2, C, D, R1, p1
+        hI, M, cI, RR, pR = h2, C, D, R1, p1
     else:
-        hR, hI, M, cI, RR, pR = h2, h1, _transpose(C), _scale(_rot_t(C, D), -1.0), R2, p2
+        hI, M, cI, RR, pR = h1, _transpose(C), _scale(_rot_t(C, D), -1.0), R2, p2
     nref, dref = _face_plane(planes, idx)
     nloc = _rot_t(M, nref)  # the reference normal in the incident frame
     inc = hI[0]
@@ -1487,8 +1502,9 @@ def _hull_hull(p1, R1, h1, s1, p2, R2, h2, s2, verts, planes, face_verts, edges,
 
 
 @numba.njit(cache=True)
-def _collide_hull(ka, pA, RA, ra, hA, sA, kb, pB, RB, rb, hB, sB, verts, planes, face_verts, edges, dirs,
-                  margin, limit, c_psi, c_n, c_pa, c_pb, start):
+def _collide_hull(
+    ka, pA, RA, ra, hA, sA, kb, pB, RB, rb, hB, sB, verts, planes, face_verts, edges, dirs, margin, limit, c_psi, c_n, c_pa, c_pb, start
+):
     """A pair with a mesh and no plane: hA, hB are (f0, nf, e0, ne, d0, nd, v0, nv); sA, sB the
     bodies' sizes. The polytope (the mesh, or the box vs a mesh) is body 1."""
     swapped = kb == SHAPE_MESH and ka != SHAPE_MESH  # body 1 is B
@@ -1497,13 +1513,50 @@ def _collide_hull(ka, pA, RA, ra, hA, sA, kb, pB, RB, rb, hB, sB, verts, planes,
     else:
         k2, p1, R1, h1, s1, p2, R2, r2, h2, s2 = kb, pA, RA, hA, sA, pB, RB, rb, hB, sB
     if k2 == SHAPE_SPHERE:
-        return _sphere_hull(_core_point(verts, h2[6], p2, R2), r2, p1, R1, h1, verts, planes, face_verts, edges,
-                            margin, swapped, c_psi, c_n, c_pa, c_pb, start, limit)
+        return _sphere_hull(
+            _core_point(verts, h2[6], p2, R2),
+            r2,
+            p1,
+            R1,
+            h1,
+            verts,
+            planes,
+            face_verts,
+            edges,
+            margin,
+            swapped,
+            c_psi,
+            c_n,
+            c_pa,
+            c_pb,
+            start,
+            limit,
+        )
     if k2 == SHAPE_CAPSULE:
-        return _capsule_hull(_core_point(verts, h2[6], p2, R2), _core_point(verts, h2[6] + 1, p2, R2), r2, p1, R1, h1,
-                             verts, planes, face_verts, edges, dirs, margin, swapped, c_psi, c_n, c_pa, c_pb, start, limit)
-    return _hull_hull(p1, R1, h1, s1, p2, R2, h2, s2, verts, planes, face_verts, edges, dirs, margin, swapped,
-                      c_psi, c_n, c_pa, c_pb, start, limit)
+        return _capsule_hull(
+            _core_point(verts, h2[6], p2, R2),
+            _core_point(verts, h2[6] + 1, p2, R2),
+            r2,
+            p1,
+            R1,
+            h1,
+            verts,
+            planes,
+            face_verts,
+            edges,
+            dirs,
+            margin,
+            swapped,
+            c_psi,
+            c_n,
+            c_pa,
+            c_pb,
+            start,
+            limit,
+        )
+    return _hull_hull(
+        p1, R1, h1, s1, p2, R2, h2, s2, verts, planes, face_verts, edges, dirs, margin, swapped, c_psi, c_n, c_pa, c_pb, start, limit
+    )
 
 
 # ----------------------------------------------------------------------------- entry point
@@ -1537,18 +1590,58 @@ def collide_pair_3d(S, q, p, margin, c_psi, c_n, c_pa, c_pb, start):
     pB, RB = _pose(S, q, B)
     if (ka == SHAPE_MESH or kb == SHAPE_MESH) and ka != SHAPE_HALFSPACE and kb != SHAPE_HALFSPACE:
         return _collide_hull(
-            ka, pA, RA, S.radius[A], (S.hull[A, 0], S.hull[A, 1], S.hull[A, 2], S.hull[A, 3], S.hull[A, 4], S.hull[A, 5],
-                                      S.vstart[A], S.vcount[A]), S.bound_radius[A],
-            kb, pB, RB, S.radius[B], (S.hull[B, 0], S.hull[B, 1], S.hull[B, 2], S.hull[B, 3], S.hull[B, 4], S.hull[B, 5],
-                                      S.vstart[B], S.vcount[B]), S.bound_radius[B],
-            S.verts, S.planes, S.face_verts, S.edges, S.edge_dirs, margin, limit, c_psi, c_n, c_pa, c_pb, start,
+            ka,
+            pA,
+            RA,
+            S.radius[A],
+            (S.hull[A, 0], S.hull[A, 1], S.hull[A, 2], S.hull[A, 3], S.hull[A, 4], S.hull[A, 5], S.vstart[A], S.vcount[A]),
+            S.bound_radius[A],
+            kb,
+            pB,
+            RB,
+            S.radius[B],
+            (S.hull[B, 0], S.hull[B, 1], S.hull[B, 2], S.hull[B, 3], S.hull[B, 4], S.hull[B, 5], S.vstart[B], S.vcount[B]),
+            S.bound_radius[B],
+            S.verts,
+            S.planes,
+            S.face_verts,
+            S.edges,
+            S.edge_dirs,
+            margin,
+            limit,
+            c_psi,
+            c_n,
+            c_pa,
+            c_pb,
+            start,
         )
     return _collide(
-        S.kind[A], pA, RA, S.radius[A], (S.half_extents[A, 0], S.half_extents[A, 1], S.half_extents[A, 2]),
-        (S.hs_normal[A, 0], S.hs_normal[A, 1], S.hs_normal[A, 2]), S.hs_offset[A], S.vstart[A], S.vcount[A],
-        S.kind[B], pB, RB, S.radius[B], (S.half_extents[B, 0], S.half_extents[B, 1], S.half_extents[B, 2]),
-        (S.hs_normal[B, 0], S.hs_normal[B, 1], S.hs_normal[B, 2]), S.hs_offset[B], S.vstart[B], S.vcount[B],
-        S.verts, margin, limit, c_psi, c_n, c_pa, c_pb, start,
+        S.kind[A],
+        pA,
+        RA,
+        S.radius[A],
+        (S.half_extents[A, 0], S.half_extents[A, 1], S.half_extents[A, 2]),
+        (S.hs_normal[A, 0], S.hs_normal[A, 1], S.hs_normal[A, 2]),
+        S.hs_offset[A],
+        S.vstart[A],
+        S.vcount[A],
+        S.kind[B],
+        pB,
+        RB,
+        S.radius[B],
+        (S.half_extents[B, 0], S.half_extents[B, 1], S.half_extents[B, 2]),
+        (S.hs_normal[B, 0], S.hs_normal[B, 1], S.hs_normal[B, 2]),
+        S.hs_offset[B],
+        S.vstart[B],
+        S.vcount[B],
+        S.verts,
+        margin,
+        limit,
+        c_psi,
+        c_n,
+        c_pa,
+        c_pb,
+        start,
     )
 
 
@@ -1566,8 +1659,9 @@ def _compiled(ka, kb, fa, fb):
 
 
 @numba.njit(cache=True)
-def _collide(ka, pA, RA, ra, hA, nA, offA, vA, cA, kb, pB, RB, rb, hB, nB, offB, vB, cB,
-             verts, margin, limit, c_psi, c_n, c_pa, c_pb, start):
+def _collide(
+    ka, pA, RA, ra, hA, nA, offA, vA, cA, kb, pB, RB, rb, hB, nB, offB, vB, cB, verts, margin, limit, c_psi, c_n, c_pa, c_pb, start
+):
     """`collide_pair_3d` on one pair's data: kind, pose, radius, half extents, plane normal
     and offset (body frame), first core point and count, for A then B."""
     if ka == SHAPE_HALFSPACE and kb == SHAPE_HALFSPACE:
@@ -1576,11 +1670,9 @@ def _collide(ka, pA, RA, ra, hA, nA, offA, vA, cA, kb, pB, RB, rb, hB, nB, offB,
         flip = kb == SHAPE_HALFSPACE  # the plane is B: contacts found from it are flipped
         if flip:
             nh = _rot(RB, nB)
-            return _plane_shape(nh, offB + _dot(nh, pB), ka, pA, RA, ra, verts, vA, cA, flip,
-                                margin, c_psi, c_n, c_pa, c_pb, start, limit)
+            return _plane_shape(nh, offB + _dot(nh, pB), ka, pA, RA, ra, verts, vA, cA, flip, margin, c_psi, c_n, c_pa, c_pb, start, limit)
         nh = _rot(RA, nA)
-        return _plane_shape(nh, offA + _dot(nh, pA), kb, pB, RB, rb, verts, vB, cB, flip,
-                            margin, c_psi, c_n, c_pa, c_pb, start, limit)
+        return _plane_shape(nh, offA + _dot(nh, pA), kb, pB, RB, rb, verts, vB, cB, flip, margin, c_psi, c_n, c_pa, c_pb, start, limit)
     if ka == SHAPE_MESH or kb == SHAPE_MESH or ka < SHAPE_SPHERE or kb < SHAPE_SPHERE:
         return -1
     # canonical order: x has the lower kind (sphere < capsule < box); swapped: x is B
@@ -1610,8 +1702,22 @@ def _collide(ka, pA, RA, ra, hA, nA, offA, vA, cA, kb, pB, RB, rb, hB, nB, offB,
         a0 = _core_point(verts, vx, px, Rx)
         a1 = _core_point(verts, vx + 1, px, Rx)
         if ky == SHAPE_CAPSULE:
-            return _capsule_capsule(a0, a1, rx, _core_point(verts, vy, py, Ry), _core_point(verts, vy + 1, py, Ry),
-                                    ry, margin, swapped, c_psi, c_n, c_pa, c_pb, start, limit)
+            return _capsule_capsule(
+                a0,
+                a1,
+                rx,
+                _core_point(verts, vy, py, Ry),
+                _core_point(verts, vy + 1, py, Ry),
+                ry,
+                margin,
+                swapped,
+                c_psi,
+                c_n,
+                c_pa,
+                c_pb,
+                start,
+                limit,
+            )
         return _capsule_box(a0, a1, rx, py, Ry, hy, margin, not swapped, c_psi, c_n, c_pa, c_pb, start, limit)
     return _box_box(px, Rx, hx, py, Ry, hy, margin, swapped, c_psi, c_n, c_pa, c_pb, start, limit)
 
@@ -1644,22 +1750,62 @@ def collide_all_3d(S, q, margin, c_psi, c_n, c_pa, c_pb, c_pair, fallback):
         pB, RB = _pose(S, q, B)
         if (ka == SHAPE_MESH or kb == SHAPE_MESH) and ka != SHAPE_HALFSPACE and kb != SHAPE_HALFSPACE:
             k = _collide_hull(
-                ka, pA, RA, S.radius[A], (S.hull[A, 0], S.hull[A, 1], S.hull[A, 2], S.hull[A, 3], S.hull[A, 4], S.hull[A, 5],
-                                          S.vstart[A], S.vcount[A]), S.bound_radius[A],
-                kb, pB, RB, S.radius[B], (S.hull[B, 0], S.hull[B, 1], S.hull[B, 2], S.hull[B, 3], S.hull[B, 4], S.hull[B, 5],
-                                          S.vstart[B], S.vcount[B]), S.bound_radius[B],
-                S.verts, S.planes, S.face_verts, S.edges, S.edge_dirs, margin, limit, c_psi, c_n, c_pa, c_pb, count,
+                ka,
+                pA,
+                RA,
+                S.radius[A],
+                (S.hull[A, 0], S.hull[A, 1], S.hull[A, 2], S.hull[A, 3], S.hull[A, 4], S.hull[A, 5], S.vstart[A], S.vcount[A]),
+                S.bound_radius[A],
+                kb,
+                pB,
+                RB,
+                S.radius[B],
+                (S.hull[B, 0], S.hull[B, 1], S.hull[B, 2], S.hull[B, 3], S.hull[B, 4], S.hull[B, 5], S.vstart[B], S.vcount[B]),
+                S.bound_radius[B],
+                S.verts,
+                S.planes,
+                S.face_verts,
+                S.edges,
+                S.edge_dirs,
+                margin,
+                limit,
+                c_psi,
+                c_n,
+                c_pa,
+                c_pb,
+                count,
             )
             for i in range(count, count + k):
                 c_pair[i] = p
             count += k
             continue
         k = _collide(
-            S.kind[A], pA, RA, S.radius[A], (S.half_extents[A, 0], S.half_extents[A, 1], S.half_extents[A, 2]),
-            (S.hs_normal[A, 0], S.hs_normal[A, 1], S.hs_normal[A, 2]), S.hs_offset[A], S.vstart[A], S.vcount[A],
-            S.kind[B], pB, RB, S.radius[B], (S.half_extents[B, 0], S.half_extents[B, 1], S.half_extents[B, 2]),
-            (S.hs_normal[B, 0], S.hs_normal[B, 1], S.hs_normal[B, 2]), S.hs_offset[B], S.vstart[B], S.vcount[B],
-            S.verts, margin, limit, c_psi, c_n, c_pa, c_pb, count,
+            S.kind[A],
+            pA,
+            RA,
+            S.radius[A],
+            (S.half_extents[A, 0], S.half_extents[A, 1], S.half_extents[A, 2]),
+            (S.hs_normal[A, 0], S.hs_normal[A, 1], S.hs_normal[A, 2]),
+            S.hs_offset[A],
+            S.vstart[A],
+            S.vcount[A],
+            S.kind[B],
+            pB,
+            RB,
+            S.radius[B],
+            (S.half_extents[B, 0], S.half_extents[B, 1], S.half_extents[B, 2]),
+            (S.hs_normal[B, 0], S.hs_normal[B, 1], S.hs_normal[B, 2]),
+            S.hs_offset[B],
+            S.vstart[B],
+            S.vcount[B],
+            S.verts,
+            margin,
+            limit,
+            c_psi,
+            c_n,
+            c_pa,
+            c_pb,
+            count,
         )
         for i in range(count, count + k):
             c_pair[i] = p

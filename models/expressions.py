@@ -64,9 +64,7 @@ def names_in(text: str) -> set[str]:
 
 
 def _eval(node: ast.AST, text: str, parameters: Mapping[str, float]) -> float:
-    if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(
-        node.value, bool
-    ):
+    if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool):
         return float(node.value)
     if isinstance(node, ast.Name):
         if node.id in CONSTANTS and node.id not in parameters:

@@ -158,8 +158,10 @@ def make_geometry(shape, dimension: int, base_dir: Path | None = None, max_coord
         v, faces = read_obj(path)
         v = v * shape.scale
         if np.max(np.abs(v)) > max_coordinate:
-            raise GeometryError(f"{path.name}: vertex coordinates times scale reach {np.max(np.abs(v)):g}, "
-                                f"beyond the bound on coordinates ({max_coordinate:g} m)")
+            raise GeometryError(
+                f"{path.name}: vertex coordinates times scale reach {np.max(np.abs(v)):g}, "
+                f"beyond the bound on coordinates ({max_coordinate:g} m)"
+            )
         check_convex_mesh(v, faces, path.name)
         return Geometry("solid3d", 3, v, fcl_args=("mesh", v, tuple(tuple(f) for f in faces)))
     raise GeometryError(f"shape {t!r} is not spatial")

@@ -37,8 +37,12 @@ _EXPECTED_BY_TYPE = {
     "dataclass_type": "a table",
     "is_instance_of": "a table",
 }
-_RANGE = {"greater_than": "greater than", "greater_than_equal": "greater than or equal to",
-          "less_than": "less than", "less_than_equal": "less than or equal to"}
+_RANGE = {
+    "greater_than": "greater than",
+    "greater_than_equal": "greater than or equal to",
+    "less_than": "less than",
+    "less_than_equal": "less than or equal to",
+}
 _RANGE_CTX = {"greater_than": "gt", "greater_than_equal": "ge", "less_than": "lt", "less_than_equal": "le"}
 
 
@@ -205,7 +209,7 @@ def reason(err: Mapping[str, Any], annotation: Any, shown: Callable[[Any], str] 
     if kind in ("value_error", "assertion_error"):
         for prefix in ("Value error, ", "Assertion failed, "):
             if message.startswith(prefix):
-                message = message[len(prefix):]
+                message = message[len(prefix) :]
         return "", message
     if kind in _EXPECTED_BY_TYPE:
         expected = what[0] if what and kind not in ("int_from_float",) else _EXPECTED_BY_TYPE[kind]
@@ -233,7 +237,7 @@ def reason(err: Mapping[str, Any], annotation: Any, shown: Callable[[Any], str] 
         key = str(ctx.get("discriminator", "")).strip("'")
         return (f".{key}", "required key is missing") if key.isidentifier() else ("", message)
     if message.startswith("Input should be "):
-        message = "expected " + message[len("Input should be "):]
+        message = "expected " + message[len("Input should be ") :]
     if value is not None and not isinstance(value, (dict, list)):
         message += f", got {got(value)}"
     return "", message

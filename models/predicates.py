@@ -39,8 +39,7 @@ def _pair_index(scenario: Scenario, a: str, b: str) -> int:
         if {pair.body_a, pair.body_b} == {a, b}:
             return i
     raise ValueError(
-        f"touch predicate on {a!r} and {b!r}: these bodies are not a contact pair "
-        "(both fixed, or the pair is disabled in [contact.pairs])"
+        f"touch predicate on {a!r} and {b!r}: these bodies are not a contact pair (both fixed, or the pair is disabled in [contact.pairs])"
     )
 
 

@@ -76,7 +76,9 @@ def _failure(status: QPStatus, n: int, m: int, note: str = "") -> QPResult:
     return QPResult(np.full(n, np.nan), np.full(m, np.nan), status, math.inf, math.inf, 0, note)
 
 
-def solve_qp(P, c, A, lower, upper, *, eps_abs: float = EPS_ABS, eps_rel: float = EPS_REL, max_iterations: int = MAX_ITERATIONS) -> QPResult:
+def solve_qp(
+    P, c, A, lower, upper, *, eps_abs: float = EPS_ABS, eps_rel: float = EPS_REL, max_iterations: int = MAX_ITERATIONS
+) -> QPResult:
     """Solve the QP above. P (n, n) symmetric PSD (upper triangle used), A (m, n); bounds may be +-inf."""
     try:
         P = sp.csc_matrix(P, dtype=float)
@@ -103,9 +105,18 @@ def solve_qp(P, c, A, lower, upper, *, eps_abs: float = EPS_ABS, eps_rel: float 
     solver = osqp.OSQP()
     try:
         solver.setup(
-            sp.triu(P, format="csc"), c, A, lower, upper,
-            verbose=False, eps_abs=eps_abs, eps_rel=eps_rel, max_iter=max_iterations,
-            polishing=True, eps_prim_inf=1e-10, eps_dual_inf=1e-10,
+            sp.triu(P, format="csc"),
+            c,
+            A,
+            lower,
+            upper,
+            verbose=False,
+            eps_abs=eps_abs,
+            eps_rel=eps_rel,
+            max_iter=max_iterations,
+            polishing=True,
+            eps_prim_inf=1e-10,
+            eps_dual_inf=1e-10,
         )
         result = solver.solve(raise_error=False)
     except Exception as exc:  # OSQP raises its own errors for non-convex P and the like

@@ -92,11 +92,13 @@ class RolloutResult:
         for k, pair in enumerate(scenario.pairs):
             if self.pair_wrench is None or self.pair_force[k] == 0.0:
                 continue
-            out.append({
-                "bodies": [pair.body_a, pair.body_b],
-                "normal": float(self.pair_force[k]),
-                "force": [float(v) for v in self.pair_wrench[k][:dim]],
-            })
+            out.append(
+                {
+                    "bodies": [pair.body_a, pair.body_b],
+                    "normal": float(self.pair_force[k]),
+                    "force": [float(v) for v in self.pair_wrench[k][:dim]],
+                }
+            )
         return out
 
 
@@ -243,9 +245,24 @@ class Rung:
             scene = scene._replace(bf=scene.bf.copy(), base_pos=scene.base_pos.copy(), base_quat=scene.base_quat.copy())
         start = time.perf_counter()
         out = rollout_kernel(
-            scene, c.drives, self.model, self.solver, c.goal, c.unsafe,
-            state.q.copy(), state.nu.copy(), state.q_ref.copy(), state.delta_n.copy(), state.delta_t.copy(),
-            controls, durations, float(h), int(record_every), int(max_records), bool(stop_at_outcome), float(t0),
+            scene,
+            c.drives,
+            self.model,
+            self.solver,
+            c.goal,
+            c.unsafe,
+            state.q.copy(),
+            state.nu.copy(),
+            state.q_ref.copy(),
+            state.delta_n.copy(),
+            state.delta_t.copy(),
+            controls,
+            durations,
+            float(h),
+            int(record_every),
+            int(max_records),
+            bool(stop_at_outcome),
+            float(t0),
         )
         wall = time.perf_counter() - start
         status = StepStatus(out.status)
@@ -317,8 +334,17 @@ class Rung:
             last = done + n >= total
             if not chunk_d:  # nothing (left) to step: one call classifies the state
                 chunk_u, chunk_d = [controls[min(k, len(controls) - 1)]], [0.0]
-            out = self.rollout(scenario, state, np.array(chunk_u), np.array(chunk_d), h, record_every=record_every,
-                               max_records=n // record_every + 3, stop_at_outcome=True, t0=t0 + done * h)
+            out = self.rollout(
+                scenario,
+                state,
+                np.array(chunk_u),
+                np.array(chunk_d),
+                h,
+                record_every=record_every,
+                max_records=n // record_every + 3,
+                stop_at_outcome=True,
+                t0=t0 + done * h,
+            )
             results.append(out)
             done += out.steps
             wall += out.wall_s
@@ -438,8 +464,9 @@ def pair_signed_distances(scenario: Scenario, q: np.ndarray) -> np.ndarray:
         placements = scenario.placements(q)
         for k in missing:
             pair = scenario.pairs[k]
-            out[k] = geo.signed_distance(scenario.geometries[pair.body_a], placements[pair.body_a],
-                                         scenario.geometries[pair.body_b], placements[pair.body_b])
+            out[k] = geo.signed_distance(
+                scenario.geometries[pair.body_a], placements[pair.body_a], scenario.geometries[pair.body_b], placements[pair.body_b]
+            )
     return out[: len(scenario.pairs)]
 
 

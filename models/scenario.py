@@ -33,7 +33,6 @@ from models.schema import (
     GEOMETRIC_PLANNERS,
     LIMITS,
     MAX_PREDICATE_DEPTH,
-    PREDICATE_KEYS,
     SHAPES_2D,
     SHAPES_3D,
     BodySpec,
@@ -207,9 +206,7 @@ class Scenario:
                 }
                 for b in spec.bodies
             ],
-            "contact_pairs": [
-                {"bodies": [p.body_a, p.body_b], "mu": p.mu, "K": p.K, "C": p.C} for p in self.pairs
-            ],
+            "contact_pairs": [{"bodies": [p.body_a, p.body_b], "mu": p.mu, "K": p.K, "C": p.C} for p in self.pairs],
             "ladder": {
                 "rungs": [r.model for r in spec.ladder.rungs],
                 "steps": {r.model: r.h for r in spec.ladder.rungs},
@@ -321,10 +318,12 @@ def _check_predicate_depth(raw: dict) -> list[Problem]:
             if "not" in node:
                 stack.append((node["not"], depth + 1))
         if deepest > MAX_PREDICATE_DEPTH:
-            out.append(Problem(
-                f"task.{name}",
-                f"predicates nested {deepest} levels deep (all / any / not inside each other); at most {MAX_PREDICATE_DEPTH} levels",
-            ))
+            out.append(
+                Problem(
+                    f"task.{name}",
+                    f"predicates nested {deepest} levels deep (all / any / not inside each other); at most {MAX_PREDICATE_DEPTH} levels",
+                )
+            )
     return out
 
 
@@ -492,7 +491,9 @@ def _derive(spec: ScenarioSpec, parameters: Mapping[str, float], path: Path) -> 
     start_velocity = [0.0] * len(velocities)
     for name, value in spec.task.velocity.items():
         if name not in velocities:
-            problems.append(Problem(key_path(("task", "velocity", name)), _unknown_coordinate(name, velocities).replace("coordinate", "velocity")))
+            problems.append(
+                Problem(key_path(("task", "velocity", name)), _unknown_coordinate(name, velocities).replace("coordinate", "velocity"))
+            )
         else:
             start_velocity[velocities.index(name)] = value
 
@@ -572,7 +573,9 @@ def _check_body(body: BodySpec, key: str, dim: int) -> list[Problem]:
 
     if body.role == "obstacle":
         if body.dofs:
-            out.append(Problem(f"{key}.dofs", "an obstacle is fixed or scripted and has no free DOFs; use role = 'object' for a passive body"))
+            out.append(
+                Problem(f"{key}.dofs", "an obstacle is fixed or scripted and has no free DOFs; use role = 'object' for a passive body")
+            )
         if body.actuators:
             out.append(Problem(f"{key}.actuators", "only robots have actuators"))
     else:
@@ -637,15 +640,18 @@ def _pair_status(spec: ScenarioSpec) -> Callable[[str, str], str | None]:
         if pair in pairs:
             return None
         if pair in disabled:
-            return (f"the pair {a}-{b} is disabled (contact.pairs[{disabled[pair]}].enabled = false), "
-                    "so they never touch; enable the pair or drop this predicate")
+            return (
+                f"the pair {a}-{b} is disabled (contact.pairs[{disabled[pair]}].enabled = false), "
+                "so they never touch; enable the pair or drop this predicate"
+            )
         return f"neither {a!r} nor {b!r} moves, so they are not a contact pair and their touching never changes"
 
     return status
 
 
-def _check_predicate(pred: Predicate, key: str, coordinates: list[str], names: list[str],
-                     pair_status: Callable[[str, str], str | None] = lambda a, b: None) -> list[Problem]:
+def _check_predicate(
+    pred: Predicate, key: str, coordinates: list[str], names: list[str], pair_status: Callable[[str, str], str | None] = lambda a, b: None
+) -> list[Problem]:
     kind = type(pred).__name__
     out: list[Problem] = []
     if kind == "BoxPredicate":
@@ -684,8 +690,13 @@ def _check_touch_tolerance(key: str, tol: float) -> list[Problem]:
 
     if tol <= CONTACT_MARGIN:
         return []
-    return [Problem(key, f"touch tolerance {tol:g} m is above the contact-detection margin {CONTACT_MARGIN:g} m "
-                         "(rollouts see a pair only within the margin); use at most that")]
+    return [
+        Problem(
+            key,
+            f"touch tolerance {tol:g} m is above the contact-detection margin {CONTACT_MARGIN:g} m "
+            "(rollouts see a pair only within the margin); use at most that",
+        )
+    ]
 
 
 def _parse_key(key: str) -> tuple:
@@ -703,8 +714,9 @@ def _parse_key(key: str) -> tuple:
     return tuple(parts)
 
 
-def _check_task(spec: ScenarioSpec, coordinates: list[str], actuated: list[str], names: list[str],
-                pair_status: Callable[[str, str], str | None]) -> list[Problem]:
+def _check_task(
+    spec: ScenarioSpec, coordinates: list[str], actuated: list[str], names: list[str], pair_status: Callable[[str, str], str | None]
+) -> list[Problem]:
     task = spec.task
     out = _check_predicate(task.goal, "task.goal", coordinates, names, pair_status)
     if task.unsafe is not None:
@@ -718,7 +730,12 @@ def _check_task(spec: ScenarioSpec, coordinates: list[str], actuated: list[str],
     if task.policy is not None:
         for name in task.policy.speeds:
             if name not in actuated:
-                out.append(Problem(key_path(("task", "policy", "speeds", name)), f"{name!r} is not an actuated coordinate (actuated: {', '.join(actuated) or 'none'})"))
+                out.append(
+                    Problem(
+                        key_path(("task", "policy", "speeds", name)),
+                        f"{name!r} is not an actuated coordinate (actuated: {', '.join(actuated) or 'none'})",
+                    )
+                )
     return out
 
 
@@ -729,7 +746,13 @@ def _check_ladder(spec: ScenarioSpec) -> list[Problem]:
     for i, rung in enumerate(ladder.rungs):
         key = f"ladder.rungs[{i}]"
         if i > 0 and order[i] <= order[i - 1]:
-            out.append(Problem(f"{key}.model", f"{rung.model!r} after {ladder.rungs[i - 1].model!r}: rungs go from low to high fidelity ({' < '.join(RUNG_NAMES)}), each once"))
+            out.append(
+                Problem(
+                    f"{key}.model",
+                    f"{rung.model!r} after {ladder.rungs[i - 1].model!r}: rungs go from low to high fidelity "
+                    f"({' < '.join(RUNG_NAMES)}), each once",
+                )
+            )
         if rung.model == "geometric":
             if rung.h is not None:
                 out.append(Problem(f"{key}.h", "the geometric rung has no time step"))
@@ -764,9 +787,13 @@ def _check_limits(spec: ScenarioSpec, coordinates: list[str], start: list[float]
                 key, where = _pose_key(body, i, dof, dim), "the body's pose"
             limits = f"bodies[{i}].actuators.{dof}"
             if drive.lower is not None and value < drive.lower:
-                out.append(Problem(key, f"{name} starts at {value:g} (from {where}), below its lower limit {drive.lower:g} ({limits}.lower)"))
+                out.append(
+                    Problem(key, f"{name} starts at {value:g} (from {where}), below its lower limit {drive.lower:g} ({limits}.lower)")
+                )
             if drive.upper is not None and value > drive.upper:
-                out.append(Problem(key, f"{name} starts at {value:g} (from {where}), above its upper limit {drive.upper:g} ({limits}.upper)"))
+                out.append(
+                    Problem(key, f"{name} starts at {value:g} (from {where}), above its upper limit {drive.upper:g} ({limits}.upper)")
+                )
     return out
 
 

@@ -18,7 +18,7 @@ Units are SI (m, kg, s, rad, N); angles in radians unless a key says ``_deg``.
 from __future__ import annotations
 
 import math
-from typing import Annotated, Any, Literal, Union
+from typing import Annotated, Any, Literal
 
 from pydantic import (
     AfterValidator,
@@ -107,6 +107,7 @@ _NUMBER_SCHEMA = {
         {"type": "string", "description": "a parameter name or an expression over parameters"},
     ]
 }
+
 
 def _plain_number(value: Any) -> Any:
     """A literal number (parameter values themselves may not refer to parameters)."""
@@ -265,7 +266,7 @@ class Mesh(Strict):
 
 
 Shape = Annotated[
-    Union[HalfPlane, Disc, Polygon, Box, Capsule, Plane, Sphere, Mesh],
+    HalfPlane | Disc | Polygon | Box | Capsule | Plane | Sphere | Mesh,
     Field(discriminator="type"),
 ]
 
@@ -309,9 +310,7 @@ class BodySpec(Strict):
         description="rotational inertia about the centre of mass (planar: scalar; spatial: "
         "scalar or principal moments); required when a rotation is free",
     )
-    actuators: dict[str, Drive] = Field(
-        default_factory=dict, description="robots only: the drive of each actuated DOF"
-    )
+    actuators: dict[str, Drive] = Field(default_factory=dict, description="robots only: the drive of each actuated DOF")
     velocity: dict[str, Speed] = Field(
         default_factory=dict,
         description="obstacles only: constant scripted velocity per pose coordinate",
@@ -335,15 +334,15 @@ class TouchPredicate(Strict):
 
 
 class AllPredicate(Strict):
-    all: tuple["Predicate", ...] = Field(min_length=1)
+    all: tuple[Predicate, ...] = Field(min_length=1)
 
 
 class AnyPredicate(Strict):
-    any: tuple["Predicate", ...] = Field(min_length=1)
+    any: tuple[Predicate, ...] = Field(min_length=1)
 
 
 class NotPredicate(Strict):
-    not_: "Predicate" = Field(alias="not")
+    not_: Predicate = Field(alias="not")
     model_config = ConfigDict(extra="forbid", frozen=True, populate_by_name=True)
 
 
@@ -391,13 +390,11 @@ def _one_predicate_key(value: Any) -> Any:
 
 
 Predicate = Annotated[
-    Union[
-        Annotated[BoxPredicate, Tag("box")],
-        Annotated[TouchPredicate, Tag("touch")],
-        Annotated[AllPredicate, Tag("all")],
-        Annotated[AnyPredicate, Tag("any")],
-        Annotated[NotPredicate, Tag("not")],
-    ],
+    Annotated[BoxPredicate, Tag("box")]
+    | Annotated[TouchPredicate, Tag("touch")]
+    | Annotated[AllPredicate, Tag("all")]
+    | Annotated[AnyPredicate, Tag("any")]
+    | Annotated[NotPredicate, Tag("not")],
     Discriminator(
         _predicate_tag,
         custom_error_type="predicate",
@@ -420,9 +417,7 @@ class Policy(Strict):
 
 class TaskSpec(Strict):
     horizon: Time = Field(description="longest plan duration, s")
-    start: dict[str, Length] = Field(
-        default_factory=dict, description="overrides of initial coordinates (default: body poses)"
-    )
+    start: dict[str, Length] = Field(default_factory=dict, description="overrides of initial coordinates (default: body poses)")
     velocity: dict[str, Num] = Field(
         default_factory=dict,
         description="initial velocities by velocity name, e.g. 'box.x' (m/s) or 'disc.theta' (rad/s), "
@@ -443,17 +438,13 @@ class TaskSpec(Strict):
 class RungSpec(Strict):
     model: Literal[RUNG_NAMES]  # type: ignore[valid-type]
     h: Time | None = Field(None, description="physics time step, s (not for geometric)")
-    control_period: Time | None = Field(
-        None, description="duration of one planner control, s (default: ladder.control_period)"
-    )
+    control_period: Time | None = Field(None, description="duration of one planner control, s (default: ladder.control_period)")
     time_limit: Time | None = Field(
         None, description="wall-clock cap on this rung's planning, s (default: ladder's); see ladder.time_limit"
     )
     iterations: _int(gt=0, le=MAX_ITERATIONS) | None = Field(None, description="planner iterations of this rung (default: ladder's)")
     planner: Literal[PLANNERS] | None = None  # type: ignore[valid-type]
-    theta: Annotated[Num, Field(ge=0, le=1)] = Field(
-        1.0, description="theta-rule weight: 1 = semi-implicit (paper's scheme)"
-    )
+    theta: Annotated[Num, Field(ge=0, le=1)] = Field(1.0, description="theta-rule weight: 1 = semi-implicit (paper's scheme)")
     friction_directions: _int(ge=2, le=64) | None = Field(
         None, description="directions of the polyhedral friction cone (spatial scenes; planar: 2)"
     )

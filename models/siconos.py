@@ -180,10 +180,7 @@ def _read_csparse(text: str, start_line: int, rows: int, cols: int, path):
             continue
         break
     if col != cols - 1 or count != nnz:
-        raise ValueError(
-            f"{path}: CSparse listing incomplete ({col + 1} of {cols} columns, "
-            f"{count} of {nnz} entries)"
-        )
+        raise ValueError(f"{path}: CSparse listing incomplete ({col + 1} of {cols} columns, {count} of {nnz} entries)")
     got = np.abs(M).sum(axis=0).max() if cols else 0.0
     if abs(got - norm1) > 1e-4 * max(1.0, abs(norm1)):
         raise ValueError(f"{path}: 1-norm {got:g} does not match the header's {norm1:g}")
@@ -241,10 +238,7 @@ def read_fc2d(path, *, sparse: bool = False):
     elif kind == STORAGE_SPARSE:
         origin = tok.int("the sparse origin code")
         if origin != _NSM_CSC:
-            raise ValueError(
-                f"{path}: CSparse dump with origin code {origin} not supported "
-                f"(only compressed-column, code {_NSM_CSC})"
-            )
+            raise ValueError(f"{path}: CSparse dump with origin code {origin} not supported (only compressed-column, code {_NSM_CSC})")
         # The dump is line-oriented: find the line after the origin code.
         lines = text.splitlines()
         header_ints = 0

@@ -49,8 +49,13 @@ def machine() -> dict:
                 break
     except OSError:
         pass
-    return {"host": socket.gethostname(), "cpu": cpu or platform.processor(), "cores": os.cpu_count(),
-            "python": platform.python_version(), "system": platform.platform()}
+    return {
+        "host": socket.gethostname(),
+        "cpu": cpu or platform.processor(),
+        "cores": os.cpu_count(),
+        "python": platform.python_version(),
+        "system": platform.platform(),
+    }
 
 
 def _timed(fn, repeat: int = 3):
@@ -88,10 +93,19 @@ def work_precision(quick: bool = False) -> dict:
     direction = np.array([math.cos(math.radians(alpha)), math.sin(math.radians(alpha))])
     for rung in ("dynamic-rigid", "dynamic-compliant"):
         for h in steps:
-            wall, out = _timed(lambda: _rollout(incline, rung, h, T), repeat=1 if h < 1e-4 else 3)
+            wall, out = _timed(lambda rung=rung, h=h: _rollout(incline, rung, h, T), repeat=1 if h < 1e-4 else 3)
             travelled = -float(np.dot(out.state.q[:2] - incline.start[:2], direction))
-            rows.append({"scene": "incline_block", "rung": rung, "h": h, "reference": "closed form 0.5 a t^2",
-                         "error": abs(travelled - 0.5 * a * T * T), "wall_s": wall, "status": out.status})
+            rows.append(
+                {
+                    "scene": "incline_block",
+                    "rung": rung,
+                    "h": h,
+                    "reference": "closed form 0.5 a t^2",
+                    "error": abs(travelled - 0.5 * a * T * T),
+                    "wall_s": wall,
+                    "status": out.status,
+                }
+            )
 
     # disc dropped from 1 m: rigid (plastic) landing has a closed form; elastic compliant vs fine step
     disc = load_scenario(SCENARIOS / "bouncing_disc.toml")
@@ -100,18 +114,36 @@ def work_precision(quick: bool = False) -> dict:
     landing = math.sqrt(2 * (1.0 - 0.1) / G)
     exact = np.where(times < landing, 1.0 - 0.5 * G * times**2, 0.1)
     for h in steps:
-        wall, out = _timed(lambda: _rollout(disc, "dynamic-rigid", h, T), repeat=1 if h < 1e-4 else 3)
+        wall, out = _timed(lambda h=h: _rollout(disc, "dynamic-rigid", h, T), repeat=1 if h < 1e-4 else 3)
         y = np.interp(times, out.times, out.trajectory[:, 1])
-        rows.append({"scene": "bouncing_disc", "rung": "dynamic-rigid", "h": h, "reference": "closed form (fall, plastic landing)",
-                     "error": float(np.max(np.abs(y - exact))), "wall_s": wall, "status": out.status})
+        rows.append(
+            {
+                "scene": "bouncing_disc",
+                "rung": "dynamic-rigid",
+                "h": h,
+                "reference": "closed form (fall, plastic landing)",
+                "error": float(np.max(np.abs(y - exact))),
+                "wall_s": wall,
+                "status": out.status,
+            }
+        )
     ref_h = 1e-5 if quick else 1e-6
     ref = _rollout(disc, "dynamic-compliant", ref_h, T, records=20000)
     y_ref = np.interp(times, ref.times, ref.trajectory[:, 1])
     for h in [s for s in steps if s > ref_h]:
-        wall, out = _timed(lambda: _rollout(disc, "dynamic-compliant", h, T), repeat=1 if h < 1e-4 else 3)
+        wall, out = _timed(lambda h=h: _rollout(disc, "dynamic-compliant", h, T), repeat=1 if h < 1e-4 else 3)
         y = np.interp(times, out.times, out.trajectory[:, 1])
-        rows.append({"scene": "bouncing_disc", "rung": "dynamic-compliant (C = 0)", "h": h, "reference": f"h = {ref_h:g}",
-                     "error": float(np.max(np.abs(y - y_ref))), "wall_s": wall, "status": out.status})
+        rows.append(
+            {
+                "scene": "bouncing_disc",
+                "rung": "dynamic-compliant (C = 0)",
+                "h": h,
+                "reference": f"h = {ref_h:g}",
+                "error": float(np.max(np.abs(y - y_ref))),
+                "wall_s": wall,
+                "status": out.status,
+            }
+        )
 
     # the paper's scene, pushing phase, against the same rung at h = 1e-5
     tri = load_scenario(SCENARIOS / "two_finger_triangle.toml", {"v1": 0.8})
@@ -121,10 +153,19 @@ def work_precision(quick: bool = False) -> dict:
         ref = _rollout(tri, rung, 1e-5, 1.6, controls)
         R = np.array([np.interp(sample, ref.times, ref.trajectory[:, j]) for j in range(ref.trajectory.shape[1])]).T
         for h in [s for s in steps if s > 1e-5]:
-            wall, out = _timed(lambda: _rollout(tri, rung, h, 1.6, controls), repeat=1 if h < 1e-4 else 3)
+            wall, out = _timed(lambda rung=rung, h=h: _rollout(tri, rung, h, 1.6, controls), repeat=1 if h < 1e-4 else 3)
             X = np.array([np.interp(sample, out.times, out.trajectory[:, j]) for j in range(out.trajectory.shape[1])]).T
-            rows.append({"scene": "two_finger_triangle", "rung": rung, "h": h, "reference": "h = 1e-5",
-                         "error": float(np.max(np.abs(X - R))), "wall_s": wall, "status": out.status})
+            rows.append(
+                {
+                    "scene": "two_finger_triangle",
+                    "rung": rung,
+                    "h": h,
+                    "reference": "h = 1e-5",
+                    "error": float(np.max(np.abs(X - R))),
+                    "wall_s": wall,
+                    "status": out.status,
+                }
+            )
     return {"rows": rows}
 
 
@@ -149,13 +190,25 @@ def stability(quick: bool = False) -> dict:
         for h in STABILITY_STEPS:
             out = _rollout(tri, "dynamic-compliant", h, 3.0, controls, stop=True, records=2)
             q = out.state.q
-            rows.append({"C": C, "h": h, "outcome": out.outcome, "status": out.status, "t": float(out.t),
-                         "bounded": bool(np.all(np.isfinite(q)) and np.max(np.abs(q)) < 10.0),
-                         "same_outcome": out.outcome == ref.outcome, "triangle_x": float(q[x]),
-                         "reference_x": float(ref.state.q[x]), "reference_outcome": ref.outcome,
-                         "x_error": float(abs(q[x] - ref.state.q[x]))})
-    return {"scene": "two_finger_triangle, v1 = 0.8, v2 = 1, K = 1e6, dynamic-compliant, until the grasp (reference h = 1e-5)",
-            "rows": rows}
+            rows.append(
+                {
+                    "C": C,
+                    "h": h,
+                    "outcome": out.outcome,
+                    "status": out.status,
+                    "t": float(out.t),
+                    "bounded": bool(np.all(np.isfinite(q)) and np.max(np.abs(q)) < 10.0),
+                    "same_outcome": out.outcome == ref.outcome,
+                    "triangle_x": float(q[x]),
+                    "reference_x": float(ref.state.q[x]),
+                    "reference_outcome": ref.outcome,
+                    "x_error": float(abs(q[x] - ref.state.q[x])),
+                }
+            )
+    return {
+        "scene": "two_finger_triangle, v1 = 0.8, v2 = 1, K = 1e6, dynamic-compliant, until the grasp (reference h = 1e-5)",
+        "rows": rows,
+    }
 
 
 def plot_work_precision(data: dict, out: Path) -> list[str]:
@@ -195,12 +248,14 @@ def throughput(quick: bool = False) -> dict:
     controls = np.array([[-1.0, -1.0]])
     rows = []
     for rung in ("kinematic", "quasistatic-rigid", "quasistatic-compliant", "dynamic-rigid", "dynamic-compliant"):
-        wall, out = _timed(lambda: _rollout(tri, rung, 1e-4, 3.0, controls, stop=True, records=2), repeat=3 if quick else 7)
-        rows.append({"rung": rung, "h": 1e-4, "steps": out.steps, "outcome": out.outcome, "median_wall_s": wall,
-                     "steps_per_s": out.steps / wall})
+        wall, out = _timed(lambda rung=rung: _rollout(tri, rung, 1e-4, 3.0, controls, stop=True, records=2), repeat=3 if quick else 7)
+        rows.append(
+            {"rung": rung, "h": 1e-4, "steps": out.steps, "outcome": out.outcome, "median_wall_s": wall, "steps_per_s": out.steps / wall}
+        )
     ours = next(row for row in rows if row["rung"] == PEER_RUNG)
-    peer = mujoco_peer(tri, controls[0], ours["steps"], ours["h"],
-                       lambda: _rollout(tri, PEER_RUNG, ours["h"], 3.0, controls, stop=True, records=2), quick)
+    peer = mujoco_peer(
+        tri, controls[0], ours["steps"], ours["h"], lambda: _rollout(tri, PEER_RUNG, ours["h"], 3.0, controls, stop=True, records=2), quick
+    )
     return {"scene": "two_finger_triangle (v1 = v2 = 1, until the grasp)", "rows": rows, "peer": peer}
 
 
@@ -226,7 +281,9 @@ def mujoco_peer(scenario, u, steps: int, h: float, ours, quick: bool = False) ->
         return {"skipped": "mujoco is not installed (pip install 'contact-ladder[peers]'); the peer was not timed"}
     repeat = 3 if quick else 7
     inert = [f"{p.body_a}-{p.body_b}" for p in peers.inert_pairs(scenario)]
-    built = [peers.build(scenario, h, contact, drop) for contact in peers.CONTACT_MAPPINGS for drop in ((False, True) if inert else (False,))]
+    built = [
+        peers.build(scenario, h, contact, drop) for contact in peers.CONTACT_MAPPINGS for drop in ((False, True) if inert else (False,))
+    ]
     walls = np.zeros((repeat, 1 + len(built)))
     ends = [None] * len(built)
     for round_ in range(-1, repeat):  # round -1 warms up
@@ -236,17 +293,37 @@ def mujoco_peer(scenario, u, steps: int, h: float, ours, quick: bool = False) ->
         for k, peer in enumerate(built):
             walls[round_, 1 + k], ends[k] = peers.timed_run(peer, u, steps)
     median = np.median(walls, axis=0)
-    rows = [{"contact": peer.contact, "inert_pairs_left_out": list(peer.dropped), "steps": steps, "median_wall_s": float(median[1 + k]),
-             "steps_per_s": steps / float(median[1 + k]), "ratio": float(np.median(walls[:, 1 + k] / walls[:, 0])),
-             "end": _end_state(scenario, ends[k])} for k, peer in enumerate(built)]
+    rows = [
+        {
+            "contact": peer.contact,
+            "inert_pairs_left_out": list(peer.dropped),
+            "steps": steps,
+            "median_wall_s": float(median[1 + k]),
+            "steps_per_s": steps / float(median[1 + k]),
+            "ratio": float(np.median(walls[:, 1 + k] / walls[:, 0])),
+            "end": _end_state(scenario, ends[k]),
+        }
+        for k, peer in enumerate(built)
+    ]
     fastest = max(rows, key=lambda row: row["steps_per_s"])
     return {
-        "version": peers.version(), "integrator": "Euler", "h": h, "steps": steps, "simulated_s": steps * h,
-        "repeat": repeat, "rows": rows, "ours": {"rung": PEER_RUNG, "steps_per_s": steps / float(median[0])},
-        "inert_pairs": inert, "steps_per_s": fastest["steps_per_s"], "ratio": fastest["ratio"],
-        "against": fastest["contact"] + (" without " + ", ".join(fastest["inert_pairs_left_out"]) if fastest["inert_pairs_left_out"] else ""),
-        "mapping": {"force": "solref = -(1 - d) A~ (K, C), solimp d = %g, elliptic cone: f_n = K r + C r' per pair" % peers.FORCE_IMPEDANCE,
-                    "direct": "solref = (-K, -C), MuJoCo's default solimp and (pyramidal) cone"},
+        "version": peers.version(),
+        "integrator": "Euler",
+        "h": h,
+        "steps": steps,
+        "simulated_s": steps * h,
+        "repeat": repeat,
+        "rows": rows,
+        "ours": {"rung": PEER_RUNG, "steps_per_s": steps / float(median[0])},
+        "inert_pairs": inert,
+        "steps_per_s": fastest["steps_per_s"],
+        "ratio": fastest["ratio"],
+        "against": fastest["contact"]
+        + (" without " + ", ".join(fastest["inert_pairs_left_out"]) if fastest["inert_pairs_left_out"] else ""),
+        "mapping": {
+            "force": f"solref = -(1 - d) A~ (K, C), solimp d = {peers.FORCE_IMPEDANCE:g}, elliptic cone: f_n = K r + C r' per pair",
+            "direct": "solref = (-K, -C), MuJoCo's default solimp and (pyramidal) cone",
+        },
         "stability": peer_stability(peers),
     }
 
@@ -260,10 +337,17 @@ def _end_state(scenario, q) -> dict:
     tol = scenario.spec.contact.touch_tolerance
     roles = {b.name: b.role for b in scenario.spec.bodies}
     psi = pair_signed_distances(scenario, q) if np.all(np.isfinite(q)) else np.full(len(scenario.pairs), np.nan)
-    touching = {f"{p.body_a}-{p.body_b}": bool(psi[i] <= tol) for i, p in enumerate(scenario.pairs)
-                if {roles[p.body_a], roles[p.body_b]} == {"robot", "object"}}
-    return {"outcome": _outcome(scenario, q), "diverged": _diverged(q), "q": dict(zip(scenario.coordinates, map(float, q))),
-            "touching": touching}
+    touching = {
+        f"{p.body_a}-{p.body_b}": bool(psi[i] <= tol)
+        for i, p in enumerate(scenario.pairs)
+        if {roles[p.body_a], roles[p.body_b]} == {"robot", "object"}
+    }
+    return {
+        "outcome": _outcome(scenario, q),
+        "diverged": _diverged(q),
+        "q": dict(zip(scenario.coordinates, map(float, q))),
+        "touching": touching,
+    }
 
 
 def _diverged(q) -> bool:
@@ -291,9 +375,15 @@ def _track(scenario, times, Q) -> dict:
     diverged_at = next((float(t) for t, q in zip(times, Q) if _diverged(q)), None)
     finite = Q[np.all(np.isfinite(Q), axis=1)]
     moved = np.abs(finite[:, passive] - scenario.start[passive]) if passive else np.zeros((1, 1))
-    return {"goal_at": first["goal"], "unsafe_at": first["unsafe"], "diverged_at": diverged_at, "end": outcomes[-1],
-            "end_q": dict(zip(scenario.coordinates, map(float, Q[-1]))), "max_object_displacement": float(moved.max()),
-            "duration": float(times[-1])}
+    return {
+        "goal_at": first["goal"],
+        "unsafe_at": first["unsafe"],
+        "diverged_at": diverged_at,
+        "end": outcomes[-1],
+        "end_q": dict(zip(scenario.coordinates, map(float, Q[-1]))),
+        "max_object_displacement": float(moved.max()),
+        "duration": float(times[-1]),
+    }
 
 
 def peer_stability(peers) -> dict:
@@ -308,13 +398,21 @@ def peer_stability(peers) -> dict:
         u = np.array([policy.speeds.get(name, 0.0) for name in scene.actuated])
         for h in STABILITY_STEPS:
             out = _rollout(scene, "dynamic-compliant", h, policy.duration, u, records=int(round(policy.duration / STABILITY_PERIOD)) + 2)
-            rows.append({"scene": label, "simulator": "ours (dynamic-compliant)", "h": h, "status": out.status,
-                         **_track(scene, out.times, out.trajectory)})
+            rows.append(
+                {
+                    "scene": label,
+                    "simulator": "ours (dynamic-compliant)",
+                    "h": h,
+                    "status": out.status,
+                    **_track(scene, out.times, out.trajectory),
+                }
+            )
             for contact in peers.CONTACT_MAPPINGS:
                 run = peers.run(peers.build(scene, h, contact), u, policy.duration, STABILITY_PERIOD)
                 status = "ok" if run.finite and not run.diverged else "diverged (" + ", ".join(run.diverged or ("non-finite",)) + ")"
-                rows.append({"scene": label, "simulator": f"MuJoCo ({contact})", "h": h, "status": status,
-                             **_track(scene, run.times, run.q)})
+                rows.append(
+                    {"scene": label, "simulator": f"MuJoCo ({contact})", "h": h, "status": status, **_track(scene, run.times, run.q)}
+                )
     return {"period": STABILITY_PERIOD, "rows": rows}
 
 
@@ -396,9 +494,16 @@ def _per_step(scene, rung_name: str, solver: str, steps: int) -> dict:
         out = run()
         best = min(best, time.perf_counter() - t0)
     taken = max(out.steps, 1)
-    return {"rung": rung_name, "solver": solver, "lcp_size": out.max_lcp_size,
-            "us_per_step": 1e6 * best / out.steps if out.steps else None, "sweeps_per_step": out.sweeps / taken,
-            "steps": out.steps, "status": out.status, "max_drift": float(np.max(np.abs(out.state.q - scene.start)))}
+    return {
+        "rung": rung_name,
+        "solver": solver,
+        "lcp_size": out.max_lcp_size,
+        "us_per_step": 1e6 * best / out.steps if out.steps else None,
+        "sweeps_per_step": out.sweeps / taken,
+        "steps": out.steps,
+        "status": out.status,
+        "max_drift": float(np.max(np.abs(out.state.q - scene.start))),
+    }
 
 
 def _growth_exponent(rows: list[dict]) -> float:
@@ -439,8 +544,10 @@ def _scaling(quick: bool) -> dict:
                     for solver in SCALING_SOLVERS:
                         row = _per_step(scene, rung, solver, steps if arrangement == "row" else steps // 2)
                         out.append({**row, "boxes": n, "contacts": 2 * n})
-    exponents = {rung: {solver: _growth_exponent([r for r in rows if r["rung"] == rung and r["solver"] == solver])
-                        for solver in SCALING_SOLVERS} for rung in SCALING_RUNGS}
+    exponents = {
+        rung: {solver: _growth_exponent([r for r in rows if r["rung"] == rung and r["solver"] == solver]) for solver in SCALING_SOLVERS}
+        for rung in SCALING_RUNGS
+    }
     return {
         "rows": rows,
         "stack_rows": stack_rows,
@@ -450,9 +557,9 @@ def _scaling(quick: bool) -> dict:
         "auto_pgs_contacts": AUTO_PGS_CONTACTS,
         "blas_threads": os.environ.get("OPENBLAS_NUM_THREADS", "default"),
         "note": "contact detection (all n (n + 1) / 2 body pairs), Jacobians and the contact solve of a rollout from rest at h = 1e-3 "
-                f"(best of {SCALING_REPEATS} rollouts). Lemke solves the dense Stewart-Trinkle LCP (8 unknowns per box: "
-                "normal, 2 friction directions and a sliding speed per contact); PGS iterates on the contact impulses "
-                "body by body (models.contact_pgs) to a relative residual of 1e-6, warm-started from the previous step",
+        f"(best of {SCALING_REPEATS} rollouts). Lemke solves the dense Stewart-Trinkle LCP (8 unknowns per box: "
+        "normal, 2 friction directions and a sliding speed per contact); PGS iterates on the contact impulses "
+        "body by body (models.contact_pgs) to a relative residual of 1e-6, warm-started from the previous step",
     }
 
 
@@ -476,8 +583,9 @@ def scaling(quick: bool = False) -> dict:
     import sys
 
     code = f"import json\nfrom planner.bench import _scaling\nprint(json.dumps(_scaling({bool(quick)})))"
-    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=False,
-                          env={**os.environ, "OPENBLAS_NUM_THREADS": "1"})
+    done = subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=False, env={**os.environ, "OPENBLAS_NUM_THREADS": "1"}
+    )
     if done.returncode != 0:
         raise RuntimeError(f"the scaling benchmark's child process failed:\n{done.stderr[-4000:]}")
     return json.loads(done.stdout.strip().splitlines()[-1])
@@ -497,7 +605,6 @@ PLANNING_PARAMETERS = {"two_finger_triangle": {"v1": 0.8}}
 
 def planning(quick: bool = False, out: Path | None = None, scenes=PLANNING_SCENES) -> dict:
     from models.scenario import load_scenario
-
     from planner.benchmark import ladder_vs_flat
 
     seeds = range(1, 4) if quick else range(1, 11)
@@ -543,8 +650,16 @@ def write_ompl_log(path: Path, name: str, result: dict) -> Path:
     ]
     for mode in ("ladder", "flat"):
         mine = [r for r in runs if r["mode"] == mode]
-        lines += [f"control_{mode}", "0 common properties", "4 properties for each run",
-                  "time REAL", "solved BOOLEAN", "propagations INTEGER", "seed INTEGER", f"{len(mine)} runs"]
+        lines += [
+            f"control_{mode}",
+            "0 common properties",
+            "4 properties for each run",
+            "time REAL",
+            "solved BOOLEAN",
+            "propagations INTEGER",
+            "seed INTEGER",
+            f"{len(mine)} runs",
+        ]
         lines += [f"{r['wall_s']:.6f}; {int(r['holds'])}; {r['propagations']}; {r['seed']}; " for r in mine]
         lines.append(".")
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -583,31 +698,52 @@ def scaling_markdown(s: dict) -> list[str]:
     """The scaling section: Lemke and PGS side by side per rung and contact count."""
 
     def table(rows: list[dict]) -> list[str]:
-        out = ["| rung | boxes | contacts | Lemke us/step | PGS us/step | PGS sweeps/step | Lemke status | PGS status |",
-               "|---|---|---|---|---|---|---|---|"]
+        out = [
+            "| rung | boxes | contacts | Lemke us/step | PGS us/step | PGS sweeps/step | Lemke status | PGS status |",
+            "|---|---|---|---|---|---|---|---|",
+        ]
         for rung in dict.fromkeys(r["rung"] for r in rows):
             for n in dict.fromkeys(r["boxes"] for r in rows if r["rung"] == rung):
                 by = {r["solver"]: r for r in rows if r["rung"] == rung and r["boxes"] == n}
                 lemke, pgs = by["lemke"], by["pgs"]
-                out.append(f"| {rung} | {n} | {lemke['contacts']} | {_us(lemke['us_per_step'])} | {_us(pgs['us_per_step'])} | "
-                           f"{pgs['sweeps_per_step']:.2f} | {lemke['status']} | {pgs['status']} |")
+                out.append(
+                    f"| {rung} | {n} | {lemke['contacts']} | {_us(lemke['us_per_step'])} | {_us(pgs['us_per_step'])} | "
+                    f"{pgs['sweeps_per_step']:.2f} | {lemke['status']} | {pgs['status']} |"
+                )
         return out
 
     def count(c) -> str:
         return "at none of the measured counts" if c is None else f"from {c} contacts on"
 
-    lines = ["", "## Scaling with the number of contacts (boxes resting on a plane, h = 1e-3)", "",
-             f"Cost per step: {s['note']}. OpenBLAS threads: {s['blas_threads']}.", "", "Boxes apart in a row:", ""]
+    lines = [
+        "",
+        "## Scaling with the number of contacts (boxes resting on a plane, h = 1e-3)",
+        "",
+        f"Cost per step: {s['note']}. OpenBLAS threads: {s['blas_threads']}.",
+        "",
+        "Boxes apart in a row:",
+        "",
+    ]
     lines += table(s["rows"])
-    lines += ["", "Fitted growth exponent of cost per step in the number of contacts (4 and more): "
-              + "; ".join(f"{rung}: Lemke {e['lemke']:.2f}, PGS {e['pgs']:.2f}" for rung, e in s["growth_exponent"].items()) + ".",
-              "PGS is cheaper per step than Lemke "
-              + "; ".join(f"{count(c)} ({rung})" for rung, c in s["crossover_contacts"].items())
-              + f". The `auto` contact solver switches to PGS from {s['auto_pgs_contacts']} contacts.", "",
-              "A stack of boxes (every contact coupled to the ones above and below; `-`: the first step did not converge):", ""]
+    lines += [
+        "",
+        "Fitted growth exponent of cost per step in the number of contacts (4 and more): "
+        + "; ".join(f"{rung}: Lemke {e['lemke']:.2f}, PGS {e['pgs']:.2f}" for rung, e in s["growth_exponent"].items())
+        + ".",
+        "PGS is cheaper per step than Lemke "
+        + "; ".join(f"{count(c)} ({rung})" for rung, c in s["crossover_contacts"].items())
+        + f". The `auto` contact solver switches to PGS from {s['auto_pgs_contacts']} contacts.",
+        "",
+        "A stack of boxes (every contact coupled to the ones above and below; `-`: the first step did not converge):",
+        "",
+    ]
     lines += table(s["stack_rows"])
-    lines += ["", "On the stack Lemke is cheaper (or PGS fails) "
-              + "; ".join(f"{count(c)} ({rung})" for rung, c in s["stack_lemke_cheaper_from"].items()) + "."]
+    lines += [
+        "",
+        "On the stack Lemke is cheaper (or PGS fails) "
+        + "; ".join(f"{count(c)} ({rung})" for rung, c in s["stack_lemke_cheaper_from"].items())
+        + ".",
+    ]
     return lines
 
 
@@ -616,24 +752,50 @@ def markdown(r: dict, doc_dir: Path, out: Path) -> str:
         return os.path.relpath(p, doc_dir)
 
     m = r["machine"]
-    lines = ["# Benchmarks", "", f"Generated by `ladder bench{' --quick' if r['quick'] else ''}` on {r['date']}.",
-             f"Machine: {m['cpu']}, {m['cores']} cores, Python {m['python']}, {m['system']}.", "",
-             "## Throughput (paper's scene, h = 1e-4, until the grasp)", "", "| rung | steps | median wall (s) | steps/s |", "|---|---|---|---|"]
+    lines = [
+        "# Benchmarks",
+        "",
+        f"Generated by `ladder bench{' --quick' if r['quick'] else ''}` on {r['date']}.",
+        f"Machine: {m['cpu']}, {m['cores']} cores, Python {m['python']}, {m['system']}.",
+        "",
+        "## Throughput (paper's scene, h = 1e-4, until the grasp)",
+        "",
+        "| rung | steps | median wall (s) | steps/s |",
+        "|---|---|---|---|",
+    ]
     for row in r["throughput"]["rows"]:
         lines.append(f"| {row['rung']} | {row['steps']} | {row['median_wall_s']:.4f} | {row['steps_per_s']:,.0f} |")
-    lines += [""] + peer_markdown(r["throughput"]["peer"]) + ["",
-              "## Work-precision", "", "| scene | rung | h | reference | error | wall (s) | status |", "|---|---|---|---|---|---|---|"]
+    lines += (
+        [""]
+        + peer_markdown(r["throughput"]["peer"])
+        + ["", "## Work-precision", "", "| scene | rung | h | reference | error | wall (s) | status |", "|---|---|---|---|---|---|---|"]
+    )
     for row in r["work_precision"]["rows"]:
-        lines.append(f"| {row['scene']} | {row['rung']} | {row['h']:g} | {row['reference']} | {row['error']:.2e} | {row['wall_s']:.4f} | {row['status']} |")
+        lines.append(
+            f"| {row['scene']} | {row['rung']} | {row['h']:g} | {row['reference']} | {row['error']:.2e} "
+            f"| {row['wall_s']:.4f} | {row['status']} |"
+        )
     lines += [""] + [f"![{Path(p).stem}]({rel(p)})" for p in r["plots"]]
-    lines += ["", f"## Stability at large steps ({r['stability']['scene']})", "",
-              "| C | h | outcome | status | bounded | same outcome as h = 1e-5 | triangle x at the end | error |", "|---|---|---|---|---|---|---|---|"]
+    lines += [
+        "",
+        f"## Stability at large steps ({r['stability']['scene']})",
+        "",
+        "| C | h | outcome | status | bounded | same outcome as h = 1e-5 | triangle x at the end | error |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for row in r["stability"]["rows"]:
-        lines.append(f"| {row['C']:g} | {row['h']:g} | {row['outcome']} (t = {row['t']:.4f}) | {row['status']} | {row['bounded']} | "
-                     f"{row['same_outcome']} | {row['triangle_x']:.6f} | {row['x_error']:.2e} |")
+        lines.append(
+            f"| {row['C']:g} | {row['h']:g} | {row['outcome']} (t = {row['t']:.4f}) | {row['status']} | {row['bounded']} | "
+            f"{row['same_outcome']} | {row['triangle_x']:.6f} | {row['x_error']:.2e} |"
+        )
     lines += scaling_markdown(r["scaling"])
-    lines += ["", "## Planning: ladder against flat (equal budgets)", "",
-              "| scene | mode | success | median wall (s) | median propagations |", "|---|---|---|---|---|"]
+    lines += [
+        "",
+        "## Planning: ladder against flat (equal budgets)",
+        "",
+        "| scene | mode | success | median wall (s) | median propagations |",
+        "|---|---|---|---|---|",
+    ]
     for scene, res in r["planning"].items():
         for mode in ("ladder", "flat"):
             x = res["summary"][mode]
@@ -654,28 +816,46 @@ def peer_markdown(peer: dict) -> list[str]:
     def t(value) -> str:
         return "-" if value is None else f"{value:.4f}"
 
-    lines = [f"### Peer: MuJoCo {peer['version']}", "",
-             f"The same scene built in MuJoCo (`planner/peers.py`), MuJoCo's default integrator ({peer['integrator']}), "
-             f"h = {peer['h']:g}, the same {peer['steps']} steps ({peer['simulated_s']:.4f} s simulated) in one "
-             f"`mj_step(nstep=...)` call; ours and MuJoCo timed in turns, {peer['repeat']} rounds, medians (the ratio: "
-             "median of the rounds' ratios). Inert pairs (" + (", ".join(peer["inert_pairs"]) or "none") + "): no free DOF "
-             "feels them; our stepper drops their contacts, MuJoCo solves their rows unless they are left out. Contact mappings: "
-             + "; ".join(f"`{k}`: {v}" for k, v in peer["mapping"].items()) + ".", "",
-             f"| contact mapping | inert pairs left out | steps/s | {peer['ours']['rung']} / MuJoCo | outcome at the end | fingers touching | end state |",
-             "|---|---|---|---|---|---|---|"]
+    lines = [
+        f"### Peer: MuJoCo {peer['version']}",
+        "",
+        f"The same scene built in MuJoCo (`planner/peers.py`), MuJoCo's default integrator ({peer['integrator']}), "
+        f"h = {peer['h']:g}, the same {peer['steps']} steps ({peer['simulated_s']:.4f} s simulated) in one "
+        f"`mj_step(nstep=...)` call; ours and MuJoCo timed in turns, {peer['repeat']} rounds, medians (the ratio: "
+        "median of the rounds' ratios). Inert pairs (" + (", ".join(peer["inert_pairs"]) or "none") + "): no free DOF "
+        "feels them; our stepper drops their contacts, MuJoCo solves their rows unless they are left out. Contact mappings: "
+        + "; ".join(f"`{k}`: {v}" for k, v in peer["mapping"].items())
+        + ".",
+        "",
+        f"| contact mapping | inert pairs left out | steps/s | {peer['ours']['rung']} / MuJoCo "
+        "| outcome at the end | fingers touching | end state |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for row in peer["rows"]:
         end = row["end"]
         touching = ", ".join(f"{k}: {'yes' if v else 'no'}" for k, v in end["touching"].items())
         left_out = ", ".join(row["inert_pairs_left_out"]) or "none"
-        lines.append(f"| {row['contact']} | {left_out} | {row['steps_per_s']:,.0f} | {row['ratio']:.2f}x | {end['outcome'] or '-'} | {touching} | {q(end['q'])} |")
-    lines += ["", f"Ours ({peer['ours']['rung']}, {peer['ours']['steps_per_s']:,.0f} steps/s in these rounds) against the faster MuJoCo mapping "
-              f"(`{peer['against']}`): **{peer['ratio']:.2f}x**.", ""]
+        lines.append(
+            f"| {row['contact']} | {left_out} | {row['steps_per_s']:,.0f} | {row['ratio']:.2f}x "
+            f"| {end['outcome'] or '-'} | {touching} | {q(end['q'])} |"
+        )
+    lines += [
+        "",
+        f"Ours ({peer['ours']['rung']}, {peer['ours']['steps_per_s']:,.0f} steps/s in these rounds) against the faster MuJoCo mapping "
+        f"(`{peer['against']}`): **{peer['ratio']:.2f}x**.",
+        "",
+    ]
     st = peer["stability"]
-    lines += ["### Stability over h (the policy for its full duration; goal and unsafe checked every "
-              f"{st['period'] * 1e3:g} ms)", "",
-              "| scene | simulator | h | goal first at (s) | unsafe first at (s) | max abs object displacement (m) | outcome at the end | end state | status |",
-              "|---|---|---|---|---|---|---|---|---|"]
+    lines += [
+        f"### Stability over h (the policy for its full duration; goal and unsafe checked every {st['period'] * 1e3:g} ms)",
+        "",
+        "| scene | simulator | h | goal first at (s) | unsafe first at (s) | max abs object displacement (m) "
+        "| outcome at the end | end state | status |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
     for row in st["rows"]:
-        lines.append(f"| {row['scene']} | {row['simulator']} | {row['h']:g} | {t(row['goal_at'])} | {t(row['unsafe_at'])} | "
-                     f"{row['max_object_displacement']:.3g} | {row['end'] or '-'} | {q(row['end_q'])} | {row['status']} |")
+        lines.append(
+            f"| {row['scene']} | {row['simulator']} | {row['h']:g} | {t(row['goal_at'])} | {t(row['unsafe_at'])} | "
+            f"{row['max_object_displacement']:.3g} | {row['end'] or '-'} | {q(row['end_q'])} | {row['status']} |"
+        )
     return lines

@@ -27,8 +27,9 @@ class Run:
     rungs: str  # how each rung ended
 
 
-def ladder_vs_flat(scenario: Scenario, seeds, *, iterations: int | None = None, rungs: list[str] | None = None,
-                   planner: str | None = None, progress=None) -> dict:
+def ladder_vs_flat(
+    scenario: Scenario, seeds, *, iterations: int | None = None, rungs: list[str] | None = None, planner: str | None = None, progress=None
+) -> dict:
     """Both modes on each seed; see the module docstring. Returns runs and a summary."""
     from planner.ladder import assess, run_ladder
 
@@ -40,10 +41,21 @@ def ladder_vs_flat(scenario: Scenario, seeds, *, iterations: int | None = None, 
             result = run_ladder(scenario, rungs=rungs, seed=int(seed), iterations=iterations, flat=mode == "flat", planner=planner)
             wall = time.perf_counter() - t0
             top = result.rungs[-1] if result.rungs else None
-            holds = bool(result.top_holds and top is not None
-                         and assess(scenario, top.rung, top.controls, top.durations)["outcome"] == Outcome.GOAL.label)
-            runs.append(Run(mode, int(seed), holds, wall, sum(r.propagations for r in result.rungs),
-                            ", ".join(f"{r.rung}: {r.ended.label}" for r in result.rungs)))
+            holds = bool(
+                result.top_holds
+                and top is not None
+                and assess(scenario, top.rung, top.controls, top.durations)["outcome"] == Outcome.GOAL.label
+            )
+            runs.append(
+                Run(
+                    mode,
+                    int(seed),
+                    holds,
+                    wall,
+                    sum(r.propagations for r in result.rungs),
+                    ", ".join(f"{r.rung}: {r.ended.label}" for r in result.rungs),
+                )
+            )
             if progress:
                 progress(runs[-1])
     summary = {}

@@ -83,8 +83,14 @@ class LadderResult:
             r["ended"] = r["ended"].label
             if not timings:
                 del r["wall_s"]
-        return {"scenario": self.scenario, "scene": self.scene, "seed": self.seed, "complete": self.complete,
-                "top_holds": self.top_holds, "rungs": rungs}
+        return {
+            "scenario": self.scenario,
+            "scene": self.scene,
+            "seed": self.seed,
+            "complete": self.complete,
+            "top_holds": self.top_holds,
+            "rungs": rungs,
+        }
 
 
 def scene_record(scenario: Scenario) -> dict:
@@ -92,8 +98,12 @@ def scene_record(scenario: Scenario) -> dict:
     parameters are applied (the validated spec as canonical JSON), the parameter values and
     the coordinates the controls drive, in the controls' order."""
     spec = json.dumps(scenario.spec.model_dump(mode="json"), sort_keys=True, separators=(",", ":"))
-    return {"name": scenario.spec.scenario.name, "sha256": hashlib.sha256(spec.encode()).hexdigest(),
-            "parameters": dict(scenario.parameters), "controls": list(scenario.actuated)}
+    return {
+        "name": scenario.spec.scenario.name,
+        "sha256": hashlib.sha256(spec.encode()).hexdigest(),
+        "parameters": dict(scenario.parameters),
+        "controls": list(scenario.actuated),
+    }
 
 
 def scene_mismatch(record, scenario: Scenario) -> list[str]:
@@ -105,12 +115,15 @@ def scene_mismatch(record, scenario: Scenario) -> list[str]:
     if record["name"] != here["name"]:
         reasons.append(f"it is of scenario {record['name']!r}, this file is {here['name']!r}")
     if record["controls"] != here["controls"]:
-        reasons.append(f"its controls drive {', '.join(record['controls']) or 'nothing'}, this scene's {', '.join(here['controls']) or 'nothing'}")
+        reasons.append(
+            f"its controls drive {', '.join(record['controls']) or 'nothing'}, this scene's {', '.join(here['controls']) or 'nothing'}"
+        )
     if record["sha256"] != here["sha256"] and not reasons:
         theirs = record.get("parameters") or {}
         changed = [f"{k} = {theirs[k]:g} in the plan, {v:g} here" for k, v in here["parameters"].items() if k in theirs and theirs[k] != v]
-        reasons.append("the scene's contents differ (sha256 of the resolved scenario)"
-                       + (f": parameters {'; '.join(changed)}" if changed else ""))
+        reasons.append(
+            "the scene's contents differ (sha256 of the resolved scenario)" + (f": parameters {'; '.join(changed)}" if changed else "")
+        )
     return reasons
 
 
@@ -119,18 +132,27 @@ def check_start(scenario: Scenario) -> None:
     is a scripted obstacle: plan states carry no time, so a moving obstacle's pose at a state is
     unknown (simulate and sweep run such scenes from t = 0)."""
     if not scenario.actuated:
-        raise ScenarioError(scenario.path, [
-            Problem("bodies", "nothing to plan: no body has an actuated DOF (a robot's actuators); `ladder simulate` runs such a scene")
-        ])
+        raise ScenarioError(
+            scenario.path,
+            [Problem("bodies", "nothing to plan: no body has an actuated DOF (a robot's actuators); `ladder simulate` runs such a scene")],
+        )
     moving = [i for i, body in enumerate(scenario.spec.bodies) if body.velocity]
     if moving:
-        raise ScenarioError(scenario.path, [
-            Problem(f"bodies[{i}].velocity", "planning with a scripted (moving) obstacle is not supported: plan states carry no "
-                    "time; `ladder simulate` and `ladder sweep` run such scenes")
-            for i in moving
-        ])
+        raise ScenarioError(
+            scenario.path,
+            [
+                Problem(
+                    f"bodies[{i}].velocity",
+                    "planning with a scripted (moving) obstacle is not supported: plan states carry no "
+                    "time; `ladder simulate` and `ladder sweep` run such scenes",
+                )
+                for i in moving
+            ],
+        )
     if classify(scenario, scenario.start) is Outcome.UNSAFE:
-        raise ScenarioError(scenario.path, [Problem("task.start", "the start state is inside the unsafe set; nothing can be planned from it")])
+        raise ScenarioError(
+            scenario.path, [Problem("task.start", "the start state is inside the unsafe set; nothing can be planned from it")]
+        )
 
 
 def run_ladder(
@@ -205,8 +227,18 @@ def run_ladder(
         if previous is not None and previous.durations:
             same = _same_physics(scenario, previous, name)
             if same:
-                reports.append(replace(previous, rung=name, ended=PlanStatus.SKIPPED, reason=same, wall_s=time.perf_counter() - t0,
-                                       propagations=0, iterations=0, solver_failures=0))
+                reports.append(
+                    replace(
+                        previous,
+                        rung=name,
+                        ended=PlanStatus.SKIPPED,
+                        reason=same,
+                        wall_s=time.perf_counter() - t0,
+                        propagations=0,
+                        iterations=0,
+                        solver_failures=0,
+                    )
+                )
                 previous = reports[-1]
                 continue
         replay = None
@@ -220,10 +252,20 @@ def run_ladder(
                 states = replay.configurations(start)
                 hold = [[0.0] * len(scenario.actuated)] * replay.held
                 reason = PlanStatus.REPLAYED.message + (
-                    f" (its drives held still for {replay.held} control period(s) at the end)" if replay.held else "")
-                reports.append(RungReport(name, PlanStatus.REPLAYED, reason, wall_s=time.perf_counter() - t0,
-                                          controls=list(previous.controls) + hold, durations=list(previous.durations) + [period] * replay.held,
-                                          states=states, **replay.fields(scenario)))
+                    f" (its drives held still for {replay.held} control period(s) at the end)" if replay.held else ""
+                )
+                reports.append(
+                    RungReport(
+                        name,
+                        PlanStatus.REPLAYED,
+                        reason,
+                        wall_s=time.perf_counter() - t0,
+                        controls=list(previous.controls) + hold,
+                        durations=list(previous.durations) + [period] * replay.held,
+                        states=states,
+                        **replay.fields(scenario),
+                    )
+                )
                 previous = reports[-1]
                 continue
         seeds, prefix_controls, prefix_durations = [], [], np.zeros(0)
@@ -233,18 +275,31 @@ def run_ladder(
         # the geometric path moves passive bodies on their own: its states are no guide for physics
         guide = np.array(previous.states) if previous is not None and previous.states and guided and previous.rung != "geometric" else None
         budget = allowance - sum(r.iterations for r in reports)
-        plan = _plan_with_restarts(scenario, rung, start, h=h, control_period=period, seed=seed, iterations=budget,
-                                   planner=planner or settings[name].planner,
-                                   extra_starts=seeds, guide=guide,
-                                   time_limit=deadline - time.perf_counter(), stop=stop,
-                                   progress=(lambda i, n, _name=name: progress(_name, i, n)) if progress else None)
+        plan = _plan_with_restarts(
+            scenario,
+            rung,
+            start,
+            h=h,
+            control_period=period,
+            seed=seed,
+            iterations=budget,
+            planner=planner or settings[name].planner,
+            extra_starts=seeds,
+            guide=guide,
+            time_limit=deadline - time.perf_counter(),
+            stop=stop,
+            progress=(lambda i, n, _name=name: progress(_name, i, n)) if progress else None,
+        )
         if stopped():
             interrupted = True
             break
         j = plan.start_index
         if j > 0:  # the path starts at a seed: splice the previous prefix in front
-            plan = replace(plan, controls=np.concatenate([np.array(prefix_controls[:j]).reshape(j, -1), plan.controls]),
-                           durations=np.concatenate([prefix_durations[:j], plan.durations]))
+            plan = replace(
+                plan,
+                controls=np.concatenate([np.array(prefix_controls[:j]).reshape(j, -1), plan.controls]),
+                durations=np.concatenate([prefix_durations[:j], plan.durations]),
+            )
         # the plan replayed from the start: the prefix's part is known, the rest runs from the seed it starts at
         head = replay.head(j) if j > 0 else _Replay.empty(start)
         tail = _replay_controls(scenario, rung, head.state, plan.controls[j:], plan.durations[j:], h, head)
@@ -262,9 +317,19 @@ def run_ladder(
         # an accepted plan's states are its replay's under this rung, from the start (the tree's
         # path begins at its root, which may be a seed part-way along the prefix)
         states = tail.configurations(start) if accepted else plan.states.tolist()
-        report = RungReport(name, ended, reason, wall_s=wall, propagations=plan.propagations, iterations=plan.iterations,
-                            solver_failures=plan.failures, controls=plan.controls.tolist(), durations=plan.durations.tolist(),
-                            states=states, **replay)
+        report = RungReport(
+            name,
+            ended,
+            reason,
+            wall_s=wall,
+            propagations=plan.propagations,
+            iterations=plan.iterations,
+            solver_failures=plan.failures,
+            controls=plan.controls.tolist(),
+            durations=plan.durations.tolist(),
+            states=states,
+            **replay,
+        )
         reports.append(report)
         if not ended.holds:
             break
@@ -308,13 +373,24 @@ def assess(scenario: Scenario, name: str, controls, durations) -> dict:
     the last state, largest penetration and contact steps, as report fields."""
     rung = rung_for(scenario, name)
     if not len(durations):
-        return {"outcome": NONE, "status": OK, "goal_distance": goal_distance(scenario, scenario.start),
-                "max_penetration": 0.0, "contact_steps": 0}
-    out = rung.rollout(scenario, rung.initial_state(scenario), np.array(controls, float), np.array(durations, float),
-                       scenario.rung_settings(name).h)
+        return {
+            "outcome": NONE,
+            "status": OK,
+            "goal_distance": goal_distance(scenario, scenario.start),
+            "max_penetration": 0.0,
+            "contact_steps": 0,
+        }
+    out = rung.rollout(
+        scenario, rung.initial_state(scenario), np.array(controls, float), np.array(durations, float), scenario.rung_settings(name).h
+    )
     distance = 0.0 if out.outcome == GOAL else goal_distance(scenario, out.state.q)
-    return {"outcome": out.outcome, "status": out.status, "goal_distance": distance,
-            "max_penetration": out.max_penetration, "contact_steps": out.force_steps}
+    return {
+        "outcome": out.outcome,
+        "status": out.status,
+        "goal_distance": distance,
+        "max_penetration": out.max_penetration,
+        "contact_steps": out.force_steps,
+    }
 
 
 #: Rung pairs that are one model with rigid and with compliant contact.
@@ -330,8 +406,10 @@ def _same_physics(scenario: Scenario, previous: RungReport, name: str) -> str:
     a, b = rung_for(scenario, previous.rung).model, rung_for(scenario, name).model
     if a._replace(compliant=b.compliant) != b:
         return ""
-    return (f"no contact carries force along the plan under {previous.rung} at the same step, and without contact force "
-            f"{name} is the same model: the plan holds as it is")
+    return (
+        f"no contact carries force along the plan under {previous.rung} at the same step, and without contact force "
+        f"{name} is the same model: the plan holds as it is"
+    )
 
 
 def _geometric(scenario: Scenario, seed: int, iterations: int, time_limit: float | None = None, stop=None) -> RungReport:
@@ -359,9 +437,19 @@ def _geometric(scenario: Scenario, seed: int, iterations: int, time_limit: float
     reason = "" if path.exact else ended.message
     if not path.goal_samples:
         reason += ("; " if reason else "") + "no goal state could be made by projection, so RRT searched for the goal region"
-    return RungReport("geometric", ended, reason, GOAL if path.exact else NONE, time.perf_counter() - t0, 0,
-                      path.iterations, goal_distance=goal_distance(scenario, path.states[-1]), controls=controls,
-                      durations=durations, states=np.array(states).tolist())
+    return RungReport(
+        "geometric",
+        ended,
+        reason,
+        GOAL if path.exact else NONE,
+        time.perf_counter() - t0,
+        0,
+        path.iterations,
+        goal_distance=goal_distance(scenario, path.states[-1]),
+        controls=controls,
+        durations=durations,
+        states=np.array(states).tolist(),
+    )
 
 
 @dataclass
@@ -381,14 +469,15 @@ class _Replay:
     held: int = 0  # control periods of drives held still added at the end (_replay)
 
     @staticmethod
-    def empty(start: State) -> "_Replay":
+    def empty(start: State) -> _Replay:
         return _Replay(start)
 
-    def head(self, j: int) -> "_Replay":
+    def head(self, j: int) -> _Replay:
         """The first j controls of this replay."""
         min_psi, contact = self.steps_min_psi[j - 1]
-        return _Replay(self.states[j - 1], self.states[:j], self.controls[:j], self.durations[:j], NONE, OK, min_psi, contact,
-                       self.steps_min_psi[:j])
+        return _Replay(
+            self.states[j - 1], self.states[:j], self.controls[:j], self.durations[:j], NONE, OK, min_psi, contact, self.steps_min_psi[:j]
+        )
 
     def configurations(self, start: State) -> list:
         """q at the start, after each control that ran on, and where the replay ended."""
@@ -396,15 +485,29 @@ class _Replay:
 
     def fields(self, scenario: Scenario) -> dict:
         distance = 0.0 if self.outcome == GOAL else goal_distance(scenario, self.state.q)
-        return {"outcome": self.outcome, "status": self.status, "goal_distance": distance,
-                "max_penetration": float(max(0.0, -self.min_psi)), "contact_steps": int(self.contact_steps)}
+        return {
+            "outcome": self.outcome,
+            "status": self.status,
+            "goal_distance": distance,
+            "max_penetration": float(max(0.0, -self.min_psi)),
+            "contact_steps": int(self.contact_steps),
+        }
 
 
 def _replay_controls(scenario, rung, state, controls, durations, h, so_far: _Replay) -> _Replay:
     """Continue `so_far` with controls, one rollout each, until one ends in the goal, the
     unsafe set or a solver failure."""
-    run = _Replay(state, list(so_far.states), list(so_far.controls), list(so_far.durations), NONE, OK, so_far.min_psi,
-                  so_far.contact_steps, list(so_far.steps_min_psi))
+    run = _Replay(
+        state,
+        list(so_far.states),
+        list(so_far.controls),
+        list(so_far.durations),
+        NONE,
+        OK,
+        so_far.min_psi,
+        so_far.contact_steps,
+        list(so_far.steps_min_psi),
+    )
     for u, d in zip(controls, durations):
         out = rung.rollout(scenario, run.state, np.array(u, float).reshape(1, -1), [float(d)], h)
         run.min_psi = min(run.min_psi, out.min_psi)
@@ -436,8 +539,11 @@ def _agreeing(scenario: Scenario, replay: _Replay, previous: RungReport) -> int:
     planned = np.asarray(previous.states, float)
     steered = np.array(steered_coordinates(scenario), dtype=int)
     names = scenario.coordinates
-    quaternions = [[names.index(f"{b}.{c}") for c in ("qw", "qx", "qy", "qz")]
-                   for b in dict.fromkeys(n.split(".")[0] for n in names) if f"{b}.qw" in names]
+    quaternions = [
+        [names.index(f"{b}.{c}") for c in ("qw", "qx", "qy", "qz")]
+        for b in dict.fromkeys(n.split(".")[0] for n in names)
+        if f"{b}.qw" in names
+    ]
     for k, s in enumerate(replay.states):
         if k + 1 >= len(planned):
             return k

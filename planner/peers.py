@@ -233,17 +233,27 @@ def mjcf(scenario: Scenario, h: float, contact: str, weights: dict[str, float] |
     qpos = _n(*(start[c] for c in scenario.coordinates))
     act = _n(*(start[c] for c in scenario.actuated))
     key = f'<key qpos="{qpos}"' + (f' act="{act}"' if act else "") + "/>"
-    return "\n".join([
-        f'<mujoco model="{scenario.spec.scenario.name}">',
-        '  <compiler angle="radian"/>',
-        f'  <option timestep="{_n(h)}" gravity="{_n(gx, gy, 0.0)}" cone="{cone}"/>',
-        "  <asset>", *assets, "  </asset>",
-        "  <worldbody>", *world, "  </worldbody>",
-        "  <contact>", *pairs, "  </contact>",
-        "  <actuator>", *actuators, "  </actuator>",
-        f"  <keyframe>{key}</keyframe>",
-        "</mujoco>",
-    ])
+    return "\n".join(
+        [
+            f'<mujoco model="{scenario.spec.scenario.name}">',
+            '  <compiler angle="radian"/>',
+            f'  <option timestep="{_n(h)}" gravity="{_n(gx, gy, 0.0)}" cone="{cone}"/>',
+            "  <asset>",
+            *assets,
+            "  </asset>",
+            "  <worldbody>",
+            *world,
+            "  </worldbody>",
+            "  <contact>",
+            *pairs,
+            "  </contact>",
+            "  <actuator>",
+            *actuators,
+            "  </actuator>",
+            f"  <keyframe>{key}</keyframe>",
+            "</mujoco>",
+        ]
+    )
 
 
 def _n(*values) -> str:
@@ -378,4 +388,3 @@ def geom_distance(peer: Peer, data: mujoco.MjData, a: str, b: str, limit: float 
     ga = mujoco.mj_name2id(peer.model, mujoco.mjtObj.mjOBJ_GEOM, a)
     gb = mujoco.mj_name2id(peer.model, mujoco.mjtObj.mjOBJ_GEOM, b)
     return float(mujoco.mj_geomDistance(peer.model, data, ga, gb, limit, None))
-

@@ -99,8 +99,12 @@ def plot_feasible_sets(path: Path, result) -> Path:
                 panel.plot([b["boundary"]] * 2, [y - 0.02 * _span(y_axis), y + 0.02 * _span(y_axis)], color="k", lw=1.5)
             elif y_axis is not None and b["axis"] == y_axis.name:
                 x = b["at"][x_axis.name]
-                panel.plot([x / 1.02, x * 1.02] if x_axis.log else [x - 0.01 * _span(x_axis), x + 0.01 * _span(x_axis)],
-                           [b["boundary"]] * 2, color="k", lw=1.5)
+                panel.plot(
+                    [x / 1.02, x * 1.02] if x_axis.log else [x - 0.01 * _span(x_axis), x + 0.01 * _span(x_axis)],
+                    [b["boundary"]] * 2,
+                    color="k",
+                    lw=1.5,
+                )
         if x_axis.log:
             from matplotlib.ticker import NullFormatter, ScalarFormatter
 
@@ -140,7 +144,7 @@ def plot_fan(path: Path, panels: list[tuple[str, list[tuple[float, str, np.ndarr
     fig = plt.figure(figsize=(4.6 * len(panels), 4.6))
     for k, (label, runs) in enumerate(panels):
         ax = fig.add_subplot(1, len(panels), k + 1, projection="3d")
-        for ratio, outcome, X in runs:
+        for _ratio, outcome, X in runs:
             P = paper_coordinates(coordinates, start, X)
             inside = np.abs(P[:, 2]) <= 1.5  # the paper's window; a triangle thrown out leaves it
             P = P[: (np.argmin(inside) if not inside.all() else len(P))]

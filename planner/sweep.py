@@ -4,9 +4,9 @@ A sweep evaluates the scenario's parametric open-loop policy (``[task.policy]``:
 commanded speeds, expressions in the design parameters) at every point of a grid of design
 parameters, under one or more models, and classifies each run by its outcome
 (`models.task.Outcome`): ``goal`` (the paper's Z_F), ``unsafe`` (Z_U) or ``none`` (including
-runs a solver failure stopped: their status says so). A model is a rung, optionally with parameter overrides (``dynamic-compliant[C=0]``), so
-the paper's variants (plastic or elastic impacts, with or without finger dynamics) are one
-sweep each.
+runs a solver failure stopped: their status says so). A model is a rung, optionally with
+parameter overrides (``dynamic-compliant[C=0]``), so the paper's variants (plastic or elastic
+impacts, with or without finger dynamics) are one sweep each.
 
 `refine` then finds the boundaries between outcomes by bisection along grid lines, to a
 tolerance, instead of leaving them at grid resolution.
@@ -31,6 +31,7 @@ import numpy as np
 
 from models.scenario import Problem, ScenarioError
 from models.task import Outcome
+
 #: The most runs one sweep may hold (grid points times models; the points stream, their
 #: results are kept).
 MAX_RUNS = 1_000_000  # planner.cli.MAX_RUNS says the same in --help
@@ -152,7 +153,9 @@ def parse_models(text: str) -> list[ModelSpec]:
         depth += ch == "["
         depth -= ch == "]"
         if depth < 0 or depth > 1:
-            raise ScenarioError(Path("--model"), [Problem(f"--model {text}", f"unbalanced '{ch}' in {(current + ch).strip()!r}; expected {syntax}")])
+            raise ScenarioError(
+                Path("--model"), [Problem(f"--model {text}", f"unbalanced '{ch}' in {(current + ch).strip()!r}; expected {syntax}")]
+            )
         current += ch
     if depth != 0:
         raise ScenarioError(Path("--model"), [Problem(f"--model {text}", f"a '[' is not closed; expected {syntax}")])
@@ -162,7 +165,10 @@ def parse_models(text: str) -> list[ModelSpec]:
     for item in models:
         m = _MODEL.match(item)
         if not m or m.group(2) not in PROPAGATING_RUNGS:
-            raise ScenarioError(Path("--model"), [Problem(f"--model {item}", f"expected [LABEL=]RUNG[NAME=VALUE;...], RUNG one of {', '.join(PROPAGATING_RUNGS)}")])
+            raise ScenarioError(
+                Path("--model"),
+                [Problem(f"--model {item}", f"expected [LABEL=]RUNG[NAME=VALUE;...], RUNG one of {', '.join(PROPAGATING_RUNGS)}")],
+            )
         overrides = []
         for part in re.split(r"[;,]", m.group(3) or ""):
             if not part.strip():
@@ -183,8 +189,16 @@ def parse_models(text: str) -> list[ModelSpec]:
     labels = [spec.label for spec in specs]
     twice = sorted({label for label in labels if labels.count(label) > 1})
     if twice:
-        raise ScenarioError(Path("--model"), [Problem(f"--model {text}", f"the label {label!r} names two models (or one model is given twice); "
-                                                      "give each model its own label, LABEL=RUNG[...]") for label in twice])
+        raise ScenarioError(
+            Path("--model"),
+            [
+                Problem(
+                    f"--model {text}",
+                    f"the label {label!r} names two models (or one model is given twice); give each model its own label, LABEL=RUNG[...]",
+                )
+                for label in twice
+            ],
+        )
     return specs
 
 
@@ -213,8 +227,7 @@ def run_task(task: Task) -> Point:
     duration = task.duration or policy.duration
     controls = np.array([[policy.speeds.get(name, 0.0) for name in scenario.actuated]])
     out = rung.rollout(scenario, rung.initial_state(scenario), controls, [duration], h, max_records=2)
-    return Point(task.model.label, dict(task.parameters), out.outcome, out.t, out.status,
-                 out.state.named(scenario), out.steps, out.wall_s)
+    return Point(task.model.label, dict(task.parameters), out.outcome, out.t, out.status, out.state.named(scenario), out.steps, out.wall_s)
 
 
 def _warm() -> None:
@@ -239,17 +252,21 @@ class Executor:
         self._pool = None
         self._client = None
 
-    def __enter__(self) -> "Executor":
+    def __enter__(self) -> Executor:
         if self.address:
             try:
                 from distributed import Client
             except ImportError:
-                raise ScenarioError(Path("--executor"), [Problem(f"--executor {self.address}",
-                                    'install the dask extra: pip install "contact-ladder[dask]"')]) from None
+                raise ScenarioError(
+                    Path("--executor"),
+                    [Problem(f"--executor {self.address}", 'install the dask extra: pip install "contact-ladder[dask]"')],
+                ) from None
             try:
                 self._client = Client(self.address.removeprefix("dask://"), set_as_default=False, timeout=10)
             except (OSError, TimeoutError, ValueError) as exc:
-                raise ScenarioError(Path("--executor"), [Problem(f"--executor {self.address}", f"cannot reach the Dask scheduler: {exc}")]) from None
+                raise ScenarioError(
+                    Path("--executor"), [Problem(f"--executor {self.address}", f"cannot reach the Dask scheduler: {exc}")]
+                ) from None
         elif self.workers > 1:
             self._pool = ProcessPoolExecutor(self.workers, initializer=_warm)
         return self
@@ -341,13 +358,33 @@ class SweepResult:
         for p in self.points:
             if p is None:
                 continue
-            lines.append(",".join([p.model, *(repr(p.parameters[n]) for n in names), p.outcome, repr(p.t), p.status,
-                                   str(p.steps), *(repr(p.final.get(c, float("nan"))) for c in coords)]))
+            lines.append(
+                ",".join(
+                    [
+                        p.model,
+                        *(repr(p.parameters[n]) for n in names),
+                        p.outcome,
+                        repr(p.t),
+                        p.status,
+                        str(p.steps),
+                        *(repr(p.final.get(c, float("nan"))) for c in coords),
+                    ]
+                )
+            )
         return "\n".join(lines) + "\n"
 
 
-def sweep(file: str, axes: list[Axis], models: list[ModelSpec], *, fixed: dict | None = None, h: float | None = None,
-          duration: float | None = None, executor: Executor | None = None, progress=None) -> SweepResult:
+def sweep(
+    file: str,
+    axes: list[Axis],
+    models: list[ModelSpec],
+    *,
+    fixed: dict | None = None,
+    h: float | None = None,
+    duration: float | None = None,
+    executor: Executor | None = None,
+    progress=None,
+) -> SweepResult:
     """Every grid point under every model. On KeyboardInterrupt the result so far comes back
     with complete = False (the caller writes it)."""
     fixed = dict(fixed or {})
@@ -399,9 +436,20 @@ def refine(result: SweepResult, *, tolerance: float = 1e-3, executor: Executor |
                 other[axis.name] = axis.values[k + 1]
                 q = by_key.get((model.label, tuple(sorted(other.items()))))
                 if q is not None and q.outcome != p.outcome:
-                    brackets.append({"model": model.label, "axis": axis.name, "log": axis.log, "at": dict(p.parameters),
-                                     "grid_low": v, "grid_high": axis.values[k + 1],
-                                     "low": v, "high": axis.values[k + 1], "low_outcome": p.outcome, "high_outcome": q.outcome})
+                    brackets.append(
+                        {
+                            "model": model.label,
+                            "axis": axis.name,
+                            "log": axis.log,
+                            "at": dict(p.parameters),
+                            "grid_low": v,
+                            "grid_high": axis.values[k + 1],
+                            "low": v,
+                            "high": axis.values[k + 1],
+                            "low_outcome": p.outcome,
+                            "high_outcome": q.outcome,
+                        }
+                    )
 
     def width(b) -> float:
         return math.log(b["high"] / b["low"]) if b["log"] else b["high"] - b["low"]

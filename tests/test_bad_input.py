@@ -18,13 +18,34 @@ BAD = DATA / "bad"
 #: bounds on numbers, a zero quaternion, predicate tables with two kinds, start values
 #: outside a drive's limits, and the plain wording of type and shape errors.
 FILES = [
-    "touch_disabled_pair", "touch_disabled_pair_nested", "touch_fixed_pair",
-    "boolean_string", "boolean_integer", "integer_boolean", "integer_not_number",
-    "nesting_too_deep", "array_too_deep", "predicate_too_deep",
-    "huge_vertex", "huge_radius", "huge_mass", "huge_gain", "huge_horizon", "huge_mesh",
-    "zero_quaternion", "predicate_two_keys", "start_above_limit", "pose_below_limit",
-    "number_not_list", "normal_wrong_length", "list_not_number", "string_dimension", "bad_name",
-    "unknown_rung", "unknown_shape", "wrong_type",
+    "touch_disabled_pair",
+    "touch_disabled_pair_nested",
+    "touch_fixed_pair",
+    "boolean_string",
+    "boolean_integer",
+    "integer_boolean",
+    "integer_not_number",
+    "nesting_too_deep",
+    "array_too_deep",
+    "predicate_too_deep",
+    "huge_vertex",
+    "huge_radius",
+    "huge_mass",
+    "huge_gain",
+    "huge_horizon",
+    "huge_mesh",
+    "zero_quaternion",
+    "predicate_two_keys",
+    "start_above_limit",
+    "pose_below_limit",
+    "number_not_list",
+    "normal_wrong_length",
+    "list_not_number",
+    "string_dimension",
+    "bad_name",
+    "unknown_rung",
+    "unknown_shape",
+    "wrong_type",
 ]
 
 
@@ -75,7 +96,9 @@ def _scene(tmp_path, text):
 
 def _nested_unsafe(levels: int) -> str:
     """An unsafe predicate `levels` predicates deep: nots around a box."""
-    return GOOD.replace(UNSAFE, "unsafe = " + "{ not = " * (levels - 1) + '{ box = { "triangle.x" = [-0.51, 0.51] } }' + " }" * (levels - 1))
+    return GOOD.replace(
+        UNSAFE, "unsafe = " + "{ not = " * (levels - 1) + '{ box = { "triangle.x" = [-0.51, 0.51] } }' + " }" * (levels - 1)
+    )
 
 
 def test_predicates_32_deep_load_and_33_do_not(tmp_path):

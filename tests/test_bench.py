@@ -8,7 +8,6 @@ import math
 import sqlite3
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 
@@ -84,12 +83,18 @@ def test_planning_section_and_ompl_logs(quick):
         assert res["summary"]["ladder"]["success_rate"] >= 2 / 3
         log = out / f"ladder_vs_flat.{scene}.log"
         db = out / f"{scene}.db"
-        done = subprocess.run([sys.executable, "-m", "ompl.ompl_benchmark_statistics", str(log), "-d", str(db)],
-                              capture_output=True, text=True, timeout=120)
+        done = subprocess.run(
+            [sys.executable, "-m", "ompl.ompl_benchmark_statistics", str(log), "-d", str(db)], capture_output=True, text=True, timeout=120
+        )
         assert done.returncode == 0, done.stderr
-        rows = sqlite3.connect(db).execute(
-            "SELECT plannerConfigs.name, COUNT(*), AVG(runs.solved) FROM runs JOIN plannerConfigs ON runs.plannerid = plannerConfigs.id GROUP BY 1"
-        ).fetchall()
+        rows = (
+            sqlite3.connect(db)
+            .execute(
+                "SELECT plannerConfigs.name, COUNT(*), AVG(runs.solved) "
+                "FROM runs JOIN plannerConfigs ON runs.plannerid = plannerConfigs.id GROUP BY 1"
+            )
+            .fetchall()
+        )
         assert {name for name, _, _ in rows} == {"control_ladder", "control_flat"}
         assert all(count == 3 for _, count, _ in rows)
     text = (out / "benchmarks.md").read_text()

@@ -17,9 +17,7 @@ from tests.conftest import DATA, ROOT, SCENARIOS
 
 def ladder(*args: str, cwd=ROOT) -> subprocess.CompletedProcess:
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    return subprocess.run(
-        [sys.executable, "-m", "planner", *args], capture_output=True, text=True, cwd=cwd, env=env, timeout=120
-    )
+    return subprocess.run([sys.executable, "-m", "planner", *args], capture_output=True, text=True, cwd=cwd, env=env, timeout=120)
 
 
 def test_help_lists_the_commands():
@@ -108,8 +106,15 @@ def test_unknown_command_is_a_usage_error():
 def test_simulate_json_on_the_paper_scene(tmp_path):
     plot = tmp_path / "fig4.png"
     result = ladder(
-        "simulate", str(SCENARIOS / "two_finger_triangle.toml"), "--model", "quasistatic-rigid",
-        "--param", "v1=0.8", "--json", "--plot", str(plot),
+        "simulate",
+        str(SCENARIOS / "two_finger_triangle.toml"),
+        "--model",
+        "quasistatic-rigid",
+        "--param",
+        "v1=0.8",
+        "--json",
+        "--plot",
+        str(plot),
     )
     assert result.returncode == 0, result.stderr
     summary = json.loads(result.stdout)
@@ -154,8 +159,9 @@ TRIANGLE = str(SCENARIOS / "two_finger_triangle.toml")
 
 def popen(*args: str) -> subprocess.Popen:
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    return subprocess.Popen([sys.executable, "-m", "planner", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, cwd=ROOT, env=env)
+    return subprocess.Popen(
+        [sys.executable, "-m", "planner", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT, env=env
+    )
 
 
 def wait_for_line(proc: subprocess.Popen, prefix: str, limit: int = 50) -> list[str]:
@@ -173,8 +179,20 @@ def wait_for_line(proc: subprocess.Popen, prefix: str, limit: int = 50) -> list[
 def test_ctrl_c_during_simulate_is_exit_130_with_one_line(tmp_path):
     plot = tmp_path / "never.png"
     # fingers held still: 1e8 free steps, far longer than the test waits
-    proc = popen("simulate", TRIANGLE, "--model", "dynamic-compliant", "--param", "v1=0", "--param", "v2=0",
-                 "--duration", "10000", "--plot", str(plot))
+    proc = popen(
+        "simulate",
+        TRIANGLE,
+        "--model",
+        "dynamic-compliant",
+        "--param",
+        "v1=0",
+        "--param",
+        "v2=0",
+        "--duration",
+        "10000",
+        "--plot",
+        str(plot),
+    )
     before = wait_for_line(proc, "simulating 100,000,000 steps")
     time.sleep(1.5)
     proc.send_signal(signal.SIGINT)
@@ -196,8 +214,9 @@ def test_ctrl_c_during_plan_keeps_the_rungs_done_marked_incomplete(tmp_path):
     stdout, stderr = proc.communicate(timeout=300)
     assert proc.returncode == 130, stderr
     assert "Traceback" not in stderr
-    assert stderr.splitlines()[-1] == (f"interrupted: INCOMPLETE plan (rungs done: geometric, kinematic, quasistatic-rigid) "
-                                       f"written to {out / 'plan.json'}")
+    assert stderr.splitlines()[-1] == (
+        f"interrupted: INCOMPLETE plan (rungs done: geometric, kinematic, quasistatic-rigid) written to {out / 'plan.json'}"
+    )
     plan = json.loads((out / "plan.json").read_text())
     assert plan["complete"] is False and plan["top_holds"] is False
     assert [r["rung"] for r in plan["rungs"]] == ["geometric", "kinematic", "quasistatic-rigid"]
@@ -211,8 +230,12 @@ def test_a_chunked_rollout_equals_one_call():
 
     outcomes = []
     # goal; unsafe; goal; none (3750 steps, more than the 2000 records kept)
-    for params, model, h in [({"v1": 0.8}, "dynamic-compliant", 1e-4), ({"v1": 3.0}, "dynamic-compliant", 1e-4),
-                             ({"v1": 0.8}, "quasistatic-rigid", 1e-3), ({"v1": 0.0, "v2": 0.0}, "kinematic", 1e-3)]:
+    for params, model, h in [
+        ({"v1": 0.8}, "dynamic-compliant", 1e-4),
+        ({"v1": 3.0}, "dynamic-compliant", 1e-4),
+        ({"v1": 0.8}, "quasistatic-rigid", 1e-3),
+        ({"v1": 0.0, "v2": 0.0}, "kinematic", 1e-3),
+    ]:
         scenario = load_scenario(TRIANGLE, params)
         rung = rung_for(scenario, model)
         start = rung.initial_state(scenario)
@@ -229,7 +252,12 @@ def test_a_chunked_rollout_equals_one_call():
         assert chunked.times == pytest.approx(whole.times, rel=1e-12, abs=1e-12)
         assert chunked.t == pytest.approx(whole.t, rel=1e-12)
         assert (chunked.lcp_solves, chunked.pivots, chunked.force_steps, chunked.min_psi, chunked.max_lcp_size) == (
-            whole.lcp_solves, whole.pivots, whole.force_steps, whole.min_psi, whole.max_lcp_size)
+            whole.lcp_solves,
+            whole.pivots,
+            whole.force_steps,
+            whole.min_psi,
+            whole.max_lcp_size,
+        )
         assert np.array_equal(whole.pair_force, chunked.pair_force)
     assert outcomes == ["goal", "unsafe", "goal", "none"]
 
@@ -243,8 +271,10 @@ def test_simulate_says_how_many_steps_up_front():
 def test_simulate_refuses_an_absurd_number_of_steps():
     result = ladder("simulate", TRIANGLE, "--model", "dynamic-compliant", "--step", "1e-9")
     assert result.returncode == 2
-    assert result.stderr == (f"error: {TRIANGLE}: --step: 3 s at h = 1e-09 is 3e+09 steps, more than the 1e+09 one run may take; "
-                             "use a larger --step or a shorter --duration\n")
+    assert result.stderr == (
+        f"error: {TRIANGLE}: --step: 3 s at h = 1e-09 is 3e+09 steps, more than the 1e+09 one run may take; "
+        "use a larger --step or a shorter --duration\n"
+    )
 
 
 @pytest.mark.parametrize(
@@ -254,12 +284,20 @@ def test_simulate_refuses_an_absurd_number_of_steps():
         (["plan", TRIANGLE, "--iterations", "0"], "--iterations: must be at least 1, got 0"),
         (["plan", TRIANGLE, "--time-limit", "0"], "--time-limit: must be a positive number, got 0.0"),
         (["plan", TRIANGLE, "--top", "kinematic", "--rungs", "dynamic-rigid"], "--top: no rung of the ladder is at or below kinematic"),
-        (["plan", TRIANGLE, "--rungs", "dynamic-compliant,kinematic"],
-         "--rungs: 'kinematic' after 'dynamic-compliant': rungs go from low to high fidelity (geometric < kinematic < "
-         "quasistatic-rigid < quasistatic-compliant < dynamic-rigid < dynamic-compliant), each once"),
+        (
+            ["plan", TRIANGLE, "--rungs", "dynamic-compliant,kinematic"],
+            "--rungs: 'kinematic' after 'dynamic-compliant': rungs go from low to high fidelity (geometric < kinematic < "
+            "quasistatic-rigid < quasistatic-compliant < dynamic-rigid < dynamic-compliant), each once",
+        ),
         (["plan", TRIANGLE, "--rungs", "kinematic,kinematic"], "--rungs: 'kinematic' after 'kinematic': rungs go from low to high"),
-        (["simulate", TRIANGLE, "--model", "kinematic", "--plot", "{tmp}/x.jpgx"], "--plot: {tmp}/x.jpgx: unsupported file type '.jpgx'; use .png or .svg"),
-        (["simulate", TRIANGLE, "--model", "kinematic", "--plot", "{tmp}/missing/x.png"], "--plot: {tmp}/missing/x.png: the folder {tmp}/missing does not exist"),
+        (
+            ["simulate", TRIANGLE, "--model", "kinematic", "--plot", "{tmp}/x.jpgx"],
+            "--plot: {tmp}/x.jpgx: unsupported file type '.jpgx'; use .png or .svg",
+        ),
+        (
+            ["simulate", TRIANGLE, "--model", "kinematic", "--plot", "{tmp}/missing/x.png"],
+            "--plot: {tmp}/missing/x.png: the folder {tmp}/missing does not exist",
+        ),
         (["simulate", TRIANGLE, "--model", "kinematic", "--plot", "{tmp}"], "--plot: {tmp} is a folder; give a file name"),
         (["simulate", TRIANGLE, "--model", "kinematic", "--duration", "0"], "--duration: must be a positive number, got 0.0"),
         (["simulate", TRIANGLE, "--model", "kinematic", "--step", "0"], "--step: must be a positive number, got 0.0"),
@@ -309,8 +347,12 @@ def test_plan_json_records_its_scene_and_is_reproducible(tmp_path):
     scene = json.loads(first.read_text())["scene"]
     scenario = load_scenario(TRIANGLE, {"v1": 0.8})
     spec = json.dumps(scenario.spec.model_dump(mode="json"), sort_keys=True, separators=(",", ":"))
-    assert scene == {"name": "two_finger_triangle", "sha256": hashlib.sha256(spec.encode()).hexdigest(),
-                     "parameters": dict(scenario.parameters), "controls": ["finger1.y", "finger2.y"]}
+    assert scene == {
+        "name": "two_finger_triangle",
+        "sha256": hashlib.sha256(spec.encode()).hexdigest(),
+        "parameters": dict(scenario.parameters),
+        "controls": ["finger1.y", "finger2.y"],
+    }
     assert scene["parameters"]["v1"] == 0.8
     # the plan replays on its own scene
     replay = ladder("simulate", TRIANGLE, "--param", "v1=0.8", "--plan", str(first), "--model", "dynamic-compliant", "--json")
@@ -322,12 +364,16 @@ def test_simulate_plan_of_another_scene_is_bad_input(tmp_path):
     plan = _plan(tmp_path, "a")
     other = ladder("simulate", str(SCENARIOS / "four_finger_grasp.toml"), "--plan", str(plan), "--model", "kinematic")
     assert other.returncode == 2 and "Traceback" not in other.stderr
-    assert f"{plan}: scene: not a plan of {SCENARIOS / 'four_finger_grasp.toml'}: it is of scenario 'two_finger_triangle', " \
-           "this file is 'four_finger_grasp'" in other.stderr
+    assert (
+        f"{plan}: scene: not a plan of {SCENARIOS / 'four_finger_grasp.toml'}: it is of scenario 'two_finger_triangle', "
+        "this file is 'four_finger_grasp'" in other.stderr
+    )
     changed = ladder("simulate", TRIANGLE, "--param", "v1=0.5", "--plan", str(plan), "--model", "kinematic")
     assert changed.returncode == 2 and "Traceback" not in changed.stderr
-    assert changed.stderr == (f"error: {plan}: scene: not a plan of {TRIANGLE}: the scene's contents differ (sha256 of the "
-                              "resolved scenario): parameters v1 = 0.8 in the plan, 0.5 here\n")
+    assert changed.stderr == (
+        f"error: {plan}: scene: not a plan of {TRIANGLE}: the scene's contents differ (sha256 of the "
+        "resolved scenario): parameters v1 = 0.8 in the plan, 0.5 here\n"
+    )
     data = json.loads(plan.read_text())
     del data["scene"]
     old = tmp_path / "old.json"
@@ -339,8 +385,15 @@ def test_simulate_plan_of_another_scene_is_bad_input(tmp_path):
 def test_outputs_get_the_usual_file_mode(tmp_path):
     out = tmp_path / "summary.json"
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    done = subprocess.run([sys.executable, "-m", "planner", "check", TRIANGLE, "--out", str(out)], capture_output=True,
-                          text=True, cwd=ROOT, env=env, timeout=120, preexec_fn=lambda: os.umask(0o022))
+    done = subprocess.run(
+        [sys.executable, "-m", "planner", "check", TRIANGLE, "--out", str(out)],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        env=env,
+        timeout=120,
+        preexec_fn=lambda: os.umask(0o022),
+    )
     assert done.returncode == 0, done.stderr
     assert out.stat().st_mode & 0o777 == 0o644
 
@@ -348,8 +401,14 @@ def test_outputs_get_the_usual_file_mode(tmp_path):
 def test_piped_output_is_not_wrapped():
     env = {k: v for k, v in os.environ.items() if k not in ("COLUMNS", "LINES")}
     env["PYTHONPATH"] = str(ROOT)
-    done = subprocess.run([sys.executable, "-m", "planner", "check", str(SCENARIOS / "four_finger_grasp.toml")],
-                          capture_output=True, text=True, cwd=ROOT, env=env, timeout=120)
+    done = subprocess.run(
+        [sys.executable, "-m", "planner", "check", str(SCENARIOS / "four_finger_grasp.toml")],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        env=env,
+        timeout=120,
+    )
     assert done.returncode == 0, done.stderr
     description = "Form-closure grasp with two fixed lower fingers and two descending upper fingers (paper Fig. 2)"
     assert len(description) > 80 and description in done.stdout.splitlines()

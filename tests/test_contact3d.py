@@ -70,8 +70,16 @@ def write_scene(directory: Path, bodies, name="contacts") -> Path:
     """A scenario with the given (name, shape, kind) bodies, free ones apart at z = 5."""
     (directory / "wedge.obj").write_text(WEDGE)
     lines = [
-        "version = 1", "[scenario]", f'name = "{name}"', "[scene]", "dimension = 3", "gravity = [0.0, 0.0, -9.81]",
-        "[contact]", "mu = 0.5", "K = 1e6", "C = 1e3",
+        "version = 1",
+        "[scenario]",
+        f'name = "{name}"',
+        "[scene]",
+        "dimension = 3",
+        "gravity = [0.0, 0.0, -9.81]",
+        "[contact]",
+        "mu = 0.5",
+        "K = 1e6",
+        "C = 1e3",
     ]
     for i, (body, shape, kind) in enumerate(bodies):
         lines += ["[[bodies]]", f'name = "{body}"', kind, f"shape = {shape}"]
@@ -80,8 +88,14 @@ def write_scene(directory: Path, bodies, name="contacts") -> Path:
         elif kind != FIXED:
             lines.append(f"pose = {{ x = {2.0 * i}, y = 0.0, z = 5.0 }}")
     lines += [
-        "[task]", "horizon = 1.0", f'goal = {{ box = {{ "{next(b for b, _, k in bodies if k != FIXED)}.x" = [0.0, 1.0] }} }}',
-        "[ladder]", "time_limit = 1.0", "[[ladder.rungs]]", 'model = "kinematic"', "h = 1e-2",
+        "[task]",
+        "horizon = 1.0",
+        f'goal = {{ box = {{ "{next(b for b, _, k in bodies if k != FIXED)}.x" = [0.0, 1.0] }} }}',
+        "[ladder]",
+        "time_limit = 1.0",
+        "[[ladder.rungs]]",
+        'model = "kinematic"',
+        "h = 1e-2",
     ]
     path = directory / f"{name}.toml"
     path.write_text("\n".join(lines) + "\n")
@@ -227,12 +241,14 @@ def random_quat(rng):
 def quat_mul(a, b):
     w1, x1, y1, z1 = a
     w2, x2, y2, z2 = b
-    return np.array([
-        w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
-        w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-        w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
-        w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
-    ])
+    return np.array(
+        [
+            w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
+            w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+            w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+            w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
+        ]
+    )
 
 
 def small_rotation(rng, max_angle):
@@ -285,8 +301,11 @@ def random_pose(scene: Scene, p, rng, aligned=False):
         scene.place(q, first, rng.uniform(-1, 1, 3), random_quat(rng))
     Xf = scene.sc.placements(q)[first]
     if aligned:
-        turn = [np.array([1.0, 0, 0, 0]), np.array([math.cos(math.pi / 4), 0, 0, math.sin(math.pi / 4)]),
-                np.array([math.cos(math.pi / 8), math.sin(math.pi / 8), 0, 0])][rng.integers(3)]
+        turn = [
+            np.array([1.0, 0, 0, 0]),
+            np.array([math.cos(math.pi / 4), 0, 0, math.sin(math.pi / 4)]),
+            np.array([math.cos(math.pi / 8), math.sin(math.pi / 8), 0, 0]),
+        ][rng.integers(3)]
         quat_f = _matrix_quat(Xf.rotation)
         quat = quat_mul(small_rotation(rng, 2e-2), quat_mul(quat_f, quat_mul(turn, small_rotation(rng, 2e-2))))
     else:
@@ -341,8 +360,9 @@ def compiled_pairs(scene: Scene):
     return [
         (p, a, b)
         for p, a, b in scene.pairs()
-        if not (SHAPE_MESH in (S.kind[S.pair_a[p]], S.kind[S.pair_b[p]])
-                and SHAPE_HALFSPACE not in (S.kind[S.pair_a[p]], S.kind[S.pair_b[p]]))
+        if not (
+            SHAPE_MESH in (S.kind[S.pair_a[p]], S.kind[S.pair_b[p]]) and SHAPE_HALFSPACE not in (S.kind[S.pair_a[p]], S.kind[S.pair_b[p]])
+        )
     ]
 
 
@@ -575,7 +595,7 @@ def test_never_writes_more_than_the_pair_allows(scenes):
                 assert k >= 0, (a, b)  # every spatial pair is compiled
                 assert k <= min(most, size - start), (a, b, k)
                 written = np.zeros(size + 2, bool)
-                written[start:start + k] = True
+                written[start : start + k] = True
                 assert np.all(np.isnan(psi[~written])), (a, b)
                 assert np.all(~np.isnan(psi[written]))
                 for v in vec:
@@ -598,7 +618,7 @@ def test_collide_all_matches_pair_by_pair(scenes):
     scene = scenes[0]
     S = scene.S
     rng = np.random.default_rng(11)
-    for trial in range(20):
+    for _trial in range(20):
         q = np.array(scene.sc.start, float)
         for name in ("sph", "cap", "box", "mesh", "sph2", "cap2", "box2", "ycap"):
             scene.place(q, name, rng.uniform(-0.4, 0.4, 3) + [0.0, 0.0, 0.5], random_quat(rng))
@@ -625,7 +645,7 @@ def test_fcl_fallback_for_meshes(scenes):
     for other in ("sph", "cap", "box", "sph2", "cap2", "box2", "wall"):
         names = ("mesh", other) if scene.names.index("mesh") < scene.names.index(other) else (other, "mesh")
         p = scene.pair(*names)
-        for trial in range(15):
+        for _trial in range(15):
             q = random_pose(scene, p, rng)
             ref = reference(scene, q, p)
             found = fcl_pair_contacts(scene.sc, scene.S, q, p, np.inf)
@@ -642,7 +662,7 @@ def test_fcl_fallback_agrees_with_compiled_pairs(scenes):
     rng = np.random.default_rng(6)
     for names in (("box", "box2"), ("cap", "box"), ("plane1", "box"), ("box", "plane2"), ("plane1", "mesh")):
         p = scene.pair(*names)
-        for trial in range(10):
+        for _trial in range(10):
             q = random_pose(scene, p, rng)
             k, psi, n, pa, pb = contacts(scene, q, p)
             found = fcl_pair_contacts(scene.sc, scene.S, q, p, np.inf)
@@ -677,7 +697,7 @@ def test_tangent_basis_is_orthonormal_right_handed_and_continuous():
 def test_poses_match_the_kinematics(scenes):
     scene = scenes[0]
     rng = np.random.default_rng(4)
-    for trial in range(20):
+    for _trial in range(20):
         q = np.array(scene.sc.start, float) + rng.normal(size=len(scene.sc.start))
         X = scene.sc.placements(q)
         for b, name in enumerate(scene.names):

@@ -21,7 +21,6 @@ import math
 import numpy as np
 import pytest
 
-from models import geometry as geo
 from models.contact3d import collide_pair_3d
 from models.kinematics import hull_tables
 from tests.test_contact3d import (
@@ -32,7 +31,6 @@ from tests.test_contact3d import (
     contacts,
     random_pose,
     reference,
-    surface_distance,
     write_scene,
 )
 
@@ -369,7 +367,7 @@ def test_mesh_pairs_are_compiled(scenes):
     scene = scenes[0]
     q = np.array(scene.sc.start, float)
     buffers = (np.empty(8), np.empty((8, 3)), np.empty((8, 3)), np.empty((8, 3)))
-    for p, a, b in mesh_pairs(scene):
+    for p, _a, _b in mesh_pairs(scene):
         assert collide_pair_3d(scene.S, q, p, 0.0, *buffers, 0) == 0  # apart, and compiled
 
 
@@ -414,8 +412,17 @@ def test_box_pushed_into_the_wedge_is_unsafe():
 #: t = 1.762, in a box-table-pusher contact LCP unrelated to meshes (the same rollout with
 #: the wedge moved 5 m away fails the same way, at the same step).
 STOPPED_AT_THE_WEDGE = (
-    [[0.2448, 0.2618], [0.4695, -0.2928], [0.2769, 0.3093], [0.2769, 0.3093], [0.1939, -0.0102],
-     [0.1939, -0.0102], [0.1939, -0.0102], [-0.2839, -0.2984], [0.4028, 0.1497]],
+    [
+        [0.2448, 0.2618],
+        [0.4695, -0.2928],
+        [0.2769, 0.3093],
+        [0.2769, 0.3093],
+        [0.1939, -0.0102],
+        [0.1939, -0.0102],
+        [0.1939, -0.0102],
+        [-0.2839, -0.2984],
+        [0.4028, 0.1497],
+    ],
     [0.2, 0.4, 0.1, 0.4, 0.4, 0.2, 0.1, 0.2, 0.8],
 )
 

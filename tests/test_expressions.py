@@ -7,7 +7,15 @@ from models.expressions import ExpressionError, evaluate, names_in
 
 @pytest.mark.parametrize(
     "text, value",
-    [("1.5", 1.5), ("-v1", -2.0), ("2 * v1 + 1", 5.0), ("v1 ** 2 / 4", 1.0), ("sin(radians(30))", 0.5), ("pi", math.pi), ("(1 - v1) * 3", -3.0)],
+    [
+        ("1.5", 1.5),
+        ("-v1", -2.0),
+        ("2 * v1 + 1", 5.0),
+        ("v1 ** 2 / 4", 1.0),
+        ("sin(radians(30))", 0.5),
+        ("pi", math.pi),
+        ("(1 - v1) * 3", -3.0),
+    ],
 )
 def test_evaluates(text, value):
     assert evaluate(text, {"v1": 2.0}) == pytest.approx(value)

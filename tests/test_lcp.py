@@ -375,9 +375,7 @@ def test_pgs_zero_diagonal_on_friction_lcp():
     assert lem.success
 
 
-@pytest.mark.parametrize(
-    "diag", [[0.0, 1.0], [1.0, -2.0], [1.0, 1e-20], [1e-30, 1e-30]], ids=str
-)
+@pytest.mark.parametrize("diag", [[0.0, 1.0], [1.0, -2.0], [1.0, 1e-20], [1e-30, 1e-30]], ids=str)
 def test_pgs_zero_or_tiny_or_negative_diagonal(diag):
     M = np.diag(diag) + np.array([[0.0, 0.5], [0.5, 0.0]])
     q = np.array([-1.0, -1.0])
@@ -637,10 +635,7 @@ def test_property_never_raises_never_false_success(data, method):
         warnings.simplefilter("error")
         res = solve_lcp(M, q, method, max_iterations=500)
     assert isinstance(res.status, LCPStatus)
-    finite_ok = (
-        M.ndim == 2 and q.ndim == 1 and M.shape == (q.size, q.size)
-        and np.isfinite(M).all() and np.isfinite(q).all()
-    )
+    finite_ok = M.ndim == 2 and q.ndim == 1 and M.shape == (q.size, q.size) and np.isfinite(M).all() and np.isfinite(q).all()
     if not finite_ok:
         assert res.status in (LCPStatus.INVALID_INPUT, LCPStatus.NON_FINITE_INPUT)
     if res.success:
@@ -694,8 +689,7 @@ def test_badly_scaled_degenerate_psd_regressions(seed):
 def test_stress_lemke_on_many_psd_and_friction_problems():
     rng = np.random.default_rng(31337)
     for t in range(20_000):
-        M, q = exact_psd_problem(int(rng.integers(0, 2**32 - 1)), int(rng.integers(1, 9)),
-                                 [2.0**-20, 1.0, 2.0**20][t % 3])
+        M, q = exact_psd_problem(int(rng.integers(0, 2**32 - 1)), int(rng.integers(1, 9)), [2.0**-20, 1.0, 2.0**20][t % 3])
         res = solve_lcp(M, q)
         assert res.success and natural_residual(M, q, res.z) <= DEFAULT_TOL, t
     for t in range(3000):

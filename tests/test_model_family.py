@@ -162,7 +162,9 @@ def energy(scenario, result, K=None):
 @pytest.mark.parametrize("mu", [0.0, 0.3, 0.7])
 def test_passive_block_never_gains_energy_over_1e5_steps(tmp_path, mu):
     text = (SCENARIOS / "incline_block.toml").read_text()
-    text = text.replace('goal = { box = { "block.x" = [-1e3, "-0.5 * cos(radians(slope_deg))"] } }', 'goal = { box = { "block.x" = [1e3, 2e3] } }')
+    text = text.replace(
+        'goal = { box = { "block.x" = [-1e3, "-0.5 * cos(radians(slope_deg))"] } }', 'goal = { box = { "block.x" = [1e3, 2e3] } }'
+    )
     path = tmp_path / "incline.toml"
     path.write_text(text)
     scenario = load_scenario(path, {"slope_deg": 30.0, "mu": mu})
@@ -394,10 +396,18 @@ def test_quasistatic_rungs_hold_their_accuracy_at_larger_steps():
 
 @pytest.mark.parametrize("eps", [1.0, 0.0])
 def test_cheap_free_step_equals_the_full_step_without_contacts(eps):
-    from models.rungs import compiled
     from models.contact import contact_buffers
+    from models.rungs import compiled
     from models.stepper import (
-        LEMKE, QUASISTATIC_INERTIA, SceneTables, System, dynamics_step, free_step, gravity_force, mass_matrix, system_matrix,
+        LEMKE,
+        QUASISTATIC_INERTIA,
+        SceneTables,
+        System,
+        dynamics_step,
+        free_step,
+        gravity_force,
+        mass_matrix,
+        system_matrix,
     )
 
     scenario = load_scenario(SCENARIOS / "free_transfer.toml")
@@ -414,8 +424,24 @@ def test_cheap_free_step_equals_the_full_step_without_contacts(eps):
     drives = (D.q_index, D.v_index, D.kp, D.kd, D.lower, D.upper)
     fast = free_step(eps, 1.0, h, S.bi, Ainv, M, rhs, q, nu, q_ref, u, *drives)
     contacts, _ = contact_buffers(S.pi, S.nv)
-    full = dynamics_step(model, LEMKE, D, SceneTables(S.bi, S.bf, S.pi, S.pf, False), system, h, q, nu, q_ref, delta_n, delta_t, u,
-                         contacts, 0, np.zeros(1), np.zeros((1, 2)))
+    full = dynamics_step(
+        model,
+        LEMKE,
+        D,
+        SceneTables(S.bi, S.bf, S.pi, S.pf, False),
+        system,
+        h,
+        q,
+        nu,
+        q_ref,
+        delta_n,
+        delta_t,
+        u,
+        contacts,
+        0,
+        np.zeros(1),
+        np.zeros((1, 2)),
+    )
     for a, b in zip(fast[:3], full[:3]):
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-15)
     assert fast[3] == full.status == 0

@@ -63,11 +63,31 @@ def step(scenario, rung_name: str, solver: str, q, nu, h: float = H, **settings)
     W_o = frames.W_o if spatial else np.zeros_like(frames.W_n)
     u = np.zeros(len(D.v_index))
     contacts = ContactSet(
-        frames.pair, frames.psi, np.arange(nc, dtype=np.int64), frames.W_n, frames.W_t, W_o, np.zeros((max(nc, 1), 3)),
+        frames.pair,
+        frames.psi,
+        np.arange(nc, dtype=np.int64),
+        frames.W_n,
+        frames.W_t,
+        W_o,
+        np.zeros((max(nc, 1), 3)),
     )
     out = dynamics_step(
-        model, contact_solver(solver, **settings), D, SceneTables(S.bi, S.bf, S.pi, S.pf, spatial), System(A, Ainv, M, rhs), h,
-        q, nu, q[D.q_index].copy(), np.zeros(nc), np.zeros((nc, 2)), u, contacts, nc, np.zeros(nc), np.zeros((nc, 2)),
+        model,
+        contact_solver(solver, **settings),
+        D,
+        SceneTables(S.bi, S.bf, S.pi, S.pf, spatial),
+        System(A, Ainv, M, rhs),
+        h,
+        q,
+        nu,
+        q[D.q_index].copy(),
+        np.zeros(nc),
+        np.zeros((nc, 2)),
+        u,
+        contacts,
+        nc,
+        np.zeros(nc),
+        np.zeros((nc, 2)),
     )
     return frames, Ainv, out
 
@@ -296,7 +316,7 @@ def test_random_frictionless_discs_pgs_normal_impulses_equal_lemkes(tmp_path, se
 @pytest.mark.parametrize("solver", ["pgs", "auto"])
 def test_random_scenes_keep_the_stress_invariants(tmp_path, solver):
     rng = np.random.default_rng(7)
-    for trial in range(4):
+    for _trial in range(4):
         sc = random_loose_scene(tmp_path, rng)
         for rung_name in ("dynamic-rigid", "dynamic-compliant"):
             rung = with_solver(sc, rung_name, solver, auto_contacts=2)
@@ -361,7 +381,7 @@ def test_lemke_is_every_rungs_default():
 
 
 def test_scenario_rung_chooses_its_contact_solver(tmp_path):
-    sc = sliding_box(tmp_path, 0.5)
+    sliding_box(tmp_path, 0.5)  # writes stress.toml
     text = (tmp_path / "stress.toml").read_text()
     path = tmp_path / "choice.toml"
     path.write_text(text.replace('model = "dynamic-rigid"\n', 'model = "dynamic-rigid"\ncontact_solver = "pgs"\n'))
@@ -373,7 +393,11 @@ def test_scenario_rung_chooses_its_contact_solver(tmp_path):
 
 def test_solver_names_and_settings_are_validated():
     assert tuple(SOLVER_METHODS) == CONTACT_SOLVERS
-    for bad in ({"name": "jacobi"}, {"name": "pgs", "tolerance": 0.0}, {"name": "pgs", "max_sweeps": 0},
-                {"name": "auto", "auto_contacts": 1.5}):
+    for bad in (
+        {"name": "jacobi"},
+        {"name": "pgs", "tolerance": 0.0},
+        {"name": "pgs", "max_sweeps": 0},
+        {"name": "auto", "auto_contacts": 1.5},
+    ):
         with pytest.raises(ValueError):
             contact_solver(**bad)

@@ -70,7 +70,9 @@ def test_a_start_inside_the_unsafe_set_is_bad_input(tmp_path):
         run_ladder(load_scenario(path), seed=1, iterations=100)
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     out = tmp_path / "plan"
-    done = subprocess.run([sys.executable, "-m", "planner", "plan", str(path), "--out", str(out)], capture_output=True, text=True, env=env, timeout=300)
+    done = subprocess.run(
+        [sys.executable, "-m", "planner", "plan", str(path), "--out", str(out)], capture_output=True, text=True, env=env, timeout=300
+    )
     assert done.returncode == 2 and "task.start" in done.stderr and not out.exists()
 
 
@@ -81,7 +83,10 @@ def test_plan_command_writes_a_reproducible_plan(tmp_path):
         out = tmp_path / f"run{run}"
         done = subprocess.run(
             [sys.executable, "-m", "planner", "plan", str(TRIANGLE), "--param", "v1=0.8", "--seed", "2", "--out", str(out)],
-            capture_output=True, text=True, env=env, timeout=600,
+            capture_output=True,
+            text=True,
+            env=env,
+            timeout=600,
         )
         assert done.returncode == 0, done.stderr
         outputs.append((out / "plan.json").read_bytes())
@@ -142,18 +147,46 @@ def test_the_scenarios_time_limit_caps_a_search_and_the_report_says_so(tmp_path)
 def test_simulate_replays_a_plan_file_under_any_rung(tmp_path):
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     out = tmp_path / "plan"
-    done = subprocess.run([sys.executable, "-m", "planner", "plan", str(TRIANGLE), "--param", "v1=0.8", "--out", str(out)],
-                          capture_output=True, text=True, env=env, timeout=600)
+    done = subprocess.run(
+        [sys.executable, "-m", "planner", "plan", str(TRIANGLE), "--param", "v1=0.8", "--out", str(out)],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=600,
+    )
     assert done.returncode == 0, done.stderr
     for model in ("quasistatic-rigid", "dynamic-compliant"):
-        sim = subprocess.run([sys.executable, "-m", "planner", "simulate", str(TRIANGLE), "--param", "v1=0.8", "--plan",
-                              str(out / "plan.json"), "--model", model, "--json"], capture_output=True, text=True, env=env, timeout=600)
+        sim = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "planner",
+                "simulate",
+                str(TRIANGLE),
+                "--param",
+                "v1=0.8",
+                "--plan",
+                str(out / "plan.json"),
+                "--model",
+                model,
+                "--json",
+            ],
+            capture_output=True,
+            text=True,
+            env=env,
+            timeout=600,
+        )
         assert sim.returncode == 0, sim.stderr
         assert json.loads(sim.stdout)["outcome"] == "goal"
     bad = tmp_path / "bad.json"
     bad.write_text("{}")
-    sim = subprocess.run([sys.executable, "-m", "planner", "simulate", str(TRIANGLE), "--plan", str(bad), "--model", "kinematic"],
-                         capture_output=True, text=True, env=env, timeout=300)
+    sim = subprocess.run(
+        [sys.executable, "-m", "planner", "simulate", str(TRIANGLE), "--plan", str(bad), "--model", "kinematic"],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=300,
+    )
     assert sim.returncode == 2 and "not a usable plan file" in sim.stderr
 
 
@@ -162,10 +195,18 @@ def test_scenario_expectations_run_as_pytest_items_and_can_fail(tmp_path):
     good = tmp_path / "good.toml"
     good.write_text(text)
     wrong = tmp_path / "wrong.toml"
-    wrong.write_text(text.replace('policy = { dynamic-rigid = "goal", dynamic-compliant = "goal" }', 'policy = { dynamic-rigid = "unsafe" }'))
+    wrong.write_text(
+        text.replace('policy = { dynamic-rigid = "goal", dynamic-compliant = "goal" }', 'policy = { dynamic-rigid = "unsafe" }')
+    )
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "--rootdir", str(tmp_path), str(tmp_path)],
-                          capture_output=True, text=True, env=env, timeout=600, cwd=tmp_path)
+    done = subprocess.run(
+        [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "--rootdir", str(tmp_path), str(tmp_path)],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=600,
+        cwd=tmp_path,
+    )
     assert done.returncode == 1, done.stdout + done.stderr
     assert "2 passed" in done.stdout and "1 failed" in done.stdout
     assert "expected 'unsafe'" in done.stdout
@@ -195,8 +236,17 @@ def test_plans_that_hold_at_the_top_rung_in_most_seeds(name):
         result = run_ladder(scenario, seed=seed)
         top = result.rungs[-1]
         rung = rung_for(scenario, top.rung)
-        replay = rung.rollout(scenario, rung.initial_state(scenario), np.array(top.controls).reshape(len(top.durations), -1),
-                              np.array(top.durations), scenario.rung_settings(top.rung).h) if top.durations else None
+        replay = (
+            rung.rollout(
+                scenario,
+                rung.initial_state(scenario),
+                np.array(top.controls).reshape(len(top.durations), -1),
+                np.array(top.durations),
+                scenario.rung_settings(top.rung).h,
+            )
+            if top.durations
+            else None
+        )
         held += bool(result.top_holds and replay is not None and replay.outcome == "goal" and replay.ok)
     assert held >= 8
 
@@ -205,8 +255,13 @@ def _holds_at_a_tenth_of_the_step(scenario, report) -> bool:
     """The rung's accepted plan, replayed under the rung at a tenth of its step, still ends in
     the goal: it does not rely on the discretisation error (a planner exploits it if it can)."""
     rung = rung_for(scenario, report.rung)
-    out = rung.rollout(scenario, rung.initial_state(scenario), np.array(report.controls).reshape(len(report.durations), -1),
-                       np.array(report.durations), scenario.rung_settings(report.rung).h / 10)
+    out = rung.rollout(
+        scenario,
+        rung.initial_state(scenario),
+        np.array(report.controls).reshape(len(report.durations), -1),
+        np.array(report.durations),
+        scenario.rung_settings(report.rung).h / 10,
+    )
     return out.ok and out.outcome == "goal"
 
 
@@ -270,4 +325,3 @@ def test_goal_states_made_by_projection_are_in_the_goal_and_valid():
     path = plan_geometric(scenario, seed=1, iterations=2000)
     assert path.exact and path.goal_samples >= 1
     assert all(valid(q) for q in path.states)
-

@@ -34,7 +34,10 @@ def reference(scenario, node, q):
 def pair_distances(scenario, q):
     P = scenario.placements(q)
     return np.array(
-        [geo.signed_distance(scenario.geometries[p.body_a], P[p.body_a], scenario.geometries[p.body_b], P[p.body_b]) for p in scenario.pairs]
+        [
+            geo.signed_distance(scenario.geometries[p.body_a], P[p.body_a], scenario.geometries[p.body_b], P[p.body_b])
+            for p in scenario.pairs
+        ]
     )
 
 
@@ -73,7 +76,11 @@ def test_missing_unsafe_set_is_never_true():
     "old, new, key",
     [
         ("touch_tolerance = 1e-3", f"touch_tolerance = {2 * CONTACT_MARGIN}", "contact.touch_tolerance"),
-        ('{ touch = ["finger2", "triangle"] }', f'{{ touch = ["finger2", "triangle"], tol = {2 * CONTACT_MARGIN} }}', "task.goal.all[1].tol"),
+        (
+            '{ touch = ["finger2", "triangle"] }',
+            f'{{ touch = ["finger2", "triangle"], tol = {2 * CONTACT_MARGIN} }}',
+            "task.goal.all[1].tol",
+        ),
     ],
 )
 def test_a_touch_tolerance_above_the_detection_margin_is_bad_input(tmp_path, old, new, key):

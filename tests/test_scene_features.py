@@ -32,8 +32,9 @@ def scene(tmp_path, bodies: str, *, mu: float = 0.5, task: str = "", name: str =
     smooth are frictionless (a pusher's face then cannot carry part of a body's weight, so the
     force it needs is exactly the floor's sliding friction)."""
     pairs = "".join(f'[[contact.pairs]]\nbodies = ["{a}", "{b}"]\nmu = 0.0\n' for a, b in smooth)
-    text = textwrap.dedent(
-        f"""
+    text = (
+        textwrap.dedent(
+            f"""
         version = 1
         [scenario]
         name = "{name}"
@@ -50,8 +51,10 @@ def scene(tmp_path, bodies: str, *, mu: float = 0.5, task: str = "", name: str =
         role = "obstacle"
         shape = {{ type = "halfplane", normal = [0.0, 1.0], offset = 0.0 }}
         """
-    ) + textwrap.dedent(bodies) + textwrap.dedent(
-        f"""
+        )
+        + textwrap.dedent(bodies)
+        + textwrap.dedent(
+            f"""
         [task]
         horizon = 5.0
         goal = {{ box = {{ "floor_dummy" = [0.0, 1.0] }} }}
@@ -62,6 +65,7 @@ def scene(tmp_path, bodies: str, *, mu: float = 0.5, task: str = "", name: str =
         model = "dynamic-rigid"
         h = 1e-4
         """
+        )
     )
     return text
 
@@ -209,6 +213,7 @@ def test_unlimited_drive_moves_box(tmp_path, rung):
 
 # ----------------------------------------------------------------------------- drive limits
 
+
 @pytest.mark.parametrize("rung", MOVING_RUNGS)
 def test_drive_driven_into_its_limit_rests_at_it(tmp_path, rung):
     """Commanded at 0.5 m/s for 1 s towards upper = -0.1 (5 cm away): the pusher rests at
@@ -264,6 +269,7 @@ def test_initial_velocity_unknown_name_is_reported(tmp_path):
 
 
 # ----------------------------------------------------------------------------- reported forces
+
 
 @pytest.mark.parametrize("rung", FORCE_RUNGS)
 def test_contact_forces_of_resting_box_balance_gravity(tmp_path, rung):
@@ -343,7 +349,13 @@ def test_spatial_resting_box_forces_balance_gravity(tmp_path, rung, solver):
 
 @pytest.mark.parametrize(
     "rung, solver",
-    [("kinematic", "lemke"), ("quasistatic-rigid", "lemke"), ("dynamic-rigid", "lemke"), ("dynamic-rigid", "pgs"), ("dynamic-compliant", "auto")],
+    [
+        ("kinematic", "lemke"),
+        ("quasistatic-rigid", "lemke"),
+        ("dynamic-rigid", "lemke"),
+        ("dynamic-rigid", "pgs"),
+        ("dynamic-compliant", "auto"),
+    ],
 )
 def test_spatial_scripted_ram_pushes_box(tmp_path, rung, solver):
     """In space too: the ram's face starts 5 cm from the box and moves at 0.5 m/s along x;
@@ -367,7 +379,9 @@ def test_spatial_scripted_ram_pushes_box(tmp_path, rung, solver):
 def test_chunked_rollout_moves_scripted_obstacles_on(tmp_path):
     """`simulate` runs long rollouts in chunks; each chunk starts at the time reached, so the
     ram goes on from where it was: the same final state as one call."""
-    text = scene(tmp_path, RAM, smooth=[("ram", "puck")]).replace("\"floor_dummy\" = [0.0, 1.0]", "\"floor_dummy\" = [0.3, 1.0]")  # goal not met at the start
+    text = scene(tmp_path, RAM, smooth=[("ram", "puck")]).replace(
+        '"floor_dummy" = [0.0, 1.0]', '"floor_dummy" = [0.3, 1.0]'
+    )  # goal not met at the start
     scenario = load(tmp_path, text, "puck.x")
     r = RUNGS["dynamic-rigid"]
     start = r.initial_state(scenario)

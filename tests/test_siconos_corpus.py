@@ -45,12 +45,7 @@ README_EXPECTED_FAIL = ["lcp_CPS_3", "lcp_Pang_isolated_sol_perturbed"]
 BLOCK_TWINS = ["lcp_deudeu", "lcp_ortiz", "lcp_trivial"]
 
 # Files seen in the corpus when these tests were written; they must stay there.
-KNOWN_LCP_FILES = sorted(
-    README_SOLVED
-    + README_EXPECTED_FAIL
-    + ["lcp_tobenna"]
-    + [f"{name}_block" for name in BLOCK_TWINS]
-)
+KNOWN_LCP_FILES = sorted(README_SOLVED + README_EXPECTED_FAIL + ["lcp_tobenna"] + [f"{name}_block" for name in BLOCK_TWINS])
 SLIDER_CRANK = ["FC2D_SliderCrankLagrangian00000", "FC2D_SliderCrankLagrangian00001"]
 GRANULAR_SMALL = "fc2d_granularflowonwall_00667_00000"
 GRANULAR_LARGE = "fc2d_granularflowonwall_02020_00213"
@@ -91,13 +86,9 @@ def fc2d_file(corpus: Path, name: str) -> Path:
 def test_corpus_location_and_contents(corpus):
     present_lcp = sorted(p.stem for p in (corpus / "lcp").glob("*.dat"))
     present_fc2d = sorted(p.stem for p in (corpus / "fc2d").glob("*.dat"))
-    missing = sorted(set(KNOWN_LCP_FILES) - set(present_lcp)) + sorted(
-        set(KNOWN_FC2D_FILES) - set(present_fc2d)
-    )
+    missing = sorted(set(KNOWN_LCP_FILES) - set(present_lcp)) + sorted(set(KNOWN_FC2D_FILES) - set(present_fc2d))
     assert not missing, f"corpus files missing: {missing}"
-    unknown = sorted(set(present_lcp) - set(KNOWN_LCP_FILES)) + sorted(
-        set(present_fc2d) - set(KNOWN_FC2D_FILES)
-    )
+    unknown = sorted(set(present_lcp) - set(KNOWN_LCP_FILES)) + sorted(set(present_fc2d) - set(KNOWN_FC2D_FILES))
     assert not unknown, f"new corpus files without a test expectation: {unknown}"
 
 
@@ -187,9 +178,7 @@ def test_pgs_on_the_lcp_files_is_honest(corpus, name):
         assert natural_residual(M, q, res.z) <= DEFAULT_TOL
 
 
-@pytest.mark.parametrize(
-    "name", ["lcp_deudeu", "lcp_trivial", "lcp_ortiz", "lcp_mmc", "lcp_exp_murty2", "lcp_CPS_5"]
-)
+@pytest.mark.parametrize("name", ["lcp_deudeu", "lcp_trivial", "lcp_ortiz", "lcp_mmc", "lcp_exp_murty2", "lcp_CPS_5"])
 def test_pgs_solves_the_positive_diagonal_files_it_should(corpus, name):
     M, q = read_lcp(lcp_file(corpus, name))
     res = solve_lcp(M, q, "pgs", max_iterations=20_000)

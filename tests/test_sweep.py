@@ -68,7 +68,9 @@ def test_local_pool_and_dask_local_cluster_give_identical_results():
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
         with sw.Executor(address=f"dask://{cluster.scheduler_address}") as dask:
             remote = ratio_sweep("quasistatic-rigid", "0.5,1.2", count=7, tolerance=1e-2, executor=dask)
-    assert [(p.parameters, p.outcome, p.status, p.t) for p in local.points] == [(p.parameters, p.outcome, p.status, p.t) for p in remote.points]
+    assert [(p.parameters, p.outcome, p.status, p.t) for p in local.points] == [
+        (p.parameters, p.outcome, p.status, p.t) for p in remote.points
+    ]
     assert local.boundaries == remote.boundaries
     serial = ratio_sweep("quasistatic-rigid", "0.5,1.2", count=7, tolerance=1e-2)
     assert [p.outcome for p in serial.points] == [p.outcome for p in local.points]
@@ -94,9 +96,29 @@ def test_ctrl_c_on_the_command_writes_partial_results_marked_incomplete(tmp_path
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     out = tmp_path / "sweep"
     proc = subprocess.Popen(
-        [sys.executable, "-m", "planner", "sweep", TRIANGLE, "--grid", "v1=0.25:4:400:log", "--param", "v2=1",
-         "--model", "dynamic-compliant", "--workers", "1", "--duration", "8", "--out", str(out)],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+        [
+            sys.executable,
+            "-m",
+            "planner",
+            "sweep",
+            TRIANGLE,
+            "--grid",
+            "v1=0.25:4:400:log",
+            "--param",
+            "v2=1",
+            "--model",
+            "dynamic-compliant",
+            "--workers",
+            "1",
+            "--duration",
+            "8",
+            "--out",
+            str(out),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
     )
     line = proc.stderr.readline()  # "sweeping N runs ..." once the sweep starts
     assert line.startswith("sweeping 400 runs"), line
@@ -115,9 +137,35 @@ def test_sweep_command_writes_json_csv_and_plot(tmp_path):
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     out = tmp_path / "s"
     done = subprocess.run(
-        [sys.executable, "-m", "planner", "sweep", TRIANGLE, "--grid", "v1=0.4:2.5:5:log", "--grid", "mu=0.5,1.2", "--param", "v2=1",
-         "--model", "quasistatic-rigid", "--workers", "1", "--duration", "8", "--refine", "--tolerance", "1e-2", "--out", str(out), "--json"],
-        capture_output=True, text=True, env=env, timeout=600,
+        [
+            sys.executable,
+            "-m",
+            "planner",
+            "sweep",
+            TRIANGLE,
+            "--grid",
+            "v1=0.4:2.5:5:log",
+            "--grid",
+            "mu=0.5,1.2",
+            "--param",
+            "v2=1",
+            "--model",
+            "quasistatic-rigid",
+            "--workers",
+            "1",
+            "--duration",
+            "8",
+            "--refine",
+            "--tolerance",
+            "1e-2",
+            "--out",
+            str(out),
+            "--json",
+        ],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=600,
     )
     assert done.returncode == 0, done.stderr
     data = json.loads(done.stdout)
@@ -145,8 +193,9 @@ def test_bad_sweep_input_is_exit_2_naming_the_key_and_writes_nothing(tmp_path, a
     if "--model" not in args:
         args = args + ["--model", "quasistatic-rigid"]
     assert "Traceback" not in args
-    done = subprocess.run([sys.executable, "-m", "planner", "sweep", TRIANGLE, *args, "--out", str(out)],
-                          capture_output=True, text=True, env=env, timeout=300)
+    done = subprocess.run(
+        [sys.executable, "-m", "planner", "sweep", TRIANGLE, *args, "--out", str(out)], capture_output=True, text=True, env=env, timeout=300
+    )
     assert done.returncode == 2, done.stderr
     assert key in done.stderr and "Traceback" not in done.stderr
     assert not out.exists()
@@ -162,30 +211,52 @@ def test_parse_axis_values():
 
 def sweep_command(tmp_path, *args, timeout=120):
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    return subprocess.run([sys.executable, "-m", "planner", "sweep", TRIANGLE, *args, "--out", str(tmp_path / "s")],
-                          capture_output=True, text=True, env=env, timeout=timeout)
+    return subprocess.run(
+        [sys.executable, "-m", "planner", "sweep", TRIANGLE, *args, "--out", str(tmp_path / "s")],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=timeout,
+    )
 
 
 @pytest.mark.parametrize(
     "args, message",
     [
         # 1e8 runs would not fit in memory: refused before any value is made
-        (["--grid", "v1=1:2:100000000", "--model", "kinematic"],
-         "--grid v1=1:2:100000000: COUNT 100,000,000 is more than a sweep may run (1,000,000 runs)"),
-        (["--grid", "v1=1:2:1000", "--grid", "mu=0:1:1001", "--model", "kinematic"],
-         "--grid: 1000 x 1001 grid points x 1 model(s) = 1,001,000 runs, more than a sweep may run (1,000,000)"),
+        (
+            ["--grid", "v1=1:2:100000000", "--model", "kinematic"],
+            "--grid v1=1:2:100000000: COUNT 100,000,000 is more than a sweep may run (1,000,000 runs)",
+        ),
+        (
+            ["--grid", "v1=1:2:1000", "--grid", "mu=0:1:1001", "--model", "kinematic"],
+            "--grid: 1000 x 1001 grid points x 1 model(s) = 1,001,000 runs, more than a sweep may run (1,000,000)",
+        ),
         # values are checked before the pool starts (it used to die with BrokenProcessPool)
-        (["--grid", "mu=-1:1:3", "--model", "kinematic", "--workers", "2"],
-         "--grid mu=-1:1:3: kinematic at mu=-1: the scenario is invalid: contact.pairs[0].mu: must be greater than or equal to 0, got -1 from 'mu'"),
-        (["--grid", "v1=0.5,1", "--model", "kinematic[mu=-2]", "--workers", "2"],
-         "--model kinematic[mu=-2]: kinematic[mu=-2] at v1=0.5 and 1 more grid point: the scenario is invalid: contact.pairs[0].mu"),
-        (["--grid", "v1=1:2:3", "--model", "dynamic-compliant[C=0"],
-         "--model dynamic-compliant[C=0: a '[' is not closed; expected [LABEL=]RUNG[NAME=VALUE,...]"),
+        (
+            ["--grid", "mu=-1:1:3", "--model", "kinematic", "--workers", "2"],
+            "--grid mu=-1:1:3: kinematic at mu=-1: the scenario is invalid: "
+            "contact.pairs[0].mu: must be greater than or equal to 0, got -1 from 'mu'",
+        ),
+        (
+            ["--grid", "v1=0.5,1", "--model", "kinematic[mu=-2]", "--workers", "2"],
+            "--model kinematic[mu=-2]: kinematic[mu=-2] at v1=0.5 and 1 more grid point: the scenario is invalid: contact.pairs[0].mu",
+        ),
+        (
+            ["--grid", "v1=1:2:3", "--model", "dynamic-compliant[C=0"],
+            "--model dynamic-compliant[C=0: a '[' is not closed; expected [LABEL=]RUNG[NAME=VALUE,...]",
+        ),
         (["--grid", "v1=1:2:3", "--model", "dynamic-compliant]C=0["], "--model dynamic-compliant]C=0[: unbalanced ']'"),
-        (["--grid", "v1=1:2:3", "--model", "a=kinematic,a=dynamic-compliant"], "--model a=kinematic,a=dynamic-compliant: the label 'a' names two models"),
+        (
+            ["--grid", "v1=1:2:3", "--model", "a=kinematic,a=dynamic-compliant"],
+            "--model a=kinematic,a=dynamic-compliant: the label 'a' names two models",
+        ),
         (["--grid", "v1=1:2:3", "--model", "quasistatic-rigid,quasistatic-rigid"], "the label 'quasistatic-rigid' names two models"),
         (["--grid", "v1=1:2:3", "--model", "dynamic-rigid[mu=1,mu=2]"], "--model dynamic-rigid[mu=1,mu=2]: mu overridden twice"),
-        (["--grid", "v1=1:2:3", "--model", "kinematic", "--step", "1e-12"], "--step: kinematic at v1=1 and 2 more grid points: a run of 3 s at h = 1e-12 is 3e+12 steps"),
+        (
+            ["--grid", "v1=1:2:3", "--model", "kinematic", "--step", "1e-12"],
+            "--step: kinematic at v1=1 and 2 more grid points: a run of 3 s at h = 1e-12 is 3e+12 steps",
+        ),
         (["--grid", "v1=1:2:3", "--model", "kinematic", "--tolerance", "0"], "--tolerance: must be a positive number, got 0.0"),
         (["--grid", "v1=1:2:3", "--model", "kinematic", "--duration", "-1"], "--duration: must be a positive number, got -1.0"),
     ],
@@ -208,20 +279,29 @@ def test_sweep_out_onto_a_file_is_bad_input(tmp_path):
 
 
 def test_dask_executor_without_the_extra_says_how_to_install_it(tmp_path):
-    code = ("import sys; sys.modules['distributed'] = None; from planner.cli import main; "
-            f"sys.exit(main(['sweep', {TRIANGLE!r}, '--grid', 'v1=1:2:3', '--model', 'kinematic', "
-            f"'--executor', 'dask://127.0.0.1:8786', '--out', {str(tmp_path / 's')!r}]))")
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=dict(os.environ, PYTHONPATH=str(ROOT)),
-                          timeout=120)
+    code = (
+        "import sys; sys.modules['distributed'] = None; from planner.cli import main; "
+        f"sys.exit(main(['sweep', {TRIANGLE!r}, '--grid', 'v1=1:2:3', '--model', 'kinematic', "
+        f"'--executor', 'dask://127.0.0.1:8786', '--out', {str(tmp_path / 's')!r}]))"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env=dict(os.environ, PYTHONPATH=str(ROOT)), timeout=120
+    )
     assert done.returncode == 2
-    assert done.stderr == (f'error: {TRIANGLE}: --executor: a Dask executor needs the dask extra: install the dask extra: '
-                           'pip install "contact-ladder[dask]"\n')
+    assert done.stderr == (
+        f'error: {TRIANGLE}: --executor: a Dask executor needs the dask extra: install the dask extra: pip install "contact-ladder[dask]"\n'
+    )
     assert not (tmp_path / "s").exists()
 
 
 def test_sweep_help_shows_the_model_syntax():
-    done = subprocess.run([sys.executable, "-m", "planner", "sweep", "--help"], capture_output=True, text=True,
-                          env=dict(os.environ, PYTHONPATH=str(ROOT)), timeout=60)
+    done = subprocess.run(
+        [sys.executable, "-m", "planner", "sweep", "--help"],
+        capture_output=True,
+        text=True,
+        env=dict(os.environ, PYTHONPATH=str(ROOT)),
+        timeout=60,
+    )
     text = " ".join(done.stdout.split())
     assert "[LABEL=]RUNG[NAME=VALUE,...]" in text
     assert "elastic=dynamic-compliant[C=0,finger_mass=1e3]" in text
@@ -249,7 +329,11 @@ def test_grid_points_stream_and_the_pool_is_fed_a_bounded_window():
 
 @pytest.mark.parametrize(
     "text, phrase",
-    [("v1=0:1:abc", "COUNT must be an integer, got 'abc'"), ("v1=a:1:3", "START must be a number, got 'a'"), ("mu=0.3,x", "must be a number, got 'x'")],
+    [
+        ("v1=0:1:abc", "COUNT must be an integer, got 'abc'"),
+        ("v1=a:1:3", "START must be a number, got 'a'"),
+        ("mu=0.3,x", "must be a number, got 'x'"),
+    ],
 )
 def test_parse_axis_says_what_it_expected(text, phrase):
     with pytest.raises(ScenarioError) as info:

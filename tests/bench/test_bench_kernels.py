@@ -35,7 +35,7 @@ def _contacts_loop(bi, bf, verts, pi, nv, q, calls):
     W_n, W_t = np.zeros((nv, cap)), np.zeros((nv, cap))
     nu = np.zeros(nv)
     total = 0
-    for k in range(calls):
+    for _ in range(calls):
         q[0] += 1e-12  # keep the compiler from hoisting the work
         nc = detect_planar(bi, bf, verts, pi, q, nu, 1e-4, 1e-3, c_pair, c_psi, c_n, c_pa, c_pb)
         tangents_packed(2, nc, c_n, c_t, c_o)
@@ -72,11 +72,28 @@ def paper_scene_lcp():
     nu_free = np.linalg.solve(A, np.array([0.0, -0.05, -0.05]))
     slots = np.arange(len(frames.psi))
     contacts = ContactSet(
-        frames.pair, frames.psi, slots, np.ascontiguousarray(frames.W_n), np.ascontiguousarray(frames.W_t), np.zeros_like(frames.W_n), np.zeros((len(slots), 3)),
+        frames.pair,
+        frames.psi,
+        slots,
+        np.ascontiguousarray(frames.W_n),
+        np.ascontiguousarray(frames.W_t),
+        np.zeros_like(frames.W_n),
+        np.zeros((len(slots), 3)),
     )
     M, qv, *_ = contact_lcp(
-        RUNGS["dynamic-compliant"].model, False, h, A, np.linalg.inv(A), nu_free, fingers.astype(np.int64), S.pf, contacts,
-        np.zeros(len(slots)), np.zeros((len(slots), 2)), D, np.zeros(len(D.v_index)),
+        RUNGS["dynamic-compliant"].model,
+        False,
+        h,
+        A,
+        np.linalg.inv(A),
+        nu_free,
+        fingers.astype(np.int64),
+        S.pf,
+        contacts,
+        np.zeros(len(slots)),
+        np.zeros((len(slots), 2)),
+        D,
+        np.zeros(len(D.v_index)),
     )
     return M, qv
 
@@ -84,7 +101,7 @@ def paper_scene_lcp():
 @numba.njit(cache=True)
 def _lemke_loop(M, q, calls):
     total = 0
-    for k in range(calls):
+    for _ in range(calls):
         q[0] += 1e-15
         z, w, status, pivots = lemke_kernel(M, q, 500)
         total += pivots
@@ -95,7 +112,7 @@ def _lemke_loop(M, q, calls):
 def _pgs_loop(M, q, calls):
     total = 0
     z0 = np.zeros(q.shape[0])
-    for k in range(calls):
+    for _ in range(calls):
         q[0] += 1e-15
         z, w, status, iterations = pgs_kernel(M, q, z0, 100_000, 1e-9, 1.0)
         total += iterations
@@ -135,7 +152,7 @@ def _collide_loop(S, q, p, margin, calls):
     c_psi = np.zeros(cap)
     c_n, c_pa, c_pb = np.zeros((cap, 3)), np.zeros((cap, 3)), np.zeros((cap, 3))
     total = 0
-    for k in range(calls):
+    for _ in range(calls):
         q[0] += 1e-15  # keep the compiler from hoisting the work
         total += collide_pair_3d(S, q, p, margin, c_psi, c_n, c_pa, c_pb, 0)
     return total
@@ -156,7 +173,9 @@ def box_wedge_poses():
         q[3:7] = np.asarray(quat) / np.linalg.norm(quat)
         return q
 
-    yaw = lambda a: [np.cos(a / 2), 0.0, 0.0, np.sin(a / 2)]
+    def yaw(a):
+        return [np.cos(a / 2), 0.0, 0.0, np.sin(a / 2)]
+
     out.append(("face", pose(0.35 - 0.1 + 1e-4, -0.3, 0.05, [1.0, 0, 0, 0])))
     # tilted above the slope (normal (0.6, 0, 0.8)), 0.1 mm into it
     out.append(("tilted on slope", pose(0.47 - 0.6 * (0.0362105 + 1e-4), -0.35, 0.25 - 0.8 * (0.0362105 + 1e-4), [0.9, 0.2, -0.3, 0.1])))

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import time
-from pathlib import Path
 
 import pytest
 
@@ -41,13 +40,28 @@ def test_fig5_sweep_wall_time():
     rigid = "finger_mass=1e3;finger_kp=1e9;finger_kd=2e6"
     timings = {}
     with sw.Executor() as executor:
-        sw.sweep(str(SCENARIOS / "two_finger_triangle.toml"), axes[:1], sw.parse_models("quasistatic-rigid"), fixed={"v2": 1.0},
-                 duration=0.01, executor=executor)  # workers started and kernels loaded
-        for label, models, h in [("dynamic plastic + elastic", f"dynamic-compliant[C=1e4;{rigid}],dynamic-compliant[C=0;{rigid}]", 1e-4),
-                                 ("quasistatic", "quasistatic-rigid", None)]:
+        sw.sweep(
+            str(SCENARIOS / "two_finger_triangle.toml"),
+            axes[:1],
+            sw.parse_models("quasistatic-rigid"),
+            fixed={"v2": 1.0},
+            duration=0.01,
+            executor=executor,
+        )  # workers started and kernels loaded
+        for label, models, h in [
+            ("dynamic plastic + elastic", f"dynamic-compliant[C=1e4;{rigid}],dynamic-compliant[C=0;{rigid}]", 1e-4),
+            ("quasistatic", "quasistatic-rigid", None),
+        ]:
             t0 = time.perf_counter()
-            result = sw.sweep(str(SCENARIOS / "two_finger_triangle.toml"), axes, sw.parse_models(models), fixed={"v2": 1.0},
-                              h=h, duration=8.0, executor=executor)
+            result = sw.sweep(
+                str(SCENARIOS / "two_finger_triangle.toml"),
+                axes,
+                sw.parse_models(models),
+                fixed={"v2": 1.0},
+                h=h,
+                duration=8.0,
+                executor=executor,
+            )
             timings[label] = {"runs": len(result.points), "wall_s": time.perf_counter() - t0}
             assert result.complete and all(p is not None for p in result.points)
     OUT.mkdir(parents=True, exist_ok=True)

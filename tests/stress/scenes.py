@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import numpy as np
@@ -48,8 +47,10 @@ h = 1e-3
 
 def body(name: str, shape: str, x: float, y: float, theta: float = 0.0, mass: float = 1.0, inertia: float | None = None) -> str:
     inertia_line = f"inertia = {inertia!r}\n" if inertia is not None else ""
-    return (f'[[bodies]]\nname = "{name}"\nrole = "object"\nmass = {mass!r}\n{inertia_line}shape = {shape}\n'
-            f'pose = {{ x = {x!r}, y = {y!r}, theta = {theta!r} }}\ndofs = ["x", "y", "theta"]\n')
+    return (
+        f'[[bodies]]\nname = "{name}"\nrole = "object"\nmass = {mass!r}\n{inertia_line}shape = {shape}\n'
+        f'pose = {{ x = {x!r}, y = {y!r}, theta = {theta!r} }}\ndofs = ["x", "y", "theta"]\n'
+    )
 
 
 def box_shape(w: float, h: float) -> str:

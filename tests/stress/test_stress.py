@@ -17,9 +17,9 @@ from hypothesis import strategies as st
 from models.scenario import load_scenario
 from tests.conftest import SCENARIOS
 from tests.stress.scenes import (
+    body,
     box_inertia,
     box_shape,
-    body,
     check_invariants,
     disc_shape,
     run,
@@ -116,8 +116,10 @@ def test_peg_wedged_at_two_points(tmp_path):
     sc = scene(tmp_path, [text], mu=0.3)
     # the V: add as obstacles through a second file (obstacles take a pose and no DOFs)
     path = tmp_path / "stress.toml"
-    v = (f'[[bodies]]\nname = "left"\nrole = "obstacle"\nshape = {wall}\npose = {{ x = -0.3, y = 0.3, theta = {-math.pi / 4!r} }}\n'
-         f'[[bodies]]\nname = "right"\nrole = "obstacle"\nshape = {wall}\npose = {{ x = 0.3, y = 0.3, theta = {math.pi / 4!r} }}\n')
+    v = (
+        f'[[bodies]]\nname = "left"\nrole = "obstacle"\nshape = {wall}\npose = {{ x = -0.3, y = 0.3, theta = {-math.pi / 4!r} }}\n'
+        f'[[bodies]]\nname = "right"\nrole = "obstacle"\nshape = {wall}\npose = {{ x = 0.3, y = 0.3, theta = {math.pi / 4!r} }}\n'
+    )
     path.write_text(path.read_text().replace("[task]", v + "\n[task]"))
     sc = load_scenario(path)
     for rung in ("dynamic-rigid", "dynamic-compliant"):
@@ -208,17 +210,19 @@ SHAPES = st.one_of(
     st.tuples(st.just("disc"), st.floats(0.02, 0.3)),
     st.tuples(st.just("box"), st.floats(0.02, 0.5), st.floats(0.02, 0.5)),
 )
-SCENE = st.fixed_dictionaries({
-    "shapes": st.lists(SHAPES, min_size=1, max_size=3),
-    "masses": st.lists(st.floats(1e-2, 1e2), min_size=3, max_size=3),
-    "mu": st.floats(0.0, 2.0),
-    "K": st.sampled_from([1e4, 1e6, 1e8]),
-    "C": st.sampled_from([0.0, 1e2, 1e4]),
-    "h": st.sampled_from([1e-2, 3e-3, 1e-3]),
-    "drop": st.floats(0.0, 0.5),
-    "theta": st.floats(-math.pi, math.pi),
-    "rung": st.sampled_from(["dynamic-rigid", "dynamic-compliant"]),
-})
+SCENE = st.fixed_dictionaries(
+    {
+        "shapes": st.lists(SHAPES, min_size=1, max_size=3),
+        "masses": st.lists(st.floats(1e-2, 1e2), min_size=3, max_size=3),
+        "mu": st.floats(0.0, 2.0),
+        "K": st.sampled_from([1e4, 1e6, 1e8]),
+        "C": st.sampled_from([0.0, 1e2, 1e4]),
+        "h": st.sampled_from([1e-2, 3e-3, 1e-3]),
+        "drop": st.floats(0.0, 0.5),
+        "theta": st.floats(-math.pi, math.pi),
+        "rung": st.sampled_from(["dynamic-rigid", "dynamic-compliant"]),
+    }
+)
 
 
 def _random_scene(tmp_path, s):
@@ -232,8 +236,9 @@ def _random_scene(tmp_path, s):
         else:
             w, h = shape[1], shape[2]
             half = 0.5 * math.hypot(w, h)
-            bodies.append(body(f"b{k}", box_shape(w, h), edge + half, half + s["drop"] + 1e-3, theta=s["theta"], mass=m,
-                               inertia=box_inertia(m, w, h)))
+            bodies.append(
+                body(f"b{k}", box_shape(w, h), edge + half, half + s["drop"] + 1e-3, theta=s["theta"], mass=m, inertia=box_inertia(m, w, h))
+            )
             edge += 2 * half + 0.05
     sc = scene(tmp_path, bodies, mu=s["mu"], K=s["K"], C=s["C"])
     result = run(sc, s["rung"], s["h"], 1.0)
