@@ -33,13 +33,25 @@ RESERVED = {
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The `ladder` argument parser, one subparser per command."""
     parser = argparse.ArgumentParser(
         prog="ladder",
         description="Hierarchical manipulation planning: plan with the cheapest contact model, "
         "then upgrade the model and replan until the plan holds under the highest-fidelity one.",
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    _add_check_parser(sub)
+    _add_schema_parser(sub)
+    _add_simulate_parser(sub)
+    _add_plan_parser(sub)
+    _add_sweep_parser(sub)
+    _add_bench_parser(sub)
+    _add_reserved_parsers(sub)
+    return parser
 
+
+def _add_check_parser(sub: argparse._SubParsersAction) -> None:
+    """Add the `check` subcommand: validate and summarise a scenario file."""
     check = sub.add_parser(
         "check",
         help="validate a scenario file and summarise it",
@@ -52,6 +64,9 @@ def build_parser() -> argparse.ArgumentParser:
     check.add_argument("--out", type=Path, help="also write the JSON summary to this file (its folder must exist)")
     check.set_defaults(handler=cmd_check)
 
+
+def _add_schema_parser(sub: argparse._SubParsersAction) -> None:
+    """Add the `schema` subcommand: print or write the scenario JSON Schema."""
     schema = sub.add_parser(
         "schema",
         help="print the JSON Schema of scenario files",
@@ -61,6 +76,9 @@ def build_parser() -> argparse.ArgumentParser:
     schema.add_argument("--out", type=Path, help="write the schema to this file instead of printing it (its folder must exist)")
     schema.set_defaults(handler=cmd_schema)
 
+
+def _add_simulate_parser(sub: argparse._SubParsersAction) -> None:
+    """Add the `simulate` subcommand: run the policy (or a plan) under one rung."""
     simulate = sub.add_parser(
         "simulate",
         help="run the scenario's open-loop policy under one rung",
@@ -79,6 +97,9 @@ def build_parser() -> argparse.ArgumentParser:
                           "(the plan must be of this scene: same scenario, contents after parameters, and driven coordinates)")
     simulate.set_defaults(handler=cmd_simulate)
 
+
+def _add_plan_parser(sub: argparse._SubParsersAction) -> None:
+    """Add the `plan` subcommand: plan up the model ladder."""
     plan = sub.add_parser(
         "plan",
         help="plan up the model ladder",
@@ -103,6 +124,9 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument("--json", action="store_true", help="print the plan report as one JSON object")
     plan.set_defaults(handler=cmd_plan)
 
+
+def _add_sweep_parser(sub: argparse._SubParsersAction) -> None:
+    """Add the `sweep` subcommand: map feasible sets over design parameters."""
     sweep = sub.add_parser(
         "sweep",
         help="map feasible sets over design parameters (the paper's Fig. 5)",
@@ -135,6 +159,9 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--json", action="store_true", help="print the result as one JSON object")
     sweep.set_defaults(handler=cmd_sweep)
 
+
+def _add_bench_parser(sub: argparse._SubParsersAction) -> None:
+    """Add the `bench` subcommand: the benchmarks."""
     bench = sub.add_parser(
         "bench",
         help="benchmarks: work-precision, throughput, scaling, ladder vs flat",
@@ -154,11 +181,13 @@ def build_parser() -> argparse.ArgumentParser:
                        "take minutes per seed)")
     bench.set_defaults(handler=cmd_bench)
 
+
+def _add_reserved_parsers(sub: argparse._SubParsersAction) -> None:
+    """Add the reserved subcommands (RESERVED), which say they are not built yet."""
     for name, what in RESERVED.items():
         reserved = sub.add_parser(name, help=f"(not built yet) {what}", description=f"Not built yet: {what}.")
         reserved.add_argument("args", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
         reserved.set_defaults(handler=cmd_reserved)
-    return parser
 
 
 def _add_param_option(parser: argparse.ArgumentParser) -> None:
