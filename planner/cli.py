@@ -33,13 +33,25 @@ RESERVED = {
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The `ladder` argument parser, one subparser per command."""
     parser = argparse.ArgumentParser(
         prog="ladder",
         description="Hierarchical manipulation planning: plan with the cheapest contact model, "
         "then upgrade the model and replan until the plan holds under the highest-fidelity one.",
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    _add_check_parser(sub)
+    _add_schema_parser(sub)
+    _add_simulate_parser(sub)
+    _add_plan_parser(sub)
+    _add_sweep_parser(sub)
+    _add_bench_parser(sub)
+    _add_reserved_parsers(sub)
+    return parser
 
+
+def _add_check_parser(sub: argparse._SubParsersAction) -> None:
+    """Add the `check` subcommand: validate and summarise a scenario file."""
     check = sub.add_parser(
         "check",
         help="validate a scenario file and summarise it",
@@ -52,6 +64,9 @@ def build_parser() -> argparse.ArgumentParser:
     check.add_argument("--out", type=Path, help="also write the JSON summary to this file (its folder must exist)")
     check.set_defaults(handler=cmd_check)
 
+
+def _add_schema_parser(sub: argparse._SubParsersAction) -> None:
+    """Add the `schema` subcommand: print or write the scenario JSON Schema."""
     schema = sub.add_parser(
         "schema",
         help="print the JSON Schema of scenario files",
@@ -61,6 +76,9 @@ def build_parser() -> argparse.ArgumentParser:
     schema.add_argument("--out", type=Path, help="write the schema to this file instead of printing it (its folder must exist)")
     schema.set_defaults(handler=cmd_schema)
 
+
+def _add_simulate_parser(sub: argparse._SubParsersAction) -> None:
+    """Add the `simulate` subcommand: run the policy (or a plan) under one rung."""
     simulate = sub.add_parser(
         "simulate",
         help="run the scenario's open-loop policy under one rung",
@@ -79,6 +97,9 @@ def build_parser() -> argparse.ArgumentParser:
                           "(the plan must be of this scene: same scenario, contents after parameters, and driven coordinates)")
     simulate.set_defaults(handler=cmd_simulate)
 
+
+def _add_plan_parser(sub: argparse._SubParsersAction) -> None:
+    """Add the `plan` subcommand: plan up the model ladder."""
     plan = sub.add_parser(
         "plan",
         help="plan up the model ladder",
@@ -103,6 +124,9 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument("--json", action="store_true", help="print the plan report as one JSON object")
     plan.set_defaults(handler=cmd_plan)
 
+
+def _add_sweep_parser(sub: argparse._SubParsersAction) -> None:
+    """Add the `sweep` subcommand: map feasible sets over design parameters."""
     sweep = sub.add_parser(
         "sweep",
         help="map feasible sets over design parameters (the paper's Fig. 5)",
@@ -135,6 +159,9 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--json", action="store_true", help="print the result as one JSON object")
     sweep.set_defaults(handler=cmd_sweep)
 
+
+def _add_bench_parser(sub: argparse._SubParsersAction) -> None:
+    """Add the `bench` subcommand: the benchmarks."""
     bench = sub.add_parser(
         "bench",
         help="benchmarks: work-precision, throughput, scaling, ladder vs flat",
@@ -154,11 +181,13 @@ def build_parser() -> argparse.ArgumentParser:
                        "take minutes per seed)")
     bench.set_defaults(handler=cmd_bench)
 
+
+def _add_reserved_parsers(sub: argparse._SubParsersAction) -> None:
+    """Add the reserved subcommands (RESERVED), which say they are not built yet."""
     for name, what in RESERVED.items():
         reserved = sub.add_parser(name, help=f"(not built yet) {what}", description=f"Not built yet: {what}.")
         reserved.add_argument("args", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
         reserved.set_defaults(handler=cmd_reserved)
-    return parser
 
 
 def _add_param_option(parser: argparse.ArgumentParser) -> None:
@@ -266,6 +295,27 @@ def read_plan(path: Path, scenario: Scenario) -> tuple[np.ndarray, np.ndarray]:
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
+    """`ladder simulate`: run the policy (or a plan) under one rung, plot it if asked, and report."""
+    scenario, plan_controls, h, duration, total = _check_simulate_args(args)
+    result = _run_simulation(args, scenario, plan_controls, h, duration, total)
+    if result is None:
+        return EXIT_INTERRUPTED
+    summary = _simulation_summary(args, scenario, result, h, duration)
+    if args.plot:
+        from planner.plots import plot_rollouts
+
+        plot_rollouts(args.plot, scenario.coordinates, scenario.start, [(args.model, result.times, result.trajectory)],
+                      f"{scenario.spec.scenario.name}: {args.model}, h = {h:g}, outcome {result.outcome}")
+        summary["plot"] = str(args.plot)
+    if args.json:
+        print(json.dumps(summary, indent=2))
+    else:
+        print_simulation(summary)
+    return EXIT_OK if result.ok else EXIT_FAILED
+
+
+def _check_simulate_args(args: argparse.Namespace):
+    """Load and check simulate's arguments: (scenario, plan controls or None, h, duration, steps); else bad input."""
     problems = check_out_file("--plot", args.plot, PLOT_SUFFIXES)
     scenario = load_from_args(args, problems)
     policy = scenario.spec.task.policy
@@ -302,10 +352,15 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                                               "one run may take; use a larger --step or a shorter --duration"))
     if problems:
         raise ScenarioError(scenario.path, problems)
+    return scenario, plan_controls, h, duration, total
 
+
+def _run_simulation(args: argparse.Namespace, scenario: Scenario, plan_controls, h: float, duration: float, total: int):
+    """Run the policy's (or the plan's) controls under the rung; None when Ctrl-C stopped it (said on stderr)."""
     from models.rungs import rung_for
     from planner import interrupt
 
+    policy = scenario.spec.task.policy
     rung = rung_for(scenario, args.model)
     state = rung.initial_state(scenario)
     if plan_controls is not None:
@@ -321,12 +376,16 @@ def cmd_simulate(args: argparse.Namespace) -> int:
             print(f"simulating {total:,} steps of {args.model} (h = {h:g}, {duration:g} s; Ctrl-C stops)", file=sys.stderr, flush=True)
         try:
             interrupt.check()
-            result = run_with_progress(rung, scenario, state, controls, durations, h, live=live)
+            return run_with_progress(rung, scenario, state, controls, durations, h, live=live)
         except KeyboardInterrupt as stop:
             done = getattr(stop, "steps_done", 0)
             print(f"interrupted after {done:,} of {total:,} steps; nothing written", file=sys.stderr, flush=True)
-            return EXIT_INTERRUPTED
-    summary = {
+            return None
+
+
+def _simulation_summary(args: argparse.Namespace, scenario: Scenario, result, h: float, duration: float) -> dict[str, Any]:
+    """The simulate report: the run's outcome, final state, solver counters and parameters."""
+    return {
         "file": str(scenario.path),
         "model": args.model,
         "h": h,
@@ -347,17 +406,6 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         "max_lcp_size": result.max_lcp_size,
         "parameters": dict(scenario.parameters),
     }
-    if args.plot:
-        from planner.plots import plot_rollouts
-
-        plot_rollouts(args.plot, scenario.coordinates, scenario.start, [(args.model, result.times, result.trajectory)],
-                      f"{scenario.spec.scenario.name}: {args.model}, h = {h:g}, outcome {result.outcome}")
-        summary["plot"] = str(args.plot)
-    if args.json:
-        print(json.dumps(summary, indent=2))
-    else:
-        print_simulation(summary)
-    return EXIT_OK if result.ok else EXIT_FAILED
 
 
 #: --seed's range (OMPL's and numpy's generators take it).
@@ -377,6 +425,20 @@ def rung_order_problems(key: str, names: list[str]) -> list[Problem]:
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
+    """`ladder plan`: plan up the ladder, write plan.json, report.json and plots, and report."""
+    scenario, names = _check_plan_args(args)
+    result = _run_plan(args, scenario, names)
+    report, plots = _write_plan_outputs(args, scenario, result)
+    _print_plan(args, scenario, result, report, plots)
+    if not result.complete:
+        done = ", ".join(r.rung for r in result.rungs) or "none"
+        print(f"interrupted: INCOMPLETE plan (rungs done: {done}) written to {args.out / 'plan.json'}", file=sys.stderr, flush=True)
+        return EXIT_INTERRUPTED
+    return EXIT_OK if result.top_holds else EXIT_FAILED
+
+
+def _check_plan_args(args: argparse.Namespace) -> tuple[Scenario, list[str]]:
+    """Load and check plan's arguments: (scenario, the rungs to plan with); else bad input."""
     problems = check_out_dir("--out", args.out)
     problems += positive("--iterations", args.iterations, integer=True)
     problems += positive("--time-limit", args.time_limit)
@@ -402,10 +464,12 @@ def cmd_plan(args: argparse.Namespace) -> int:
                 problems.append(Problem("--top", f"no rung of the ladder is at or below {args.top}"))
     if problems:
         raise ScenarioError(scenario.path, problems)
+    return scenario, names
 
+
+def _run_plan(args: argparse.Namespace, scenario: Scenario, names: list[str]):
+    """Run the ladder over `names`, showing progress on stderr; Ctrl-C ends the rung under way."""
     from planner.ladder import run_ladder
-    from planner.plots import plot_rollouts
-    from models.rungs import rung_for
 
     live = sys.stderr.isatty() and not args.json
     budgets = {n: args.iterations if args.iterations is not None else scenario.rung_settings(n).iterations for n in names}
@@ -429,6 +493,14 @@ def cmd_plan(args: argparse.Namespace) -> int:
                             guided=not args.no_guide, stop=interrupt.asked)
     if live:
         print("\r" + " " * 78 + "\r", end="", file=sys.stderr, flush=True)
+    return result
+
+
+def _write_plan_outputs(args: argparse.Namespace, scenario: Scenario, result) -> tuple[dict, list[str]]:
+    """Write plan.json, report.json and a plot per planned rung: (the report, the plots' paths)."""
+    from models.rungs import rung_for
+    from planner.plots import plot_rollouts
+
     report = result.to_json()
     make_out_dir(args.out)
     # plan.json is reproducible (no timings): the same seed gives the same bytes
@@ -449,6 +521,11 @@ def cmd_plan(args: argparse.Namespace) -> int:
         path = plot_rollouts(args.out / f"plan.{rung_report.rung}.png", scenario.coordinates, scenario.start,
                              [(rung_report.rung, times, trajectory)], f"{scenario.spec.scenario.name}: plan under {rung_report.rung}")
         plots.append(str(path))
+    return report, plots
+
+
+def _print_plan(args: argparse.Namespace, scenario: Scenario, result, report: dict, plots: list[str]) -> None:
+    """Print the plan report: one JSON object, or a table per rung and where the plan went."""
     if args.json:
         print(json.dumps(report, indent=2))
     else:
@@ -468,11 +545,6 @@ def cmd_plan(args: argparse.Namespace) -> int:
                 console.print(f"{r.rung}: {r.reason}")
         if result.complete:
             print(f"top rung holds: {'yes' if result.top_holds else 'no'}; plan written to {args.out / 'plan.json'}; plots: {', '.join(plots) or 'none'}")
-    if not result.complete:
-        done = ", ".join(r.rung for r in result.rungs) or "none"
-        print(f"interrupted: INCOMPLETE plan (rungs done: {done}) written to {args.out / 'plan.json'}", file=sys.stderr, flush=True)
-        return EXIT_INTERRUPTED
-    return EXIT_OK if result.top_holds else EXIT_FAILED
 
 
 #: A rollout longer than this many steps shows a progress bar (on a terminal).
@@ -613,6 +685,16 @@ def sweep_point_problems(scenario: Scenario, texts: list[str], axes, models, fix
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
+    """`ladder sweep`: run the policy over a grid of design parameters per model, write and report the classes."""
+    scenario, fixed, axes, models, runs = _check_sweep_args(args)
+    result, interrupted = _run_sweep(args, scenario, fixed, axes, models, runs)
+    data, plot = _write_sweep_outputs(args, result, axes)
+    _print_sweep(args, result, data, plot, interrupted)
+    return EXIT_INTERRUPTED if interrupted else EXIT_OK
+
+
+def _check_sweep_args(args: argparse.Namespace):
+    """Load and check sweep's arguments and every run: (scenario, fixed parameters, axes, models, runs); else bad input."""
     from planner import sweep as sw
 
     problems = check_out_dir("--out", args.out)
@@ -662,6 +744,12 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     problems = sweep_point_problems(scenario, list(args.grid), axes, models, fixed, args.step, args.duration)
     if problems:
         raise ScenarioError(scenario.path, problems)
+    return scenario, fixed, axes, models, runs
+
+
+def _run_sweep(args: argparse.Namespace, scenario: Scenario, fixed: dict, axes, models, runs: int):
+    """Run the sweep (and its refinement), with a progress bar on a terminal: (result, interrupted)."""
+    from planner import sweep as sw
 
     live = sys.stderr.isatty() and not args.json
     interrupted = False
@@ -702,6 +790,13 @@ def cmd_sweep(args: argparse.Namespace) -> int:
             bar.stop()
     interrupted = not result.complete or interrupt.asked()
     result.complete = not interrupted
+    return result, interrupted
+
+
+def _write_sweep_outputs(args: argparse.Namespace, result, axes) -> tuple[dict, Any]:
+    """Write sweep.json, sweep.csv and (with any points) sweep.png: (the JSON data, the plot's path or None)."""
+    from planner import sweep as sw
+
     data = result.to_json()
     if args.refine and result.boundaries:
         data["bands"] = {a.name: sw.bands(result, a.name) for a in axes}
@@ -711,6 +806,11 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     from planner.plots import plot_feasible_sets
 
     plot = plot_feasible_sets(args.out / "sweep.png", result) if result.points and any(result.points) else None
+    return data, plot
+
+
+def _print_sweep(args: argparse.Namespace, result, data: dict, plot, interrupted: bool) -> None:
+    """Print the sweep: one JSON object, or the counts per model, the goal bands and where the results went."""
     if args.json:
         print(json.dumps(data, indent=2))
     else:
@@ -731,7 +831,6 @@ def cmd_sweep(args: argparse.Namespace) -> int:
             print(f"{failed} runs stopped on a solver failure (outcome none; their status is in the results)")
         state = "INCOMPLETE (interrupted), " if interrupted else ""
         print(f"{state}results written to {args.out / 'sweep.json'}, {args.out / 'sweep.csv'}" + (f", {plot}" if plot else ""))
-    return EXIT_INTERRUPTED if interrupted else EXIT_OK
 
 
 def cmd_bench(args: argparse.Namespace) -> int:

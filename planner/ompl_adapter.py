@@ -501,23 +501,9 @@ def plan_geometric(scenario: Scenario, *, seed: int, iterations: int, planner: s
     ou.setLogLevel(ou.LOG_NONE)
     ou.RNG.setSeed(int(seed) + 1)
     steered = steered_coordinates(scenario)  # the others keep their start values
-    ns = len(steered)
-    space = ob.RealVectorStateSpace(ns)
-    low, high = sampling_limits(scenario, scenario.start)  # passive bodies stay where something can reach them
-    bounds = ob.RealVectorBounds(ns)
-    for k, i in enumerate(steered):
-        bounds.setLow(k, float(low[i]))
-        bounds.setHigh(k, float(high[i]))
-    space.setBounds(bounds)
+    space, low, high = _geometric_space(scenario, steered)
     counter = {"checks": 0}
     x = np.array(scenario.start, float)
-
-    def q_of(s) -> np.ndarray:
-        q = np.array(scenario.start, float)
-        for k, i in enumerate(steered):
-            q[i] = s[k]
-        return q
-
     valid_q = geometric_checker(scenario, low, high)
 
     def valid(s) -> bool:
@@ -533,6 +519,55 @@ def plan_geometric(scenario: Scenario, *, seed: int, iterations: int, planner: s
     sampler = GoalSampler(scenario, np.random.default_rng(int(seed)), low, high, valid_q)
     pool = [sampler.draw()] if planner == "RRTConnect" else []
     pool = [q for q in pool if q is not None]
+
+    start = space.allocState()
+    for k, i in enumerate(steered):
+        start[k] = float(scenario.start[i])
+    ss.setStartState(start)
+    ss.setGoal(_geometric_goal(si, scenario, steered, sampler, pool))
+    if pool:
+        chosen = getattr(og, planner)(si)
+    else:
+        chosen = og.RRT(si) if planner == "RRTConnect" else getattr(og, planner)(si)
+    ss.setPlanner(chosen)
+    stop_now, done = _termination(ss, iterations, time_limit, stop=stop)
+    ss.solve(ob.PlannerTerminationCondition(stop_now))
+    status = _search_status(bool(ss.haveExactSolutionPath()), done)
+    states = _geometric_path(ss, si, scenario, steered, status)
+    result = GeometricPlan(states, status, done["iterations"], counter["checks"], len(pool))
+    del ss, si, space
+    return result
+
+
+def _q_of(scenario: Scenario, steered: list[int], s) -> np.ndarray:
+    """The full configuration of an OMPL state over the steered coordinates (the others at their start values)."""
+    q = np.array(scenario.start, float)
+    for k, i in enumerate(steered):
+        q[i] = s[k]
+    return q
+
+
+def _geometric_space(scenario: Scenario, steered: list[int]):
+    """The geometric rung's state space over the steered coordinates, bounded by the sampling limits: (space, low, high)."""
+    from ompl import base as ob
+
+    ns = len(steered)
+    space = ob.RealVectorStateSpace(ns)
+    low, high = sampling_limits(scenario, scenario.start)  # passive bodies stay where something can reach them
+    bounds = ob.RealVectorBounds(ns)
+    for k, i in enumerate(steered):
+        bounds.setLow(k, float(low[i]))
+        bounds.setHigh(k, float(high[i]))
+    space.setBounds(bounds)
+    return space, low, high
+
+
+def _geometric_goal(si, scenario: Scenario, steered: list[int], sampler: GoalSampler, pool: list):
+    """The goal set as an OMPL goal: sampleable from `pool` (grown by `sampler`) when it has a state, else a region."""
+    from ompl import base as ob
+
+    def q_of(s) -> np.ndarray:
+        return _q_of(scenario, steered, s)
 
     class Goal(ob.GoalRegion):
         def __init__(self, si_):
@@ -572,31 +607,22 @@ def plan_geometric(scenario: Scenario, *, seed: int, iterations: int, planner: s
         def couldSample(self):
             return True
 
-    start = space.allocState()
-    for k, i in enumerate(steered):
-        start[k] = float(scenario.start[i])
-    ss.setStartState(start)
-    if pool:
-        ss.setGoal(SampledGoal(si))
-        chosen = getattr(og, planner)(si)
-    else:
-        ss.setGoal(Goal(si))
-        chosen = og.RRT(si) if planner == "RRTConnect" else getattr(og, planner)(si)
-    ss.setPlanner(chosen)
-    stop_now, done = _termination(ss, iterations, time_limit, stop=stop)
-    ss.solve(ob.PlannerTerminationCondition(stop_now))
-    status = _search_status(bool(ss.haveExactSolutionPath()), done)
+    return SampledGoal(si) if pool else Goal(si)
+
+
+def _geometric_path(ss, si, scenario: Scenario, steered: list[int], status: PlanStatus) -> np.ndarray:
+    """The solution path's configurations, simplified when exact; the start alone when there is none."""
+    from ompl import geometric as og
+
     if ss.haveSolutionPath():
         path = ss.getSolutionPath()
         if status is PlanStatus.EXACT:
             og.PathSimplifier(si).simplifyMax(path)
-        states = np.array([q_of(s) for s in path.getStates()])
+        states = np.array([_q_of(scenario, steered, s) for s in path.getStates()])
         del path
     else:
         states = scenario.start[None, :].copy()
-    result = GeometricPlan(states, status, done["iterations"], counter["checks"], len(pool))
-    del ss, si, space
-    return result
+    return states
 
 
 #: Motion checks of the geometric rung: states this fraction of the space's extent apart.
