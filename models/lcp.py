@@ -487,18 +487,10 @@ def lemke_kernel(M, q, max_pivots):
     z = np.zeros(n)
     if n == 0:
         return z, np.zeros(0), STATUS_SOLVED, 0
-    trivial = True
-    for i in range(n):
-        if not (q[i] >= 0.0):
-            trivial = False
-            break
-    if trivial:
+    if _nonnegative(q):
         return z, _matvec_plus(M, z, q), STATUS_SOLVED, 0
 
-    qscale = 0.0
-    for i in range(n):
-        if abs(q[i]) > qscale:
-            qscale = abs(q[i])
+    qscale = _max_abs(q)
     Binv = np.eye(n)
     qbar = q.copy()
     basis = np.arange(n)  # basic variable of each row: w_i = i, z_j = n + j, z0 = 2n
@@ -508,22 +500,64 @@ def lemke_kernel(M, q, max_pivots):
     col = np.empty(n)
     cand = np.empty(n, dtype=np.int64)
     idx = np.empty(n, dtype=np.int64)
-    ones = np.ones(n)
-    z0 = 2 * n
+    entering, zrow = _lemke_first_pivot(Binv, qbar, basis, d, cand, idx, hist, qscale)
+    status, pivots = _lemke_path(M, Binv, qbar, basis, d, mag, hist, col, cand, idx, entering, zrow, qscale, max_pivots)
+    z = _z_from_basis(basis, qbar, n)
+    w = _matvec_plus(M, z, q)
+    z, w, status = _lemke_polish(M, q, basis, cand, z, w, status)
+    return z, w, status, pivots
 
-    # First pivot: z0 enters (column -e) in the lexicographically smallest row of (q, I),
-    # i.e. (one of) the most negative q_i; this makes the basis feasible.
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _nonnegative(q):
+    """True iff every q_i >= 0 (False on NaN): the LCP is solved by z = 0."""
+    for i in range(q.shape[0]):
+        if not (q[i] >= 0.0):
+            return False
+    return True
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _max_abs(q):
+    """||q||_inf (NaN entries ignored)."""
+    qscale = 0.0
+    for i in range(q.shape[0]):
+        if abs(q[i]) > qscale:
+            qscale = abs(q[i])
+    return qscale
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _lemke_first_pivot(Binv, qbar, basis, d, cand, idx, hist, qscale):
+    """Lemke's first pivot, in place: z0 enters (column -e) in the lexicographically smallest
+    row of (q, I), i.e. (one of) the most negative q_i, which makes the basis feasible.
+
+    Returns (entering, zrow): the next entering variable (the complement of the w that left)
+    and the row where z0 is basic.
+    """
+    n = qbar.shape[0]
+    ones = np.ones(n)
     for i in range(n):
         d[i] = -1.0
         cand[i] = i
     r = _lex_select(qbar, Binv, ones, cand, n, LEMKE_TIE_TOL, -1, qscale, hist)
     leaving = basis[r]
     _pivot(Binv, qbar, d, r, idx, hist)
-    basis[r] = z0
-    zrow = r
-    pivots = 1
-    entering = leaving + n  # the complement of w_r is z_r
+    basis[r] = 2 * n
+    return leaving + n, r  # the complement of w_r is z_r
 
+
+@numba.njit(cache=True, error_model="numpy")
+def _lemke_path(M, Binv, qbar, basis, d, mag, hist, col, cand, idx, entering, zrow, qscale, max_pivots):
+    """Follow Lemke's complementary path from the first pivot, in place on the tableau
+    (Binv, qbar, basis): entering column, lexicographic ratio test, pivot, until z0 leaves.
+
+    Returns (status, pivots): STATUS_SOLVED (z0 left), STATUS_RAY_TERMINATION (no pivot row),
+    STATUS_NON_FINITE_OUTPUT or STATUS_MAX_ITERATIONS; pivots counts the first one too.
+    """
+    n = qbar.shape[0]
+    z0 = 2 * n
+    pivots = 1
     status = STATUS_MAX_ITERATIONS
     while pivots < max_pivots:
         amax = _entering_column(M, Binv, entering, n, d, mag, col, idx)
@@ -559,13 +593,18 @@ def lemke_kernel(M, q, max_pivots):
         if not finite:
             status = STATUS_NON_FINITE_OUTPUT
             break
+    return status, pivots
 
-    z = _z_from_basis(basis, qbar, n)
-    w = _matvec_plus(M, z, q)
+
+@numba.njit(cache=True, error_model="numpy")
+def _lemke_polish(M, q, basis, work, z, w, status):
+    """Polish the end point (z, w) of a path that stopped SOLVED or on a ray: the
+    complementary point of the final basis (w_J = 0 on the basic z_J, z = 0 elsewhere)
+    recomputed from the true q replaces it if its residual is lower; a ray end point that
+    solves the LCP to LEMKE_RESCUE_TOL becomes STATUS_SOLVED. Returns (z, w, status)."""
+    n = q.shape[0]
     if status == STATUS_SOLVED or status == STATUS_RAY_TERMINATION:
-        # Polish: the complementary point of the final basis (w_J = 0 on the basic z_J,
-        # z = 0 elsewhere) recomputed from the true q.
-        z2, ok = _basis_point(M, q, basis, n, cand)
+        z2, ok = _basis_point(M, q, basis, n, work)
         if ok:
             w2 = _matvec_plus(M, z2, q)
             if _natural_map_residual(z2, w2, q) < _natural_map_residual(z, w, q):
@@ -575,7 +614,7 @@ def lemke_kernel(M, q, max_pivots):
             # The ray starts where z0 is (numerically) zero: the current point already
             # solves the LCP (z0 tied for leaving but round-off broke the tie the other way).
             status = STATUS_SOLVED
-    return z, w, status, pivots
+    return z, w, status
 
 
 @numba.njit(cache=True, error_model="numpy")
