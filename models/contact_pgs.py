@@ -347,8 +347,7 @@ def contact_pgs(
     Returns a `PgsResult`.
     """
     compliant, directions = model.compliant, model.friction_directions
-    c_pair, c_psi, c_slot, c_bias = contacts.pair, contacts.psi, contacts.slot, contacts.bias
-    W_n, W_t, W_o = contacts.W_n, contacts.W_t, contacts.W_o
+    c_slot = contacts.slot
     d = directions if spatial else 2
     cosines = np.empty(d)
     sines = np.empty(d)
@@ -356,27 +355,8 @@ def contact_pgs(
         cosines[j] = np.cos(2.0 * np.pi * j / d)
         sines[j] = np.sin(2.0 * np.pi * j / d)
     # each active contact's DOFs, Jacobian rows, A^-1 times them, Delassus blocks and terms
-    cdof = np.zeros((nc, CONTACT_DOFS), np.int64)
-    cm = np.zeros(nc, np.int64)
-    jn = np.zeros((nc, CONTACT_DOFS))
-    jt = np.zeros((nc, CONTACT_DOFS))
-    jo = np.zeros((nc, CONTACT_DOFS))
-    yn = np.zeros((nc, CONTACT_DOFS))
-    yt = np.zeros((nc, CONTACT_DOFS))
-    yo = np.zeros((nc, CONTACT_DOFS))
-    active = np.empty(nc, np.int64)
-    fric = np.zeros(nc, np.bool_)
-    gnn = np.zeros(nc)
-    g00 = np.zeros(nc)
-    g01 = np.zeros(nc)
-    g11 = np.zeros(nc)
-    comp = np.zeros(nc)
-    bn = np.zeros(nc)
-    bt = np.zeros((nc, 2))
-    mu = np.zeros(nc)
-    n, nf = _gather_contacts(
-        compliant, spatial, h, pi, pf, c_pair, c_psi, c_slot, c_bias, W_n, W_t, W_o, nc, delta_n, delta_t, dofs, count, inv,
-        zero_column, cdof, cm, jn, jt, jo, yn, yt, yo, active, fric, gnn, g00, g01, g11, comp, bn, bt, mu,
+    cdof, cm, jn, jt, jo, yn, yt, yo, active, fric, gnn, g00, g01, g11, comp, bn, bt, mu, n, nf = _gather_contacts(
+        compliant, spatial, h, pi, pf, contacts, nc, delta_n, delta_t, dofs, count, inv, zero_column
     )
     unknowns = n + nf * (2 if spatial else 1)
     p_out = np.zeros(nc)
@@ -400,15 +380,33 @@ def contact_pgs(
 
 
 @numba.njit(cache=True)
-def _gather_contacts(
-    compliant, spatial, h, pi, pf, c_pair, c_psi, c_slot, c_bias, W_n, W_t, W_o, nc, delta_n, delta_t, dofs, count, inv,
-    zero_column, cdof, cm, jn, jt, jo, yn, yt, yo, active, fric, gnn, g00, g01, g11, comp, bn, bt, mu,
-):
-    """Gather the active contacts (rows 0..n-1 of the per-contact arrays, in place): their DOFs
-    cdof (cm of them), Jacobian rows jn, jt (jo), y = A^-1 J^T rows, the Delassus blocks gnn,
-    g00, g01, g11 (compliance comp on the diagonal), the constant terms bn, bt (approach,
-    scripted bias, previous deformation), mu and whether each has friction. Returns (n, nf):
-    active contacts and friction contacts."""
+def _gather_contacts(compliant, spatial, h, pi, pf, contacts, nc, delta_n, delta_t, dofs, count, inv, zero_column):
+    """Gather the active contacts into rows 0..n-1 of per-contact arrays: their DOFs cdof (cm
+    of them), Jacobian rows jn, jt (jo), y = A^-1 J^T rows, the Delassus blocks gnn, g00, g01,
+    g11 (compliance comp on the diagonal), the constant terms bn, bt (approach, scripted bias,
+    previous deformation), mu and whether each has friction. Returns (cdof, cm, jn, jt, jo, yn,
+    yt, yo, active, fric, gnn, g00, g01, g11, comp, bn, bt, mu, n, nf): n active contacts, nf
+    with friction."""
+    c_pair, c_psi, c_slot, c_bias = contacts.pair, contacts.psi, contacts.slot, contacts.bias
+    W_n, W_t, W_o = contacts.W_n, contacts.W_t, contacts.W_o
+    cdof = np.zeros((nc, CONTACT_DOFS), np.int64)
+    cm = np.zeros(nc, np.int64)
+    jn = np.zeros((nc, CONTACT_DOFS))
+    jt = np.zeros((nc, CONTACT_DOFS))
+    jo = np.zeros((nc, CONTACT_DOFS))
+    yn = np.zeros((nc, CONTACT_DOFS))
+    yt = np.zeros((nc, CONTACT_DOFS))
+    yo = np.zeros((nc, CONTACT_DOFS))
+    active = np.empty(nc, np.int64)
+    fric = np.zeros(nc, np.bool_)
+    gnn = np.zeros(nc)
+    g00 = np.zeros(nc)
+    g01 = np.zeros(nc)
+    g11 = np.zeros(nc)
+    comp = np.zeros(nc)
+    bn = np.zeros(nc)
+    bt = np.zeros((nc, 2))
+    mu = np.zeros(nc)
     n = 0
     nf = 0
     for i in range(nc):
@@ -444,24 +442,33 @@ def _gather_contacts(
         bt[n, 1] += c_bias[i, 2]
         mu[n] = pf[p, PF_MU]
         fric[n] = mu[n] > 0.0 and (np.sqrt(st) > zero_column or np.sqrt(so) > zero_column)
-        _apply_inverse(inv, a, b, ca, cb, jn, yn, n)
-        for j in range(m):
-            gnn[n] += jn[n, j] * yn[n, j]
-        gnn[n] += comp[n]
+        _delassus(inv, a, b, ca, cb, n, spatial, fric[n], jn, jt, jo, yn, yt, yo, gnn, g00, g01, g11, comp)
         if fric[n]:
             nf += 1
-            _apply_inverse(inv, a, b, ca, cb, jt, yt, n)
-            for j in range(m):
-                g00[n] += jt[n, j] * yt[n, j]
-            g00[n] += comp[n]
-            if spatial:
-                _apply_inverse(inv, a, b, ca, cb, jo, yo, n)
-                for j in range(m):
-                    g01[n] += jt[n, j] * yo[n, j]
-                    g11[n] += jo[n, j] * yo[n, j]
-                g11[n] += comp[n]
         n += 1
-    return n, nf
+    return cdof, cm, jn, jt, jo, yn, yt, yo, active, fric, gnn, g00, g01, g11, comp, bn, bt, mu, n, nf
+
+
+@numba.njit(cache=True, inline="always")
+def _delassus(inv, a, b, ca, cb, n, spatial, has_friction, jn, jt, jo, yn, yt, yo, gnn, g00, g01, g11, comp):
+    """Contact n's rows y = A^-1 J^T and Delassus blocks, in place: gnn = jn . yn + comp and,
+    with friction, g00 = jt . yt + comp (in space also g01 = jt . yo, g11 = jo . yo + comp)."""
+    m = ca + cb
+    _apply_inverse(inv, a, b, ca, cb, jn, yn, n)
+    for j in range(m):
+        gnn[n] += jn[n, j] * yn[n, j]
+    gnn[n] += comp[n]
+    if has_friction:
+        _apply_inverse(inv, a, b, ca, cb, jt, yt, n)
+        for j in range(m):
+            g00[n] += jt[n, j] * yt[n, j]
+        g00[n] += comp[n]
+        if spatial:
+            _apply_inverse(inv, a, b, ca, cb, jo, yo, n)
+            for j in range(m):
+                g01[n] += jt[n, j] * yo[n, j]
+                g11[n] += jo[n, j] * yo[n, j]
+            g11[n] += comp[n]
 
 
 @numba.njit(cache=True, inline="always")
