@@ -230,6 +230,99 @@ def _start_system(S, D, model, h, q):
     return System(A, Ainv, M_const, h * gravity_force(bi, bf, D.gravity, nv))
 
 
+@numba.njit(cache=True)
+def _contact_frames(cap):
+    """Per-contact buffers of a rollout, allocated once: frames n, t, o and points pa, pb
+    (cap, 3), and the PGS warm start by slot (warm_n, warm_t, the slots last written)."""
+    c_n, c_t, c_o, c_pa, c_pb = np.zeros((cap, 3)), np.zeros((cap, 3)), np.zeros((cap, 3)), np.zeros((cap, 3)), np.zeros((cap, 3))
+    warm_n, warm_t, warm_slots = np.zeros(cap), np.zeros((cap, 2)), np.zeros(cap, np.int64)
+    return c_n, c_t, c_o, c_pa, c_pb, warm_n, warm_t, warm_slots
+
+
+@numba.njit(cache=True)
+def _pair_buffers(n_pairs, nb):
+    """Per-pair buffers of a rollout, allocated once (at least one pair): unsupported flags,
+    smallest psi, normal force, world force; and the planar detection's scratch (nb, 8)."""
+    n_pairs = max(n_pairs, 1)
+    unsupported = np.zeros(n_pairs, np.int64)
+    pair_psi, pair_force, pair_wrench = np.full(n_pairs, np.inf), np.zeros(n_pairs), np.zeros((n_pairs, 3))
+    scratch = np.empty((nb, 8))
+    return unsupported, pair_psi, pair_force, pair_wrench, scratch
+
+
+@numba.njit(cache=True, inline="always")
+def _detect(S, bi, bf, verts, pi, dimension, q, nu, h, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, scratch):
+    """Stage detect: contacts at q into the buffers, broadphase widened by nu and h. Returns
+    (nc, pairs the spatial kernels do not support). SceneData crosses a call only in space,
+    where detection needs it."""
+    n_unsupported = 0
+    if dimension == 3:
+        nc, n_unsupported = detect_spatial(S, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported)
+    else:
+        nc = detect_planar_into(bi, bf, verts, pi, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, scratch)
+    return nc, n_unsupported
+
+
+@numba.njit(cache=True, inline="always")
+def _cheap_step(kinematic, compliant, eps, theta, h, bi, nv, q, nu, q_ref, delta_n, delta_t, u, nc, c_psi, c_bias, W_n,
+                Ainv, M_const, rhs_const, q_index, v_index, kp, kd, lower, upper):
+    """Stages solve and integrate without a contact problem: `kinematic_step`, or `free_step`
+    (no contact, constant A, no force-limited drive; deformations relax to zero). Returns
+    (q+, nu+, q_ref+, delta_n+, delta_t+, status, pivots, residual, size, p_n, p_t, sweeps)."""
+    p_t, dn2, dt2, sw = np.zeros((0, 2)), delta_n, delta_t, 0
+    if kinematic:
+        q2, nu2, q_ref2, st, piv, res = kinematic_step(bi, h, q, q_ref, u, q_index, v_index, lower, upper, nc, c_psi, c_bias, W_n, nv)
+        size, p_n = nc, np.zeros(nc)
+    else:  # the cheap path: no contact problem
+        q2, nu2, q_ref2, st = free_step(eps, theta, h, bi, Ainv, M_const, rhs_const, q, nu, q_ref, u,
+                                        q_index, v_index, kp, kd, lower, upper)
+        if compliant and (delta_n.any() or delta_t.any()):
+            dn2, dt2 = np.zeros_like(delta_n), np.zeros_like(delta_t)
+        piv, res, size, p_n = 0, 0.0, 0, np.zeros(0)
+    return q2, nu2, q_ref2, dn2, dt2, st, piv, res, size, p_n, p_t, sw
+
+
+@numba.njit(cache=True, inline="always")
+def _contact_step(model, solver, D, tables, system, constant_A, keep_warm, eps_eff, bi, bf, nv, h, q, nu, q_ref, delta_n, delta_t,
+                  u, contacts, nc, c_slot, v_index, kp, kd, max_force, warm_n, warm_t, warm_slots, n_warm):
+    """Stages solve and integrate with a contact problem: `dynamics_step`, with A rebuilt at q
+    when it varies, keeping the PGS warm start. Returns (q+, nu+, q_ref+, delta_n+, delta_t+,
+    status, pivots, residual, size, p_n, p_t, sweeps, system, n_warm)."""
+    if not constant_A:
+        A = system_matrix(bi, bf, q, nv, eps_eff, h, v_index, kp, kd, max_force)
+        system = System(A, system.Ainv, system.M_const, system.rhs_const)
+    r = dynamics_step(model, solver, D, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t)
+    q2, nu2, q_ref2, dn2, dt2, st, piv, res, size, p_n, p_t, sw = r
+    if keep_warm and st == StepStatus.OK:
+        n_warm = _keep_warm(nc, c_slot, p_n, p_t, warm_n, warm_t, warm_slots, n_warm)
+    return q2, nu2, q_ref2, dn2, dt2, st, piv, res, size, p_n, p_t, sw, system, n_warm
+
+
+@numba.njit(cache=True, inline="always")
+def _tally(sweeps, lcp_solves, max_size, pivots, max_residual, sw, size, piv, res):
+    """A step's solver statistics into the rollout's: PGS sweeps, contact problems solved and
+    their largest size, Lemke pivots, largest residual. Returns the updated five."""
+    sweeps += sw
+    if size > 0:
+        lcp_solves += 1
+        if size > max_size:
+            max_size = size
+    pivots += piv
+    if res > max_residual:
+        max_residual = res
+    return sweeps, lcp_solves, max_size, pivots, max_residual
+
+
+@numba.njit(cache=True)
+def _start_records(max_records, q, nu):
+    """The record buffers (at least two records: start and end) with the start state at t = 0
+    as record 0. Returns (max_records, rec_t, rec_q, rec_nu, next record's index)."""
+    max_records = max(max_records, 2)
+    rec_t, rec_q, rec_nu = np.zeros(max_records), np.zeros((max_records, q.shape[0])), np.zeros((max_records, nu.shape[0]))
+    n_rec = _record_state(rec_t, rec_q, rec_nu, 0, 0.0, q, nu)
+    return max_records, rec_t, rec_q, rec_nu, n_rec
+
+
 # ----------------------------------------------------------------------------- the rollout
 
 
@@ -247,19 +340,14 @@ def rollout_kernel(S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, del
     """
     bi, bf, pi, verts, nv, dimension = S.bi, S.bf, S.pi, S.verts, S.nv, S.dimension
     tables = SceneTables(bi, bf, pi, S.pf, dimension == 3)
-    n_pairs = max(pi.shape[0], 1)
     scripted = has_script(bf)
     if scripted:
         place_scripted(bf, S.base_pos, S.base_quat, t0)
     contacts, first_slot = contact_buffers(pi, nv)  # buffers, allocated once
     c_pair, c_psi, c_slot, W_n, W_t, W_o, c_bias = contacts
-    cap = c_psi.shape[0]
-    c_n, c_t, c_o, c_pa, c_pb = np.zeros((cap, 3)), np.zeros((cap, 3)), np.zeros((cap, 3)), np.zeros((cap, 3)), np.zeros((cap, 3))
-    warm_n, warm_t, warm_slots, n_warm = np.zeros(cap), np.zeros((cap, 2)), np.zeros(cap, np.int64), 0  # PGS: by slot
-    keep_warm = solver.method != SOLVER_LEMKE
-    unsupported = np.zeros(n_pairs, np.int64)
-    pair_psi, pair_force, pair_wrench = np.full(n_pairs, np.inf), np.zeros(n_pairs), np.zeros((n_pairs, 3))
-    scratch = np.empty((bi.shape[0], 8))
+    c_n, c_t, c_o, c_pa, c_pb, warm_n, warm_t, warm_slots = _contact_frames(c_psi.shape[0])
+    n_warm, keep_warm = 0, solver.method != SOLVER_LEMKE  # PGS warm start: by slot
+    unsupported, pair_psi, pair_force, pair_wrench, scratch = _pair_buffers(pi.shape[0], bi.shape[0])
     g_op, g_index, g_lo, g_hi = goal  # hoisted: reading a tuple's array in the loop costs a reference count
     u_op, u_index, u_lo, u_hi = unsafe
     q_index, v_index, kp, kd, lower, upper, _, max_force = D
@@ -269,9 +357,7 @@ def rollout_kernel(S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, del
     constant_A, limited = not has_rotations(bi), any_limited(max_force)
     kinematic, eps, compliant, theta, _ = model
     eps_eff = QUASISTATIC_INERTIA if eps == 0.0 else eps
-    max_records = max(max_records, 2)
-    rec_t, rec_q, rec_nu = np.zeros(max_records), np.zeros((max_records, q.shape[0])), np.zeros((max_records, nv))
-    n_rec = _record_state(rec_t, rec_q, rec_nu, 0, 0.0, q, nu)
+    max_records, rec_t, rec_q, rec_nu, n_rec = _start_records(max_records, q, nu)
     t, steps, lcp_solves, pivots, max_residual, max_size, min_psi, force_steps, sweeps = 0.0, 0, 0, 0, 0.0, 0, np.inf, 0, 0
     outcome, status = Outcome.NONE.value, StepStatus.OK.value
     if not kinematic and constant_A and Ainv.shape[0] != nv:
@@ -283,12 +369,7 @@ def rollout_kernel(S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, del
         for _ in range(int(np.round(durations[k] / h))):
             if scripted:  # obstacles where they are at this time
                 place_scripted(bf, S.base_pos, S.base_quat, t0 + t)
-            # stage detect (SceneData crosses a call only in space, where detection needs it)
-            n_unsupported = 0
-            if dimension == 3:
-                nc, n_unsupported = detect_spatial(S, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported)
-            else:
-                nc = detect_planar_into(bi, bf, verts, pi, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, scratch)
+            nc, n_unsupported = _detect(S, bi, bf, verts, pi, dimension, q, nu, h, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, scratch)
             smallest = _distances(nc, c_pair, c_psi, c_slot, first_slot, pair_psi)
             if smallest < min_psi:
                 min_psi = smallest
@@ -301,33 +382,14 @@ def rollout_kernel(S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, del
                 break
             if nc > 0:
                 _assemble(bi, bf, pi, dimension, q, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, W_n, W_t, W_o, c_bias, scripted, not kinematic)
-            # stages solve and integrate: the rung's step kernel
-            p_t, dn2, dt2, sw = np.zeros((0, 2)), delta_n, delta_t, 0
-            if kinematic:
-                q2, nu2, q_ref2, st, piv, res = kinematic_step(bi, h, q, q_ref, u, q_index, v_index, lower, upper, nc, c_psi, c_bias, W_n, nv)
-                size, p_n = nc, np.zeros(nc)
-            elif nc == 0 and constant_A and not limited:  # the cheap path: no contact problem
-                q2, nu2, q_ref2, st = free_step(eps, theta, h, bi, Ainv, M_const, rhs_const, q, nu, q_ref, u,
-                                                q_index, v_index, kp, kd, lower, upper)
-                if compliant and (delta_n.any() or delta_t.any()):
-                    dn2, dt2 = np.zeros_like(delta_n), np.zeros_like(delta_t)
-                piv, res, size, p_n = 0, 0.0, 0, np.zeros(0)
+            if kinematic or (nc == 0 and constant_A and not limited):  # stages solve and integrate
+                q2, nu2, q_ref2, dn2, dt2, st, piv, res, size, p_n, p_t, sw = _cheap_step(kinematic, compliant, eps, theta, h, bi, nv, q, nu, q_ref,
+                    delta_n, delta_t, u, nc, c_psi, c_bias, W_n, Ainv, M_const, rhs_const, q_index, v_index, kp, kd, lower, upper)
             else:
-                if not constant_A:
-                    A = system_matrix(bi, bf, q, nv, eps_eff, h, v_index, kp, kd, max_force)
-                    system = System(A, Ainv, M_const, rhs_const)
-                r = dynamics_step(model, solver, D, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t)
-                q2, nu2, q_ref2, dn2, dt2, st, piv, res, size, p_n, p_t, sw = r
-                if keep_warm and st == StepStatus.OK:
-                    n_warm = _keep_warm(nc, c_slot, p_n, p_t, warm_n, warm_t, warm_slots, n_warm)
-            sweeps += sw
-            if size > 0:
-                lcp_solves += 1
-                if size > max_size:
-                    max_size = size
-            pivots += piv
-            if res > max_residual:
-                max_residual = res
+                q2, nu2, q_ref2, dn2, dt2, st, piv, res, size, p_n, p_t, sw, system, n_warm = _contact_step(
+                    model, solver, D, tables, system, constant_A, keep_warm, eps_eff, bi, bf, nv, h, q, nu, q_ref, delta_n, delta_t,
+                    u, contacts, nc, c_slot, v_index, kp, kd, max_force, warm_n, warm_t, warm_slots, n_warm)
+            sweeps, lcp_solves, max_size, pivots, max_residual = _tally(sweeps, lcp_solves, max_size, pivots, max_residual, sw, size, piv, res)
             if st != StepStatus.OK:
                 status = st
                 break
