@@ -251,54 +251,6 @@ def _pair_buffers(n_pairs, nb):
 
 
 @numba.njit(cache=True, inline="always")
-def _detect(S, bi, bf, verts, pi, dimension, q, nu, h, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, scratch):
-    """Stage detect: contacts at q into the buffers, broadphase widened by nu and h. Returns
-    (nc, pairs the spatial kernels do not support). SceneData crosses a call only in space,
-    where detection needs it."""
-    n_unsupported = 0
-    if dimension == 3:
-        nc, n_unsupported = detect_spatial(S, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported)
-    else:
-        nc = detect_planar_into(bi, bf, verts, pi, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, scratch)
-    return nc, n_unsupported
-
-
-@numba.njit(cache=True, inline="always")
-def _cheap_step(kinematic, compliant, eps, theta, h, bi, nv, q, nu, q_ref, delta_n, delta_t, u, nc, c_psi, c_bias, W_n,
-                Ainv, M_const, rhs_const, q_index, v_index, kp, kd, lower, upper):
-    """Stages solve and integrate without a contact problem: `kinematic_step`, or `free_step`
-    (no contact, constant A, no force-limited drive; deformations relax to zero). Returns
-    (q+, nu+, q_ref+, delta_n+, delta_t+, status, pivots, residual, size, p_n, p_t, sweeps)."""
-    p_t, dn2, dt2, sw = np.zeros((0, 2)), delta_n, delta_t, 0
-    if kinematic:
-        q2, nu2, q_ref2, st, piv, res = kinematic_step(bi, h, q, q_ref, u, q_index, v_index, lower, upper, nc, c_psi, c_bias, W_n, nv)
-        size, p_n = nc, np.zeros(nc)
-    else:  # the cheap path: no contact problem
-        q2, nu2, q_ref2, st = free_step(eps, theta, h, bi, Ainv, M_const, rhs_const, q, nu, q_ref, u,
-                                        q_index, v_index, kp, kd, lower, upper)
-        if compliant and (delta_n.any() or delta_t.any()):
-            dn2, dt2 = np.zeros_like(delta_n), np.zeros_like(delta_t)
-        piv, res, size, p_n = 0, 0.0, 0, np.zeros(0)
-    return q2, nu2, q_ref2, dn2, dt2, st, piv, res, size, p_n, p_t, sw
-
-
-@numba.njit(cache=True, inline="always")
-def _contact_step(model, solver, D, tables, system, constant_A, keep_warm, eps_eff, bi, bf, nv, h, q, nu, q_ref, delta_n, delta_t,
-                  u, contacts, nc, c_slot, v_index, kp, kd, max_force, warm_n, warm_t, warm_slots, n_warm):
-    """Stages solve and integrate with a contact problem: `dynamics_step`, with A rebuilt at q
-    when it varies, keeping the PGS warm start. Returns (q+, nu+, q_ref+, delta_n+, delta_t+,
-    status, pivots, residual, size, p_n, p_t, sweeps, system, n_warm)."""
-    if not constant_A:
-        A = system_matrix(bi, bf, q, nv, eps_eff, h, v_index, kp, kd, max_force)
-        system = System(A, system.Ainv, system.M_const, system.rhs_const)
-    r = dynamics_step(model, solver, D, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t)
-    q2, nu2, q_ref2, dn2, dt2, st, piv, res, size, p_n, p_t, sw = r
-    if keep_warm and st == StepStatus.OK:
-        n_warm = _keep_warm(nc, c_slot, p_n, p_t, warm_n, warm_t, warm_slots, n_warm)
-    return q2, nu2, q_ref2, dn2, dt2, st, piv, res, size, p_n, p_t, sw, system, n_warm
-
-
-@numba.njit(cache=True, inline="always")
 def _tally(sweeps, lcp_solves, max_size, pivots, max_residual, sw, size, piv, res):
     """A step's solver statistics into the rollout's: PGS sweeps, contact problems solved and
     their largest size, Lemke pivots, largest residual. Returns the updated five."""
@@ -321,6 +273,21 @@ def _start_records(max_records, q, nu):
     rec_t, rec_q, rec_nu = np.zeros(max_records), np.zeros((max_records, q.shape[0])), np.zeros((max_records, nu.shape[0]))
     n_rec = _record_state(rec_t, rec_q, rec_nu, 0, 0.0, q, nu)
     return max_records, rec_t, rec_q, rec_nu, n_rec
+
+
+@numba.njit(cache=True)
+def _finish(S, goal, unsafe, scripted, t0, t, q, nu, status, outcome, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pair_psi,
+            rec_t, rec_q, rec_nu, n_rec):
+    """End of a run: a run that ended with no step failure and no outcome is classified in
+    its final state (scripted obstacles placed at the end time); the final state is recorded
+    unless it already is. Returns (outcome, number of records)."""
+    if status == StepStatus.OK and outcome == Outcome.NONE:
+        if scripted:
+            place_scripted(S.bf, S.base_pos, S.base_quat, t0 + t)
+        outcome = _final_outcome(S, goal, unsafe, q, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pair_psi)
+    if rec_t[n_rec - 1] != t:
+        n_rec = _record_state(rec_t, rec_q, rec_nu, n_rec, t, q, nu)
+    return outcome, n_rec
 
 
 # ----------------------------------------------------------------------------- the rollout
@@ -359,9 +326,8 @@ def rollout_kernel(S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, del
     eps_eff = QUASISTATIC_INERTIA if eps == 0.0 else eps
     max_records, rec_t, rec_q, rec_nu, n_rec = _start_records(max_records, q, nu)
     t, steps, lcp_solves, pivots, max_residual, max_size, min_psi, force_steps, sweeps = 0.0, 0, 0, 0, 0.0, 0, np.inf, 0, 0
-    outcome, status = Outcome.NONE.value, StepStatus.OK.value
-    if not kinematic and constant_A and Ainv.shape[0] != nv:
-        status = StepStatus.SINGULAR.value
+    outcome = Outcome.NONE.value
+    status = StepStatus.SINGULAR.value if (not kinematic and constant_A and Ainv.shape[0] != nv) else StepStatus.OK.value
     for k in range(controls.shape[0]):
         if status != StepStatus.OK or (outcome != Outcome.NONE and stop_at_outcome):
             break
@@ -369,7 +335,12 @@ def rollout_kernel(S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, del
         for _ in range(int(np.round(durations[k] / h))):
             if scripted:  # obstacles where they are at this time
                 place_scripted(bf, S.base_pos, S.base_quat, t0 + t)
-            nc, n_unsupported = _detect(S, bi, bf, verts, pi, dimension, q, nu, h, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, scratch)
+            # stage detect (SceneData crosses a call only in space, where detection needs it)
+            n_unsupported = 0
+            if dimension == 3:
+                nc, n_unsupported = detect_spatial(S, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported)
+            else:
+                nc = detect_planar_into(bi, bf, verts, pi, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, scratch)
             smallest = _distances(nc, c_pair, c_psi, c_slot, first_slot, pair_psi)
             if smallest < min_psi:
                 min_psi = smallest
@@ -382,13 +353,26 @@ def rollout_kernel(S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, del
                 break
             if nc > 0:
                 _assemble(bi, bf, pi, dimension, q, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, W_n, W_t, W_o, c_bias, scripted, not kinematic)
-            if kinematic or (nc == 0 and constant_A and not limited):  # stages solve and integrate
-                q2, nu2, q_ref2, dn2, dt2, st, piv, res, size, p_n, p_t, sw = _cheap_step(kinematic, compliant, eps, theta, h, bi, nv, q, nu, q_ref,
-                    delta_n, delta_t, u, nc, c_psi, c_bias, W_n, Ainv, M_const, rhs_const, q_index, v_index, kp, kd, lower, upper)
+            # stages solve and integrate: the rung's step kernel (in line: arguments of an inlined
+            # stage are reference-counted each step, which slowed the cheap rungs by about 10%)
+            p_t, dn2, dt2, sw = np.zeros((0, 2)), delta_n, delta_t, 0
+            if kinematic:
+                q2, nu2, q_ref2, st, piv, res = kinematic_step(bi, h, q, q_ref, u, q_index, v_index, lower, upper, nc, c_psi, c_bias, W_n, nv)
+                size, p_n = nc, np.zeros(nc)
+            elif nc == 0 and constant_A and not limited:  # the cheap path: no contact problem
+                q2, nu2, q_ref2, st = free_step(eps, theta, h, bi, Ainv, M_const, rhs_const, q, nu, q_ref, u,
+                                                q_index, v_index, kp, kd, lower, upper)
+                if compliant and (delta_n.any() or delta_t.any()):
+                    dn2, dt2 = np.zeros_like(delta_n), np.zeros_like(delta_t)
+                piv, res, size, p_n = 0, 0.0, 0, np.zeros(0)
             else:
-                q2, nu2, q_ref2, dn2, dt2, st, piv, res, size, p_n, p_t, sw, system, n_warm = _contact_step(
-                    model, solver, D, tables, system, constant_A, keep_warm, eps_eff, bi, bf, nv, h, q, nu, q_ref, delta_n, delta_t,
-                    u, contacts, nc, c_slot, v_index, kp, kd, max_force, warm_n, warm_t, warm_slots, n_warm)
+                if not constant_A:
+                    A = system_matrix(bi, bf, q, nv, eps_eff, h, v_index, kp, kd, max_force)
+                    system = System(A, Ainv, M_const, rhs_const)
+                r = dynamics_step(model, solver, D, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t)
+                q2, nu2, q_ref2, dn2, dt2, st, piv, res, size, p_n, p_t, sw = r
+                if keep_warm and st == StepStatus.OK:
+                    n_warm = _keep_warm(nc, c_slot, p_n, p_t, warm_n, warm_t, warm_slots, n_warm)
             sweeps, lcp_solves, max_size, pivots, max_residual = _tally(sweeps, lcp_solves, max_size, pivots, max_residual, sw, size, piv, res)
             if st != StepStatus.OK:
                 status = st
@@ -399,11 +383,7 @@ def rollout_kernel(S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, del
             steps += 1
             if record_every > 0 and steps % record_every == 0 and n_rec < max_records - 1:
                 n_rec = _record_state(rec_t, rec_q, rec_nu, n_rec, t, q, nu)
-    if status == StepStatus.OK and outcome == Outcome.NONE:
-        if scripted:
-            place_scripted(bf, S.base_pos, S.base_quat, t0 + t)
-        outcome = _final_outcome(S, goal, unsafe, q, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pair_psi)
-    if rec_t[n_rec - 1] != t:
-        n_rec = _record_state(rec_t, rec_q, rec_nu, n_rec, t, q, nu)
+    outcome, n_rec = _finish(S, goal, unsafe, scripted, t0, t, q, nu, status, outcome, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pair_psi,
+                             rec_t, rec_q, rec_nu, n_rec)
     return RolloutOutput(q, nu, q_ref, delta_n, delta_t, t, outcome, status, steps, lcp_solves, pivots, max_residual, max_size,
                          rec_t[:n_rec], rec_q[:n_rec], rec_nu[:n_rec], pair_force, min_psi, force_steps, sweeps, pair_wrench)
