@@ -347,15 +347,48 @@ def contact_pgs(
     Returns a `PgsResult`.
     """
     compliant, directions = model.compliant, model.friction_directions
-    c_pair, c_psi, c_slot, c_bias = contacts.pair, contacts.psi, contacts.slot, contacts.bias
-    W_n, W_t, W_o = contacts.W_n, contacts.W_t, contacts.W_o
+    c_slot = contacts.slot
     d = directions if spatial else 2
     cosines = np.empty(d)
     sines = np.empty(d)
     for j in range(d):
         cosines[j] = np.cos(2.0 * np.pi * j / d)
         sines[j] = np.sin(2.0 * np.pi * j / d)
-    # gather each contact's DOFs and Jacobian rows
+    # each active contact's DOFs, Jacobian rows, A^-1 times them, Delassus blocks and terms
+    cdof, cm, jn, jt, jo, yn, yt, yo, active, fric, gnn, g00, g01, g11, comp, bn, bt, mu, n, nf = _gather_contacts(
+        compliant, spatial, h, pi, pf, contacts, nc, delta_n, delta_t, dofs, count, inv, zero_column
+    )
+    unknowns = n + nf * (2 if spatial else 1)
+    p_out = np.zeros(nc)
+    t_out = np.zeros((nc, 2))
+    if n == 0:
+        return PgsResult(nu_free.copy(), p_out, t_out, active[:0], PgsStatus.CONVERGED.value, 0, 0.0, 0)
+    scale = _impulse_scale(n, cdof, cm, jn, gnn, bn, nu_free)
+    v = nu_free.copy()
+    p_n = np.zeros(n)
+    f = np.zeros((n, 2))
+    _warm_start(n, spatial, d, active, c_slot, warm_n, warm_t, cdof, cm, yn, yt, yo, fric, mu, p_n, f, v, cosines, sines)
+    status, sweeps, residual = _sweeps(
+        n, spatial, cdof, cm, jn, jt, jo, yn, yt, yo, gnn, g00, g01, g11, comp, bn, bt, mu, fric, p_n, f, v, cosines, sines,
+        scale, tolerance, max_sweeps,
+    )
+    for k in range(n):
+        p_out[active[k]] = p_n[k]
+        t_out[active[k], 0] = f[k, 0]
+        t_out[active[k], 1] = f[k, 1]
+    return PgsResult(v, p_out, t_out, active[:n], status, sweeps, residual, unknowns)
+
+
+@numba.njit(cache=True)
+def _gather_contacts(compliant, spatial, h, pi, pf, contacts, nc, delta_n, delta_t, dofs, count, inv, zero_column):
+    """Gather the active contacts into rows 0..n-1 of per-contact arrays: their DOFs cdof (cm
+    of them), Jacobian rows jn, jt (jo), y = A^-1 J^T rows, the Delassus blocks gnn, g00, g01,
+    g11 (compliance comp on the diagonal), the constant terms bn, bt (approach, scripted bias,
+    previous deformation), mu and whether each has friction. Returns (cdof, cm, jn, jt, jo, yn,
+    yt, yo, active, fric, gnn, g00, g01, g11, comp, bn, bt, mu, n, nf): n active contacts, nf
+    with friction."""
+    c_pair, c_psi, c_slot, c_bias = contacts.pair, contacts.psi, contacts.slot, contacts.bias
+    W_n, W_t, W_o = contacts.W_n, contacts.W_t, contacts.W_o
     cdof = np.zeros((nc, CONTACT_DOFS), np.int64)
     cm = np.zeros(nc, np.int64)
     jn = np.zeros((nc, CONTACT_DOFS))
@@ -409,37 +442,50 @@ def contact_pgs(
         bt[n, 1] += c_bias[i, 2]
         mu[n] = pf[p, PF_MU]
         fric[n] = mu[n] > 0.0 and (np.sqrt(st) > zero_column or np.sqrt(so) > zero_column)
-        _apply_inverse(inv, a, b, ca, cb, jn, yn, n)
-        for j in range(m):
-            gnn[n] += jn[n, j] * yn[n, j]
-        gnn[n] += comp[n]
+        _delassus(inv, a, b, ca, cb, n, spatial, fric[n], jn, jt, jo, yn, yt, yo, gnn, g00, g01, g11, comp)
         if fric[n]:
             nf += 1
-            _apply_inverse(inv, a, b, ca, cb, jt, yt, n)
-            for j in range(m):
-                g00[n] += jt[n, j] * yt[n, j]
-            g00[n] += comp[n]
-            if spatial:
-                _apply_inverse(inv, a, b, ca, cb, jo, yo, n)
-                for j in range(m):
-                    g01[n] += jt[n, j] * yo[n, j]
-                    g11[n] += jo[n, j] * yo[n, j]
-                g11[n] += comp[n]
         n += 1
-    unknowns = n + nf * (2 if spatial else 1)
-    p_out = np.zeros(nc)
-    t_out = np.zeros((nc, 2))
-    if n == 0:
-        return PgsResult(nu_free.copy(), p_out, t_out, active[:0], PgsStatus.CONVERGED.value, 0, 0.0, 0)
-    # impulse scale: the largest impulse that would stop a contact's free approach
+    return cdof, cm, jn, jt, jo, yn, yt, yo, active, fric, gnn, g00, g01, g11, comp, bn, bt, mu, n, nf
+
+
+@numba.njit(cache=True, inline="always")
+def _delassus(inv, a, b, ca, cb, n, spatial, has_friction, jn, jt, jo, yn, yt, yo, gnn, g00, g01, g11, comp):
+    """Contact n's rows y = A^-1 J^T and Delassus blocks, in place: gnn = jn . yn + comp and,
+    with friction, g00 = jt . yt + comp (in space also g01 = jt . yo, g11 = jo . yo + comp)."""
+    m = ca + cb
+    _apply_inverse(inv, a, b, ca, cb, jn, yn, n)
+    for j in range(m):
+        gnn[n] += jn[n, j] * yn[n, j]
+    gnn[n] += comp[n]
+    if has_friction:
+        _apply_inverse(inv, a, b, ca, cb, jt, yt, n)
+        for j in range(m):
+            g00[n] += jt[n, j] * yt[n, j]
+        g00[n] += comp[n]
+        if spatial:
+            _apply_inverse(inv, a, b, ca, cb, jo, yo, n)
+            for j in range(m):
+                g01[n] += jt[n, j] * yo[n, j]
+                g11[n] += jo[n, j] * yo[n, j]
+            g11[n] += comp[n]
+
+
+@numba.njit(cache=True, inline="always")
+def _impulse_scale(n, cdof, cm, jn, gnn, bn, nu_free):
+    """The impulse scale: the largest normal impulse that would stop a contact's free approach."""
     scale = 0.0
     for k in range(n):
         w = bn[k] + _dot(jn, k, cdof, cm[k], nu_free)
         scale = max(scale, -w / gnn[k])
-    # warm start, clipped into the cones
-    v = nu_free.copy()
-    p_n = np.zeros(n)
-    f = np.zeros((n, 2))
+    return scale
+
+
+@numba.njit(cache=True)
+def _warm_start(n, spatial, d, active, c_slot, warm_n, warm_t, cdof, cm, yn, yt, yo, fric, mu, p_n, f, v, cosines, sines):
+    """Warm start, in place: p_n, f from the previous step's impulses by contact slot, clipped
+    into their cones (in space, onto the polygon's inscribed circle), and v = nu_free plus
+    A^-1 times their impulse."""
     for k in range(n):
         slot = c_slot[active[k]]
         p_n[k] = max(warm_n[slot], 0.0)
@@ -460,6 +506,26 @@ def contact_pgs(
             _add(yt, k, cdof, cm[k], f[k, 0], v)
             if spatial:
                 _add(yo, k, cdof, cm[k], f[k, 1], v)
+
+
+@numba.njit(cache=True, inline="always")
+def _largest_impulse(n, scale, p_n, f):
+    """max(scale, every p_n, every |f|): the size the convergence tests are relative to."""
+    big = scale
+    for k in range(n):
+        big = max(big, p_n[k], np.sqrt(f[k, 0] * f[k, 0] + f[k, 1] * f[k, 1]))
+    return big
+
+
+@numba.njit(cache=True)
+def _sweeps(
+    n, spatial, cdof, cm, jn, jt, jo, yn, yt, yo, gnn, g00, g01, g11, comp, bn, bt, mu, fric, p_n, f, v, cosines, sines,
+    scale, tolerance, max_sweeps,
+):
+    """PGS sweeps, in place on (p_n, f, v), until the change of a sweep and then the
+    recomputed residual (both relative to the largest impulse) are below tolerance, or
+    max_sweeps. Returns (status, sweeps, residual), the residual recomputed at the end when
+    not converged (NON_FINITE when it, or a sweep's change, is not finite)."""
     status = PgsStatus.NOT_CONVERGED.value
     sweeps = 0
     residual = np.inf
@@ -477,9 +543,7 @@ def contact_pgs(
         if not np.isfinite(change):
             status = PgsStatus.NON_FINITE.value
             break
-        big = scale
-        for k in range(n):
-            big = max(big, p_n[k], np.sqrt(f[k, 0] * f[k, 0] + f[k, 1] * f[k, 1]))
+        big = _largest_impulse(n, scale, p_n, f)
         if change <= tolerance * big:
             residual = _residual(n, spatial, cdof, cm, jn, jt, jo, gnn, g00, g01, g11, comp, bn, bt, mu, fric, p_n, f, v, cosines, sines)
             residual = residual / big if big > 0.0 else residual
@@ -487,18 +551,12 @@ def contact_pgs(
                 status = PgsStatus.CONVERGED.value
                 break
     if status != PgsStatus.CONVERGED:
-        big = scale
-        for k in range(n):
-            big = max(big, p_n[k], np.sqrt(f[k, 0] * f[k, 0] + f[k, 1] * f[k, 1]))
+        big = _largest_impulse(n, scale, p_n, f)
         residual = _residual(n, spatial, cdof, cm, jn, jt, jo, gnn, g00, g01, g11, comp, bn, bt, mu, fric, p_n, f, v, cosines, sines)
         residual = residual / big if big > 0.0 else residual
         if not np.isfinite(residual):
             status = PgsStatus.NON_FINITE.value
-    for k in range(n):
-        p_out[active[k]] = p_n[k]
-        t_out[active[k], 0] = f[k, 0]
-        t_out[active[k], 1] = f[k, 1]
-    return PgsResult(v, p_out, t_out, active[:n], status, sweeps, residual, unknowns)
+    return status, sweeps, residual
 
 
 @numba.njit(cache=True)

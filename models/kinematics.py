@@ -171,8 +171,10 @@ def hull_tables(core: np.ndarray):
             np.array(dirs, float).reshape(-1, 3))
 
 
-def compile_scene(scenario: Scenario) -> SceneData:
-    """Pack a validated scenario into arrays for the compiled kernels."""
+def _shape_tables(scenario: Scenario):
+    """Per-body shape tables: kind, core-point ranges (vstart, vcount), core points, radius,
+    box half extents, half-space normal and offset, and bounding radius (inf for half-spaces).
+    """
     dim = scenario.dimension
     bodies = scenario.spec.bodies
     nb = len(bodies)
@@ -184,21 +186,7 @@ def compile_scene(scenario: Scenario) -> SceneData:
     half_extents = np.zeros((nb, 3))
     hs_normal = np.zeros((nb, dim))
     hs_offset = np.zeros(nb)
-    base_pos = np.zeros((nb, 3))
-    base_quat = np.zeros((nb, 4))
-    qmap = -np.ones((nb, 8), np.int64)
-    vmap = -np.ones((nb, 7), np.int64)
-    mass = np.zeros(nb)
-    inertia = np.zeros((nb, 3))
     bound = np.zeros(nb)
-    script = np.zeros((nb, 9))
-    q_index = {name: i for i, name in enumerate(scenario.coordinates)}
-    v_index = {name: i for i, name in enumerate(scenario.velocities)}
-    hull = np.zeros((nb, 6), np.int64)
-    planes_list: list[np.ndarray] = []
-    loops_list: list[list[int]] = []
-    edges_list: list[np.ndarray] = []
-    dirs_list: list[np.ndarray] = []
     offset = 0
     for b, body in enumerate(bodies):
         g = scenario.geometries[body.name]
@@ -215,26 +203,61 @@ def compile_scene(scenario: Scenario) -> SceneData:
             if body.shape.type == "box":
                 half_extents[b] = 0.5 * np.asarray(body.shape.size)
         radius[b] = g.radius
-        if dim == 3 and kind[b] in (SHAPE_BOX, SHAPE_MESH):
-            planes, loops, edges, dirs = hull_tables(core)
-            hull[b] = [sum(map(len, planes_list)), len(planes), sum(map(len, edges_list)), len(edges),
-                       sum(map(len, dirs_list)), len(dirs)]
-            planes_list.append(planes)
-            loops_list += [[offset + k for k in lp] for lp in loops]
-            edges_list.append(edges + offset)
-            dirs_list.append(dirs)
         vstart[b], vcount[b] = offset, len(core)
         verts_list.append(core)
         offset += len(core)
         if g.kind != "halfspace":
             bound[b] = (np.max(np.linalg.norm(core, axis=1)) if len(core) else 0.0) + g.radius
+    verts = np.concatenate(verts_list) if verts_list else np.zeros((0, dim))
+    return kind, vstart, vcount, verts, radius, half_extents, hs_normal, hs_offset, bound
 
-        placement = scenario.base_placements[body.name]
-        base_pos[b, :dim] = placement.translation
-        if dim == 2:
-            base_quat[b] = _quat_z(float(body.pose.theta or 0.0))
-        else:
-            base_quat[b] = _rotation_to_quat(placement.rotation)
+
+def _scene_hulls(scenario: Scenario, kind, vstart):
+    """Hull tables of the boxes and meshes (spatial scenes): per-body ranges hull (nb, 6) and
+    the stacked planes, face vertex loops (face_verts), edges and edge directions, with vertex
+    indices into the scene's stacked core points.
+    """
+    dim = scenario.dimension
+    nb = len(kind)
+    hull = np.zeros((nb, 6), np.int64)
+    planes_list: list[np.ndarray] = []
+    loops_list: list[list[int]] = []
+    edges_list: list[np.ndarray] = []
+    dirs_list: list[np.ndarray] = []
+    for b, body in enumerate(scenario.spec.bodies):
+        if not (dim == 3 and kind[b] in (SHAPE_BOX, SHAPE_MESH)):
+            continue
+        core = np.asarray(scenario.geometries[body.name].core, float).reshape(-1, dim)
+        offset = vstart[b]
+        planes, loops, edges, dirs = hull_tables(core)
+        hull[b] = [sum(map(len, planes_list)), len(planes), sum(map(len, edges_list)), len(edges),
+                   sum(map(len, dirs_list)), len(dirs)]
+        planes_list.append(planes)
+        loops_list += [[offset + k for k in lp] for lp in loops]
+        edges_list.append(edges + offset)
+        dirs_list.append(dirs)
+    width = max((len(lp) for lp in loops_list), default=0)
+    face_verts = np.zeros((len(loops_list), 1 + width), np.int64)
+    for f, lp in enumerate(loops_list):
+        face_verts[f, 0] = len(lp)
+        face_verts[f, 1:1 + len(lp)] = lp
+    planes = np.ascontiguousarray(np.concatenate(planes_list) if planes_list else np.zeros((0, 4)))
+    edges = np.ascontiguousarray(np.concatenate(edges_list) if edges_list else np.zeros((0, 2), np.int64))
+    edge_dirs = np.ascontiguousarray(np.concatenate(dirs_list) if dirs_list else np.zeros((0, 3)))
+    return hull, planes, face_verts, edges, edge_dirs
+
+
+def _index_maps(scenario: Scenario):
+    """Per-body index maps: qmap (nb, 8) and vmap (nb, 7), the q and nu indices of each
+    body's free coordinates (-1 where not free; see the module docstring)."""
+    dim = scenario.dimension
+    bodies = scenario.spec.bodies
+    nb = len(bodies)
+    qmap = -np.ones((nb, 8), np.int64)
+    vmap = -np.ones((nb, 7), np.int64)
+    q_index = {name: i for i, name in enumerate(scenario.coordinates)}
+    v_index = {name: i for i, name in enumerate(scenario.velocities)}
+    for b, body in enumerate(bodies):
         for col, name in enumerate(("x", "y", "z")):
             key = f"{body.name}.{name}"
             if key in q_index:
@@ -249,6 +272,28 @@ def compile_scene(scenario: Scenario) -> SceneData:
                 qmap[b, Q_QW + k] = q_index[f"{body.name}.q{c}"]
             for k, c in enumerate("xyz"):
                 vmap[b, V_WX + k] = v_index[f"{body.name}.w{c}"]
+    return qmap, vmap
+
+
+def _poses_and_inertia(scenario: Scenario, bound):
+    """Per-body poses and mass properties: base pose (position, quaternion), the scripted
+    motion of moving obstacles (pose at t = 0, velocity, speed bound from the bounding radius),
+    mass and principal moments of inertia (zero for bodies without DOFs)."""
+    dim = scenario.dimension
+    bodies = scenario.spec.bodies
+    nb = len(bodies)
+    base_pos = np.zeros((nb, 3))
+    base_quat = np.zeros((nb, 4))
+    mass = np.zeros(nb)
+    inertia = np.zeros((nb, 3))
+    script = np.zeros((nb, 9))
+    for b, body in enumerate(bodies):
+        placement = scenario.base_placements[body.name]
+        base_pos[b, :dim] = placement.translation
+        if dim == 2:
+            base_quat[b] = _quat_z(float(body.pose.theta or 0.0))
+        else:
+            base_quat[b] = _rotation_to_quat(placement.rotation)
         if body.velocity:
             script[b, :3] = base_pos[b]
             script[b, 3] = float(body.pose.theta or 0.0) if dim == 2 else 0.0
@@ -262,20 +307,33 @@ def compile_scene(scenario: Scenario) -> SceneData:
                 inertia[b] = [0.0, 0.0, body.inertia[0]] if dim == 2 else (
                     body.inertia * 3 if len(body.inertia) == 1 else body.inertia
                 )
+    return base_pos, base_quat, mass, inertia, script
 
-    names = [b.name for b in bodies]
+
+def _pair_tables(scenario: Scenario, kind, vcount):
+    """Per-pair tables: body indices a and b, the most contacts the pair can produce at once,
+    and the contact parameters pf (np, 3): mu, K, C."""
+    names = [b.name for b in scenario.spec.bodies]
     pairs = scenario.pairs
     pair_a = np.array([names.index(p.body_a) for p in pairs], np.int64)
     pair_b = np.array([names.index(p.body_b) for p in pairs], np.int64)
     max_contacts = np.array(
-        [_max_contacts(kind[a], vcount[a], kind[b], vcount[b], dim) for a, b in zip(pair_a, pair_b)], np.int64
+        [_max_contacts(kind[a], vcount[a], kind[b], vcount[b], scenario.dimension) for a, b in zip(pair_a, pair_b)], np.int64
     )
-    verts = np.concatenate(verts_list) if verts_list else np.zeros((0, dim))
-    width = max((len(lp) for lp in loops_list), default=0)
-    face_verts = np.zeros((len(loops_list), 1 + width), np.int64)
-    for f, lp in enumerate(loops_list):
-        face_verts[f, 0] = len(lp)
-        face_verts[f, 1:1 + len(lp)] = lp
+    pf = np.array([[p.mu, p.K, p.C] for p in pairs], float).reshape(-1, 3)
+    return pair_a, pair_b, max_contacts, pf
+
+
+def compile_scene(scenario: Scenario) -> SceneData:
+    """Pack a validated scenario into arrays for the compiled kernels."""
+    dim = scenario.dimension
+    nb = len(scenario.spec.bodies)
+    kind, vstart, vcount, verts, radius, half_extents, hs_normal, hs_offset, bound = _shape_tables(scenario)
+    hull, planes, face_verts, edges, edge_dirs = _scene_hulls(scenario, kind, vstart)
+    qmap, vmap = _index_maps(scenario)
+    base_pos, base_quat, mass, inertia, script = _poses_and_inertia(scenario, bound)
+    pairs = scenario.pairs
+    pair_a, pair_b, max_contacts, pf = _pair_tables(scenario, kind, vcount)
     bi = np.concatenate([kind[:, None], vstart[:, None], vcount[:, None], qmap, vmap], axis=1).astype(np.int64)
     normals3 = np.zeros((nb, 3))
     normals3[:, :dim] = hs_normal
@@ -283,7 +341,6 @@ def compile_scene(scenario: Scenario) -> SceneData:
         [radius[:, None], half_extents, normals3, hs_offset[:, None], base_pos, base_quat, mass[:, None], inertia, bound[:, None], script], axis=1
     )
     assert bi.shape[1] == BI_COLUMNS and bf.shape[1] == BF_COLUMNS
-    pf = np.array([[p.mu, p.K, p.C] for p in pairs], float).reshape(-1, 3)
     return SceneData(
         dimension=dim,
         nq=len(scenario.coordinates),
@@ -310,10 +367,10 @@ def compile_scene(scenario: Scenario) -> SceneData:
         pair_C=np.array([p.C for p in pairs], float),
         pair_max_contacts=max_contacts,
         hull=hull,
-        planes=np.ascontiguousarray(np.concatenate(planes_list) if planes_list else np.zeros((0, 4))),
+        planes=planes,
         face_verts=face_verts,
-        edges=np.ascontiguousarray(np.concatenate(edges_list) if edges_list else np.zeros((0, 2), np.int64)),
-        edge_dirs=np.ascontiguousarray(np.concatenate(dirs_list) if dirs_list else np.zeros((0, 3))),
+        edges=edges,
+        edge_dirs=edge_dirs,
         bi=np.ascontiguousarray(bi),
         bf=np.ascontiguousarray(bf),
         pi=np.ascontiguousarray(

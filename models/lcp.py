@@ -487,18 +487,10 @@ def lemke_kernel(M, q, max_pivots):
     z = np.zeros(n)
     if n == 0:
         return z, np.zeros(0), STATUS_SOLVED, 0
-    trivial = True
-    for i in range(n):
-        if not (q[i] >= 0.0):
-            trivial = False
-            break
-    if trivial:
+    if _nonnegative(q):
         return z, _matvec_plus(M, z, q), STATUS_SOLVED, 0
 
-    qscale = 0.0
-    for i in range(n):
-        if abs(q[i]) > qscale:
-            qscale = abs(q[i])
+    qscale = _max_abs(q)
     Binv = np.eye(n)
     qbar = q.copy()
     basis = np.arange(n)  # basic variable of each row: w_i = i, z_j = n + j, z0 = 2n
@@ -508,22 +500,64 @@ def lemke_kernel(M, q, max_pivots):
     col = np.empty(n)
     cand = np.empty(n, dtype=np.int64)
     idx = np.empty(n, dtype=np.int64)
-    ones = np.ones(n)
-    z0 = 2 * n
+    entering, zrow = _lemke_first_pivot(Binv, qbar, basis, d, cand, idx, hist, qscale)
+    status, pivots = _lemke_path(M, Binv, qbar, basis, d, mag, hist, col, cand, idx, entering, zrow, qscale, max_pivots)
+    z = _z_from_basis(basis, qbar, n)
+    w = _matvec_plus(M, z, q)
+    z, w, status = _lemke_polish(M, q, basis, cand, z, w, status)
+    return z, w, status, pivots
 
-    # First pivot: z0 enters (column -e) in the lexicographically smallest row of (q, I),
-    # i.e. (one of) the most negative q_i; this makes the basis feasible.
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _nonnegative(q):
+    """True iff every q_i >= 0 (False on NaN): the LCP is solved by z = 0."""
+    for i in range(q.shape[0]):
+        if not (q[i] >= 0.0):
+            return False
+    return True
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _max_abs(q):
+    """||q||_inf (NaN entries ignored)."""
+    qscale = 0.0
+    for i in range(q.shape[0]):
+        if abs(q[i]) > qscale:
+            qscale = abs(q[i])
+    return qscale
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _lemke_first_pivot(Binv, qbar, basis, d, cand, idx, hist, qscale):
+    """Lemke's first pivot, in place: z0 enters (column -e) in the lexicographically smallest
+    row of (q, I), i.e. (one of) the most negative q_i, which makes the basis feasible.
+
+    Returns (entering, zrow): the next entering variable (the complement of the w that left)
+    and the row where z0 is basic.
+    """
+    n = qbar.shape[0]
+    ones = np.ones(n)
     for i in range(n):
         d[i] = -1.0
         cand[i] = i
     r = _lex_select(qbar, Binv, ones, cand, n, LEMKE_TIE_TOL, -1, qscale, hist)
     leaving = basis[r]
     _pivot(Binv, qbar, d, r, idx, hist)
-    basis[r] = z0
-    zrow = r
-    pivots = 1
-    entering = leaving + n  # the complement of w_r is z_r
+    basis[r] = 2 * n
+    return leaving + n, r  # the complement of w_r is z_r
 
+
+@numba.njit(cache=True, error_model="numpy")
+def _lemke_path(M, Binv, qbar, basis, d, mag, hist, col, cand, idx, entering, zrow, qscale, max_pivots):
+    """Follow Lemke's complementary path from the first pivot, in place on the tableau
+    (Binv, qbar, basis): entering column, lexicographic ratio test, pivot, until z0 leaves.
+
+    Returns (status, pivots): STATUS_SOLVED (z0 left), STATUS_RAY_TERMINATION (no pivot row),
+    STATUS_NON_FINITE_OUTPUT or STATUS_MAX_ITERATIONS; pivots counts the first one too.
+    """
+    n = qbar.shape[0]
+    z0 = 2 * n
+    pivots = 1
     status = STATUS_MAX_ITERATIONS
     while pivots < max_pivots:
         amax = _entering_column(M, Binv, entering, n, d, mag, col, idx)
@@ -559,13 +593,18 @@ def lemke_kernel(M, q, max_pivots):
         if not finite:
             status = STATUS_NON_FINITE_OUTPUT
             break
+    return status, pivots
 
-    z = _z_from_basis(basis, qbar, n)
-    w = _matvec_plus(M, z, q)
+
+@numba.njit(cache=True, error_model="numpy")
+def _lemke_polish(M, q, basis, work, z, w, status):
+    """Polish the end point (z, w) of a path that stopped SOLVED or on a ray: the
+    complementary point of the final basis (w_J = 0 on the basic z_J, z = 0 elsewhere)
+    recomputed from the true q replaces it if its residual is lower; a ray end point that
+    solves the LCP to LEMKE_RESCUE_TOL becomes STATUS_SOLVED. Returns (z, w, status)."""
+    n = q.shape[0]
     if status == STATUS_SOLVED or status == STATUS_RAY_TERMINATION:
-        # Polish: the complementary point of the final basis (w_J = 0 on the basic z_J,
-        # z = 0 elsewhere) recomputed from the true q.
-        z2, ok = _basis_point(M, q, basis, n, cand)
+        z2, ok = _basis_point(M, q, basis, n, work)
         if ok:
             w2 = _matvec_plus(M, z2, q)
             if _natural_map_residual(z2, w2, q) < _natural_map_residual(z, w, q):
@@ -575,7 +614,7 @@ def lemke_kernel(M, q, max_pivots):
             # The ray starts where z0 is (numerically) zero: the current point already
             # solves the LCP (z0 tied for leaving but round-off broke the tie the other way).
             status = STATUS_SOLVED
-    return z, w, status, pivots
+    return z, w, status
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -739,39 +778,10 @@ def solve_lcp(
     if method not in _METHODS:
         raise ValueError(f"unknown LCP method {method!r}; expected one of {_METHODS}")
     with np.errstate(all="ignore"):
-        try:
-            if np.iscomplexobj(M) or np.iscomplexobj(q):
-                raise TypeError("complex input")
-            M = np.ascontiguousarray(M, dtype=np.float64)
-            q = np.ascontiguousarray(q, dtype=np.float64)
-        except Exception:  # noqa: BLE001 - anything not convertible to floats is invalid input
-            return _fail(LCPStatus.INVALID_INPUT, method, None)
-        if q.ndim != 1 or M.ndim != 2 or M.shape != (q.shape[0], q.shape[0]):
-            return _fail(LCPStatus.INVALID_INPUT, method, None)
-        n = q.shape[0]
-        try:
-            tol = float(tol)
-            omega = float(omega)
-            if max_iterations is None:
-                max_iterations = default_max_iterations(method, n)
-            if isinstance(max_iterations, bool) or int(max_iterations) != max_iterations:
-                raise ValueError
-            max_iterations = int(max_iterations)
-            if z0 is not None and np.iscomplexobj(z0):
-                raise TypeError("complex z0")
-            z0a = np.zeros(n) if z0 is None else np.ascontiguousarray(z0, dtype=np.float64)
-        except Exception:  # noqa: BLE001
-            return _fail(LCPStatus.INVALID_INPUT, method, n)
-        if (
-            not (tol > 0.0 and np.isfinite(tol))
-            or not (0.0 < omega < 2.0)
-            or max_iterations < 0
-            or z0a.shape != (n,)
-        ):
-            return _fail(LCPStatus.INVALID_INPUT, method, n)
-        if not (np.isfinite(M).all() and np.isfinite(q).all() and np.isfinite(z0a).all()):
-            return _fail(LCPStatus.NON_FINITE_INPUT, method, n)
-
+        checked = _lcp_input(M, q, method, z0, max_iterations, tol, omega)
+        if isinstance(checked, LCPResult):
+            return checked
+        M, q, z0a, max_iterations, tol, omega = checked
         if method == "lemke":
             z, _, code, iters = lemke_kernel(M, q, max_iterations)
         else:
@@ -779,19 +789,68 @@ def solve_lcp(
         z = np.asarray(z, dtype=np.float64)
         w = M @ z + q
         residual = float(complementarity_residual(M, q, z))
-        status = LCPStatus(int(code))
-        if status is LCPStatus.SOLVED:
-            if not (np.isfinite(z).all() and np.isfinite(w).all()):
-                status = LCPStatus.NON_FINITE_OUTPUT
-            elif residual <= tol:
-                status = LCPStatus.SOLVED
-            elif residual <= max(INACCURATE_TOL, tol):
-                status = LCPStatus.SOLVED_INACCURATE
-            else:
-                status = LCPStatus.NUMERICAL_FAILURE
+        status = _recomputed_status(LCPStatus(int(code)), z, w, residual, tol)
         return LCPResult(
             z=z, w=w, status=status, residual=residual, iterations=int(iters), method=method
         )
+
+
+def _lcp_input(M, q, method, z0, max_iterations, tol, omega):
+    """Validate and convert `solve_lcp`'s input (call under np.errstate(all="ignore")).
+
+    Returns (M, q, z0, max_iterations, tol, omega) as C-contiguous float64 arrays, int and
+    floats (z0 zeros when not given, max_iterations defaulted), or the failure LCPResult:
+    INVALID_INPUT for bad shapes or parameters, NON_FINITE_INPUT for NaN/inf in M, q or z0.
+    """
+    try:
+        if np.iscomplexobj(M) or np.iscomplexobj(q):
+            raise TypeError("complex input")
+        M = np.ascontiguousarray(M, dtype=np.float64)
+        q = np.ascontiguousarray(q, dtype=np.float64)
+    except Exception:  # noqa: BLE001 - anything not convertible to floats is invalid input
+        return _fail(LCPStatus.INVALID_INPUT, method, None)
+    if q.ndim != 1 or M.ndim != 2 or M.shape != (q.shape[0], q.shape[0]):
+        return _fail(LCPStatus.INVALID_INPUT, method, None)
+    n = q.shape[0]
+    try:
+        tol = float(tol)
+        omega = float(omega)
+        if max_iterations is None:
+            max_iterations = default_max_iterations(method, n)
+        if isinstance(max_iterations, bool) or int(max_iterations) != max_iterations:
+            raise ValueError
+        max_iterations = int(max_iterations)
+        if z0 is not None and np.iscomplexobj(z0):
+            raise TypeError("complex z0")
+        z0a = np.zeros(n) if z0 is None else np.ascontiguousarray(z0, dtype=np.float64)
+    except Exception:  # noqa: BLE001
+        return _fail(LCPStatus.INVALID_INPUT, method, n)
+    if (
+        not (tol > 0.0 and np.isfinite(tol))
+        or not (0.0 < omega < 2.0)
+        or max_iterations < 0
+        or z0a.shape != (n,)
+    ):
+        return _fail(LCPStatus.INVALID_INPUT, method, n)
+    if not (np.isfinite(M).all() and np.isfinite(q).all() and np.isfinite(z0a).all()):
+        return _fail(LCPStatus.NON_FINITE_INPUT, method, n)
+    return M, q, z0a, max_iterations, tol, omega
+
+
+def _recomputed_status(status: LCPStatus, z, w, residual: float, tol: float) -> LCPStatus:
+    """The status of a kernel's result judged on the recomputed w and residual: a kernel
+    SOLVED becomes NON_FINITE_OUTPUT, SOLVED (residual <= tol), SOLVED_INACCURATE (up to
+    INACCURATE_TOL) or NUMERICAL_FAILURE; any other kernel status is kept."""
+    if status is LCPStatus.SOLVED:
+        if not (np.isfinite(z).all() and np.isfinite(w).all()):
+            status = LCPStatus.NON_FINITE_OUTPUT
+        elif residual <= tol:
+            status = LCPStatus.SOLVED
+        elif residual <= max(INACCURATE_TOL, tol):
+            status = LCPStatus.SOLVED_INACCURATE
+        else:
+            status = LCPStatus.NUMERICAL_FAILURE
+    return status
 
 
 # --------------------------------------------------------------------------------------------
@@ -880,50 +939,16 @@ def contact_lcp_from_fc2d(W, q, mu) -> Fc2dLCP:
     ordered contact by contact.
     """
     W, q, mu, nc = _check_fc2d(W, q, mu)
-    normal = np.full(nc, -1, dtype=np.int64)
-    plus = np.full(nc, -1, dtype=np.int64)
-    minus = np.full(nc, -1, dtype=np.int64)
-    gamma = np.full(nc, -1, dtype=np.int64)
-    k = 0
-    for c in range(nc):
-        normal[c] = k
-        k += 1
-        if mu[c] > 0.0:
-            plus[c], minus[c], gamma[c] = k, k + 1, k + 2
-            k += 3
-    m = k
+    normal, plus, minus, gamma, m = _fc2d_layout(mu)
     fr = np.flatnonzero(mu > 0.0)
     nI = 2 * np.arange(nc)  # rows/cols of W for normals
     tI = nI + 1  # tangentials
     M = np.zeros((m, m))
     ql = np.zeros(m)
-    # normal rows
-    diag_scale = np.maximum(np.abs(W[nI, nI]), np.abs(W[tI, tI]))
-    gscale = np.ones(nc)
-    pos = diag_scale > 0.0
-    gscale[pos] = np.exp2(np.round(np.log2(diag_scale[pos])))
-    M[np.ix_(normal, normal)] = W[np.ix_(nI, nI)]
-    M[np.ix_(normal, plus[fr])] = W[np.ix_(nI, tI[fr])]
-    M[np.ix_(normal, minus[fr])] = -W[np.ix_(nI, tI[fr])]
-    ql[normal] = q[nI]
+    gscale = _fc2d_gamma_scale(W, nI, tI, nc)
+    _fc2d_normal_rows(M, ql, W, q, normal, plus, minus, fr, nI, tI)
     if fr.size:
-        P, Mi, G = plus[fr], minus[fr], gamma[fr]
-        Wtn = W[np.ix_(tI[fr], nI)]
-        Wtt = W[np.ix_(tI[fr], tI[fr])]
-        M[np.ix_(P, normal)] = Wtn
-        M[np.ix_(P, P)] = Wtt
-        M[np.ix_(P, Mi)] = -Wtt
-        sc = gscale[fr]
-        M[P, G] = sc
-        M[np.ix_(Mi, normal)] = -Wtn
-        M[np.ix_(Mi, P)] = -Wtt
-        M[np.ix_(Mi, Mi)] = Wtt
-        M[Mi, G] = sc
-        M[G, normal[fr]] = sc * mu[fr]
-        M[G, P] = -sc
-        M[G, Mi] = -sc
-        ql[P] = q[tI[fr]]
-        ql[Mi] = -q[tI[fr]]
+        _fc2d_friction_rows(M, ql, W, q, mu, normal, plus, minus, gamma, fr, tI, nI, gscale)
     return Fc2dLCP(
         M=M,
         q=ql,
@@ -935,6 +960,64 @@ def contact_lcp_from_fc2d(W, q, mu) -> Fc2dLCP:
         gamma_index=gamma,
         gamma_scale=gscale,
     )
+
+
+def _fc2d_layout(mu):
+    """LCP variable layout of `contact_lcp_from_fc2d`, contact by contact: the positions of
+    each contact's r_n, b+, b-, gamma (-1 for the last three when mu = 0) and the size m."""
+    nc = mu.shape[0]
+    normal = np.full(nc, -1, dtype=np.int64)
+    plus = np.full(nc, -1, dtype=np.int64)
+    minus = np.full(nc, -1, dtype=np.int64)
+    gamma = np.full(nc, -1, dtype=np.int64)
+    k = 0
+    for c in range(nc):
+        normal[c] = k
+        k += 1
+        if mu[c] > 0.0:
+            plus[c], minus[c], gamma[c] = k, k + 1, k + 2
+            k += 3
+    return normal, plus, minus, gamma, k
+
+
+def _fc2d_gamma_scale(W, nI, tI, nc):
+    """Per-contact scale s_c of the gamma row and column: max(|W_nn|, |W_tt|) rounded to a
+    power of two (1 where both are zero)."""
+    diag_scale = np.maximum(np.abs(W[nI, nI]), np.abs(W[tI, tI]))
+    gscale = np.ones(nc)
+    pos = diag_scale > 0.0
+    gscale[pos] = np.exp2(np.round(np.log2(diag_scale[pos])))
+    return gscale
+
+
+def _fc2d_normal_rows(M, ql, W, q, normal, plus, minus, fr, nI, tI):
+    """Fill the u_n rows of the fc2d LCP in place: W_nn, W_nt, -W_nt and q_n."""
+    M[np.ix_(normal, normal)] = W[np.ix_(nI, nI)]
+    M[np.ix_(normal, plus[fr])] = W[np.ix_(nI, tI[fr])]
+    M[np.ix_(normal, minus[fr])] = -W[np.ix_(nI, tI[fr])]
+    ql[normal] = q[nI]
+
+
+def _fc2d_friction_rows(M, ql, W, q, mu, normal, plus, minus, gamma, fr, tI, nI, gscale):
+    """Fill the rows of the frictional contacts fr in place: u_t + gamma, -u_t + gamma and
+    the scaled cone row mu r_n - b+ - b- (gamma column and row scaled by gscale)."""
+    P, Mi, G = plus[fr], minus[fr], gamma[fr]
+    Wtn = W[np.ix_(tI[fr], nI)]
+    Wtt = W[np.ix_(tI[fr], tI[fr])]
+    M[np.ix_(P, normal)] = Wtn
+    M[np.ix_(P, P)] = Wtt
+    M[np.ix_(P, Mi)] = -Wtt
+    sc = gscale[fr]
+    M[P, G] = sc
+    M[np.ix_(Mi, normal)] = -Wtn
+    M[np.ix_(Mi, P)] = -Wtt
+    M[np.ix_(Mi, Mi)] = Wtt
+    M[Mi, G] = sc
+    M[G, normal[fr]] = sc * mu[fr]
+    M[G, P] = -sc
+    M[G, Mi] = -sc
+    ql[P] = q[tI[fr]]
+    ql[Mi] = -q[tI[fr]]
 
 
 def fc2d_reactions_from_lcp(problem: Fc2dLCP, z) -> np.ndarray:

@@ -230,6 +230,66 @@ def _start_system(S, D, model, h, q):
     return System(A, Ainv, M_const, h * gravity_force(bi, bf, D.gravity, nv))
 
 
+@numba.njit(cache=True)
+def _contact_frames(cap):
+    """Per-contact buffers of a rollout, allocated once: frames n, t, o and points pa, pb
+    (cap, 3), and the PGS warm start by slot (warm_n, warm_t, the slots last written)."""
+    c_n, c_t, c_o, c_pa, c_pb = np.zeros((cap, 3)), np.zeros((cap, 3)), np.zeros((cap, 3)), np.zeros((cap, 3)), np.zeros((cap, 3))
+    warm_n, warm_t, warm_slots = np.zeros(cap), np.zeros((cap, 2)), np.zeros(cap, np.int64)
+    return c_n, c_t, c_o, c_pa, c_pb, warm_n, warm_t, warm_slots
+
+
+@numba.njit(cache=True)
+def _pair_buffers(n_pairs, nb):
+    """Per-pair buffers of a rollout, allocated once (at least one pair): unsupported flags,
+    smallest psi, normal force, world force; and the planar detection's scratch (nb, 8)."""
+    n_pairs = max(n_pairs, 1)
+    unsupported = np.zeros(n_pairs, np.int64)
+    pair_psi, pair_force, pair_wrench = np.full(n_pairs, np.inf), np.zeros(n_pairs), np.zeros((n_pairs, 3))
+    scratch = np.empty((nb, 8))
+    return unsupported, pair_psi, pair_force, pair_wrench, scratch
+
+
+@numba.njit(cache=True, inline="always")
+def _tally(sweeps, lcp_solves, max_size, pivots, max_residual, sw, size, piv, res):
+    """A step's solver statistics into the rollout's: PGS sweeps, contact problems solved and
+    their largest size, Lemke pivots, largest residual. Returns the updated five."""
+    sweeps += sw
+    if size > 0:
+        lcp_solves += 1
+        if size > max_size:
+            max_size = size
+    pivots += piv
+    if res > max_residual:
+        max_residual = res
+    return sweeps, lcp_solves, max_size, pivots, max_residual
+
+
+@numba.njit(cache=True)
+def _start_records(max_records, q, nu):
+    """The record buffers (at least two records: start and end) with the start state at t = 0
+    as record 0. Returns (max_records, rec_t, rec_q, rec_nu, next record's index)."""
+    max_records = max(max_records, 2)
+    rec_t, rec_q, rec_nu = np.zeros(max_records), np.zeros((max_records, q.shape[0])), np.zeros((max_records, nu.shape[0]))
+    n_rec = _record_state(rec_t, rec_q, rec_nu, 0, 0.0, q, nu)
+    return max_records, rec_t, rec_q, rec_nu, n_rec
+
+
+@numba.njit(cache=True)
+def _finish(S, goal, unsafe, scripted, t0, t, q, nu, status, outcome, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pair_psi,
+            rec_t, rec_q, rec_nu, n_rec):
+    """End of a run: a run that ended with no step failure and no outcome is classified in
+    its final state (scripted obstacles placed at the end time); the final state is recorded
+    unless it already is. Returns (outcome, number of records)."""
+    if status == StepStatus.OK and outcome == Outcome.NONE:
+        if scripted:
+            place_scripted(S.bf, S.base_pos, S.base_quat, t0 + t)
+        outcome = _final_outcome(S, goal, unsafe, q, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pair_psi)
+    if rec_t[n_rec - 1] != t:
+        n_rec = _record_state(rec_t, rec_q, rec_nu, n_rec, t, q, nu)
+    return outcome, n_rec
+
+
 # ----------------------------------------------------------------------------- the rollout
 
 
@@ -247,19 +307,14 @@ def rollout_kernel(S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, del
     """
     bi, bf, pi, verts, nv, dimension = S.bi, S.bf, S.pi, S.verts, S.nv, S.dimension
     tables = SceneTables(bi, bf, pi, S.pf, dimension == 3)
-    n_pairs = max(pi.shape[0], 1)
     scripted = has_script(bf)
     if scripted:
         place_scripted(bf, S.base_pos, S.base_quat, t0)
     contacts, first_slot = contact_buffers(pi, nv)  # buffers, allocated once
     c_pair, c_psi, c_slot, W_n, W_t, W_o, c_bias = contacts
-    cap = c_psi.shape[0]
-    c_n, c_t, c_o, c_pa, c_pb = np.zeros((cap, 3)), np.zeros((cap, 3)), np.zeros((cap, 3)), np.zeros((cap, 3)), np.zeros((cap, 3))
-    warm_n, warm_t, warm_slots, n_warm = np.zeros(cap), np.zeros((cap, 2)), np.zeros(cap, np.int64), 0  # PGS: by slot
-    keep_warm = solver.method != SOLVER_LEMKE
-    unsupported = np.zeros(n_pairs, np.int64)
-    pair_psi, pair_force, pair_wrench = np.full(n_pairs, np.inf), np.zeros(n_pairs), np.zeros((n_pairs, 3))
-    scratch = np.empty((bi.shape[0], 8))
+    c_n, c_t, c_o, c_pa, c_pb, warm_n, warm_t, warm_slots = _contact_frames(c_psi.shape[0])
+    n_warm, keep_warm = 0, solver.method != SOLVER_LEMKE  # PGS warm start: by slot
+    unsupported, pair_psi, pair_force, pair_wrench, scratch = _pair_buffers(pi.shape[0], bi.shape[0])
     g_op, g_index, g_lo, g_hi = goal  # hoisted: reading a tuple's array in the loop costs a reference count
     u_op, u_index, u_lo, u_hi = unsafe
     q_index, v_index, kp, kd, lower, upper, _, max_force = D
@@ -269,13 +324,10 @@ def rollout_kernel(S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, del
     constant_A, limited = not has_rotations(bi), any_limited(max_force)
     kinematic, eps, compliant, theta, _ = model
     eps_eff = QUASISTATIC_INERTIA if eps == 0.0 else eps
-    max_records = max(max_records, 2)
-    rec_t, rec_q, rec_nu = np.zeros(max_records), np.zeros((max_records, q.shape[0])), np.zeros((max_records, nv))
-    n_rec = _record_state(rec_t, rec_q, rec_nu, 0, 0.0, q, nu)
+    max_records, rec_t, rec_q, rec_nu, n_rec = _start_records(max_records, q, nu)
     t, steps, lcp_solves, pivots, max_residual, max_size, min_psi, force_steps, sweeps = 0.0, 0, 0, 0, 0.0, 0, np.inf, 0, 0
-    outcome, status = Outcome.NONE.value, StepStatus.OK.value
-    if not kinematic and constant_A and Ainv.shape[0] != nv:
-        status = StepStatus.SINGULAR.value
+    outcome = Outcome.NONE.value
+    status = StepStatus.SINGULAR.value if (not kinematic and constant_A and Ainv.shape[0] != nv) else StepStatus.OK.value
     for k in range(controls.shape[0]):
         if status != StepStatus.OK or (outcome != Outcome.NONE and stop_at_outcome):
             break
@@ -301,7 +353,8 @@ def rollout_kernel(S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, del
                 break
             if nc > 0:
                 _assemble(bi, bf, pi, dimension, q, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, W_n, W_t, W_o, c_bias, scripted, not kinematic)
-            # stages solve and integrate: the rung's step kernel
+            # stages solve and integrate: the rung's step kernel (in line: arguments of an inlined
+            # stage are reference-counted each step, which slowed the cheap rungs by about 10%)
             p_t, dn2, dt2, sw = np.zeros((0, 2)), delta_n, delta_t, 0
             if kinematic:
                 q2, nu2, q_ref2, st, piv, res = kinematic_step(bi, h, q, q_ref, u, q_index, v_index, lower, upper, nc, c_psi, c_bias, W_n, nv)
@@ -320,14 +373,7 @@ def rollout_kernel(S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, del
                 q2, nu2, q_ref2, dn2, dt2, st, piv, res, size, p_n, p_t, sw = r
                 if keep_warm and st == StepStatus.OK:
                     n_warm = _keep_warm(nc, c_slot, p_n, p_t, warm_n, warm_t, warm_slots, n_warm)
-            sweeps += sw
-            if size > 0:
-                lcp_solves += 1
-                if size > max_size:
-                    max_size = size
-            pivots += piv
-            if res > max_residual:
-                max_residual = res
+            sweeps, lcp_solves, max_size, pivots, max_residual = _tally(sweeps, lcp_solves, max_size, pivots, max_residual, sw, size, piv, res)
             if st != StepStatus.OK:
                 status = st
                 break
@@ -337,11 +383,7 @@ def rollout_kernel(S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, del
             steps += 1
             if record_every > 0 and steps % record_every == 0 and n_rec < max_records - 1:
                 n_rec = _record_state(rec_t, rec_q, rec_nu, n_rec, t, q, nu)
-    if status == StepStatus.OK and outcome == Outcome.NONE:
-        if scripted:
-            place_scripted(bf, S.base_pos, S.base_quat, t0 + t)
-        outcome = _final_outcome(S, goal, unsafe, q, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pair_psi)
-    if rec_t[n_rec - 1] != t:
-        n_rec = _record_state(rec_t, rec_q, rec_nu, n_rec, t, q, nu)
+    outcome, n_rec = _finish(S, goal, unsafe, scripted, t0, t, q, nu, status, outcome, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pair_psi,
+                             rec_t, rec_q, rec_nu, n_rec)
     return RolloutOutput(q, nu, q_ref, delta_n, delta_t, t, outcome, status, steps, lcp_solves, pivots, max_residual, max_size,
                          rec_t[:n_rec], rec_q[:n_rec], rec_nu[:n_rec], pair_force, min_psi, force_steps, sweeps, pair_wrench)

@@ -664,13 +664,46 @@ def contact_lcp(model, spatial, h, A, Ainv, nu_free, active, pf, contacts, delta
     v_index, kp, kd, max_force = drives.v_index, drives.kp, drives.kd, drives.max_force
     nc = active.shape[0]
     nv = nu_free.shape[0]
+    lim, nl = _limited_drives(max_force)
+    d = directions if spatial else 2
+    fric, nf = _friction_contacts(spatial, active, c_pair, pf, W_t, W_o)
+    nd = nf * d
+    m = nc + nd + nl
+    J, coef = _lcp_jacobian(spatial, d, nv, m, active, fric, nf, lim, nl, v_index, W_n, W_t, W_o)
+    if Ainv.shape[0] == nv:
+        AinvJ = Ainv @ J
+    else:
+        AinvJ = np.linalg.solve(A, J)
+    n = m + nf + nl
+    Mlcp = np.zeros((n, n))
+    qlcp = np.zeros(n)
+    Jt = np.ascontiguousarray(J.T)
+    Mlcp[:m, :m] = Jt @ AinvJ
+    Jt_nu = Jt @ nu_free
+    _normal_rows(Mlcp, qlcp, compliant, h, active, pf, c_pair, c_psi, c_slot, c_bias, Jt_nu, delta_n)
+    _friction_rows(Mlcp, qlcp, compliant, h, d, m, active, fric, nf, coef, pf, c_pair, c_slot, c_bias, Jt_nu, delta_t)
+    _scale_gamma(Mlcp, d, m, nc, nf)
+    _drive_rows(Mlcp, qlcp, h, nc + nd, m + nf, lim, nl, kp, kd, max_force, drive_a, Jt_nu)
+    return Mlcp, qlcp, AinvJ, coef, fric, nf, lim[:nl]
+
+
+@numba.njit(cache=True)
+def _limited_drives(max_force):
+    """The force-limited drives (finite max_force): (indices in a buffer of all drives, count)."""
     nl = 0
-    lim = np.empty(v_index.shape[0], np.int64)
-    for j in range(v_index.shape[0]):
+    lim = np.empty(max_force.shape[0], np.int64)
+    for j in range(max_force.shape[0]):
         if np.isfinite(max_force[j]):
             lim[nl] = j
             nl += 1
-    d = directions if spatial else 2
+    return lim, nl
+
+
+@numba.njit(cache=True)
+def _friction_contacts(spatial, active, c_pair, pf, W_t, W_o):
+    """The active contacts (positions k in active) with friction rows: mu > 0 and a tangent
+    Jacobian column that couples to a free DOF. Returns (fric, nf)."""
+    nc = active.shape[0]
     fric = np.empty(nc, np.int64)
     nf = 0
     for k in range(nc):
@@ -681,9 +714,16 @@ def contact_lcp(model, spatial, h, A, Ainv, nu_free, active, pf, contacts, delta
         if pf[c_pair[i], PF_MU] > 0.0 and couples:
             fric[nf] = k
             nf += 1
+    return fric, nf
+
+
+@numba.njit(cache=True)
+def _lcp_jacobian(spatial, d, nv, m, active, fric, nf, lim, nl, v_index, W_n, W_t, W_o):
+    """J = [W_n | D | E] (nv, m) over the active contacts, the d friction directions of each
+    friction contact and the force-limited drives' unit DOFs, and coef: the friction
+    directions in the (t, o) basis (a Jacobian column is linear in its direction)."""
+    nc = active.shape[0]
     nd = nf * d
-    m = nc + nd + nl
-    # friction directions in the (t, o) basis; a Jacobian column is linear in its direction
     coef = np.zeros((max(nd, 1), 2))
     J = np.zeros((nv, m))
     for k in range(nc):
@@ -704,17 +744,14 @@ def contact_lcp(model, spatial, h, A, Ainv, nu_free, active, pf, contacts, delta
                     J[v, nc + r] += coef[r, 1] * W_o[v, i]
     for e in range(nl):
         J[v_index[lim[e]], nc + nd + e] = 1.0
-    if Ainv.shape[0] == nv:
-        AinvJ = Ainv @ J
-    else:
-        AinvJ = np.linalg.solve(A, J)
-    n = m + nf + nl
-    Mlcp = np.zeros((n, n))
-    qlcp = np.zeros(n)
-    Jt = np.ascontiguousarray(J.T)
-    Mlcp[:m, :m] = Jt @ AinvJ
-    Jt_nu = Jt @ nu_free
-    for k in range(nc):
+    return J, coef
+
+
+@numba.njit(cache=True)
+def _normal_rows(Mlcp, qlcp, compliant, h, active, pf, c_pair, c_psi, c_slot, c_bias, Jt_nu, delta_n):
+    """Normal rows of the contact LCP, in place: q = psi / h + W_n^T nu_free + bias, and for
+    compliant contact 1 / (h (h K + C)) on the diagonal and the previous deformation in q."""
+    for k in range(active.shape[0]):
         i = active[k]
         qlcp[k] = c_psi[i] / h + Jt_nu[k] + c_bias[i, 0]
         if compliant:
@@ -722,6 +759,14 @@ def contact_lcp(model, spatial, h, A, Ainv, nu_free, active, pf, contacts, delta
             comp = 1.0 / (h * (h * K + C))
             Mlcp[k, k] += comp
             qlcp[k] += comp * C * delta_n[c_slot[i]]
+
+
+@numba.njit(cache=True)
+def _friction_rows(Mlcp, qlcp, compliant, h, d, m, active, fric, nf, coef, pf, c_pair, c_slot, c_bias, Jt_nu, delta_t):
+    """Friction rows of the contact LCP, in place: each friction contact's d direction rows
+    (q from nu_free and the bias; compliant: the friction block's 1 / (h (h K + C)) and the
+    previous tangential deformation) and its gamma row and column (mu, +-1), unscaled."""
+    nc = active.shape[0]
     for f in range(nf):
         k = fric[f]
         i = active[k]
@@ -741,9 +786,18 @@ def contact_lcp(model, spatial, h, A, Ainv, nu_free, active, pf, contacts, delta
                     r2 = nc + f * d + j2
                     Mlcp[r, r2] += comp * (coef[r - nc, 0] * coef[r2 - nc, 0] + coef[r - nc, 1] * coef[r2 - nc, 1])
                 qlcp[r] -= K / (h * K + C) * (coef[r - nc, 0] * delta_t[slot, 0] + coef[r - nc, 1] * delta_t[slot, 1])
-    # the sliding-speed variable gamma of each friction contact sits beside W-sized entries
-    # with entries mu and +-1: scale its row and column to the contact's friction diagonal
-    # (complementarity is kept; gamma is not used afterwards), as Siconos-style LCPs need
+
+
+@numba.njit(cache=True)
+def _scale_gamma(Mlcp, d, m, nc, nf):
+    """Scale each friction contact's gamma row and column, in place, to the largest diagonal
+    entry of its friction block.
+
+    The sliding-speed variable gamma sits beside W-sized entries with entries mu and +-1;
+    the scaling keeps complementarity (gamma is not used afterwards), as Siconos-style LCPs
+    need.
+    """
+    n = Mlcp.shape[0]
     for f in range(nf):
         g = m + f
         scale = 0.0
@@ -754,11 +808,17 @@ def contact_lcp(model, spatial, h, A, Ainv, nu_free, active, pf, contacts, delta
             for r in range(n):
                 Mlcp[r, g] *= scale
                 Mlcp[g, r] *= scale
-    # force-limited drives: the box rows (see above); s's row and column scaled like gamma's
+
+
+@numba.njit(cache=True)
+def _drive_rows(Mlcp, qlcp, h, first_row, first_slack, lim, nl, kp, kd, max_force, drive_a, Jt_nu):
+    """Box rows of the force-limited drives, in place (see `contact_lcp`): row first_row + e
+    of drive lim[e] gets 1 / b on the diagonal and q = J^T nu_free - (P + a) / b; its slack s
+    (row and column first_slack + e) is scaled to that diagonal, with q = 2 P times it."""
     for e in range(nl):
         j = lim[e]
-        r = nc + nd + e
-        sx = m + nf + e
+        r = first_row + e
+        sx = first_slack + e
         P = h * max_force[j]
         b = h * (h * kp[j] + kd[j])
         Mlcp[r, r] += 1.0 / b
@@ -767,7 +827,6 @@ def contact_lcp(model, spatial, h, A, Ainv, nu_free, active, pf, contacts, delta
         Mlcp[r, sx] = scale
         Mlcp[sx, r] = -scale
         qlcp[sx] = 2.0 * P * scale
-    return Mlcp, qlcp, AinvJ, coef, fric, nf, lim[:nl]
 
 
 @numba.njit(cache=True)
