@@ -331,8 +331,24 @@ def _friction_update(k, spatial, cdof, cm, jt, jo, yt, yo, g00, g01, g11, comp, 
 
 @numba.njit(cache=True)
 def contact_pgs(
-    model, spatial, h, pi, pf, contacts, nc, delta_n, delta_t, dofs, count, inv, nu_free, warm_n, warm_t,
-    zero_column, tolerance, max_sweeps,
+    model,
+    spatial,
+    h,
+    pi,
+    pf,
+    contacts,
+    nc,
+    delta_n,
+    delta_t,
+    dofs,
+    count,
+    inv,
+    nu_free,
+    warm_n,
+    warm_t,
+    zero_column,
+    tolerance,
+    max_sweeps,
 ):
     """Solve the contact problem of the module docstring by PGS.
 
@@ -369,8 +385,33 @@ def contact_pgs(
     f = np.zeros((n, 2))
     _warm_start(n, spatial, d, active, c_slot, warm_n, warm_t, cdof, cm, yn, yt, yo, fric, mu, p_n, f, v, cosines, sines)
     status, sweeps, residual = _sweeps(
-        n, spatial, cdof, cm, jn, jt, jo, yn, yt, yo, gnn, g00, g01, g11, comp, bn, bt, mu, fric, p_n, f, v, cosines, sines,
-        scale, tolerance, max_sweeps,
+        n,
+        spatial,
+        cdof,
+        cm,
+        jn,
+        jt,
+        jo,
+        yn,
+        yt,
+        yo,
+        gnn,
+        g00,
+        g01,
+        g11,
+        comp,
+        bn,
+        bt,
+        mu,
+        fric,
+        p_n,
+        f,
+        v,
+        cosines,
+        sines,
+        scale,
+        tolerance,
+        max_sweeps,
     )
     for k in range(n):
         p_out[active[k]] = p_n[k]
@@ -519,8 +560,33 @@ def _largest_impulse(n, scale, p_n, f):
 
 @numba.njit(cache=True)
 def _sweeps(
-    n, spatial, cdof, cm, jn, jt, jo, yn, yt, yo, gnn, g00, g01, g11, comp, bn, bt, mu, fric, p_n, f, v, cosines, sines,
-    scale, tolerance, max_sweeps,
+    n,
+    spatial,
+    cdof,
+    cm,
+    jn,
+    jt,
+    jo,
+    yn,
+    yt,
+    yo,
+    gnn,
+    g00,
+    g01,
+    g11,
+    comp,
+    bn,
+    bt,
+    mu,
+    fric,
+    p_n,
+    f,
+    v,
+    cosines,
+    sines,
+    scale,
+    tolerance,
+    max_sweeps,
 ):
     """PGS sweeps, in place on (p_n, f, v), until the change of a sweep and then the
     recomputed residual (both relative to the largest impulse) are below tolerance, or
@@ -539,7 +605,9 @@ def _sweeps(
             change = max(change, _normal_update(k, cdof, cm, jn, yn, gnn, comp, bn, p_n, v))
         for k in range(n):
             if fric[k]:
-                change = max(change, _friction_update(k, spatial, cdof, cm, jt, jo, yt, yo, g00, g01, g11, comp, bt, mu, p_n, f, v, cosines, sines))
+                change = max(
+                    change, _friction_update(k, spatial, cdof, cm, jt, jo, yt, yo, g00, g01, g11, comp, bt, mu, p_n, f, v, cosines, sines)
+                )
         if not np.isfinite(change):
             status = PgsStatus.NON_FINITE.value
             break

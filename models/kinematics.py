@@ -167,8 +167,7 @@ def hull_tables(core: np.ndarray):
         u = u / np.linalg.norm(u)
         if not any(abs(np.dot(u, w)) > 1.0 - COPLANAR_TOL for w in dirs):
             dirs.append(u)
-    return (np.array(planes, float).reshape(-1, 4), loops, np.array(edges, np.int64).reshape(-1, 2),
-            np.array(dirs, float).reshape(-1, 3))
+    return (np.array(planes, float).reshape(-1, 4), loops, np.array(edges, np.int64).reshape(-1, 2), np.array(dirs, float).reshape(-1, 3))
 
 
 def _shape_tables(scenario: Scenario):
@@ -230,8 +229,7 @@ def _scene_hulls(scenario: Scenario, kind, vstart):
         core = np.asarray(scenario.geometries[body.name].core, float).reshape(-1, dim)
         offset = vstart[b]
         planes, loops, edges, dirs = hull_tables(core)
-        hull[b] = [sum(map(len, planes_list)), len(planes), sum(map(len, edges_list)), len(edges),
-                   sum(map(len, dirs_list)), len(dirs)]
+        hull[b] = [sum(map(len, planes_list)), len(planes), sum(map(len, edges_list)), len(edges), sum(map(len, dirs_list)), len(dirs)]
         planes_list.append(planes)
         loops_list += [[offset + k for k in lp] for lp in loops]
         edges_list.append(edges + offset)
@@ -240,7 +238,7 @@ def _scene_hulls(scenario: Scenario, kind, vstart):
     face_verts = np.zeros((len(loops_list), 1 + width), np.int64)
     for f, lp in enumerate(loops_list):
         face_verts[f, 0] = len(lp)
-        face_verts[f, 1:1 + len(lp)] = lp
+        face_verts[f, 1 : 1 + len(lp)] = lp
     planes = np.ascontiguousarray(np.concatenate(planes_list) if planes_list else np.zeros((0, 4)))
     edges = np.ascontiguousarray(np.concatenate(edges_list) if edges_list else np.zeros((0, 2), np.int64))
     edge_dirs = np.ascontiguousarray(np.concatenate(dirs_list) if dirs_list else np.zeros((0, 3)))
@@ -304,9 +302,7 @@ def _poses_and_inertia(scenario: Scenario, bound):
         if body.dofs:
             mass[b] = body.mass
             if body.inertia is not None:
-                inertia[b] = [0.0, 0.0, body.inertia[0]] if dim == 2 else (
-                    body.inertia * 3 if len(body.inertia) == 1 else body.inertia
-                )
+                inertia[b] = [0.0, 0.0, body.inertia[0]] if dim == 2 else (body.inertia * 3 if len(body.inertia) == 1 else body.inertia)
     return base_pos, base_quat, mass, inertia, script
 
 
@@ -338,7 +334,8 @@ def compile_scene(scenario: Scenario) -> SceneData:
     normals3 = np.zeros((nb, 3))
     normals3[:, :dim] = hs_normal
     bf = np.concatenate(
-        [radius[:, None], half_extents, normals3, hs_offset[:, None], base_pos, base_quat, mass[:, None], inertia, bound[:, None], script], axis=1
+        [radius[:, None], half_extents, normals3, hs_offset[:, None], base_pos, base_quat, mass[:, None], inertia, bound[:, None], script],
+        axis=1,
     )
     assert bi.shape[1] == BI_COLUMNS and bf.shape[1] == BF_COLUMNS
     return SceneData(

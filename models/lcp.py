@@ -141,17 +141,12 @@ _STATUS_MESSAGES = {
         "this proves the LCP has no solution; for other M it proves nothing (a solution may "
         "exist that Lemke cannot reach)"
     ),
-    LCPStatus.MAX_ITERATIONS: (
-        "the pivot / iteration limit was reached before a solution was found"
-    ),
+    LCPStatus.MAX_ITERATIONS: ("the pivot / iteration limit was reached before a solution was found"),
     LCPStatus.ZERO_DIAGONAL: (
-        "PGS needs every diagonal entry M[i, i] > 0; a diagonal entry is zero, negative or "
-        "negligible (use Lemke, or regularise M)"
+        "PGS needs every diagonal entry M[i, i] > 0; a diagonal entry is zero, negative or negligible (use Lemke, or regularise M)"
     ),
     LCPStatus.NON_FINITE_INPUT: "M or q (or z0) contains NaN or infinity",
-    LCPStatus.NON_FINITE_OUTPUT: (
-        "the iterates became non-finite (overflow / divergence); z is not a solution"
-    ),
+    LCPStatus.NON_FINITE_OUTPUT: ("the iterates became non-finite (overflow / divergence); z is not a solution"),
     LCPStatus.INVALID_INPUT: (
         "invalid input: M must be a square 2-D array, q a 1-D array of matching length, "
         "z0 (if given) like q, tol > 0, 0 < omega < 2, max_iterations >= 0"
@@ -790,9 +785,7 @@ def solve_lcp(
         w = M @ z + q
         residual = float(complementarity_residual(M, q, z))
         status = _recomputed_status(LCPStatus(int(code)), z, w, residual, tol)
-        return LCPResult(
-            z=z, w=w, status=status, residual=residual, iterations=int(iters), method=method
-        )
+        return LCPResult(z=z, w=w, status=status, residual=residual, iterations=int(iters), method=method)
 
 
 def _lcp_input(M, q, method, z0, max_iterations, tol, omega):
@@ -825,12 +818,7 @@ def _lcp_input(M, q, method, z0, max_iterations, tol, omega):
         z0a = np.zeros(n) if z0 is None else np.ascontiguousarray(z0, dtype=np.float64)
     except Exception:  # noqa: BLE001
         return _fail(LCPStatus.INVALID_INPUT, method, n)
-    if (
-        not (tol > 0.0 and np.isfinite(tol))
-        or not (0.0 < omega < 2.0)
-        or max_iterations < 0
-        or z0a.shape != (n,)
-    ):
+    if not (tol > 0.0 and np.isfinite(tol)) or not (0.0 < omega < 2.0) or max_iterations < 0 or z0a.shape != (n,):
         return _fail(LCPStatus.INVALID_INPUT, method, n)
     if not (np.isfinite(M).all() and np.isfinite(q).all() and np.isfinite(z0a).all()):
         return _fail(LCPStatus.NON_FINITE_INPUT, method, n)
@@ -883,10 +871,7 @@ def _check_fc2d(W, q, mu):
     mu = np.ascontiguousarray(mu, dtype=np.float64).reshape(-1)
     nc = mu.shape[0]
     if q.shape != (2 * nc,) or W.shape != (2 * nc, 2 * nc):
-        raise ValueError(
-            f"fc2d shapes: need W (2nc, 2nc), q (2nc,), mu (nc,); got W {W.shape}, "
-            f"q {q.shape}, mu {mu.shape}"
-        )
+        raise ValueError(f"fc2d shapes: need W (2nc, 2nc), q (2nc,), mu (nc,); got W {W.shape}, q {q.shape}, mu {mu.shape}")
     if not (np.isfinite(mu).all() and (mu >= 0).all()):
         raise ValueError("fc2d friction coefficients must be finite and >= 0")
     return W, q, mu, nc

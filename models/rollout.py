@@ -276,8 +276,29 @@ def _start_records(max_records, q, nu):
 
 
 @numba.njit(cache=True)
-def _finish(S, goal, unsafe, scripted, t0, t, q, nu, status, outcome, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pair_psi,
-            rec_t, rec_q, rec_nu, n_rec):
+def _finish(
+    S,
+    goal,
+    unsafe,
+    scripted,
+    t0,
+    t,
+    q,
+    nu,
+    status,
+    outcome,
+    c_pair,
+    c_psi,
+    c_n,
+    c_pa,
+    c_pb,
+    unsupported,
+    pair_psi,
+    rec_t,
+    rec_q,
+    rec_nu,
+    n_rec,
+):
     """End of a run: a run that ended with no step failure and no outcome is classified in
     its final state (scripted obstacles placed at the end time); the final state is recorded
     unless it already is. Returns (outcome, number of records)."""
@@ -294,7 +315,26 @@ def _finish(S, goal, unsafe, scripted, t0, t, q, nu, status, outcome, c_pair, c_
 
 
 @numba.njit(cache=True)
-def rollout_kernel(S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, delta_t, controls, durations, h, record_every, max_records, stop_at_outcome, t0):
+def rollout_kernel(
+    S,
+    D,
+    model,
+    solver,
+    goal,
+    unsafe,
+    q,
+    nu,
+    q_ref,
+    delta_n,
+    delta_t,
+    controls,
+    durations,
+    h,
+    record_every,
+    max_records,
+    stop_at_outcome,
+    t0,
+):
     """Run the controls from the given state (stopping at goal/unsafe if stop_at_outcome;
     otherwise the returned outcome is the first one met, and the run goes on).
 
@@ -357,11 +397,14 @@ def rollout_kernel(S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, del
             # stage are reference-counted each step, which slowed the cheap rungs by about 10%)
             p_t, dn2, dt2, sw = np.zeros((0, 2)), delta_n, delta_t, 0
             if kinematic:
-                q2, nu2, q_ref2, st, piv, res = kinematic_step(bi, h, q, q_ref, u, q_index, v_index, lower, upper, nc, c_psi, c_bias, W_n, nv)
+                q2, nu2, q_ref2, st, piv, res = kinematic_step(
+                    bi, h, q, q_ref, u, q_index, v_index, lower, upper, nc, c_psi, c_bias, W_n, nv
+                )
                 size, p_n = nc, np.zeros(nc)
             elif nc == 0 and constant_A and not limited:  # the cheap path: no contact problem
-                q2, nu2, q_ref2, st = free_step(eps, theta, h, bi, Ainv, M_const, rhs_const, q, nu, q_ref, u,
-                                                q_index, v_index, kp, kd, lower, upper)
+                q2, nu2, q_ref2, st = free_step(
+                    eps, theta, h, bi, Ainv, M_const, rhs_const, q, nu, q_ref, u, q_index, v_index, kp, kd, lower, upper
+                )
                 if compliant and (delta_n.any() or delta_t.any()):
                     dn2, dt2 = np.zeros_like(delta_n), np.zeros_like(delta_t)
                 piv, res, size, p_n = 0, 0.0, 0, np.zeros(0)
@@ -373,7 +416,9 @@ def rollout_kernel(S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, del
                 q2, nu2, q_ref2, dn2, dt2, st, piv, res, size, p_n, p_t, sw = r
                 if keep_warm and st == StepStatus.OK:
                     n_warm = _keep_warm(nc, c_slot, p_n, p_t, warm_n, warm_t, warm_slots, n_warm)
-            sweeps, lcp_solves, max_size, pivots, max_residual = _tally(sweeps, lcp_solves, max_size, pivots, max_residual, sw, size, piv, res)
+            sweeps, lcp_solves, max_size, pivots, max_residual = _tally(
+                sweeps, lcp_solves, max_size, pivots, max_residual, sw, size, piv, res
+            )
             if st != StepStatus.OK:
                 status = st
                 break
@@ -383,7 +428,49 @@ def rollout_kernel(S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, del
             steps += 1
             if record_every > 0 and steps % record_every == 0 and n_rec < max_records - 1:
                 n_rec = _record_state(rec_t, rec_q, rec_nu, n_rec, t, q, nu)
-    outcome, n_rec = _finish(S, goal, unsafe, scripted, t0, t, q, nu, status, outcome, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pair_psi,
-                             rec_t, rec_q, rec_nu, n_rec)
-    return RolloutOutput(q, nu, q_ref, delta_n, delta_t, t, outcome, status, steps, lcp_solves, pivots, max_residual, max_size,
-                         rec_t[:n_rec], rec_q[:n_rec], rec_nu[:n_rec], pair_force, min_psi, force_steps, sweeps, pair_wrench)
+    outcome, n_rec = _finish(
+        S,
+        goal,
+        unsafe,
+        scripted,
+        t0,
+        t,
+        q,
+        nu,
+        status,
+        outcome,
+        c_pair,
+        c_psi,
+        c_n,
+        c_pa,
+        c_pb,
+        unsupported,
+        pair_psi,
+        rec_t,
+        rec_q,
+        rec_nu,
+        n_rec,
+    )
+    return RolloutOutput(
+        q,
+        nu,
+        q_ref,
+        delta_n,
+        delta_t,
+        t,
+        outcome,
+        status,
+        steps,
+        lcp_solves,
+        pivots,
+        max_residual,
+        max_size,
+        rec_t[:n_rec],
+        rec_q[:n_rec],
+        rec_nu[:n_rec],
+        pair_force,
+        min_psi,
+        force_steps,
+        sweeps,
+        pair_wrench,
+    )

@@ -52,10 +52,10 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
+from models.contact_pgs import PgsStatus, block_solve, body_blocks, contact_pgs
 from models.kinematics import (
     BF_INERTIA,
     BF_MASS,
-    BF_QUAT,
     BI_QMAP,
     BI_VMAP,
     PF_C,
@@ -67,7 +67,6 @@ from models.kinematics import (
     quat_mul,
     quat_to_matrix,
 )
-from models.contact_pgs import PgsStatus, block_solve, body_blocks, contact_pgs
 from models.lcp import STATUS_SOLVED, STATUS_SOLVED_INACCURATE, complementarity_residual, lemke_kernel
 
 #: Quasistatic rungs: inertia scale standing in for eps -> 0 (times the mass matrix).
@@ -84,6 +83,7 @@ LCP_REGULARIZATION = 1e-9
 LCP_REGULARIZATION_STEPS = 3
 #: A state entry above this in magnitude counts as diverged.
 DIVERGENCE_LIMIT = 1e10
+
 
 class StepStatus(IntEnum):
     """How a step ended. Only OK is a success; `.label` is the name files and the CLI print,
@@ -584,7 +584,19 @@ def _lemke_step(model, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t
     n_act = active.shape[0]
     if n_act > 0 or any_limited(drives.max_force):
         nu_new, p_n, p_t, status, pivots, residual, size = _contact_solve(
-            model, tables.spatial, h, system.A, system.Ainv, nu_free, active, tables.pf, contacts, delta_n, delta_t, drives, drive_a,
+            model,
+            tables.spatial,
+            h,
+            system.A,
+            system.Ainv,
+            nu_free,
+            active,
+            tables.pf,
+            contacts,
+            delta_n,
+            delta_t,
+            drives,
+            drive_a,
         )
         for k in range(n_act):
             impulses[active[k]] = p_n[k]
@@ -622,8 +634,24 @@ def _pgs_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, d
     # quasistatic rungs (eps -> 0) get velocities as accurate as dynamic ones
     tolerance = solver.tolerance * min(eps, 1.0)
     r = contact_pgs(
-        model, tables.spatial, h, tables.pi, tables.pf, contacts, nc, delta_n, delta_t, dofs, count, inv, nu_free,
-        warm_n, warm_t, ZERO_COLUMN, tolerance, solver.max_sweeps,
+        model,
+        tables.spatial,
+        h,
+        tables.pi,
+        tables.pf,
+        contacts,
+        nc,
+        delta_n,
+        delta_t,
+        dofs,
+        count,
+        inv,
+        nu_free,
+        warm_n,
+        warm_t,
+        ZERO_COLUMN,
+        tolerance,
+        solver.max_sweeps,
     )
     if r.status != PgsStatus.CONVERGED:
         bad = StepStatus.CONTACT_NOT_CONVERGED.value if r.status == PgsStatus.NOT_CONVERGED else StepStatus.NON_FINITE.value
@@ -641,7 +669,9 @@ def _pgs_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, d
     q_new, bad = _integrate_checked(bi, model.theta, h, q, nu, r.nu)
     if bad != StepStatus.OK:
         return StepResult(q, nu, q_ref, delta_n, delta_t, bad, 0, r.residual, r.unknowns, r.p_n, r.p_t, r.sweeps)
-    return StepResult(q_new, r.nu, q_ref_new, delta_n_new, delta_t_new, StepStatus.OK.value, 0, r.residual, r.unknowns, r.p_n, r.p_t, r.sweeps)
+    return StepResult(
+        q_new, r.nu, q_ref_new, delta_n_new, delta_t_new, StepStatus.OK.value, 0, r.residual, r.unknowns, r.p_n, r.p_t, r.sweeps
+    )
 
 
 @numba.njit(cache=True)
@@ -832,7 +862,9 @@ def _drive_rows(Mlcp, qlcp, h, first_row, first_slack, lim, nl, kp, kd, max_forc
 @numba.njit(cache=True)
 def _contact_solve(model, spatial, h, A, Ainv, nu_free, active, pf, contacts, delta_n, delta_t, drives, drive_a):
     """Build and solve the contact LCP. Returns (nu+, p_n, p_t, status, pivots, residual, size)."""
-    Mlcp, qlcp, AinvJ, coef, fric, nf, lim = contact_lcp(model, spatial, h, A, Ainv, nu_free, active, pf, contacts, delta_n, delta_t, drives, drive_a)
+    Mlcp, qlcp, AinvJ, coef, fric, nf, lim = contact_lcp(
+        model, spatial, h, A, Ainv, nu_free, active, pf, contacts, delta_n, delta_t, drives, drive_a
+    )
     nc = active.shape[0]
     d = model.friction_directions if spatial else 2
     nd = nf * d

@@ -93,8 +93,12 @@ def _add_simulate_parser(sub: argparse._SubParsersAction) -> None:
     simulate.add_argument("--step", type=float, help="time step h (default: the rung's h in the ladder, else the rung's default)")
     simulate.add_argument("--json", action="store_true", help="print one JSON object")
     simulate.add_argument("--plot", type=Path, help="write a trajectory plot (.png or .svg) here; its folder must exist")
-    simulate.add_argument("--plan", type=Path, help="replay this plan.json's top-rung controls instead of the policy "
-                          "(the plan must be of this scene: same scenario, contents after parameters, and driven coordinates)")
+    simulate.add_argument(
+        "--plan",
+        type=Path,
+        help="replay this plan.json's top-rung controls instead of the policy "
+        "(the plan must be of this scene: same scenario, contents after parameters, and driven coordinates)",
+    )
     simulate.set_defaults(handler=cmd_simulate)
 
 
@@ -112,11 +116,18 @@ def _add_plan_parser(sub: argparse._SubParsersAction) -> None:
     plan.add_argument("--rungs", help="comma-separated rungs (default: the scenario's ladder)")
     plan.add_argument("--top", metavar="RUNG", help="stop at this rung")
     plan.add_argument("--seed", type=int, help="seed for OMPL's and our RNG (default: the scenario's)")
-    plan.add_argument("--iterations", type=int,
-                      help="planner iterations per rung (the budget; default: the scenario's, [ladder] iterations = 2000 unless set)")
+    plan.add_argument(
+        "--iterations",
+        type=int,
+        help="planner iterations per rung (the budget; default: the scenario's, [ladder] iterations = 2000 unless set)",
+    )
     plan.add_argument("--planner", choices=CONTROL_PLANNERS, help="control planner (default: the scenario's)")
-    plan.add_argument("--time-limit", type=float, help="wall-clock cap per rung in seconds (default: the scenario's time_limit); a safety net on top of "
-                      "the iteration budget: a plan is reproducible unless a cap ends a search")
+    plan.add_argument(
+        "--time-limit",
+        type=float,
+        help="wall-clock cap per rung in seconds (default: the scenario's time_limit); a safety net on top of "
+        "the iteration budget: a plan is reproducible unless a cap ends a search",
+    )
     plan.add_argument("--flat", action="store_true", help="plan directly at the top rung with the same budget (the baseline)")
     plan.add_argument("--no-seed-roots", action="store_true", help="replan without rooting trees at the previous plan's states")
     plan.add_argument("--no-guide", action="store_true", help="replan without sampling near the previous plan")
@@ -143,11 +154,21 @@ def _add_sweep_parser(sub: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     sweep.add_argument("file", type=Path, help="scenario file (TOML)")
-    sweep.add_argument("--grid", action="append", default=[], required=True, metavar="NAME=START:STOP:COUNT[:log]",
-                       help="a grid axis over a design parameter (repeatable); NAME=V1,V2,... lists values")
+    sweep.add_argument(
+        "--grid",
+        action="append",
+        default=[],
+        required=True,
+        metavar="NAME=START:STOP:COUNT[:log]",
+        help="a grid axis over a design parameter (repeatable); NAME=V1,V2,... lists values",
+    )
     _add_param_option(sweep)
-    sweep.add_argument("--model", required=True, metavar="[LABEL=]RUNG[NAME=VALUE,...][,...]",
-                       help="models to run (see below), e.g. quasistatic-rigid,elastic=dynamic-compliant[C=0]")
+    sweep.add_argument(
+        "--model",
+        required=True,
+        metavar="[LABEL=]RUNG[NAME=VALUE,...][,...]",
+        help="models to run (see below), e.g. quasistatic-rigid,elastic=dynamic-compliant[C=0]",
+    )
     where = sweep.add_mutually_exclusive_group()
     where.add_argument("--workers", type=int, help="local worker processes (default: all cores)")
     where.add_argument("--executor", metavar="dask://HOST:PORT", help="run on a Dask distributed scheduler")
@@ -171,14 +192,19 @@ def _add_bench_parser(sub: argparse._SubParsersAction) -> None:
         "and the ladder against flat planning (also as OMPL benchmark logs). Writes bench.json, plots and "
         "docs/benchmarks.md (--doc). --quick is a smoke run of every section.",
     )
-    bench.add_argument("--quick", action="store_true", help="a small version of every section (a few seconds once the kernels are compiled)")
+    bench.add_argument(
+        "--quick", action="store_true", help="a small version of every section (a few seconds once the kernels are compiled)"
+    )
     bench.add_argument("--out", type=Path, default=Path("out/bench"), help="output folder, created if missing (default out/bench)")
     bench.add_argument("--doc", type=Path, help="also write the markdown report here (make bench-doc: docs/benchmarks.md)")
     bench.add_argument("--json", action="store_true", help="print the results as one JSON object")
-    bench.add_argument("--planning", metavar="SCENE,...",
-                       help="scenes of the ladder-vs-flat section (default: two_finger_triangle,four_finger_grasp, "
-                       "the planar scenes, as make bench-doc; adding box_push_3d takes about an hour: its flat runs "
-                       "take minutes per seed)")
+    bench.add_argument(
+        "--planning",
+        metavar="SCENE,...",
+        help="scenes of the ladder-vs-flat section (default: two_finger_triangle,four_finger_grasp, "
+        "the planar scenes, as make bench-doc; adding box_push_3d takes about an hour: its flat runs "
+        "take minutes per seed)",
+    )
     bench.set_defaults(handler=cmd_bench)
 
 
@@ -304,8 +330,13 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     if args.plot:
         from planner.plots import plot_rollouts
 
-        plot_rollouts(args.plot, scenario.coordinates, scenario.start, [(args.model, result.times, result.trajectory)],
-                      f"{scenario.spec.scenario.name}: {args.model}, h = {h:g}, outcome {result.outcome}")
+        plot_rollouts(
+            args.plot,
+            scenario.coordinates,
+            scenario.start,
+            [(args.model, result.times, result.trajectory)],
+            f"{scenario.spec.scenario.name}: {args.model}, h = {h:g}, outcome {result.outcome}",
+        )
         summary["plot"] = str(args.plot)
     if args.json:
         print(json.dumps(summary, indent=2))
@@ -348,8 +379,13 @@ def _check_simulate_args(args: argparse.Namespace):
         durations = plan_controls[1] if plan_controls is not None else [duration]
         total = sum(round(d / h) for d in durations)
         if total > MAX_STEPS:
-            problems.append(Problem("--step", f"{duration:g} s at h = {h:g} is {total:.3g} steps, more than the {MAX_STEPS:.0e} "
-                                              "one run may take; use a larger --step or a shorter --duration"))
+            problems.append(
+                Problem(
+                    "--step",
+                    f"{duration:g} s at h = {h:g} is {total:.3g} steps, more than the {MAX_STEPS:.0e} "
+                    "one run may take; use a larger --step or a shorter --duration",
+                )
+            )
     if problems:
         raise ScenarioError(scenario.path, problems)
     return scenario, plan_controls, h, duration, total
@@ -480,7 +516,13 @@ def _run_plan(args: argparse.Namespace, scenario: Scenario, names: list[str]):
         if args.json:
             return
         if live:
-            print(f"\rplanning {name}: {iterations}/{flat_budget if args.flat else budgets.get(name, 0)} iterations, {propagations} propagations   ", end="", file=sys.stderr, flush=True)
+            print(
+                f"\rplanning {name}: {iterations}/{flat_budget if args.flat else budgets.get(name, 0)} iterations, "
+                f"{propagations} propagations   ",
+                end="",
+                file=sys.stderr,
+                flush=True,
+            )
         elif iterations == 0:
             print(f"planning: {name} ...", file=sys.stderr, flush=True)
 
@@ -488,9 +530,19 @@ def _run_plan(args: argparse.Namespace, scenario: Scenario, names: list[str]):
 
     with interrupt.deferred():  # Ctrl-C ends the rung under way; the rungs done are kept
         announce_compile()
-        result = run_ladder(scenario, rungs=names, seed=args.seed, iterations=args.iterations, progress=progress,
-                            flat=args.flat, planner=args.planner, time_limit=args.time_limit, seeded=not args.no_seed_roots,
-                            guided=not args.no_guide, stop=interrupt.asked)
+        result = run_ladder(
+            scenario,
+            rungs=names,
+            seed=args.seed,
+            iterations=args.iterations,
+            progress=progress,
+            flat=args.flat,
+            planner=args.planner,
+            time_limit=args.time_limit,
+            seeded=not args.no_seed_roots,
+            guided=not args.no_guide,
+            stop=interrupt.asked,
+        )
     if live:
         print("\r" + " " * 78 + "\r", end="", file=sys.stderr, flush=True)
     return result
@@ -513,13 +565,20 @@ def _write_plan_outputs(args: argparse.Namespace, scenario: Scenario, result) ->
         rung = rung_for(scenario, rung_report.rung)
         if rung.propagates:
             h = scenario.rung_settings(rung_report.rung).h
-            replay = rung.rollout(scenario, rung.initial_state(scenario), np.array(rung_report.controls), np.array(rung_report.durations), h)
+            replay = rung.rollout(
+                scenario, rung.initial_state(scenario), np.array(rung_report.controls), np.array(rung_report.durations), h
+            )
             times, trajectory = replay.times, replay.trajectory
         else:  # the geometric path itself
             times = np.concatenate([[0.0], np.cumsum(rung_report.durations)])
             trajectory = np.array(rung_report.states)
-        path = plot_rollouts(args.out / f"plan.{rung_report.rung}.png", scenario.coordinates, scenario.start,
-                             [(rung_report.rung, times, trajectory)], f"{scenario.spec.scenario.name}: plan under {rung_report.rung}")
+        path = plot_rollouts(
+            args.out / f"plan.{rung_report.rung}.png",
+            scenario.coordinates,
+            scenario.start,
+            [(rung_report.rung, times, trajectory)],
+            f"{scenario.spec.scenario.name}: plan under {rung_report.rung}",
+        )
         plots.append(str(path))
     return report, plots
 
@@ -536,15 +595,28 @@ def _print_plan(args: argparse.Namespace, scenario: Scenario, result, report: di
             table.add_column(col, no_wrap=True)
         for r in result.rungs:
             distance = "-" if r.goal_distance is None else f"{r.goal_distance:.2g}"
-            table.add_row(r.rung, r.ended.label, r.outcome, f"{r.wall_s:.2f}", str(r.propagations), str(r.iterations), distance,
-                          f"{r.max_penetration:.1e}", str(r.solver_failures), str(len(r.durations)))
+            table.add_row(
+                r.rung,
+                r.ended.label,
+                r.outcome,
+                f"{r.wall_s:.2f}",
+                str(r.propagations),
+                str(r.iterations),
+                distance,
+                f"{r.max_penetration:.1e}",
+                str(r.solver_failures),
+                str(len(r.durations)),
+            )
         console = _console(width=110)
         console.print(table)
         for r in result.rungs:
             if r.reason:
                 console.print(f"{r.rung}: {r.reason}")
         if result.complete:
-            print(f"top rung holds: {'yes' if result.top_holds else 'no'}; plan written to {args.out / 'plan.json'}; plots: {', '.join(plots) or 'none'}")
+            print(
+                f"top rung holds: {'yes' if result.top_holds else 'no'}; plan written to {args.out / 'plan.json'}; "
+                f"plots: {', '.join(plots) or 'none'}"
+            )
 
 
 #: A rollout longer than this many steps shows a progress bar (on a terminal).
@@ -562,8 +634,15 @@ def run_with_progress(rung, scenario, state, controls, durations, h, *, live: bo
     if live and total > PROGRESS_STEPS:
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
-        bar = Progress(TextColumn("{task.description}"), BarColumn(bar_width=15), MofNCompleteColumn(),
-                       TextColumn("{task.fields[rate]}"), TimeRemainingColumn(), console=_console(stderr=True), transient=True)
+        bar = Progress(
+            TextColumn("{task.description}"),
+            BarColumn(bar_width=15),
+            MofNCompleteColumn(),
+            TextColumn("{task.fields[rate]}"),
+            TimeRemainingColumn(),
+            console=_console(stderr=True),
+            transient=True,
+        )
         task = bar.add_task(rung.name, total=total, rate="steps")
         bar.start()
 
@@ -671,8 +750,15 @@ def sweep_point_problems(scenario: Scenario, texts: list[str], axes, models, fix
                 seconds = duration or (variant.spec.task.policy.duration if variant.spec.task.policy else 0.0)
                 if seconds / h > MAX_STEPS:
                     key = "--step" if step else "--duration" if duration else "task.policy.duration"
-                    found.setdefault((key, model.label, f"a run of {seconds:g} s at h = {h:g} is {seconds / h:.3g} steps, "
-                                                        f"more than the {MAX_STEPS:.0e} one run may take"), []).append(where)
+                    found.setdefault(
+                        (
+                            key,
+                            model.label,
+                            f"a run of {seconds:g} s at h = {h:g} is {seconds / h:.3g} steps, "
+                            f"more than the {MAX_STEPS:.0e} one run may take",
+                        ),
+                        [],
+                    ).append(where)
                     bad += 1
             if bad >= MAX_BAD_POINTS:
                 break
@@ -704,7 +790,9 @@ def _check_sweep_args(args: argparse.Namespace):
         if not args.executor.startswith("dask://") or not args.executor.removeprefix("dask://"):
             problems.append(Problem("--executor", "expected dask://HOST:PORT"))
         elif importlib.util.find_spec("distributed") is None:
-            problems.append(Problem("--executor", 'a Dask executor needs the dask extra: install the dask extra: pip install "contact-ladder[dask]"'))
+            problems.append(
+                Problem("--executor", 'a Dask executor needs the dask extra: install the dask extra: pip install "contact-ladder[dask]"')
+            )
     for key, value in (("--duration", args.duration), ("--step", args.step), ("--tolerance", args.tolerance)):
         problems += positive(key, value)
     scenario = load_from_args(args, problems)
@@ -724,7 +812,9 @@ def _check_sweep_args(args: argparse.Namespace):
     axes = [sw.parse_axis(text) for text in args.grid]
     for axis in axes:
         if axis.name not in scenario.parameters:
-            problems.append(Problem(f"--grid {axis.name}", f"not a design parameter of this file; parameters: {', '.join(scenario.parameters)}"))
+            problems.append(
+                Problem(f"--grid {axis.name}", f"not a design parameter of this file; parameters: {', '.join(scenario.parameters)}")
+            )
     if len({a.name for a in axes}) != len(axes):
         problems.append(Problem("--grid", "an axis is given twice"))
     for model in models:
@@ -735,8 +825,13 @@ def _check_sweep_args(args: argparse.Namespace):
         problems.append(Problem("task.policy", "a sweep runs the scenario's policy, and this file has none"))
     runs = sw.grid_size(axes) * len(models)
     if runs > sw.MAX_RUNS:
-        problems.append(Problem("--grid", f"{' x '.join(str(len(a.values)) for a in axes)} grid points x {len(models)} model(s) = "
-                                          f"{runs:,} runs, more than a sweep may run ({sw.MAX_RUNS:,}); use a coarser grid (and --refine)"))
+        problems.append(
+            Problem(
+                "--grid",
+                f"{' x '.join(str(len(a.values)) for a in axes)} grid points x {len(models)} model(s) = "
+                f"{runs:,} runs, more than a sweep may run ({sw.MAX_RUNS:,}); use a coarser grid (and --refine)",
+            )
+        )
     if problems:
         raise ScenarioError(scenario.path, problems)
     if runs > 10_000 and not args.json:
@@ -781,8 +876,9 @@ def _run_sweep(args: argparse.Namespace, scenario: Scenario, fixed: dict, axes, 
         announce_compile()
     try:
         with interrupt.deferred(), sw.Executor(args.workers, args.executor) as executor:
-            result = sw.sweep(str(scenario.path), axes, models, fixed=fixed, h=args.step, duration=args.duration,
-                              executor=executor, progress=progress)
+            result = sw.sweep(
+                str(scenario.path), axes, models, fixed=fixed, h=args.step, duration=args.duration, executor=executor, progress=progress
+            )
             if result.complete and args.refine:
                 result = sw.refine(result, tolerance=args.tolerance, executor=executor, progress=refine_progress)
     finally:
@@ -840,7 +936,9 @@ def cmd_bench(args: argparse.Namespace) -> int:
     scenes = DEFAULT_PLANNING_SCENES if args.planning is None else tuple(s.strip() for s in args.planning.split(",") if s.strip())
     unknown = [s for s in scenes if s not in PLANNING_SCENES]
     if unknown or not scenes:
-        problems.append(Problem("--planning", f"unknown scene(s) {', '.join(unknown) or '(none)'}; choose from {', '.join(PLANNING_SCENES)}"))
+        problems.append(
+            Problem("--planning", f"unknown scene(s) {', '.join(unknown) or '(none)'}; choose from {', '.join(PLANNING_SCENES)}")
+        )
     if problems:
         raise ScenarioError("ladder bench", problems)
     announce_compile()
@@ -861,12 +959,16 @@ def cmd_bench(args: argparse.Namespace) -> int:
         else:
             for row in peer["rows"]:
                 left_out = f", without {', '.join(row['inert_pairs_left_out'])}" if row["inert_pairs_left_out"] else ""
-                print(f"throughput MuJoCo {peer['version']} ({row['contact']}{left_out}) {row['steps_per_s']:>12,.0f} steps/s: "
-                      f"dynamic-compliant is {row['ratio']:.2f}x")
+                print(
+                    f"throughput MuJoCo {peer['version']} ({row['contact']}{left_out}) {row['steps_per_s']:>12,.0f} steps/s: "
+                    f"dynamic-compliant is {row['ratio']:.2f}x"
+                )
         for scene, res in results["planning"].items():
             x = res["summary"]
-            print(f"planning {scene}: ladder {x['ladder']['success_rate']:.0%} in {x['ladder']['median_wall_s']:.3f} s, "
-                  f"flat {x['flat']['success_rate']:.0%} in {x['flat']['median_wall_s']:.3f} s (median)")
+            print(
+                f"planning {scene}: ladder {x['ladder']['success_rate']:.0%} in {x['ladder']['median_wall_s']:.3f} s, "
+                f"flat {x['flat']['success_rate']:.0%} in {x['flat']['median_wall_s']:.3f} s (median)"
+            )
         print(f"results written to {args.out / 'bench.json'}" + (f" and {args.doc}" if args.doc else ""))
     return EXIT_OK
 

@@ -11,7 +11,8 @@ control period of physics steps in one compiled rollout (OMPL-CRIB section 8: co
 keep the Python callback cost small). Validity: flag is neither unsafe nor failure, q is in
 bounds, and no drive is wound up (its reference leads its position by more than a control
 period of full-speed travel: it is jammed, and the spring released later would throw what it
-touches; kinematic plans that jam a pusher against a wall failed this way under dynamics). The goal region's distance is 0 exactly on states whose rollout reached the goal.
+touches; kinematic plans that jam a pusher against a wall failed this way under dynamics).
+The goal region's distance is 0 exactly on states whose rollout reached the goal.
 
 Determinism (OMPL-CRIB section 6): the seed is set before any planner exists and the budget
 is an iteration count, so the same seed gives the same plan.
@@ -167,8 +168,7 @@ def steered_coordinates(scenario: Scenario) -> list[int]:
     planners' metric."""
     if scenario.dimension == 2:
         return list(range(len(scenario.coordinates)))
-    return [i for i, n in enumerate(scenario.coordinates)
-            if n in scenario.actuated or n.rsplit(".", 1)[1] not in UNSTEERED_DOFS]
+    return [i for i, n in enumerate(scenario.coordinates) if n in scenario.actuated or n.rsplit(".", 1)[1] not in UNSTEERED_DOFS]
 
 
 def _projection_coordinates(scenario: Scenario, most: int = 3) -> list[int]:
@@ -449,21 +449,30 @@ def plan_control(
     else:
         ss.setGoal(Goal(si))
     ss.setPlanner(chosen)
-    stop_now, done = _termination(ss, iterations, time_limit,
-                                  None if progress is None else (lambda i: progress(i, counter["propagations"])), stop)
+    stop_now, done = _termination(
+        ss, iterations, time_limit, None if progress is None else (lambda i: progress(i, counter["propagations"])), stop
+    )
     ss.solve(ob.PlannerTerminationCondition(stop_now))
     status = _search_status(bool(ss.haveExactSolutionPath()), done)
     if not ss.haveSolutionPath():
-        return ControlPlan(np.zeros((0, na)), np.zeros(0), start.q[None, :].copy(), status, counter["propagations"], done["iterations"],
-                           failures=counter["failures"])
+        return ControlPlan(
+            np.zeros((0, na)),
+            np.zeros(0),
+            start.q[None, :].copy(),
+            status,
+            counter["propagations"],
+            done["iterations"],
+            failures=counter["failures"],
+        )
     path = ss.getSolutionPath()
     controls = np.array([[c[j] for j in range(na)] for c in path.getControls()]).reshape(-1, na)
     durations = np.array(path.getControlDurations(), dtype=float)
     states = np.array([q_of(s) for s in path.getStates()])
     first = read(path.getState(0))
     start_index = int(np.argmin([np.max(np.abs(first - r)) for r in roots]))
-    result = ControlPlan(controls, durations, states, status, counter["propagations"], done["iterations"], start_index,
-                         failures=counter["failures"])
+    result = ControlPlan(
+        controls, durations, states, status, counter["propagations"], done["iterations"], start_index, failures=counter["failures"]
+    )
     del path, ss, si, space
     return result
 
@@ -481,8 +490,9 @@ class GeometricPlan:
         return self.status is PlanStatus.EXACT
 
 
-def plan_geometric(scenario: Scenario, *, seed: int, iterations: int, planner: str = "RRTConnect",
-                   time_limit: float | None = None, stop=None) -> GeometricPlan:
+def plan_geometric(
+    scenario: Scenario, *, seed: int, iterations: int, planner: str = "RRTConnect", time_limit: float | None = None, stop=None
+) -> GeometricPlan:
     """The geometric rung (eq. 9): a path in the C-space of all free DOFs whose states do not
     penetrate and are not unsafe, ending in the goal set. In a spatial scene a passive body's
     height and orientation stay at their start values (steered_coordinates): it rests.
@@ -642,8 +652,9 @@ class GoalSampler:
     def __init__(self, scenario: Scenario, rng: np.random.Generator, low: np.ndarray, high: np.ndarray, valid) -> None:
         self.scenario, self.rng, self.low, self.high, self.valid = scenario, rng, low, high, valid
         steered = set(steered_coordinates(scenario))
-        self.movable = [i for i, n in enumerate(scenario.coordinates)
-                        if i in steered and n.rsplit(".", 1)[1] in ("x", "y", "z", "theta", "yaw")]
+        self.movable = [
+            i for i, n in enumerate(scenario.coordinates) if i in steered and n.rsplit(".", 1)[1] in ("x", "y", "z", "theta", "yaw")
+        ]
 
     def _constraints(self, node, boxes, touches) -> None:
         from models.predicates import _pair_index
