@@ -224,7 +224,7 @@ def run_ladder(
         h, period = settings[name].h, settings[name].control_period
         start = rung.initial_state(scenario)
         t0 = time.perf_counter()
-        if previous is not None and previous.durations:
+        if previous is not None and previous.durations and previous.ended.holds:
             same = _same_physics(scenario, previous, name)
             if same:
                 reports.append(
@@ -330,10 +330,21 @@ def run_ladder(
             states=states,
             **replay,
         )
+        if not ended.holds and name != names[-1]:
+            # a rung that cannot express the task (a kinematic rung where only momentum reaches
+            # the goal) does not end the ladder: its best partial plan guides the next rung
+            partial = bool(report.durations) and bool(report.states)
+            report = replace(
+                report,
+                reason=report.reason
+                + (
+                    "; the ladder goes on, the next rung guided by this rung's best partial plan"
+                    if partial
+                    else "; the ladder goes on, the next rung unguided"
+                ),
+            )
         reports.append(report)
-        if not ended.holds:
-            break
-        previous = report
+        previous = report if (ended.holds or (report.durations and report.states)) else None
     return LadderResult(str(scenario.path), int(seed), reports, scene_record(scenario), complete=not interrupted)
 
 

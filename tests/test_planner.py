@@ -325,3 +325,25 @@ def test_goal_states_made_by_projection_are_in_the_goal_and_valid():
     path = plan_geometric(scenario, seed=1, iterations=2000)
     assert path.exact and path.goal_samples >= 1
     assert all(valid(q) for q in path.states)
+
+
+def test_a_rung_that_cannot_express_the_task_does_not_end_the_ladder():
+    """tests/data/strike.toml: the pusher may not pass x = 0, the puck must reach x >= 0.5, so
+    only momentum gets it there. The kinematic rung cannot (no inertia: the puck stops with
+    the pusher) and fails; the ladder goes on, guided by its best partial plan, and the top
+    rung (dynamic-rigid) plans. Seeds 1-5, equal budgets."""
+    from pathlib import Path
+
+    from models.scenario import load_scenario
+    from planner.ladder import run_ladder
+
+    scenario = load_scenario(Path(__file__).parent / "data" / "strike.toml")
+    held = 0
+    for seed in range(1, 6):
+        result = run_ladder(scenario, seed=seed, time_limit=20.0)
+        kinematic = next(r for r in result.rungs if r.rung == "kinematic")
+        assert not kinematic.ended.holds and kinematic.outcome != "goal"
+        assert "the ladder goes on" in kinematic.reason
+        assert [r.rung for r in result.rungs] == ["geometric", "kinematic", "dynamic-rigid"]
+        held += result.top_holds
+    assert held == 5
