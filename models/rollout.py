@@ -38,7 +38,6 @@ from models.contact import (
 )
 from models.predicates import evaluate, evaluate_with
 from models.stepper import (
-    QUASISTATIC_INERTIA,
     SOLVER_LEMKE,
     SceneTables,
     StepStatus,
@@ -219,8 +218,8 @@ def _inverse_or_empty(A):
 def _start_system(S, D, model, h, q):
     """The System at the start of a rollout: A, and A^-1 and M when they never change."""
     bi, bf, nv = S.bi, S.bf, S.nv
-    kinematic, eps, compliant, theta, _ = model
-    eps_eff = QUASISTATIC_INERTIA if eps == 0.0 else eps
+    eps = model.eps
+    eps_eff = model.quasistatic_inertia if eps == 0.0 else eps
     A = system_matrix(bi, bf, q, nv, eps_eff, h, D.v_index, D.kp, D.kd, D.max_force)
     Ainv = np.zeros((0, 0))
     M_const = np.zeros((0, 0))
@@ -362,8 +361,8 @@ def rollout_kernel(
     system = _start_system(S, D, model, h, q)
     A, Ainv, M_const, rhs_const = system
     constant_A, limited = not has_rotations(bi), any_limited(max_force)
-    kinematic, eps, compliant, theta, _ = model
-    eps_eff = QUASISTATIC_INERTIA if eps == 0.0 else eps
+    kinematic, eps, compliant, theta = model.kinematic, model.eps, model.compliant, model.theta
+    eps_eff = model.quasistatic_inertia if eps == 0.0 else eps
     max_records, rec_t, rec_q, rec_nu, n_rec = _start_records(max_records, q, nu)
     t, steps, lcp_solves, pivots, max_residual, max_size, min_psi, force_steps, sweeps = 0.0, 0, 0, 0, 0.0, 0, np.inf, 0, 0
     outcome = Outcome.NONE.value

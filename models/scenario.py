@@ -96,7 +96,7 @@ class RungSettings:
     RRTConnect unless the entry names one; else the ladder's); iterations: planner
     iterations; time_limit: wall-clock cap on its planning, s; contact_solver: lemke, pgs or
     auto; friction_directions: sides of the spatial friction cone (None for geometric);
-    theta: theta-rule weight."""
+    theta: theta-rule weight; inertia: a quasistatic rung's inertia scale (None: the default)."""
 
     name: str
     h: float | None
@@ -107,6 +107,7 @@ class RungSettings:
     contact_solver: str
     friction_directions: int | None
     theta: float
+    inertia: float | None = None  # quasistatic rungs' inertia scale (None: the stepper's default)
 
 
 def resolve_rung_settings(ladder: LadderSpec, name: str) -> RungSettings:
@@ -128,6 +129,7 @@ def resolve_rung_settings(ladder: LadderSpec, name: str) -> RungSettings:
         contact_solver=given("contact_solver") or "lemke",
         friction_directions=given("friction_directions") or family.friction_directions,
         theta=1.0 if entry is None else entry.theta,
+        inertia=given("inertia"),
     )
 
 

@@ -448,6 +448,12 @@ class RungSpec(Strict):
     friction_directions: _int(ge=2, le=64) | None = Field(
         None, description="directions of the polyhedral friction cone (spatial scenes; planar: 2)"
     )
+    inertia: Annotated[Num, Field(gt=0, le=1)] | None = Field(
+        None,
+        description="quasistatic rungs: the inertia scale their memoryless step keeps (default 1e-6, the limit "
+        "eps -> 0; 1: a quasi-dynamic step with the bodies' full inertia, which resolves a statically "
+        "indeterminate support and allows large steps)",
+    )
     contact_solver: Literal[CONTACT_SOLVERS] | None = Field(  # type: ignore[valid-type]
         None,
         description="how the contact problems are solved: lemke (default, exact), pgs (projected Gauss-Seidel, "

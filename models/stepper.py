@@ -134,6 +134,9 @@ class Model(NamedTuple):
     compliant: bool  # finite K, C with deformation state; else rigid
     theta: float  # theta-rule weight for the position update
     friction_directions: int  # polyhedral cone directions in space (2 in the plane)
+    # eps = 0 (quasistatic): the inertia scale the memoryless step keeps; QUASISTATIC_INERTIA
+    # stands in for the limit eps -> 0, 1 is a quasi-dynamic step with full inertia
+    quasistatic_inertia: float = QUASISTATIC_INERTIA
 
 
 class Drives(NamedTuple):
@@ -535,7 +538,7 @@ def _free_velocity(model, drives, tables, system, h, q, nu, q_ref, u):
     nv = nu.shape[0]
     quasistatic = model.eps == 0.0
     rhs = system.rhs_const.copy()
-    eps = QUASISTATIC_INERTIA if quasistatic else model.eps
+    eps = model.quasistatic_inertia if quasistatic else model.eps
     if not quasistatic:
         if system.M_const.shape[0] == nv:
             rhs += eps * (system.M_const @ nu)
@@ -622,7 +625,7 @@ def _pgs_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, d
     if not ok:
         return StepResult(q, nu, q_ref, delta_n, delta_t, StepStatus.SINGULAR.value, 0, 0.0, 0, np.zeros(nc), np.zeros((nc, 2)), 0)
     quasistatic = model.eps == 0.0
-    eps = QUASISTATIC_INERTIA if quasistatic else model.eps
+    eps = model.quasistatic_inertia if quasistatic else model.eps
     rhs = system.rhs_const.copy()
     if not quasistatic:
         rhs += eps * mass_times(bi, bf, q, nu)
