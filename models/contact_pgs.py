@@ -67,30 +67,12 @@ INSIDE_TOL = 1e-12
 
 
 class PgsStatus(IntEnum):
-    """How a PGS solve ended; only CONVERGED is a success (see `.message`)."""
+    """How a PGS solve ended; only CONVERGED is a success. Users meet it as the step's
+    `models.stepper.StepStatus` (CONTACT_NOT_CONVERGED or NON_FINITE), whose message says why."""
 
-    CONVERGED = 0
-    NOT_CONVERGED = 1
-    NON_FINITE = 2
-
-    @property
-    def label(self) -> str:
-        return self.name.lower()
-
-    @property
-    def message(self) -> str:
-        return _PGS_MESSAGES[self]
-
-    @property
-    def is_success(self) -> bool:
-        return self is PgsStatus.CONVERGED
-
-
-_PGS_MESSAGES = {
-    PgsStatus.CONVERGED: "converged: the impulse change and the recomputed residual are within the tolerance",
-    PgsStatus.NOT_CONVERGED: "the sweep limit was reached before the impulses met the tolerance",
-    PgsStatus.NON_FINITE: "the impulses or the residual became non-finite",
-}
+    CONVERGED = 0  # the impulse change and the recomputed residual are within the tolerance
+    NOT_CONVERGED = 1  # the sweep limit was reached first
+    NON_FINITE = 2  # the impulses or the residual became non-finite
 
 
 class PgsResult(NamedTuple):

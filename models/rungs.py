@@ -23,7 +23,7 @@ import numba
 import numpy as np
 
 from models import geometry as geo
-from models.contact import pair_min_distances
+from models.contact import has_script, pair_min_distances
 from models.family import FAMILY
 from models.kinematics import PI_INERT, SceneData, compile_scene
 from models.predicates import OP_TOUCH, Program, compile_predicate, evaluate_with
@@ -168,7 +168,7 @@ def compiled(scenario: Scenario) -> Compiled:
         goal=goal,
         unsafe=unsafe,
         capacity=max(int(S.pair_max_contacts.sum()), 1),
-        scripted=any(b.velocity for b in scenario.spec.bodies),
+        scripted=bool(has_script(S.bf)),
     )
     _CACHE[id(scenario)] = (scenario, result)
     while len(_CACHE) > CACHE_SIZE:

@@ -106,10 +106,6 @@ class StepStatus(IntEnum):
     def message(self) -> str:
         return _STEP_MESSAGES[self]
 
-    @property
-    def is_success(self) -> bool:
-        return self is StepStatus.OK
-
 
 _STEP_MESSAGES = {
     StepStatus.OK: "ok",

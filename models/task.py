@@ -24,25 +24,6 @@ class Outcome(IntEnum):
     def label(self) -> str:
         return self.name.lower()
 
-    @property
-    def message(self) -> str:
-        return _MESSAGES[self]
-
-    @classmethod
-    def from_label(cls, label: str) -> Outcome:
-        """The outcome a label names ('goal', 'unsafe', 'none'); ValueError otherwise."""
-        try:
-            return cls[label.upper()]
-        except KeyError:
-            raise ValueError(f"unknown outcome {label!r}; outcomes: {', '.join(o.label for o in cls)}") from None
-
-
-_MESSAGES = {
-    Outcome.NONE: "neither the goal nor the unsafe set was reached",
-    Outcome.GOAL: "the goal set was reached",
-    Outcome.UNSAFE: "the unsafe set was entered",
-}
-
 
 #: What files and the command line call the outcomes.
 OUTCOME_LABELS: tuple[str, ...] = tuple(o.label for o in Outcome)

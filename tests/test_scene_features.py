@@ -27,7 +27,7 @@ DYNAMIC_RUNGS = ["dynamic-rigid", "dynamic-compliant"]
 STEP = {"kinematic": 1e-3, "quasistatic-rigid": 1e-3, "quasistatic-compliant": 1e-3, "dynamic-rigid": 1e-4, "dynamic-compliant": 1e-4}
 
 
-def scene(tmp_path, bodies: str, *, mu: float = 0.5, task: str = "", name: str = "feature", smooth: tuple = ()) -> object:
+def scene(bodies: str, *, mu: float = 0.5, task: str = "", name: str = "feature", smooth: tuple = ()) -> object:
     """A planar scene on a floor (the half-plane y <= 0) with the given bodies; the pairs in
     smooth are frictionless (a pusher's face then cannot carry part of a body's weight, so the
     force it needs is exactly the floor's sliding friction)."""
@@ -133,7 +133,7 @@ dofs = ["x", "y"]
 def test_scripted_ram_pushes_puck_at_its_speed(tmp_path, rung):
     """The ram's face starts 5 cm from the puck and moves at 0.5 m/s: contact at t = 0.1 s,
     then the puck moves with the ram, whatever the floor's friction (mu = 0.5)."""
-    scenario = load(tmp_path, scene(tmp_path, RAM, smooth=[("ram", "puck")]), "puck.x")
+    scenario = load(tmp_path, scene(RAM, smooth=[("ram", "puck")]), "puck.x")
     out = run(scenario, rung, [], 1.0)
     x = out.state.named(scenario)["puck.x"]
     assert x == pytest.approx(0.5 * (1.0 - 0.1), abs=2e-3)
@@ -146,7 +146,7 @@ def test_scripted_ram_pushes_puck_at_its_speed(tmp_path, rung):
 @pytest.mark.parametrize("rung", MOVING_RUNGS)
 def test_scripted_obstacle_moves_with_time(tmp_path, rung):
     """A ram moving away from the puck never touches it: the puck stays at rest."""
-    scenario = load(tmp_path, scene(tmp_path, RAM.replace("velocity = { x = 0.5 }", "velocity = { x = -0.5 }")), "puck.x")
+    scenario = load(tmp_path, scene(RAM.replace("velocity = { x = 0.5 }", "velocity = { x = -0.5 }")), "puck.x")
     out = run(scenario, rung, [], 0.5)
     assert out.state.named(scenario)["puck.x"] == pytest.approx(0.0, abs=1e-9)
 
@@ -186,7 +186,7 @@ def test_drive_below_friction_cannot_move_box(tmp_path, rung):
     """mu m g = 4.905 N; a 2 N drive touching the box and commanded at 0.2 m/s holds it still
     and presses with exactly its limit. (Starting apart, the pusher's impact would slide the
     box by ~v^2 / (2 mu g) = 3e-5 m: a real effect, not what is tested here.)"""
-    scenario = load(tmp_path, scene(tmp_path, pusher(2.0), smooth=[("pusher", "box")]), "box.x")
+    scenario = load(tmp_path, scene(pusher(2.0), smooth=[("pusher", "box")]), "box.x")
     out = run(scenario, rung, [0.2], 1.0)
     assert abs(out.state.named(scenario)["box.x"]) < 1e-6
     assert force_on(scenario, out, "box", "pusher")[0] == pytest.approx(2.0, rel=1e-6)
@@ -196,7 +196,7 @@ def test_drive_below_friction_cannot_move_box(tmp_path, rung):
 def test_drive_above_friction_moves_box(tmp_path, rung):
     """An 8 N drive (above mu m g = 4.905 N) pushes the box along at the commanded speed,
     pressing with the box's sliding friction, not its limit."""
-    scenario = load(tmp_path, scene(tmp_path, pusher(8.0), smooth=[("pusher", "box")]), "box.x")
+    scenario = load(tmp_path, scene(pusher(8.0), smooth=[("pusher", "box")]), "box.x")
     out = run(scenario, rung, [0.2], 1.0)
     assert out.state.named(scenario)["box.x"] > 0.15
     assert mean_speed(scenario, out, "box.x", 0.2) == pytest.approx(0.2, rel=1e-2)
@@ -206,7 +206,7 @@ def test_drive_above_friction_moves_box(tmp_path, rung):
 @pytest.mark.parametrize("rung", FORCE_RUNGS)
 def test_unlimited_drive_moves_box(tmp_path, rung):
     """Without a limit the same drive pushes the box (the limit above is what held it)."""
-    scenario = load(tmp_path, scene(tmp_path, pusher(None)), "box.x")
+    scenario = load(tmp_path, scene(pusher(None)), "box.x")
     out = run(scenario, rung, [0.2], 1.0)
     assert out.state.named(scenario)["box.x"] > 0.15
 
@@ -218,7 +218,7 @@ def test_unlimited_drive_moves_box(tmp_path, rung):
 def test_drive_driven_into_its_limit_rests_at_it(tmp_path, rung):
     """Commanded at 0.5 m/s for 1 s towards upper = -0.1 (5 cm away): the pusher rests at
     its limit (before: kd u / kp = 1 cm past it in the force-bearing rungs)."""
-    scenario = load(tmp_path, scene(tmp_path, pusher(None, box=False, upper=-0.1)), "pusher.x")
+    scenario = load(tmp_path, scene(pusher(None, box=False, upper=-0.1)), "pusher.x")
     out = run(scenario, rung, [0.5], 1.0)
     assert out.state.named(scenario)["pusher.x"] == pytest.approx(-0.1, abs=1e-9)
 
@@ -229,7 +229,7 @@ def test_drive_driven_into_its_limit_rests_at_it(tmp_path, rung):
 @pytest.mark.parametrize("rung", DYNAMIC_RUNGS)
 def test_launched_box_stops_after_closed_form_distance(tmp_path, rung):
     """v0 = 1 m/s, mu = 0.5: stops after v0^2 / (2 mu g) = 0.1019 m, at t = v0 / (mu g)."""
-    scenario = load(tmp_path, scene(tmp_path, SLIDER, task='velocity = { "box.x" = 1.0 }'), "box.x")
+    scenario = load(tmp_path, scene(SLIDER, task='velocity = { "box.x" = 1.0 }'), "box.x")
     out = run(scenario, rung, [], 0.5)
     assert out.state.named(scenario)["box.x"] == pytest.approx(1.0 / (2 * 0.5 * G), abs=2e-4)
     assert out.state.nu[0] == pytest.approx(0.0, abs=1e-9)
@@ -253,7 +253,7 @@ def test_disc_with_backspin_ends_rolling(tmp_path, rung):
     brings it to rolling at v = (2 v0 - r w0) / 3 = 0.5 m/s, w = -5 rad/s, after
     (v0 + r w0) / (3 mu g) = 0.102 s."""
     task = 'velocity = { "disc.x" = 1.0, "disc.theta" = 5.0 }'
-    scenario = load(tmp_path, scene(tmp_path, DISC, task=task), "disc.x")
+    scenario = load(tmp_path, scene(DISC, task=task), "disc.x")
     out = run(scenario, rung, [], 0.3)
     v = dict(zip(scenario.velocities, out.state.nu))
     assert v["disc.x"] == pytest.approx(0.5, abs=1e-3)
@@ -264,7 +264,7 @@ def test_initial_velocity_unknown_name_is_reported(tmp_path):
     from models.scenario import ScenarioError
 
     with pytest.raises(ScenarioError) as err:
-        load(tmp_path, scene(tmp_path, SLIDER, task='velocity = { "box.z" = 1.0 }'), "box.x")
+        load(tmp_path, scene(SLIDER, task='velocity = { "box.z" = 1.0 }'), "box.x")
     assert "task.velocity" in str(err.value)
 
 
@@ -273,7 +273,7 @@ def test_initial_velocity_unknown_name_is_reported(tmp_path):
 
 @pytest.mark.parametrize("rung", FORCE_RUNGS)
 def test_contact_forces_of_resting_box_balance_gravity(tmp_path, rung):
-    scenario = load(tmp_path, scene(tmp_path, SLIDER.replace('["x", "y"]', '["x", "y", "theta"]\ninertia = 0.00417')), "box.x")
+    scenario = load(tmp_path, scene(SLIDER.replace('["x", "y"]', '["x", "y", "theta"]\ninertia = 0.00417')), "box.x")
     out = run(scenario, rung, [], 0.2)
     f = force_on(scenario, out, "box")
     assert f[1] == pytest.approx(1.0 * G, rel=1e-6)
@@ -379,7 +379,7 @@ def test_spatial_scripted_ram_pushes_box(tmp_path, rung, solver):
 def test_chunked_rollout_moves_scripted_obstacles_on(tmp_path):
     """`simulate` runs long rollouts in chunks; each chunk starts at the time reached, so the
     ram goes on from where it was: the same final state as one call."""
-    text = scene(tmp_path, RAM, smooth=[("ram", "puck")]).replace(
+    text = scene(RAM, smooth=[("ram", "puck")]).replace(
         '"floor_dummy" = [0.0, 1.0]', '"floor_dummy" = [0.3, 1.0]'
     )  # goal not met at the start
     scenario = load(tmp_path, text, "puck.x")
