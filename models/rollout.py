@@ -397,7 +397,7 @@ def rollout_kernel(
             p_t, dn2, dt2, sw = np.zeros((0, 2)), delta_n, delta_t, 0
             if kinematic:
                 q2, nu2, q_ref2, st, piv, res = kinematic_step(
-                    bi, h, q, q_ref, u, q_index, v_index, lower, upper, nc, c_psi, c_bias, W_n, nv
+                    bi, bf, h, q, q_ref, u, q_index, v_index, lower, upper, nc, c_psi, c_bias, W_n, nv
                 )
                 size, p_n = nc, np.zeros(nc)
             elif nc == 0 and constant_A and not limited:  # the cheap path: no contact problem

@@ -908,16 +908,31 @@ def _contact_solve(model, spatial, h, A, Ainv, nu_free, active, pf, contacts, de
 
 
 @numba.njit(cache=True)
-def _min_norm_passive(Wp, psi_h, Wa_u, alpha, nc):
-    """Passive speeds of eq. (8) with the actuated motion scaled by alpha (see kinematic_step)."""
+def _min_norm_passive(Wp, MWp, psi_h, Wa_u, alpha, nc):
+    """Passive speeds of eq. (8) with the actuated motion scaled by alpha (see kinematic_step);
+    MWp = M_p^-1 W_p (the metric's inverse times the passive Jacobian)."""
     qlcp = np.empty(nc)
     for i in range(nc):
         qlcp[i] = psi_h[i] + alpha * Wa_u[i]
-    Mlcp = np.ascontiguousarray(Wp.T) @ Wp
+    Mlcp = np.ascontiguousarray(Wp.T) @ MWp
     lam, w, st, pivots = lemke_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (nc + 1))
     residual = complementarity_residual(Mlcp, qlcp, lam)
     ok = (st == STATUS_SOLVED or st == STATUS_SOLVED_INACCURATE) and residual <= LCP_TOLERANCE
-    return Wp @ lam, ok, pivots, residual
+    return MWp @ lam, ok, pivots, residual
+
+
+@numba.njit(cache=True)
+def passive_metric_inverse(bi, bf, q, nv, actuated):
+    """The kinematic rung's metric on the passive DOFs, inverted: M(q)^-1 restricted to them
+    (the identity on actuated DOFs, which W_p does not reach). M is block diagonal by body."""
+    M = mass_matrix(bi, bf, q, nv)
+    for v in range(nv):
+        if actuated[v] or M[v, v] <= 0.0:
+            for k in range(nv):
+                M[v, k] = 0.0
+                M[k, v] = 0.0
+            M[v, v] = 1.0
+    return np.linalg.inv(M)
 
 
 #: Bisection steps for the largest feasible fraction of a blocked kinematic step.
@@ -941,17 +956,17 @@ def _passive_problem(nc, h, c_psi, c_bias, W_n, u_eff, actuated, nv):
 
 
 @numba.njit(cache=True)
-def _largest_feasible(Wp, psi_h, Wa_u, nc, residual):
+def _largest_feasible(Wp, MWp, psi_h, Wa_u, nc, residual):
     """A blocked kinematic command: the largest feasible fraction alpha of it, by bisection.
     Returns (alpha, passive speeds, feasible: standing still is, pivots, residual: the last
     feasible solve's, else the one passed in)."""
     lo, hi = 0.0, 1.0
-    v_lo, ok_lo, pivots, res = _min_norm_passive(Wp, psi_h, Wa_u, 0.0, nc)
+    v_lo, ok_lo, pivots, res = _min_norm_passive(Wp, MWp, psi_h, Wa_u, 0.0, nc)
     if not ok_lo:
         return 0.0, v_lo, False, pivots, residual
     for _ in range(BLOCKED_BISECTIONS):
         mid = 0.5 * (lo + hi)
-        v_mid, ok_mid, piv, res = _min_norm_passive(Wp, psi_h, Wa_u, mid, nc)
+        v_mid, ok_mid, piv, res = _min_norm_passive(Wp, MWp, psi_h, Wa_u, mid, nc)
         pivots += piv
         if ok_mid:
             lo, v_lo, residual = mid, v_mid, res
@@ -961,17 +976,21 @@ def _largest_feasible(Wp, psi_h, Wa_u, nc, residual):
 
 
 @numba.njit(cache=True)
-def kinematic_step(bi, h, q, q_ref, u, q_index, v_index, lower, upper, nc, c_psi, c_bias, W_n, nv):
+def kinematic_step(bi, bf, h, q, q_ref, u, q_index, v_index, lower, upper, nc, c_psi, c_bias, W_n, nv):
     """The paper's eq. (8) given the contacts at q. Returns (q+, nu+, q_ref+, status: a
     StepStatus value, pivots, residual). Plain arrays, as `free_step` (a cheap step).
 
     Actuated DOFs move at the commanded speed (stopping at their position limits; a kinematic
     model has no forces, so a drive's force limit does not apply); c_bias[i, 0] is contact i's
     normal speed from scripted obstacles (a scripted obstacle pushes like an actuator); the
-    passive speeds v are the least-norm ones keeping every contact's psi + h W_n^T nu >= 0:
-    min |v|^2 s.t. W_p^T v >= -(psi / h + W_a^T u). Its dual is the LCP
-    0 <= lam _|_ W_p^T W_p lam + (psi / h + W_a^T u) >= 0 with v = W_p lam, solved by Lemke
-    (tests check it against the OSQP wrapper).
+    passive speeds v are the least-norm ones keeping every contact's psi + h W_n^T nu >= 0, in
+    the kinetic-energy metric: min v^T M_p v s.t. W_p^T v >= -(psi / h + W_a^T u). The paper
+    prints eq. (8) with |nu|^2, which mixes metres and radians (a push off a box's centre line
+    then barely turns it); M_p makes the norm unit-free and is the selection the quasistatic
+    rung's limit makes (the least kinetic energy motion), without friction and gravity, so a
+    push turns a body as it turns a body free of friction (tests/test_kinematic_metric.py).
+    Its dual is the LCP 0 <= lam _|_ W_p^T M_p^-1 W_p lam + (psi / h + W_a^T u) >= 0 with
+    v = M_p^-1 W_p lam, solved by Lemke (tests check it against the OSQP wrapper).
 
     A command that pushes into something nothing can move (the two fingers closing on the
     triangle: form closure) has no solution. The kinematic model then moves the actuators by
@@ -993,9 +1012,10 @@ def kinematic_step(bi, h, q, q_ref, u, q_index, v_index, lower, upper, nc, c_psi
     v_passive = np.zeros(nv)
     if nc > 0:
         Wp, psi_h, Wa_u = _passive_problem(nc, h, c_psi, c_bias, W_n, u_eff, actuated, nv)
-        v_passive, ok, pivots, residual = _min_norm_passive(Wp, psi_h, Wa_u, 1.0, nc)
+        MWp = passive_metric_inverse(bi, bf, q, nv, actuated) @ Wp
+        v_passive, ok, pivots, residual = _min_norm_passive(Wp, MWp, psi_h, Wa_u, 1.0, nc)
         if not ok:
-            alpha, v_passive, feasible, more, residual = _largest_feasible(Wp, psi_h, Wa_u, nc, residual)
+            alpha, v_passive, feasible, more, residual = _largest_feasible(Wp, MWp, psi_h, Wa_u, nc, residual)
             pivots += more
             if not feasible:
                 status = StepStatus.BLOCKED.value

@@ -362,7 +362,8 @@ def _plan_with_restarts(scenario, rung, start, *, seed: int, iterations: int, ti
     plan, else the last search's, ending TIMEOUT (or STOPPED) when no time (or a stop) was
     left for the searches to come; counts summed over the searches."""
     searches = RESTARTS if kwargs.get("guide") is None else 1
-    share = max(1, -(-iterations // searches))
+    # equal shares that sum to the budget (a ceiling each would overspend it by up to searches - 1)
+    shares = [max(1, iterations // searches + (k < iterations % searches)) for k in range(searches)]
     t0, used = time.perf_counter(), {"propagations": 0, "iterations": 0, "failures": 0}
     plan = None
     for attempt in range(searches):
@@ -371,7 +372,7 @@ def _plan_with_restarts(scenario, rung, start, *, seed: int, iterations: int, ti
             return replace(plan, status=PlanStatus.TIMEOUT, **used)
         if plan is not None and kwargs.get("stop") and kwargs["stop"]():
             return replace(plan, status=PlanStatus.STOPPED, **used)
-        plan = plan_control(scenario, rung, start, seed=seed + attempt * RESTART_STRIDE, iterations=share, time_limit=left, **kwargs)
+        plan = plan_control(scenario, rung, start, seed=seed + attempt * RESTART_STRIDE, iterations=shares[attempt], time_limit=left, **kwargs)
         for key in used:
             used[key] += getattr(plan, key)
         if plan.exact:
