@@ -372,7 +372,9 @@ def _plan_with_restarts(scenario, rung, start, *, seed: int, iterations: int, ti
             return replace(plan, status=PlanStatus.TIMEOUT, **used)
         if plan is not None and kwargs.get("stop") and kwargs["stop"]():
             return replace(plan, status=PlanStatus.STOPPED, **used)
-        plan = plan_control(scenario, rung, start, seed=seed + attempt * RESTART_STRIDE, iterations=shares[attempt], time_limit=left, **kwargs)
+        plan = plan_control(
+            scenario, rung, start, seed=seed + attempt * RESTART_STRIDE, iterations=shares[attempt], time_limit=left, **kwargs
+        )
         for key in used:
             used[key] += getattr(plan, key)
         if plan.exact:
