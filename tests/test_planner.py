@@ -280,19 +280,20 @@ def test_every_rungs_plan_holds_at_a_tenth_of_its_step(name):
 @pytest.mark.slow
 def test_box_push_plans_mostly_hold_at_a_tenth_of_their_step():
     """Pushing is unstable and the goal is reached past a wall within a 1e-6 m touch tolerance,
-    so a plan found at one step need not hold at a finer one. Measured over seeds 1-10: the
-    quasistatic plans (h = 1e-3) hold at 1e-4 in 8 of 10 (found at h = 1e-2 instead, 2 of 10:
-    why the scenario steps at 1e-3); the dynamic plans (h = 1e-3) in 10 of 10."""
+    so a plan found at one step need not hold at a finer one. The dynamic plans (h = 1e-3)
+    hold at 1e-4 in 10 of 10 seeds (1-10). The quasistatic rung's step is part of its model
+    (a memoryless quasi-dynamic step of 0.1 s, one per control period; at 0.01 s it is a
+    different model that turns a pushed box more: 2 of 10 of its plans hold there), so it is
+    not checked here: its plans carry upward by tracking (`planner.tracking`)."""
     scenario = load_scenario(SCENARIOS / "box_push_3d.toml")
-    fine = {"quasistatic-rigid": 0, "dynamic-rigid": 0}
+    fine = 0
     for seed in range(1, 11):
         result = run_ladder(scenario, seed=seed)
         assert result.top_holds
-        for report in result.rungs:
-            if report.rung in fine:
-                fine[report.rung] += _holds_at_a_tenth_of_the_step(scenario, report)
-    print(fine)
-    assert fine["quasistatic-rigid"] >= 7 and fine["dynamic-rigid"] >= 7
+        top = result.rungs[-1]
+        assert top.rung == "dynamic-rigid"
+        fine += _holds_at_a_tenth_of_the_step(scenario, top)
+    assert fine >= 7
 
 
 def test_reports_carry_goal_distance_penetration_and_failures():
