@@ -591,7 +591,20 @@ def _print_plan(args: argparse.Namespace, scenario: Scenario, result, report: di
         from rich.table import Table
 
         table = Table(title=f"ladder on {scenario.path} (seed {result.seed})", title_justify="left")
-        for col in ("rung", "ended", "outcome", "wall s", "props", "iters", "goal dist", "max pen", "fails", "controls"):
+        for col in (
+            "rung",
+            "ended",
+            "outcome",
+            "wall s",
+            "tracked",
+            "rollouts",
+            "props",
+            "iters",
+            "goal dist",
+            "max pen",
+            "fails",
+            "controls",
+        ):
             table.add_column(col, no_wrap=True)
         for r in result.rungs:
             distance = "-" if r.goal_distance is None else f"{r.goal_distance:.2g}"
@@ -600,6 +613,8 @@ def _print_plan(args: argparse.Namespace, scenario: Scenario, result, report: di
                 r.ended.label,
                 r.outcome,
                 f"{r.wall_s:.2f}",
+                "-" if r.tracked is None else f"{r.tracked:.0%}",
+                str(r.rollouts),
                 str(r.propagations),
                 str(r.iterations),
                 distance,
@@ -607,7 +622,7 @@ def _print_plan(args: argparse.Namespace, scenario: Scenario, result, report: di
                 str(r.solver_failures),
                 str(len(r.durations)),
             )
-        console = _console(width=110)
+        console = _console(width=130)
         console.print(table)
         for r in result.rungs:
             if r.reason:

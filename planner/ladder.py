@@ -40,6 +40,7 @@ from models.scenario import Problem, Scenario, ScenarioError
 from models.task import Outcome, classify, goal_distance
 from planner.ompl_adapter import plan_control, plan_geometric, steered_coordinates
 from planner.plan_status import PlanStatus
+from planner.tracking import Reference, Tracked, track
 
 #: Words of a rung's outcome and its solver status in a report.
 GOAL, NONE, OK = Outcome.GOAL.label, Outcome.NONE.label, "ok"
@@ -59,6 +60,10 @@ class RungReport:
     contact_steps: int = 0  # steps of that replay in which a contact carried force
     solver_failures: int = 0  # propagations that ended in a numerical failure while planning
     status: str = OK  # the replay's solver status
+    tracked: float | None = None  # fraction of the previous plan's duration tracked (None: not tracked)
+    diverged_at: float | None = None  # where along the previous plan tracking was (last) lost, s
+    repairs: int = 0  # local repairs tried (short searches from tracked states; see planner.tracking)
+    rollouts: int = 0  # control periods rolled out by tracking (candidates), beside the search's propagations
     controls: list = field(default_factory=list)
     durations: list = field(default_factory=list)
     states: list = field(default_factory=list)
@@ -241,8 +246,36 @@ def run_ladder(
                 )
                 previous = reports[-1]
                 continue
-        replay = None
-        if previous is not None and previous.durations:
+        replay, tracked = None, None
+        if previous is not None and previous.durations and previous.rung != "geometric":
+            budget = allowance - sum(r.iterations for r in reports)
+            tracked = _track(scenario, rung, start, previous, h, period, seed, budget, deadline - time.perf_counter(), stop)
+            replay = _Replay.of(tracked)
+            if stopped():
+                interrupted = True
+                break
+            if replay.outcome == GOAL and replay.status == OK:
+                ended = PlanStatus.REPAIRED if tracked.repaired else PlanStatus.TRACKED if tracked.corrected else PlanStatus.REPLAYED
+                reports.append(
+                    RungReport(
+                        name,
+                        ended,
+                        _tracking_reason(ended, tracked),
+                        wall_s=time.perf_counter() - t0,
+                        propagations=tracked.repair_propagations,
+                        iterations=tracked.repair_iterations,
+                        controls=list(tracked.controls),
+                        durations=list(tracked.durations),
+                        states=replay.configurations(start),
+                        tracked=tracked.fraction,
+                        repairs=tracked.repairs,
+                        rollouts=tracked.rollouts,
+                        **replay.fields(scenario),
+                    )
+                )
+                previous = reports[-1]
+                continue
+        elif previous is not None and previous.durations:
             replay = _replay(scenario, rung, start, previous, h, period)
             if stopped():
                 interrupted = True
@@ -270,11 +303,12 @@ def run_ladder(
                 continue
         seeds, prefix_controls, prefix_durations = [], [], np.zeros(0)
         if replay is not None and seeded:
-            m = _agreeing(scenario, replay, previous)
+            # tracked states agree with the previous plan by construction (TRACK_TOLERANCE)
+            m = len(replay.states) if tracked is not None else _agreeing(scenario, replay, previous)
             seeds, prefix_controls, prefix_durations = replay.states[:m], replay.controls[:m], np.array(replay.durations[:m])
         # the geometric path moves passive bodies on their own: its states are no guide for physics
         guide = np.array(previous.states) if previous is not None and previous.states and guided and previous.rung != "geometric" else None
-        budget = allowance - sum(r.iterations for r in reports)
+        budget = allowance - sum(r.iterations for r in reports) - (tracked.repair_iterations if tracked else 0)
         plan = _plan_with_restarts(
             scenario,
             rung,
@@ -308,6 +342,11 @@ def run_ladder(
         accepted = plan.exact and replay["outcome"] == GOAL and replay["status"] == OK
         if accepted:
             ended, reason = (PlanStatus.EXACT if previous is None else PlanStatus.REPLANNED), ""
+            if tracked is not None and j > 0:
+                ended = PlanStatus.REPAIRED
+                reason = _tracking_reason(ended, tracked) + f"; then a search from tracked state {j} of {len(seeds)} to the goal"
+            elif tracked is not None:
+                reason = _tracking_reason(ended, tracked) + "; then a search from the start"
         elif not plan.exact:
             ended = plan.status
             reason = ended.message + (f" ({plan.iterations} of {budget} iterations)" if ended is PlanStatus.TIMEOUT else "")
@@ -322,12 +361,16 @@ def run_ladder(
             ended,
             reason,
             wall_s=wall,
-            propagations=plan.propagations,
-            iterations=plan.iterations,
+            propagations=plan.propagations + (tracked.repair_propagations if tracked else 0),
+            iterations=plan.iterations + (tracked.repair_iterations if tracked else 0),
             solver_failures=plan.failures,
             controls=plan.controls.tolist(),
             durations=plan.durations.tolist(),
             states=states,
+            tracked=None if tracked is None else tracked.fraction,
+            diverged_at=None if tracked is None else tracked.diverged_at,
+            repairs=0 if tracked is None else tracked.repairs,
+            rollouts=0 if tracked is None else tracked.rollouts,
             **replay,
         )
         if not ended.holds and name != names[-1]:
@@ -486,6 +529,21 @@ class _Replay:
     def empty(start: State) -> _Replay:
         return _Replay(start)
 
+    @staticmethod
+    def of(tracked: Tracked) -> _Replay:
+        """A tracked run as a replay of its own controls (it is one: the same states)."""
+        return _Replay(
+            tracked.state,
+            list(tracked.states),
+            list(tracked.controls[: len(tracked.states)]),
+            list(tracked.durations[: len(tracked.states)]),
+            tracked.outcome,
+            tracked.status,
+            tracked.min_psi,
+            tracked.contact_steps,
+            list(tracked.steps_min_psi),
+        )
+
     def head(self, j: int) -> _Replay:
         """The first j controls of this replay."""
         min_psi, contact = self.steps_min_psi[j - 1]
@@ -576,6 +634,34 @@ def _agreeing(scenario: Scenario, replay: _Replay, previous: RungReport) -> int:
 #: lower rung's plan that just reaches the goal with its last control is reached after they
 #: settle.
 SETTLE_PERIODS = 5
+
+
+def _track(scenario, rung, start, previous, h, period, seed, budget, time_limit, stop) -> Tracked:
+    """The previous plan (recorded per control period under its own rung) tracked under
+    `rung`, repaired locally with at most `budget` search iterations in all."""
+    below = rung_for(scenario, previous.rung)
+    reference = Reference.of(
+        scenario,
+        below,
+        below.initial_state(scenario),
+        previous.controls,
+        previous.durations,
+        scenario.rung_settings(previous.rung).h,
+        period,
+    )
+    return track(scenario, rung, start, reference, h, period, seed, iterations=budget, time_limit=time_limit, stop=stop)
+
+
+def _tracking_reason(ended: PlanStatus, tracked: Tracked) -> str:
+    """How tracking went, in words: corrections, repairs, where it was lost."""
+    words = [f"tracked {tracked.fraction:.0%} of the previous plan's duration"]
+    if tracked.corrected:
+        words.append(f"{tracked.corrected} of {len(tracked.controls)} controls corrected")
+    if tracked.repairs:
+        words.append(f"{tracked.repaired} of {tracked.repairs} local repair(s) succeeded ({tracked.repair_propagations} propagations)")
+    if tracked.lost:
+        words.append(f"lost at {tracked.diverged_at:.1f} s ({tracked.lost})")
+    return f"{ended.message}: " + ", ".join(words)
 
 
 def _replay(scenario, rung, start, previous, h, period: float | None = None) -> _Replay:

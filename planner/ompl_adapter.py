@@ -235,6 +235,7 @@ def plan_control(
     time_limit: float | None = None,
     progress=None,
     stop=None,
+    reached=None,
 ) -> ControlPlan:
     """Plan commanded speeds from `start` under `rung` with OMPL's control planner.
 
@@ -250,6 +251,8 @@ def plan_control(
     time_limit: a wall-clock cap on top of the iteration budget (then not reproducible).
     progress: called as progress(iterations, propagations) every PROGRESS_EVERY iterations.
     stop: a function -> True (Ctrl-C) that ends the search early.
+    reached: q -> bool, a subgoal: a propagation ending where it is True ends the search as the
+    goal does (the tracker's local repair: a state near the previous plan further along).
     """
     from ompl import base as ob
     from ompl import control as oc
@@ -359,6 +362,8 @@ def plan_control(
             new_flag = FLAG_GOAL
         elif out.outcome == Outcome.UNSAFE.label:
             new_flag = FLAG_UNSAFE
+        elif reached is not None and reached(out.state.q):
+            new_flag = FLAG_GOAL
         write(result, flatten(out.state, new_flag))
 
     # a drive whose reference leads its position by more than one control period of travel at

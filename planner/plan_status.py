@@ -18,6 +18,8 @@ class PlanStatus(Enum):
     EXACT = "a search found a plan into the goal set"
     REPLANNED = "the previous plan did not hold; a search guided by it found a plan into the goal set"
     REPLAYED = "the previous plan holds under this rung"
+    TRACKED = "the previous plan, tracked in closed loop (controls corrected per control period), reaches the goal under this rung"
+    REPAIRED = "tracking the previous plan was lost; a search rooted at the tracked states found a plan into the goal set"
     SKIPPED = "the rung computes along the plan what the rung below computed: the plan holds as it is"
     APPROXIMATE = "no path into the goal set within the budget; the closest one seeds the next rung"
     TIMEOUT = "no exact plan before the time limit ran out"
@@ -37,13 +39,22 @@ class PlanStatus(Enum):
     @property
     def holds(self) -> bool:
         """The rung accepted a plan that reaches the goal under it."""
-        return self in (PlanStatus.EXACT, PlanStatus.REPLANNED, PlanStatus.REPLAYED, PlanStatus.SKIPPED)
+        return self in (
+            PlanStatus.EXACT,
+            PlanStatus.REPLANNED,
+            PlanStatus.REPLAYED,
+            PlanStatus.TRACKED,
+            PlanStatus.REPAIRED,
+            PlanStatus.SKIPPED,
+        )
 
 
 _LABELS = {
     PlanStatus.EXACT: "planned",
     PlanStatus.REPLANNED: "replanned",
     PlanStatus.REPLAYED: "replayed",
+    PlanStatus.TRACKED: "tracked",
+    PlanStatus.REPAIRED: "repaired",
     PlanStatus.SKIPPED: "skipped",
     PlanStatus.APPROXIMATE: "approximate",
     PlanStatus.TIMEOUT: "failed",
