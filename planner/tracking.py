@@ -144,18 +144,21 @@ class Reference:
 
 
 class PoseError:
-    """Distance of a configuration from a reference configuration in what the task is about:
-    the passive bodies' steered coordinates (positions; planar angles) and the angle between
-    their orientations times the body's bounding radius (how far its farthest point moves),
-    in m; with no passive body, the actuated coordinates."""
+    """Distance of a configuration from a reference configuration in what the task is about,
+    in m: the passive bodies' steered coordinates, an angle (planar theta, yaw; the angle
+    between two orientations) times the body's bounding radius (how far its farthest point
+    moves); with no passive body, the actuated coordinates."""
 
     def __init__(self, scenario: Scenario):
         names = scenario.coordinates
         steered = steered_coordinates(scenario)
-        passive = [i for i in steered if names[i] not in scenario.actuated]
-        self.coordinates = np.array(passive or [i for i in steered if names[i] in scenario.actuated], dtype=int)
         bound = compiled(scenario).scene.bound_radius
         radius = {b.name: float(bound[i]) for i, b in enumerate(scenario.spec.bodies)}
+        passive = [i for i in steered if names[i] not in scenario.actuated]
+        self.coordinates = np.array(passive or [i for i in steered if names[i] in scenario.actuated], dtype=int)
+        self.weights = np.array(
+            [radius[names[i].split(".")[0]] if names[i].split(".")[1] in ("theta", "yaw") else 1.0 for i in self.coordinates]
+        )
         self.quaternions = [
             (np.array([names.index(f"{b}.{c}") for c in ("qw", "qx", "qy", "qz")]), radius[b])
             for b in dict.fromkeys(n.split(".")[0] for n in names)
@@ -163,7 +166,7 @@ class PoseError:
         ]
 
     def __call__(self, q: np.ndarray, ref: np.ndarray) -> float:
-        err = float(np.max(np.abs(q[self.coordinates] - ref[self.coordinates]), initial=0.0))
+        err = float(np.max(self.weights * np.abs(q[self.coordinates] - ref[self.coordinates]), initial=0.0))
         for quat, radius in self.quaternions:
             a, b = q[quat], ref[quat]
             c = min(1.0, abs(float(a @ b)) / max(float(np.linalg.norm(a) * np.linalg.norm(b)), 1e-300))

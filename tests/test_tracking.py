@@ -109,3 +109,12 @@ def test_box_push_ladder_holds_in_nearly_every_seed():
     scenario = load_scenario(PUSH)
     held = sum(run_ladder(scenario, seed=seed).top_holds for seed in range(1, 21))
     assert held >= 19
+
+
+def test_pose_error_weighs_a_yaw_coordinate_as_a_turn():
+    scenario = load_scenario(ROOT / "scenarios" / "box_rotate_3d.toml")
+    error = PoseError(scenario)
+    q = rung_for(scenario, "dynamic-rigid").initial_state(scenario).q
+    turned = q.copy()
+    turned[scenario.coordinates.index("box.yaw")] += 0.1
+    assert error(turned, q) == pytest.approx(0.1 * np.sqrt(0.1**2 + 0.1**2 + 0.05**2), rel=1e-9)
