@@ -595,26 +595,37 @@ def scaling(quick: bool = False) -> dict:
 
 
 #: Scenes of the planning section and their parameters (the paper's scene at v1 = 0.8, where
-#: the default plan must push the triangle). --quick leaves out box_push_3d.
-PLANNING_SCENES = ("two_finger_triangle", "four_finger_grasp", "box_push_3d")
+#: the default plan must push the triangle). --quick leaves out the spatial scenes.
+PLANNING_SCENES = ("two_finger_triangle", "four_finger_grasp", "box_push_3d", "box_rotate_3d")
+#: Seeds per planning scene (1..PLANNING_SEEDS; --quick: 3).
+PLANNING_SEEDS = 20
 #: What `ladder bench` plans by default (as `make bench-doc`): box_push_3d's flat runs take
 #: minutes per seed, about an hour for its 10 seeds.
 DEFAULT_PLANNING_SCENES = ("two_finger_triangle", "four_finger_grasp")
 PLANNING_PARAMETERS = {"two_finger_triangle": {"v1": 0.8}}
 
 
-def planning(quick: bool = False, out: Path | None = None, scenes=PLANNING_SCENES) -> dict:
+def planning(quick: bool = False, out: Path | None = None, scenes=PLANNING_SCENES, seeds: int = PLANNING_SEEDS, progress=None) -> dict:
     from models.scenario import load_scenario
     from planner.benchmark import ladder_vs_flat
 
-    seeds = range(1, 4) if quick else range(1, 11)
+    seeds = range(1, 4) if quick else range(1, seeds + 1)
     results = {}
     for name in scenes:
-        if quick and name == "box_push_3d":
+        if quick and name.endswith("_3d"):
             continue
         params = PLANNING_PARAMETERS.get(name, {})
         t0 = time.perf_counter()
-        result = ladder_vs_flat(load_scenario(SCENARIOS / f"{name}.toml", params), seeds)
+        each = (
+            None
+            if progress is None
+            else (
+                lambda run, _n=name: progress(
+                    f"bench: planning {_n} seed {run.seed} {run.mode}: {'holds' if run.holds else 'fails'} in {run.wall_s:.1f} s"
+                )
+            )
+        )
+        result = ladder_vs_flat(load_scenario(SCENARIOS / f"{name}.toml", params), seeds, progress=each)
         result["total_s"] = time.perf_counter() - t0
         results[name] = result
         if out is not None:
@@ -670,7 +681,7 @@ def write_ompl_log(path: Path, name: str, result: dict) -> Path:
 # ----------------------------------------------------------------------------- all
 
 
-def run_all(out: Path, doc: Path | None, quick: bool = False, progress=print, scenes=PLANNING_SCENES) -> dict:
+def run_all(out: Path, doc: Path | None, quick: bool = False, progress=print, scenes=PLANNING_SCENES, seeds: int = PLANNING_SEEDS) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     results = {"machine": machine(), "quick": quick, "date": _dt.datetime.now().isoformat(timespec="seconds")}
     for name, fn in (("throughput", throughput), ("work_precision", work_precision), ("stability", stability), ("scaling", scaling)):
@@ -680,7 +691,7 @@ def run_all(out: Path, doc: Path | None, quick: bool = False, progress=print, sc
         progress(f"bench: {name} done in {time.perf_counter() - t0:.1f} s")
     progress("bench: planning ...")
     t0 = time.perf_counter()
-    results["planning"] = planning(quick, out, scenes)
+    results["planning"] = planning(quick, out, scenes, seeds, progress)
     progress(f"bench: planning done in {time.perf_counter() - t0:.1f} s")
     results["plots"] = plot_work_precision(results["work_precision"], out)
     (out / "bench.json").write_text(json.dumps(results, indent=1) + "\n")

@@ -23,7 +23,8 @@ class Run:
     seed: int
     holds: bool
     wall_s: float
-    propagations: int
+    propagations: int  # of the searches (local repairs included)
+    rollouts: int  # control periods rolled out by tracking
     rungs: str  # how each rung ended
 
 
@@ -53,6 +54,7 @@ def ladder_vs_flat(
                     holds,
                     wall,
                     sum(r.propagations for r in result.rungs),
+                    sum(r.rollouts for r in result.rungs),
                     ", ".join(f"{r.rung}: {r.ended.label}" for r in result.rungs),
                 )
             )

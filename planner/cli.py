@@ -202,9 +202,10 @@ def _add_bench_parser(sub: argparse._SubParsersAction) -> None:
         "--planning",
         metavar="SCENE,...",
         help="scenes of the ladder-vs-flat section (default: two_finger_triangle,four_finger_grasp, "
-        "the planar scenes, as make bench-doc; adding box_push_3d takes about an hour: its flat runs "
-        "take minutes per seed)",
+        "the planar scenes, as make bench-doc; box_push_3d and box_rotate_3d take about half an hour "
+        "each: their flat runs take up to minutes per seed)",
     )
+    bench.add_argument("--seeds", type=int, default=None, metavar="N", help="seeds 1..N per planning scene (default 20; --quick: 3)")
     bench.set_defaults(handler=cmd_bench)
 
 
@@ -945,7 +946,7 @@ def _print_sweep(args: argparse.Namespace, result, data: dict, plot, interrupted
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    from planner.bench import DEFAULT_PLANNING_SCENES, PLANNING_SCENES, run_all
+    from planner.bench import DEFAULT_PLANNING_SCENES, PLANNING_SCENES, PLANNING_SEEDS, run_all
 
     problems = check_out_dir("--out", args.out) + check_out_file("--doc", args.doc)
     scenes = DEFAULT_PLANNING_SCENES if args.planning is None else tuple(s.strip() for s in args.planning.split(",") if s.strip())
@@ -954,6 +955,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
         problems.append(
             Problem("--planning", f"unknown scene(s) {', '.join(unknown) or '(none)'}; choose from {', '.join(PLANNING_SCENES)}")
         )
+    if args.seeds is not None and args.seeds < 1:
+        problems.append(Problem("--seeds", f"must be at least 1, got {args.seeds}"))
     if problems:
         raise ScenarioError("ladder bench", problems)
     announce_compile()
@@ -962,7 +965,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
         if not args.json:
             print(text, file=sys.stderr, flush=True)
 
-    results = run_all(args.out, args.doc, quick=args.quick, progress=progress, scenes=scenes)
+    seeds = PLANNING_SEEDS if args.seeds is None else args.seeds
+    results = run_all(args.out, args.doc, quick=args.quick, progress=progress, scenes=scenes, seeds=seeds)
     if args.json:
         print(json.dumps(results, indent=2))
     else:
