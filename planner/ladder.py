@@ -202,193 +202,243 @@ def run_ladder(
         limits = {names[-1]: sum(limits.values())}
         names = names[-1:]
     seed = spec.seed if seed is None else seed
+    stopped = stop or (lambda: False)
+    budget = _Budget()
     reports: list[RungReport] = []
     previous: RungReport | None = None
-    # a rung may spend what the rungs below left unspent: the ladder's whole budget is the flat
-    # baseline's (iterations, and wall time)
-    allowance, deadline = 0, time.perf_counter()
-    stopped = stop or (lambda: False)
     interrupted = False
     for name in names:
         if stopped():
             interrupted = True
             break
-        allowance += budgets[name]
-        deadline += limits[name]
+        budget.add(budgets[name], limits[name])
         if progress:
             progress(name, 0, 0)
         rung = rung_for(scenario, name)
-        if not rung.propagates:
-            reports.append(_geometric(scenario, seed, budgets[name], deadline - time.perf_counter(), stop=stop))
-            if stopped():
-                reports.pop()
-                interrupted = True
-                break
-            previous = reports[-1] if reports[-1].durations else None
-            continue
-        h, period = settings[name].h, settings[name].control_period
-        start = rung.initial_state(scenario)
-        t0 = time.perf_counter()
-        if previous is not None and previous.durations and previous.ended.holds:
-            same = _same_physics(scenario, previous, name)
-            if same:
-                reports.append(
-                    replace(
-                        previous,
-                        rung=name,
-                        ended=PlanStatus.SKIPPED,
-                        reason=same,
-                        wall_s=time.perf_counter() - t0,
-                        propagations=0,
-                        iterations=0,
-                        solver_failures=0,
-                    )
-                )
-                previous = reports[-1]
-                continue
-        replay, tracked = None, None
-        if previous is not None and previous.durations and previous.rung != "geometric":
-            budget = allowance - sum(r.iterations for r in reports)
-            tracked = _track(scenario, rung, start, previous, h, period, seed, budget, deadline - time.perf_counter(), stop)
-            replay = _Replay.of(tracked)
-            if stopped():
-                interrupted = True
-                break
-            if replay.outcome == GOAL and replay.status == OK:
-                ended = PlanStatus.REPAIRED if tracked.repaired else PlanStatus.TRACKED if tracked.corrected else PlanStatus.REPLAYED
-                reports.append(
-                    RungReport(
-                        name,
-                        ended,
-                        _tracking_reason(ended, tracked),
-                        wall_s=time.perf_counter() - t0,
-                        propagations=tracked.repair_propagations,
-                        iterations=tracked.repair_iterations,
-                        controls=list(tracked.controls),
-                        durations=list(tracked.durations),
-                        states=replay.configurations(start),
-                        tracked=tracked.fraction,
-                        repairs=tracked.repairs,
-                        rollouts=tracked.rollouts,
-                        **replay.fields(scenario),
-                    )
-                )
-                previous = reports[-1]
-                continue
-        elif previous is not None and previous.durations:
-            replay = _replay(scenario, rung, start, previous, h, period)
-            if stopped():
-                interrupted = True
-                break
-            if replay.outcome == GOAL and replay.status == OK:
-                # the states are this rung's (a geometric path's states move passive bodies on their own)
-                states = replay.configurations(start)
-                hold = [[0.0] * len(scenario.actuated)] * replay.held
-                reason = PlanStatus.REPLAYED.message + (
-                    f" (its drives held still for {replay.held} control period(s) at the end)" if replay.held else ""
-                )
-                reports.append(
-                    RungReport(
-                        name,
-                        PlanStatus.REPLAYED,
-                        reason,
-                        wall_s=time.perf_counter() - t0,
-                        controls=list(previous.controls) + hold,
-                        durations=list(previous.durations) + [period] * replay.held,
-                        states=states,
-                        **replay.fields(scenario),
-                    )
-                )
-                previous = reports[-1]
-                continue
-        seeds, prefix_controls, prefix_durations = [], [], np.zeros(0)
-        if replay is not None and seeded:
-            # tracked states agree with the previous plan by construction (TRACK_TOLERANCE)
-            m = len(replay.states) if tracked is not None else _agreeing(scenario, replay, previous)
-            seeds, prefix_controls, prefix_durations = replay.states[:m], replay.controls[:m], np.array(replay.durations[:m])
-        # the geometric path moves passive bodies on their own: its states are no guide for physics
-        guide = np.array(previous.states) if previous is not None and previous.states and guided and previous.rung != "geometric" else None
-        budget = allowance - sum(r.iterations for r in reports) - (tracked.repair_iterations if tracked else 0)
-        plan = _plan_with_restarts(
-            scenario,
-            rung,
-            start,
-            h=h,
-            control_period=period,
-            seed=seed,
-            iterations=budget,
-            planner=planner or settings[name].planner,
-            extra_starts=seeds,
-            guide=guide,
-            time_limit=deadline - time.perf_counter(),
-            stop=stop,
-            progress=(lambda i, n, _name=name: progress(_name, i, n)) if progress else None,
-        )
-        if stopped():
+        step = _Step(scenario, name, rung, settings[name], seed, budgets[name], budget.left(reports), budget, stop, time.perf_counter())
+        report = _climb(step, previous, planner, seeded, guided, progress)
+        if report is None:  # interrupted: the rung under way is dropped
             interrupted = True
             break
-        j = plan.start_index
-        if j > 0:  # the path starts at a seed: splice the previous prefix in front
-            plan = replace(
-                plan,
-                controls=np.concatenate([np.array(prefix_controls[:j]).reshape(j, -1), plan.controls]),
-                durations=np.concatenate([prefix_durations[:j], plan.durations]),
-            )
-        # the plan replayed from the start: the prefix's part is known, the rest runs from the seed it starts at
-        head = replay.head(j) if j > 0 else _Replay.empty(start)
-        tail = _replay_controls(scenario, rung, head.state, plan.controls[j:], plan.durations[j:], h, head)
-        replay = tail.fields(scenario)
-        wall = time.perf_counter() - t0
-        accepted = plan.exact and replay["outcome"] == GOAL and replay["status"] == OK
-        if accepted:
-            ended, reason = (PlanStatus.EXACT if previous is None else PlanStatus.REPLANNED), ""
-            if tracked is not None and j > 0:
-                ended = PlanStatus.REPAIRED
-                reason = _tracking_reason(ended, tracked) + f"; then a search from tracked state {j} of {len(seeds)} to the goal"
-            elif tracked is not None:
-                reason = _tracking_reason(ended, tracked) + "; then a search from the start"
-        elif not plan.exact:
-            ended = plan.status
-            reason = ended.message + (f" ({plan.iterations} of {budget} iterations)" if ended is PlanStatus.TIMEOUT else "")
-        else:
-            ended = PlanStatus.FAILED
-            reason = f"{ended.message} ({replay['outcome']}, {replay['status']})"
-        # an accepted plan's states are its replay's under this rung, from the start (the tree's
-        # path begins at its root, which may be a seed part-way along the prefix)
-        states = tail.configurations(start) if accepted else plan.states.tolist()
-        report = RungReport(
-            name,
-            ended,
-            reason,
-            wall_s=wall,
-            propagations=plan.propagations + (tracked.repair_propagations if tracked else 0),
-            iterations=plan.iterations + (tracked.repair_iterations if tracked else 0),
-            solver_failures=plan.failures,
-            controls=plan.controls.tolist(),
-            durations=plan.durations.tolist(),
-            states=states,
-            tracked=None if tracked is None else tracked.fraction,
-            diverged_at=None if tracked is None else tracked.diverged_at,
-            repairs=0 if tracked is None else tracked.repairs,
-            rollouts=0 if tracked is None else tracked.rollouts,
-            **replay,
-        )
-        if not ended.holds and name != names[-1]:
-            # a rung that cannot express the task (a kinematic rung where only momentum reaches
-            # the goal) does not end the ladder: its best partial plan guides the next rung
-            partial = bool(report.durations) and bool(report.states)
-            report = replace(
-                report,
-                reason=report.reason
-                + (
-                    "; the ladder goes on, the next rung guided by this rung's best partial plan"
-                    if partial
-                    else "; the ladder goes on, the next rung unguided"
-                ),
-            )
+        if not report.ended.holds and step.rung.propagates and name != names[-1]:
+            report = _goes_on(report)
         reports.append(report)
-        previous = report if (ended.holds or (report.durations and report.states)) else None
+        if not step.rung.propagates:
+            previous = report if report.durations else None
+        else:
+            previous = report if (report.ended.holds or (report.durations and report.states)) else None
     return LadderResult(str(scenario.path), int(seed), reports, scene_record(scenario), complete=not interrupted)
+
+
+class _Budget:
+    """The ladder's budget: a rung may spend what the rungs below left unspent, so the whole
+    ladder's is the flat baseline's (iterations, and wall time)."""
+
+    def __init__(self):
+        self.allowance, self.deadline = 0, time.perf_counter()
+
+    def add(self, iterations: int, seconds: float) -> None:
+        self.allowance += iterations
+        self.deadline += seconds
+
+    def left(self, reports: list[RungReport]) -> int:
+        return self.allowance - sum(r.iterations for r in reports)
+
+    def seconds(self) -> float:
+        return self.deadline - time.perf_counter()
+
+
+@dataclass
+class _Step:
+    """One rung of the ladder under way: what it plans with."""
+
+    scenario: Scenario
+    name: str
+    rung: object  # models.rungs.Rung
+    settings: object  # models.scenario.RungSettings
+    seed: int
+    own: int  # the rung's own iterations
+    iterations: int  # what the rung may spend (its own and what the rungs below left)
+    budget: _Budget
+    stop: object
+    t0: float
+
+    @property
+    def h(self) -> float:
+        return self.settings.h
+
+    @property
+    def period(self) -> float:
+        return self.settings.control_period
+
+    def start(self) -> State:
+        return self.rung.initial_state(self.scenario)
+
+    def stopped(self) -> bool:
+        return bool(self.stop and self.stop())
+
+
+def _climb(step: _Step, previous: RungReport | None, planner, seeded: bool, guided: bool, progress) -> RungReport | None:
+    """How the rung takes the previous plan up, the cheapest way that holds: skip (the same
+    physics), track (or replay a geometric path), else search; None when stopped."""
+    if not step.rung.propagates:
+        report = _geometric(step.scenario, step.seed, step.own, step.budget.seconds(), stop=step.stop)
+        return None if step.stopped() else report
+    carried = previous is not None and previous.durations
+    if carried and previous.ended.holds:
+        same = _same_physics(step.scenario, previous, step.name)
+        if same:
+            return _skipped(step, previous, same)
+    replay, tracked = None, None
+    if carried and previous.rung != "geometric":
+        tracked = _track(step, previous)
+        replay = _Replay.of(tracked)
+        if step.stopped():
+            return None
+        if replay.outcome == GOAL and replay.status == OK:
+            return _tracked(step, tracked, replay)
+    elif carried:
+        replay = _replay(step.scenario, step.rung, step.start(), previous, step.h, step.period)
+        if step.stopped():
+            return None
+        if replay.outcome == GOAL and replay.status == OK:
+            return _replayed(step, previous, replay)
+    return _search(step, previous, replay, tracked, planner, seeded, guided, progress)
+
+
+def _skipped(step: _Step, previous: RungReport, reason: str) -> RungReport:
+    return replace(
+        previous,
+        rung=step.name,
+        ended=PlanStatus.SKIPPED,
+        reason=reason,
+        wall_s=time.perf_counter() - step.t0,
+        propagations=0,
+        iterations=0,
+        solver_failures=0,
+    )
+
+
+def _tracked(step: _Step, tracked: Tracked, replay: _Replay) -> RungReport:
+    ended = PlanStatus.REPAIRED if tracked.repaired else PlanStatus.TRACKED if tracked.corrected else PlanStatus.REPLAYED
+    return RungReport(
+        step.name,
+        ended,
+        _tracking_reason(ended, tracked),
+        wall_s=time.perf_counter() - step.t0,
+        propagations=tracked.repair_propagations,
+        iterations=tracked.repair_iterations,
+        controls=list(tracked.controls),
+        durations=list(tracked.durations),
+        states=replay.configurations(step.start()),
+        tracked=tracked.fraction,
+        repairs=tracked.repairs,
+        rollouts=tracked.rollouts,
+        **replay.fields(step.scenario),
+    )
+
+
+def _replayed(step: _Step, previous: RungReport, replay: _Replay) -> RungReport:
+    """A geometric path's commanded speeds that hold under the rung as they are (its states
+    move passive bodies on their own: the report's are this rung's)."""
+    hold = [[0.0] * len(step.scenario.actuated)] * replay.held
+    reason = PlanStatus.REPLAYED.message + (
+        f" (its drives held still for {replay.held} control period(s) at the end)" if replay.held else ""
+    )
+    return RungReport(
+        step.name,
+        PlanStatus.REPLAYED,
+        reason,
+        wall_s=time.perf_counter() - step.t0,
+        controls=list(previous.controls) + hold,
+        durations=list(previous.durations) + [step.period] * replay.held,
+        states=replay.configurations(step.start()),
+        **replay.fields(step.scenario),
+    )
+
+
+def _search(step: _Step, previous, replay, tracked, planner, seeded: bool, guided: bool, progress) -> RungReport | None:
+    """Plan at the rung with OMPL, rooted also at the replayed (or tracked) states that still
+    agree with the previous plan and guided by its configurations; the plan's prefix from the
+    root it starts at is spliced in front."""
+    scenario, start = step.scenario, step.start()
+    seeds, prefix_controls, prefix_durations = [], [], np.zeros(0)
+    if replay is not None and seeded:
+        # tracked states agree with the previous plan by construction (TRACK_TOLERANCE)
+        m = len(replay.states) if tracked is not None else _agreeing(scenario, replay, previous)
+        seeds, prefix_controls, prefix_durations = replay.states[:m], replay.controls[:m], np.array(replay.durations[:m])
+    # the geometric path moves passive bodies on their own: its states are no guide for physics
+    guide = np.array(previous.states) if previous is not None and previous.states and guided and previous.rung != "geometric" else None
+    budget = step.iterations - (tracked.repair_iterations if tracked else 0)
+    plan = _plan_with_restarts(
+        scenario,
+        step.rung,
+        start,
+        h=step.h,
+        control_period=step.period,
+        seed=step.seed,
+        iterations=budget,
+        planner=planner or step.settings.planner,
+        extra_starts=seeds,
+        guide=guide,
+        time_limit=step.budget.seconds(),
+        stop=step.stop,
+        progress=(lambda i, n, _name=step.name: progress(_name, i, n)) if progress else None,
+    )
+    if step.stopped():
+        return None
+    j = plan.start_index
+    if j > 0:  # the path starts at a seed: splice the previous prefix in front
+        plan = replace(
+            plan,
+            controls=np.concatenate([np.array(prefix_controls[:j]).reshape(j, -1), plan.controls]),
+            durations=np.concatenate([prefix_durations[:j], plan.durations]),
+        )
+    # the plan replayed from the start: the prefix's part is known, the rest runs from the seed it starts at
+    head = replay.head(j) if j > 0 else _Replay.empty(start)
+    tail = _replay_controls(scenario, step.rung, head.state, plan.controls[j:], plan.durations[j:], step.h, head)
+    fields = tail.fields(scenario)
+    accepted = plan.exact and fields["outcome"] == GOAL and fields["status"] == OK
+    if accepted:
+        ended, reason = (PlanStatus.EXACT if previous is None else PlanStatus.REPLANNED), ""
+        if tracked is not None and j > 0:
+            ended = PlanStatus.REPAIRED
+            reason = _tracking_reason(ended, tracked) + f"; then a search from tracked state {j} of {len(seeds)} to the goal"
+        elif tracked is not None:
+            reason = _tracking_reason(ended, tracked) + "; then a search from the start"
+    elif not plan.exact:
+        ended = plan.status
+        reason = ended.message + (f" ({plan.iterations} of {budget} iterations)" if ended is PlanStatus.TIMEOUT else "")
+    else:
+        ended = PlanStatus.FAILED
+        reason = f"{ended.message} ({fields['outcome']}, {fields['status']})"
+    # an accepted plan's states are its replay's under this rung, from the start (the tree's
+    # path begins at its root, which may be a seed part-way along the prefix)
+    return RungReport(
+        step.name,
+        ended,
+        reason,
+        wall_s=time.perf_counter() - step.t0,
+        propagations=plan.propagations + (tracked.repair_propagations if tracked else 0),
+        iterations=plan.iterations + (tracked.repair_iterations if tracked else 0),
+        solver_failures=plan.failures,
+        controls=plan.controls.tolist(),
+        durations=plan.durations.tolist(),
+        states=tail.configurations(start) if accepted else plan.states.tolist(),
+        tracked=None if tracked is None else tracked.fraction,
+        diverged_at=None if tracked is None else tracked.diverged_at,
+        repairs=0 if tracked is None else tracked.repairs,
+        rollouts=0 if tracked is None else tracked.rollouts,
+        **fields,
+    )
+
+
+def _goes_on(report: RungReport) -> RungReport:
+    """A rung that cannot express the task (a kinematic rung where only momentum reaches the
+    goal) does not end the ladder: its best partial plan guides the next rung."""
+    partial = bool(report.durations) and bool(report.states)
+    more = "the next rung guided by this rung's best partial plan" if partial else "the next rung unguided"
+    return replace(report, reason=f"{report.reason}; the ladder goes on, {more}")
 
 
 #: An unguided search (no previous plan to draw samples near: the first rung that propagates)
@@ -636,9 +686,10 @@ def _agreeing(scenario: Scenario, replay: _Replay, previous: RungReport) -> int:
 SETTLE_PERIODS = 5
 
 
-def _track(scenario, rung, start, previous, h, period, seed, budget, time_limit, stop) -> Tracked:
-    """The previous plan (recorded per control period under its own rung) tracked under
-    `rung`, repaired locally with at most `budget` search iterations in all."""
+def _track(step: _Step, previous: RungReport) -> Tracked:
+    """The previous plan (recorded per control period under its own rung) tracked under the
+    step's rung, repaired locally within the iterations the rung may spend."""
+    scenario = step.scenario
     below = rung_for(scenario, previous.rung)
     reference = Reference.of(
         scenario,
@@ -647,9 +698,20 @@ def _track(scenario, rung, start, previous, h, period, seed, budget, time_limit,
         previous.controls,
         previous.durations,
         scenario.rung_settings(previous.rung).h,
-        period,
+        step.period,
     )
-    return track(scenario, rung, start, reference, h, period, seed, iterations=budget, time_limit=time_limit, stop=stop)
+    return track(
+        scenario,
+        step.rung,
+        step.start(),
+        reference,
+        step.h,
+        step.period,
+        step.seed,
+        iterations=step.iterations,
+        time_limit=step.budget.seconds(),
+        stop=step.stop,
+    )
 
 
 def _tracking_reason(ended: PlanStatus, tracked: Tracked) -> str:
