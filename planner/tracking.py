@@ -43,6 +43,8 @@ REPAIR_HORIZONS = (1.0, 2.0)  # a second, longer try when the first repair fails
 REPAIR_ROOTS = 3
 REPAIR_ITERATIONS = 300
 MAX_REPAIRS = 6
+#: A repair has rejoined the reference within this fraction of TRACK_TOLERANCE.
+REPAIR_REACH = 0.5
 #: Seed offset between a rung's repair searches.
 REPAIR_STRIDE = 104729
 
@@ -277,7 +279,7 @@ class _Follower:
 
 def _repair(scenario, rung, follower: _Follower, run: Tracked, start: State, seed: int, horizon: float, iterations: int, time_limit, stop):
     """A short search under `rung` from the last REPAIR_ROOTS tracked states to a state within
-    TRACK_TOLERANCE / 2 of the reference `horizon` seconds past where tracking was lost (or the
+    REPAIR_REACH * TRACK_TOLERANCE of the reference `horizon` seconds past where tracking was lost (or the
     goal), guided by the reference in between. On success the run is cut at the root the
     search's path starts from and continued with its controls; returns the reference time to
     track on from (None: no repair)."""
@@ -300,7 +302,7 @@ def _repair(scenario, rung, follower: _Follower, run: Tracked, start: State, see
         guide=guide,
         time_limit=time_limit,
         stop=stop,
-        reached=lambda q: follower.error(q, target) <= TRACK_TOLERANCE / 2,
+        reached=lambda q: follower.error(q, target) <= REPAIR_REACH * TRACK_TOLERANCE,
     )
     run.repairs += 1
     run.repair_propagations += plan.propagations
