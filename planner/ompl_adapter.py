@@ -260,23 +260,96 @@ def plan_control(
 
     ou.setLogLevel(ou.LOG_NONE)
     ou.RNG.setSeed(int(seed) + 1)  # before any planner or sampler exists; OMPL wants > 0
-    sizes = _layout(scenario, start)
-    nq = sizes[0]
-    steered = np.array(steered_coordinates(scenario), dtype=int)
-    unsteered = np.array([i for i in range(nq) if i not in set(steered.tolist())], dtype=int)
-    ns = len(steered)
-    n_aux = len(unsteered) + sum(sizes[1:]) + 1  # the unsteered coordinates lead the auxiliary part
-    q_low, q_high = configuration_limits(scenario, start.q)  # validity
-    s_low, s_high = sampling_limits(scenario, start.q)  # where samples are drawn
+    layout = _ControlLayout(scenario, start)
+    space, projection = _control_state_space(ob, layout, scenario, start)
+    si = oc.SpaceInformation(space, _control_space(ob, oc, space, scenario))
+    si.setPropagationStepSize(control_period)
+    si.setMinMaxControlDuration(1, MAX_CONTROL_PERIODS)
+    propagate = _Propagator(scenario, rung, layout, h, reached)
+    si.setStatePropagator(propagate)
+    si.setStateValidityChecker(_Validity(scenario, layout, start, control_period))
 
+    ss = oc.SimpleSetup(si)
+    roots = []
+    for k, st in enumerate([start] + list(extra_starts or [])):
+        root = space.allocState()
+        layout.write(root, flatten(st))
+        roots.append(layout.read(root))
+        if k == 0:
+            ss.setStartState(root)
+        else:
+            ss.addStartState(root)
+    chosen = getattr(oc, planner)(si)
+    guide_q = None if guide is None or len(guide) == 0 else np.asarray(guide, float).reshape(-1, layout.nq)
+    guided = guide_q is not None and planner in ("RRT", "EST")
+    ss.setGoal(_control_goal(ob, si, layout, goal_heuristic, guide_q if guided else None, scenario, start, seed))
+    if guided and planner == "RRT":
+        chosen.setGoalBias(float(guide_bias))
+    ss.setPlanner(chosen)
+    stop_now, done = _termination(
+        ss, iterations, time_limit, None if progress is None else (lambda i: progress(i, propagate.propagations)), stop
+    )
+    ss.solve(ob.PlannerTerminationCondition(stop_now))
+    status = _search_status(bool(ss.haveExactSolutionPath()), done)
+    result = _control_result(ss, layout, scenario, start, roots, status, propagate, done)
+    del ss, si, space, projection
+    return result
+
+
+class _ControlLayout:
+    """Where the rung's flattened state sits in an OMPL compound state: the steered
+    coordinates of q in the first part (what the metric sees), then the unsteered ones and
+    the rest of the state (nu, q_ref, deformations) with the flag last in the auxiliary part."""
+
+    def __init__(self, scenario: Scenario, start: State):
+        self.sizes = _layout(scenario, start)
+        self.nq = self.sizes[0]
+        self.steered = np.array(steered_coordinates(scenario), dtype=int)
+        self.unsteered = np.array([i for i in range(self.nq) if i not in set(self.steered.tolist())], dtype=int)
+        self.ns, self.nu = len(self.steered), len(self.unsteered)
+        self.n_aux = self.nu + sum(self.sizes[1:]) + 1  # the unsteered coordinates lead the auxiliary part
+        self.n_flat = self.nq + self.n_aux - self.nu  # the flattened rung state (flatten)
+
+    def read(self, s) -> np.ndarray:
+        """The flattened rung state held by an OMPL state."""
+        x = np.empty(self.n_flat)
+        q, a = s[0], s[1]
+        for k in range(self.ns):
+            x[self.steered[k]] = q[k]
+        for k in range(self.nu):
+            x[self.unsteered[k]] = a[k]
+        for i in range(self.n_aux - self.nu):
+            x[self.nq + i] = a[self.nu + i]
+        return x
+
+    def write(self, s, x: np.ndarray) -> None:
+        q, a = s[0], s[1]
+        for k in range(self.ns):
+            q[k] = float(x[self.steered[k]])
+        for k in range(self.nu):
+            a[k] = float(x[self.unsteered[k]])
+        for i in range(self.n_aux - self.nu):
+            a[self.nu + i] = float(x[self.nq + i])
+
+    def q_of(self, s) -> np.ndarray:
+        return self.read(s)[: self.nq]
+
+    def flag(self, s) -> float:
+        return s[1][self.n_aux - 1]
+
+
+def _control_state_space(ob, layout: _ControlLayout, scenario: Scenario, start: State):
+    """The compound space (steered q, weight 1; the rest, AUXILIARY_WEIGHT) with the sampling
+    box and the KPIECE1 / EST projection registered."""
+    s_low, s_high = sampling_limits(scenario, start.q)  # where samples are drawn
     space = ob.CompoundStateSpace()
-    qspace = ob.RealVectorStateSpace(ns)
-    qbounds = ob.RealVectorBounds(ns)
-    for k, i in enumerate(steered):
+    qspace = ob.RealVectorStateSpace(layout.ns)
+    qbounds = ob.RealVectorBounds(layout.ns)
+    for k, i in enumerate(layout.steered):
         qbounds.setLow(k, float(s_low[i]))
         qbounds.setHigh(k, float(s_high[i]))
     qspace.setBounds(qbounds)
-    aux = ob.RealVectorStateSpace(n_aux)
+    aux = ob.RealVectorStateSpace(layout.n_aux)
     aux.setBounds(-1e9, 1e9)
     space.addSubspace(qspace, 1.0)
     space.addSubspace(aux, AUXILIARY_WEIGHT)
@@ -303,7 +376,11 @@ def plan_control(
 
     projection = Projection(space)
     space.registerDefaultProjection(projection)
+    return space, projection  # the caller keeps the projection alive while the space is used
 
+
+def _control_space(ob, oc, space, scenario: Scenario):
+    """Commanded speeds of the actuated coordinates within `control_bounds`."""
     na = len(scenario.actuated)
     cspace = oc.RealVectorControlSpace(space, max(na, 1))
     lo, hi = control_bounds(scenario)
@@ -312,106 +389,103 @@ def plan_control(
         cb.setLow(j, float(lo[j]))
         cb.setHigh(j, float(hi[j]))
     cspace.setBounds(cb)
+    return cspace
 
-    si = oc.SpaceInformation(space, cspace)
-    si.setPropagationStepSize(control_period)
-    si.setMinMaxControlDuration(1, MAX_CONTROL_PERIODS)
-    counter = {"propagations": 0, "failures": 0}
 
-    nu_ = len(unsteered)
-    n_flat = nq + n_aux - nu_  # the flattened rung state (flatten)
+class _Propagator:
+    """OMPL's state propagator: one compiled rollout of the rung per control (see the module
+    docstring); the result's flag says how it ended (goal, also a `reached` subgoal; unsafe;
+    a numerical failure, counted)."""
 
-    def read(s) -> np.ndarray:
-        """The flattened rung state held by an OMPL state."""
-        x = np.empty(n_flat)
-        q, a = s[0], s[1]
-        for k in range(ns):
-            x[steered[k]] = q[k]
-        for k in range(nu_):
-            x[unsteered[k]] = a[k]
-        for i in range(n_aux - nu_):
-            x[nq + i] = a[nu_ + i]
-        return x
+    def __init__(self, scenario: Scenario, rung: Rung, layout: _ControlLayout, h: float, reached=None):
+        self.scenario, self.rung, self.layout, self.h, self.reached = scenario, rung, layout, h, reached
+        self.na = len(scenario.actuated)
+        self.propagations = 0
+        self.failures = 0
 
-    def write(s, x: np.ndarray) -> None:
-        q, a = s[0], s[1]
-        for k in range(ns):
-            q[k] = float(x[steered[k]])
-        for k in range(nu_):
-            a[k] = float(x[unsteered[k]])
-        for i in range(n_aux - nu_):
-            a[nu_ + i] = float(x[nq + i])
-
-    def q_of(s) -> np.ndarray:
-        return read(s)[:nq]
-
-    def propagate(s, control, duration, result):
-        counter["propagations"] += 1
-        x = read(s)
-        state, flag = unflatten(x, sizes)
-        u = np.array([control[j] for j in range(na)])
+    def __call__(self, s, control, duration, result) -> None:
+        self.propagations += 1
+        x = self.layout.read(s)
+        state, flag = unflatten(x, self.layout.sizes)
+        u = np.array([control[j] for j in range(self.na)])
         if flag != FLAG_RUNNING:
-            write(result, x)
+            self.layout.write(result, x)
             return
-        out = rung.rollout(scenario, state, u.reshape(1, -1), [duration], h)
+        out = self.rung.rollout(self.scenario, state, u.reshape(1, -1), [duration], self.h)
         new_flag = FLAG_RUNNING
         if not out.ok:
             new_flag = FLAG_FAILED
-            counter["failures"] += 1
+            self.failures += 1
         elif out.outcome == Outcome.GOAL.label:
             new_flag = FLAG_GOAL
         elif out.outcome == Outcome.UNSAFE.label:
             new_flag = FLAG_UNSAFE
-        elif reached is not None and reached(out.state.q):
+        elif self.reached is not None and self.reached(out.state.q):
             new_flag = FLAG_GOAL
-        write(result, flatten(out.state, new_flag))
+        self.layout.write(result, flatten(out.state, new_flag))
 
-    # a drive whose reference leads its position by more than one control period of travel at
-    # full speed is jammed against something (in the kinematic rung references never lead)
-    drive_q = np.array([scenario.coordinates.index(n) for n in scenario.actuated], dtype=int)
-    windup = control_period * scenario.max_speeds
-    ref_at = nq + sizes[1]  # q_ref's place in the flattened state
 
-    def valid(s) -> bool:
-        flag = s[1][n_aux - 1]
+class _Validity:
+    """OMPL's validity checker: the flag is neither unsafe nor failure, q is within the
+    configuration limits, and no drive is wound up (its reference leads its position by more
+    than one control period of travel at full speed: it is jammed against something; in the
+    kinematic rung references never lead)."""
+
+    def __init__(self, scenario: Scenario, layout: _ControlLayout, start: State, control_period: float):
+        self.layout = layout
+        self.q_low, self.q_high = configuration_limits(scenario, start.q)
+        self.drive_q = np.array([scenario.coordinates.index(n) for n in scenario.actuated], dtype=int)
+        self.windup = control_period * scenario.max_speeds
+        self.ref_at = layout.nq + layout.sizes[1]  # q_ref's place in the flattened state
+
+    def __call__(self, s) -> bool:
+        layout, q_low, q_high = self.layout, self.q_low, self.q_high
+        flag = layout.flag(s)
         if flag == FLAG_UNSAFE or flag == FLAG_FAILED:
             return False
-        for k in range(ns):
-            if not q_low[steered[k]] <= s[0][k] <= q_high[steered[k]]:
+        for k in range(layout.ns):
+            if not q_low[layout.steered[k]] <= s[0][k] <= q_high[layout.steered[k]]:
                 return False
-        for k in range(nu_):
+        for k in range(layout.nu):
             v = s[1][k]
-            if not q_low[unsteered[k]] <= v <= q_high[unsteered[k]]:
+            if not q_low[layout.unsteered[k]] <= v <= q_high[layout.unsteered[k]]:
                 return False
-        if len(drive_q):
-            x = read(s)
-            if np.any(np.abs(x[ref_at : ref_at + len(drive_q)] - x[drive_q]) > windup):
+        if len(self.drive_q):
+            x = layout.read(s)
+            if np.any(np.abs(x[self.ref_at : self.ref_at + len(self.drive_q)] - x[self.drive_q]) > self.windup):
                 return False
         return True
 
-    si.setStatePropagator(propagate)
-    si.setStateValidityChecker(valid)
 
-    guide_q = None if guide is None or len(guide) == 0 else np.asarray(guide, float).reshape(-1, nq)
-    rng = np.random.default_rng(int(seed))
-    spread = GUIDE_SPREAD * (s_high - s_low)
-    blank = flatten(start)[nq:]
-    blank[:] = 0.0
+def _control_goal(ob, si, layout: _ControlLayout, goal_heuristic, guide_q, scenario: Scenario, start: State, seed: int):
+    """The goal region: distance 0 exactly on states whose rollout reached the goal (else the
+    heuristic's, or 1). With guide configurations, a sampleable region whose sampler hands the
+    planner states near them (later ones more often: they lie closer to the goal)."""
 
     def distance_to_goal(s) -> float:
-        if s[1][n_aux - 1] == FLAG_GOAL:
+        if layout.flag(s) == FLAG_GOAL:
             return 0.0
         if goal_heuristic is None:
             return 1.0
-        return float(1e-6 + goal_heuristic(q_of(s)))
+        return float(1e-6 + goal_heuristic(layout.q_of(s)))
 
-    class Goal(ob.GoalRegion):
-        def __init__(self, si_):
-            super().__init__(si_)
-            self.setThreshold(1e-12)
+    if guide_q is None:
 
-        def distanceGoal(self, s):
-            return distance_to_goal(s)
+        class Goal(ob.GoalRegion):
+            def __init__(self, si_):
+                super().__init__(si_)
+                self.setThreshold(1e-12)
+
+            def distanceGoal(self, s):
+                return distance_to_goal(s)
+
+        return Goal(si)
+
+    s_low, s_high = sampling_limits(scenario, start.q)
+    rng = np.random.default_rng(int(seed))
+    spread = GUIDE_SPREAD * (s_high - s_low)
+    blank = flatten(start)[layout.nq :]
+    blank[:] = 0.0
 
     class GuidedGoal(ob.GoalSampleableRegion):
         """The same goal; its sampler hands the planner states near the previous plan."""
@@ -424,10 +498,9 @@ def plan_control(
             return distance_to_goal(s)
 
         def sampleGoal(self, s):
-            # later states more often: they lie closer to the goal
             k = min(int(len(guide_q) * np.sqrt(rng.random())), len(guide_q) - 1)
-            q = np.clip(guide_q[k] + spread * rng.standard_normal(nq), s_low, s_high)
-            write(s, np.concatenate([q, blank]))
+            q = np.clip(guide_q[k] + spread * rng.standard_normal(layout.nq), s_low, s_high)
+            layout.write(s, np.concatenate([q, blank]))
 
         def maxSampleCount(self):
             return 1 << 30
@@ -435,50 +508,35 @@ def plan_control(
         def couldSample(self):
             return True
 
-    ss = oc.SimpleSetup(si)
-    starts = [start] + list(extra_starts or [])
-    roots = []
-    for k, st in enumerate(starts):
-        root = space.allocState()
-        write(root, flatten(st))
-        roots.append(read(root))
-        if k == 0:
-            ss.setStartState(root)
-        else:
-            ss.addStartState(root)
-    chosen = getattr(oc, planner)(si)
-    if guide_q is not None and planner in ("RRT", "EST"):
-        ss.setGoal(GuidedGoal(si))
-        if planner == "RRT":
-            chosen.setGoalBias(float(guide_bias))
-    else:
-        ss.setGoal(Goal(si))
-    ss.setPlanner(chosen)
-    stop_now, done = _termination(
-        ss, iterations, time_limit, None if progress is None else (lambda i: progress(i, counter["propagations"])), stop
-    )
-    ss.solve(ob.PlannerTerminationCondition(stop_now))
-    status = _search_status(bool(ss.haveExactSolutionPath()), done)
+    return GuidedGoal(si)
+
+
+def _control_result(
+    ss, layout: _ControlLayout, scenario: Scenario, start: State, roots, status, propagate: _Propagator, done
+) -> ControlPlan:
+    """The search's plan (controls, durations, states at the switches, which root it starts
+    at), or an empty one when it has no path."""
+    na = len(scenario.actuated)
     if not ss.haveSolutionPath():
         return ControlPlan(
             np.zeros((0, na)),
             np.zeros(0),
             start.q[None, :].copy(),
             status,
-            counter["propagations"],
+            propagate.propagations,
             done["iterations"],
-            failures=counter["failures"],
+            failures=propagate.failures,
         )
     path = ss.getSolutionPath()
     controls = np.array([[c[j] for j in range(na)] for c in path.getControls()]).reshape(-1, na)
     durations = np.array(path.getControlDurations(), dtype=float)
-    states = np.array([q_of(s) for s in path.getStates()])
-    first = read(path.getState(0))
+    states = np.array([layout.q_of(s) for s in path.getStates()])
+    first = layout.read(path.getState(0))
     start_index = int(np.argmin([np.max(np.abs(first - r)) for r in roots]))
     result = ControlPlan(
-        controls, durations, states, status, counter["propagations"], done["iterations"], start_index, failures=counter["failures"]
+        controls, durations, states, status, propagate.propagations, done["iterations"], start_index, failures=propagate.failures
     )
-    del path, ss, si, space
+    del path
     return result
 
 
