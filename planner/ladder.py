@@ -9,21 +9,32 @@ For each rung in order:
 - a rung whose physics along the previous plan is the same as the previous rung's (the
   rigid and compliant variants of one model when no contact carries force at the same step
   size) is "skipped", with the reason, and inherits the plan;
-- every other rung replays the previous rung's controls from its own start; if the replay
-  reaches the goal without entering the unsafe set the plan is accepted with no search
-  ("replayed"), otherwise the rung plans again ("replanned"): the tree is also rooted at the
-  states of the longest replayed prefix that still agrees, the prefix is spliced in front
-  of a path that starts at one of them (OMPL-CRIB section 5), and RRT / EST draw part of
-  their samples near the previous plan's configurations;
+- a rung above a physics rung *tracks* the previous plan (`planner.tracking`): the previous
+  plan's states, recorded per control period under its own rung, are a reference; the rung
+  follows it in closed loop, one control period at a time, keeping the previous control while
+  its result stays close and otherwise the best of a few sampled controls around it (with a
+  one-period look-ahead); where no candidate stays close, a short OMPL search from the last
+  tracked states to the reference further along repairs it locally, and tracking goes on.
+  Reaching the goal so, the rung ends "replayed" (no control changed), "tracked" or
+  "repaired" with no global search;
+- a rung above the geometric rung replays the path's commanded speeds ("replayed" if they
+  reach the goal);
+- otherwise the rung plans again ("replanned"; "repaired" when its path starts at a tracked
+  state): the tree is also rooted at the states of the tracked (or replayed) prefix that still
+  agrees with the previous plan, the prefix is spliced in front of a path that starts at one
+  of them (OMPL-CRIB section 5), and RRT / EST draw part of their samples near the previous
+  plan's configurations;
 - a rung with no usable previous plan plans from scratch ("planned").
 
 The ladder's budget is the flat baseline's: a rung may spend, on top of its own iterations,
 those the rungs below it left unspent (a replayed or skipped rung spends none); why, measured:
 docs/measurements.md.
 
-Each rung's report says how it ended (`PlanStatus`), wall time, propagations, planner iterations, how far
-the accepted plan ends from the goal, the largest penetration along it, and how many
-propagations ended in a solver failure.
+Each rung's report says how it ended (`PlanStatus`), wall time, propagations and planner
+iterations (of its searches, local repairs included), tracking's rollouts, the fraction of the
+previous plan's duration it tracked and where tracking was last lost, how far the accepted
+plan ends from the goal, the largest penetration along it, and how many propagations ended in
+a solver failure.
 """
 
 from __future__ import annotations
