@@ -552,12 +552,13 @@ def _run_plan(args: argparse.Namespace, scenario: Scenario, names: list[str]):
 def _write_plan_outputs(args: argparse.Namespace, scenario: Scenario, result) -> tuple[dict, list[str]]:
     """Write plan.json, report.json and a plot per planned rung: (the report, the plots' paths)."""
     from models.rungs import rung_for
+    from planner.ladder import plan_json_text
     from planner.plots import plot_rollouts
 
     report = result.to_json()
     make_out_dir(args.out)
     # plan.json is reproducible (no timings): the same seed gives the same bytes
-    write_atomic(args.out / "plan.json", json.dumps(result.to_json(timings=False), indent=1) + "\n")
+    write_atomic(args.out / "plan.json", plan_json_text(result))
     write_atomic(args.out / "report.json", json.dumps(report, indent=1) + "\n")
     plots = []
     for rung_report in result.rungs:

@@ -109,6 +109,12 @@ class LadderResult:
         }
 
 
+def plan_json_text(result: LadderResult) -> str:
+    """The text of plan.json (the CLI's and the service's): the plan without timings, so the
+    same scenario and seed give the same bytes."""
+    return json.dumps(result.to_json(timings=False), indent=1) + "\n"
+
+
 def scene_record(scenario: Scenario) -> dict:
     """What a plan is a plan of: the scenario's name, the sha256 of its contents after the
     parameters are applied (the validated spec as canonical JSON), the parameter values and
@@ -184,6 +190,7 @@ def run_ladder(
     planner: str | None = None,
     time_limit: float | None = None,
     stop=None,
+    rung_done=None,
 ) -> LadderResult:
     """Plan up the ladder; see the module docstring.
 
@@ -201,6 +208,8 @@ def run_ladder(
     progress: called as progress(rung, iterations, propagations) while a rung plans.
     stop: a function -> True when the planning should stop (Ctrl-C): the rung under way ends
     its search and is dropped, and the result holds the rungs finished, complete = False.
+    rung_done: called as rung_done(report) with each rung's RungReport as the rung finishes
+    (the service's live per-rung reports); it does not change the plan.
     """
     check_start(scenario)
     spec = scenario.spec.ladder
@@ -234,6 +243,8 @@ def run_ladder(
         if not report.ended.holds and step.rung.propagates and name != names[-1]:
             report = _goes_on(report)
         reports.append(report)
+        if rung_done:
+            rung_done(report)
         if not step.rung.propagates:
             previous = report if report.durations else None
         else:

@@ -1,0 +1,329 @@
+"""The service's HTTP API (FastAPI): jobs as resources, their events as server-sent events.
+
+POST   /jobs                 submit (201, Location: /jobs/{id}); Idempotency-Key honoured
+GET    /jobs                 list (?state=)
+GET    /jobs/{id}            state, progress, per-rung reports
+GET    /jobs/{id}/result     the result file (a plan's plan.json, byte for byte the CLI's)
+DELETE /jobs/{id}            cancel
+GET    /jobs/{id}/events     server-sent events (ids; Last-Event-ID resumes)
+"""
+
+from __future__ import annotations
+
+import asyncio
+import hashlib
+import hmac
+import json
+import multiprocessing
+import threading
+import uuid
+from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+from contextlib import asynccontextmanager
+from pathlib import Path
+from typing import Any, Literal
+
+from fastapi import FastAPI, Header, HTTPException, Query, Request, Response
+from fastapi.responses import JSONResponse, StreamingResponse
+from pydantic import BaseModel, ConfigDict, Field
+
+from models.scenario import ScenarioError
+from planner.service import jobs
+from planner.service.store import STATES, TERMINAL, Store, iso
+from planner.service.worker import run_job
+
+#: Paths that need no token (the API's description).
+OPEN_PATHS = frozenset({"/openapi.json", "/docs", "/docs/oauth2-redirect", "/redoc"})
+DEFAULT_MAX_BODY = 2 * 1024 * 1024
+DEFAULT_MAX_QUEUED = 100
+RETRY_AFTER_S = 5
+#: Seconds between the events stream's looks at the database, and between keep-alive comments.
+EVENTS_POLL_S = 0.1
+KEEPALIVE_S = 15.0
+
+
+class JobRequest(BaseModel):
+    """A job: a scenario (TOML text and the files it names, as contents), parameter overrides and options."""
+
+    model_config = ConfigDict(extra="forbid")
+    kind: Literal["plan", "simulate"] = Field(description="plan: up the ladder (or flat); simulate: the policy under one rung")
+    scenario: str = Field(description="the scenario file's TOML text")
+    filename: str = Field("scenario.toml", description="the scenario's relative file name (plan.json's `scenario`)")
+    files: dict[str, str] = Field(default_factory=dict, description="files the scenario names (meshes), relative to it: name -> text")
+    parameters: dict[str, float] = Field(default_factory=dict, description="design-parameter overrides (the CLI's --param)")
+    options: dict[str, Any] = Field(
+        default_factory=dict,
+        description="plan: seed, iterations, time_limit, flat, rungs, top, planner, seed_roots, guide; simulate: model, duration, step",
+    )
+
+
+class _Guard:
+    """ASGI middleware: the bearer token (when set) and the request-size limit (413)."""
+
+    def __init__(self, app, token: str | None, max_body: int):
+        self.app, self.token, self.max_body = app, token, max_body
+
+    async def __call__(self, scope, receive, send):
+        if scope["type"] != "http":
+            return await self.app(scope, receive, send)
+        headers = {k.lower(): v for k, v in scope.get("headers", [])}
+        if self.token and scope["path"] not in OPEN_PATHS:
+            given = headers.get(b"authorization", b"").decode("latin-1")
+            if not hmac.compare_digest(given.encode(), f"Bearer {self.token}".encode()):
+                detail = "missing or wrong token: send 'Authorization: Bearer TOKEN'"
+                return await _send_json(send, 401, {"detail": detail}, [(b"www-authenticate", b"Bearer")])
+        if scope["method"] not in ("POST", "PUT", "PATCH"):
+            return await self.app(scope, receive, send)
+        length = headers.get(b"content-length")
+        too_big = {"detail": f"request body larger than the limit of {self.max_body} bytes"}
+        if length is not None:
+            try:
+                if int(length) > self.max_body:
+                    return await _send_json(send, 413, too_big)
+            except ValueError:
+                return await _send_json(send, 400, {"detail": "bad Content-Length"})
+        body, more = b"", True
+        while more:  # read it all (bounded), so a body without a Content-Length is limited too
+            message = await receive()
+            if message["type"] == "http.disconnect":
+                return
+            body += message.get("body", b"")
+            more = message.get("more_body", False)
+            if len(body) > self.max_body:
+                return await _send_json(send, 413, too_big)
+        replayed = False
+
+        async def replay():
+            nonlocal replayed
+            if not replayed:
+                replayed = True
+                return {"type": "http.request", "body": body, "more_body": False}
+            return await receive()
+
+        return await self.app(scope, replay, send)
+
+
+async def _send_json(send, status: int, data: dict, headers: list | None = None) -> None:
+    body = json.dumps(data).encode()
+    await send(
+        {
+            "type": "http.response.start",
+            "status": status,
+            "headers": [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode())] + (headers or []),
+        }
+    )
+    await send({"type": "http.response.body", "body": body})
+
+
+class Service:
+    """The jobs' store and the worker pool."""
+
+    def __init__(self, db_path: str | Path, workers: int, max_queued: int, max_job_seconds: float | None):
+        self.db_path = str(db_path)
+        self.workers = workers
+        self.max_queued = max_queued
+        self.max_job_seconds = max_job_seconds
+        self.store = Store(self.db_path)
+        self.pool: ProcessPoolExecutor | None = None
+        self.lock = threading.Lock()
+
+    def start(self) -> None:
+        for job_id in self.store.recover():
+            self.submit(job_id)
+
+    def stop(self) -> None:
+        """Stop the workers at once: a job under way stays `running` in the database and is
+        run again from its inputs when the service starts next."""
+        with self.lock:
+            pool, self.pool = self.pool, None
+        if pool is not None:
+            processes = list((pool._processes or {}).values())  # noqa: SLF001 (no public way to stop a running task)
+            pool.shutdown(wait=False, cancel_futures=True)
+            for process in processes:
+                process.terminate()
+            for process in processes:
+                process.join(5)
+        self.store.close()
+
+    def _pool(self) -> ProcessPoolExecutor:
+        with self.lock:
+            if self.pool is None:
+                # spawn, not fork: the server has threads; a worker imports the planner once
+                self.pool = ProcessPoolExecutor(self.workers, mp_context=multiprocessing.get_context("spawn"))
+            return self.pool
+
+    def submit(self, job_id: str) -> None:
+        if self.workers < 1:
+            return  # accept jobs, run none (a store-only service, and the queue tests)
+        try:
+            future = self._pool().submit(run_job, self.db_path, job_id, self.max_job_seconds)
+        except (BrokenProcessPool, RuntimeError):
+            with self.lock:
+                self.pool = None
+            future = self._pool().submit(run_job, self.db_path, job_id, self.max_job_seconds)
+        future.add_done_callback(lambda f, job_id=job_id: self._done(job_id, f))
+
+    def _done(self, job_id: str, future: Future) -> None:
+        if future.cancelled():
+            return  # the service is stopping: the job stays queued and runs after a restart
+        exc = future.exception()
+        if exc is None:
+            return
+        if isinstance(exc, BrokenProcessPool):
+            if self.pool is None:  # stopping
+                return
+            with self.lock:
+                self.pool = None  # a worker died (killed, out of memory): a new pool for the next jobs
+        try:
+            self.store.finish(job_id, "failed", error=f"the worker stopped: {type(exc).__name__}: {exc}")
+        except Exception:  # the store is closed: the service is stopping
+            pass
+
+
+def _job_json(service: Service, row, *, rungs: bool = True) -> dict:
+    job_id = row["id"]
+    inputs = json.loads(row["inputs"])
+    data = {
+        "id": job_id,
+        "kind": row["kind"],
+        "state": row["state"],
+        "created": iso(row["created"]),
+        "updated": iso(row["updated"]),
+        "filename": inputs.get("filename", "scenario.toml"),
+        "parameters": inputs.get("parameters") or {},
+        "options": json.loads(row["options"]),
+        "progress": json.loads(row["progress"]) if row["progress"] else None,
+        "cancel_requested": bool(row["cancel_requested"]),
+        "runs": row["runs"],
+        "error": row["error"],
+        "result_available": row["result"] is not None,
+        "links": {"self": f"/jobs/{job_id}", "result": f"/jobs/{job_id}/result", "events": f"/jobs/{job_id}/events"},
+    }
+    if rungs:
+        data["rungs"] = service.store.rung_reports(job_id)
+    return data
+
+
+def create_app(
+    db_path: str | Path = "ladder-jobs.sqlite",
+    workers: int = 1,
+    token: str | None = None,
+    *,
+    max_body: int = DEFAULT_MAX_BODY,
+    max_queued: int = DEFAULT_MAX_QUEUED,
+    max_job_seconds: float | None = None,
+) -> FastAPI:
+    """The service's app: jobs in SQLite at `db_path`, run by `workers` processes (0: accept
+    jobs, run none), every route but /openapi.json and /docs behind `token` when given;
+    bodies above `max_body` bytes get 413, a submission while `max_queued` jobs wait gets
+    429, a job running longer than `max_job_seconds` is stopped (failed, its rungs kept)."""
+    service = Service(db_path, workers, max_queued, max_job_seconds)
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI):
+        service.start()
+        try:
+            yield
+        finally:
+            service.stop()
+
+    app = FastAPI(
+        title="ladder planning service",
+        description="Plans up the ladder of contact models, as `ladder plan` does, as jobs.",
+        lifespan=lifespan,
+    )
+    app.state.service = service
+    app.add_middleware(_Guard, token=token, max_body=max_body)
+
+    def get_row(job_id: str):
+        row = service.store.get(job_id)
+        if row is None:
+            raise HTTPException(404, f"no job {job_id}")
+        return row
+
+    @app.post("/jobs", status_code=201)
+    def submit(job: JobRequest, response: Response, idempotency_key: str | None = Header(None)):
+        """Submit a job. A bad scenario is 422 with the CLI's `FILE: KEY: reason` lines."""
+        inputs = {"filename": job.filename, "scenario": job.scenario, "files": job.files, "parameters": job.parameters}
+        try:
+            jobs.validate(job.kind, inputs, job.options)
+        except ScenarioError as exc:
+            problems = [{"key": p.key, "reason": p.reason} for p in exc.problems]
+            return JSONResponse({"detail": str(exc), "file": exc.file, "problems": problems}, status_code=422)
+        sha = hashlib.sha256(json.dumps({"kind": job.kind, **inputs, "options": job.options}, sort_keys=True).encode()).hexdigest()
+        row, what = service.store.create_job(
+            uuid.uuid4().hex, job.kind, inputs, job.options, key=idempotency_key, sha=sha, max_queued=service.max_queued
+        )
+        if what == "full":
+            return JSONResponse(
+                {"detail": f"the queue is full ({service.max_queued} jobs waiting); try again later"},
+                status_code=429,
+                headers={"Retry-After": str(RETRY_AFTER_S)},
+            )
+        if what == "conflict":
+            raise HTTPException(409, "this Idempotency-Key was used with a different request")
+        response.headers["Location"] = f"/jobs/{row['id']}"
+        if what == "existing":
+            response.status_code = 200
+        else:
+            service.submit(row["id"])
+        return _job_json(service, row)
+
+    @app.get("/jobs")
+    def list_jobs(state: str | None = Query(None, description="only jobs in this state")):
+        if state is not None and state not in STATES:
+            raise HTTPException(422, f"unknown state {state!r}; states: {', '.join(STATES)}")
+        return {"jobs": [_job_json(service, row, rungs=False) for row in service.store.list(state)]}
+
+    @app.get("/jobs/{job_id}")
+    def get_job(job_id: str):
+        return _job_json(service, get_row(job_id))
+
+    @app.get("/jobs/{job_id}/result")
+    def get_result(job_id: str):
+        """The result file: a plan's plan.json (as `ladder plan` writes it), a simulation's JSON."""
+        row = get_row(job_id)
+        if row["result"] is None:
+            raise HTTPException(409, f"job {job_id} is {row['state']}: no result" + (f" ({row['error']})" if row["error"] else ""))
+        return Response(row["result"], media_type="application/json")
+
+    @app.delete("/jobs/{job_id}")
+    def cancel_job(job_id: str):
+        """Cancel: a queued job at once; a running one stops at its next check (a plan keeps the rungs done)."""
+        get_row(job_id)
+        service.store.cancel(job_id)
+        return _job_json(service, get_row(job_id))
+
+    @app.get("/jobs/{job_id}/events")
+    async def events(job_id: str, request: Request, last_event_id: str | None = Header(None)):
+        """Server-sent events: state, rung_started, progress, rung_ended, job_ended (the last)."""
+        get_row(job_id)
+        try:
+            after = int(last_event_id) if last_event_id else 0
+        except ValueError:
+            raise HTTPException(422, "Last-Event-ID must be an event id (an integer)") from None
+
+        async def stream():
+            seq, quiet = after, 0.0
+            while True:
+                rows = service.store.events_after(job_id, seq)
+                for row in rows:
+                    seq = row["seq"]
+                    yield f"id: {seq}\nevent: {row['type']}\ndata: {row['data']}\n\n"
+                    if row["type"] == "job_ended":
+                        return
+                if not rows:
+                    job = service.store.get(job_id)
+                    if job is None or (job["state"] in TERMINAL and not service.store.events_after(job_id, seq)):
+                        return
+                    if await request.is_disconnected():
+                        return
+                    await asyncio.sleep(EVENTS_POLL_S)
+                    quiet += EVENTS_POLL_S
+                    if quiet >= KEEPALIVE_S:
+                        quiet = 0.0
+                        yield ": keep-alive\n\n"
+
+        return StreamingResponse(stream(), media_type="text/event-stream", headers={"Cache-Control": "no-cache"})
+
+    return app

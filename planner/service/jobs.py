@@ -1,0 +1,279 @@
+"""A job's inputs made into a scenario, checked, and run: shared by the server (which checks
+a request before accepting it) and the worker processes (which run it).
+
+A request carries the scenario's TOML text and the files it names (meshes) as contents; they
+are written into a fresh temporary folder and loaded from there, so a scenario reads no file
+outside what its request carried. The job runs with that folder as the working directory and
+the scenario at its request's `filename` (default scenario.toml), so its plan.json names the
+scenario as `ladder plan FILENAME` run from the folder of the file would.
+
+The checks and the runs are the CLI's own (planner.cli): the same problems, the same plan.json.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import json
+import os
+import tempfile
+import tomllib
+from collections.abc import Callable, Iterator
+from pathlib import Path, PurePosixPath
+from types import SimpleNamespace
+from typing import Any
+
+from models.scenario import Problem, ScenarioError
+
+KINDS = ("plan", "simulate")
+#: Options per kind and their types (the CLI's options of the same names).
+PLAN_OPTIONS = {
+    "seed": int,
+    "iterations": int,
+    "time_limit": float,
+    "flat": bool,
+    "rungs": str,
+    "top": str,
+    "planner": str,
+    "seed_roots": bool,
+    "guide": bool,
+}
+SIMULATE_OPTIONS = {"model": str, "duration": float, "step": float}
+OPTIONS = {"plan": PLAN_OPTIONS, "simulate": SIMULATE_OPTIONS}
+
+
+def path_problem(key: str, name: Any) -> Problem | None:
+    """A problem when `name` is not a relative path that stays inside the request's folder."""
+    if not isinstance(name, str) or not name.strip():
+        return Problem(key, "expected a relative file name")
+    if "\\" in name or "\0" in name:
+        return Problem(key, f"{name!r}: use '/' between folders; no backslashes or NUL characters")
+    path = PurePosixPath(name)
+    if path.is_absolute():
+        return Problem(key, f"{name!r} is an absolute path; a request may only name files it carries (relative paths)")
+    if ".." in path.parts:
+        return Problem(key, f"{name!r} leaves the request's folder ('..'); a request may only name files it carries")
+    if path.parts in ((), (".",)):
+        return Problem(key, f"{name!r} is not a file name")
+    return None
+
+
+def _inside(root: Path, path: Path) -> bool:
+    root = Path(os.path.realpath(root))
+    return Path(os.path.realpath(path)).is_relative_to(root)
+
+
+def _file_references(raw: Any, where: str = "") -> Iterator[tuple[str, Any]]:
+    """Every `file = ...` in the scenario (mesh shapes), with its key path."""
+    if isinstance(raw, dict):
+        for key, value in raw.items():
+            here = f"{where}.{key}" if where else str(key)
+            if key == "file":
+                yield here, value
+            else:
+                yield from _file_references(value, here)
+    elif isinstance(raw, list):
+        for i, value in enumerate(raw):
+            yield from _file_references(value, f"{where}[{i}]")
+
+
+def write_inputs(root: Path, inputs: dict) -> Path:
+    """Write the scenario and its files under `root`; the scenario's path relative to `root`.
+    A name that is absolute or leaves `root`, or a file reference in the scenario that points
+    outside what the request carried, is a ScenarioError."""
+    filename = inputs.get("filename") or "scenario.toml"
+    problems = [p for p in [path_problem("filename", filename)] if p]
+    files = inputs.get("files") or {}
+    for name in files:
+        problem = path_problem(f"files[{name!r}]", name)
+        if problem:
+            problems.append(problem)
+    if problems:
+        raise ScenarioError("request", problems)
+    scenario = PurePosixPath(filename)
+    folder = scenario.parent
+    for name, text in [(str(scenario), inputs["scenario"])] + [(str(folder / n), t) for n, t in files.items()]:
+        target = root / name
+        if not _inside(root, target):
+            raise ScenarioError("request", [Problem("files", f"{name!r} leaves the request's folder")])
+        target.parent.mkdir(parents=True, exist_ok=True)
+        target.write_text(text, encoding="utf-8")
+    try:  # a file the scenario names must be one the request carried: nothing else on the server
+        raw = tomllib.loads(inputs["scenario"])
+    except (tomllib.TOMLDecodeError, RecursionError):
+        raw = {}  # the loader says what is wrong with the text
+    for key, value in _file_references(raw):
+        if not isinstance(value, str):
+            continue
+        problem = path_problem(key, value)
+        if problem is None and not _inside(root, root / folder / value):
+            problem = Problem(key, f"{value!r} leaves the request's folder")
+        if problem is None and not (root / folder / value).is_file():
+            carried = ", ".join(sorted(files)) or "none"
+            problem = Problem(key, f"{value!r} is not among the files the request carried ({carried}); send its contents in 'files'")
+        if problem:
+            raise ScenarioError(filename, [problem])
+    return Path(filename)
+
+
+@contextlib.contextmanager
+def job_folder(inputs: dict) -> Iterator[Path]:
+    """A temporary folder holding the request's files, made the working directory (a worker
+    process runs one job at a time); yields the scenario's relative path."""
+    with tempfile.TemporaryDirectory(prefix="ladder-job-") as tmp:
+        old = os.getcwd()
+        path = write_inputs(Path(tmp), inputs)
+        os.chdir(tmp)
+        try:
+            yield path
+        finally:
+            os.chdir(old)
+
+
+def _option_problems(kind: str, options: dict) -> list[Problem]:
+    problems = []
+    allowed = OPTIONS[kind]
+    for name, value in options.items():
+        if name not in allowed:
+            problems.append(Problem(f"options.{name}", f"unknown option for a {kind} job; options: {', '.join(allowed)}"))
+            continue
+        want = allowed[name]
+        ok = (
+            isinstance(value, bool)
+            if want is bool
+            else (isinstance(value, int) and not isinstance(value, bool))
+            if want is int
+            else (isinstance(value, int | float) and not isinstance(value, bool))
+            if want is float
+            else isinstance(value, str) or (name == "rungs" and isinstance(value, list) and all(isinstance(v, str) for v in value))
+        )
+        if not ok and value is not None:
+            problems.append(Problem(f"options.{name}", f"expected {want.__name__}, got {json.dumps(value)}"))
+    if kind == "simulate" and "model" not in options:
+        problems.append(Problem("options.model", "a simulate job needs a model (a rung)"))
+    return problems
+
+
+def _cli_key(key: str) -> str:
+    """The CLI's option names in problems, as the request's keys: --time-limit -> options.time_limit."""
+    if key.startswith("--param "):
+        return "parameters." + key.removeprefix("--param ").partition("=")[0]
+    if key.startswith("--"):
+        name = key[2:].split(" ")[0].replace("-", "_")
+        return "options." + {"no_seed_roots": "seed_roots", "no_guide": "guide", "model": "model"}.get(name, name)
+    return key
+
+
+def cli_args(kind: str, path: Path, parameters: dict, options: dict, out: Path) -> SimpleNamespace:
+    """The namespace `ladder plan` / `ladder simulate` would parse for this job."""
+    param = [f"{k}={float(v)!r}" for k, v in parameters.items()]
+    if kind == "plan":
+        rungs = options.get("rungs")
+        return SimpleNamespace(
+            file=path,
+            param=param,
+            rungs=",".join(rungs) if isinstance(rungs, list) else rungs,
+            top=options.get("top"),
+            seed=options.get("seed"),
+            iterations=options.get("iterations"),
+            planner=options.get("planner"),
+            time_limit=options.get("time_limit"),
+            flat=bool(options.get("flat", False)),
+            no_seed_roots=not options.get("seed_roots", True),
+            no_guide=not options.get("guide", True),
+            out=out,
+            json=True,
+        )
+    return SimpleNamespace(
+        file=path,
+        param=param,
+        model=options.get("model"),
+        duration=options.get("duration"),
+        step=options.get("step"),
+        plot=None,
+        plan=None,
+        json=True,
+    )
+
+
+def check(kind: str, path: Path, parameters: dict, options: dict, out: Path) -> tuple[SimpleNamespace, tuple]:
+    """The CLI's checks of a plan / simulate command on this job (run with the job's folder as
+    the working directory): (the CLI namespace, what the check returns); else ScenarioError,
+    its keys the request's (options.seed, parameters.v1)."""
+    from planner import cli
+
+    problems = _option_problems(kind, options)
+    if problems:
+        raise ScenarioError(str(path), problems)
+    args = cli_args(kind, path, parameters, options, out)
+    if args.planner is not None and args.planner not in cli.CONTROL_PLANNERS:
+        raise ScenarioError(str(path), [Problem("options.planner", f"unknown planner; planners: {', '.join(cli.CONTROL_PLANNERS)}")])
+    try:
+        if kind == "plan":
+            from planner.ladder import check_start
+
+            checked = cli._check_plan_args(args)
+            check_start(checked[0])
+        else:
+            checked = cli._check_simulate_args(args)
+    except ScenarioError as exc:
+        raise ScenarioError(exc.file, [Problem(_cli_key(p.key), p.reason) for p in exc.problems]) from None
+    return args, checked
+
+
+def validate(kind: str, inputs: dict, options: dict) -> None:
+    """Check a request as the worker will run it; ScenarioError (the CLI's problems) if bad.
+    Thread-safe: loads from an absolute path and names the file as the request does."""
+    with tempfile.TemporaryDirectory(prefix="ladder-check-") as tmp:
+        root = Path(tmp)
+        path = write_inputs(root, inputs)
+        try:
+            # the CLI's checks, on the absolute path (no chdir: the server has many threads)
+            check(kind, root / path, inputs.get("parameters") or {}, options, root)
+        except ScenarioError as exc:
+            prefix = os.path.realpath(tmp) + os.sep
+            clean = lambda text: text.replace(prefix, "").replace(tmp + os.sep, "")  # noqa: E731
+            raise ScenarioError(clean(exc.file), [Problem(p.key, clean(p.reason)) for p in exc.problems]) from None
+
+
+def rung_view(report) -> dict:
+    """A rung's report for the job's progress (the plan.json entry without its controls, durations and states)."""
+    data = dataclasses.asdict(report)
+    data["ended"] = report.ended.label
+    data["controls"] = len(report.durations)
+    del data["durations"], data["states"]
+    return data
+
+
+def run(kind: str, inputs: dict, options: dict, *, progress=None, rung_done=None, stop: Callable[[], bool] | None = None):
+    """Run a job from its inputs: (the result file's text, complete). A plan's text is plan.json
+    (planner.ladder.plan_json_text, as `ladder plan` writes it); a simulation's is the JSON
+    `ladder simulate --json` prints."""
+    from planner import cli
+
+    with job_folder(inputs) as path:
+        args, checked = check(kind, path, inputs.get("parameters") or {}, options, Path("."))
+        if kind == "plan":
+            from planner.ladder import plan_json_text, run_ladder
+
+            scenario, names = checked
+            result = run_ladder(
+                scenario,
+                rungs=names,
+                seed=args.seed,
+                iterations=args.iterations,
+                progress=progress,
+                flat=args.flat,
+                planner=args.planner,
+                time_limit=args.time_limit,
+                seeded=not args.no_seed_roots,
+                guided=not args.no_guide,
+                stop=stop,
+                rung_done=rung_done,
+            )
+            return plan_json_text(result), result.complete
+        scenario, plan_controls, h, duration, total = checked
+        result = cli._run_simulation(args, scenario, plan_controls, h, duration, total)
+        if result is None:
+            return None, False
+        return json.dumps(cli._simulation_summary(args, scenario, result, h, duration), indent=2) + "\n", True
