@@ -206,7 +206,7 @@ def check(kind: str, path: Path, parameters: dict, options: dict, out: Path) -> 
     if problems:
         raise ScenarioError(str(path), problems)
     args = cli_args(kind, path, parameters, options, out)
-    if args.planner is not None and args.planner not in cli.CONTROL_PLANNERS:
+    if getattr(args, "planner", None) is not None and args.planner not in cli.CONTROL_PLANNERS:
         raise ScenarioError(str(path), [Problem("options.planner", f"unknown planner; planners: {', '.join(cli.CONTROL_PLANNERS)}")])
     try:
         if kind == "plan":

@@ -1,0 +1,265 @@
+"""The planning service (planner.service): every route and state, against a real worker pool
+where a job must run (the small free_transfer scene), and a store-only app (workers=0) for the
+rest, so the file runs in well under a minute once the kernels are compiled."""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+import time
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("fastapi")
+pytest.importorskip("httpx")
+
+from fastapi.testclient import TestClient  # noqa: E402
+
+from models.scenario import ScenarioError, load_scenario  # noqa: E402
+from planner.ladder import plan_json_text, run_ladder  # noqa: E402
+from planner.service import create_app  # noqa: E402
+from planner.service.store import Store  # noqa: E402
+from tests.conftest import ROOT, SCENARIOS  # noqa: E402
+
+FREE = (SCENARIOS / "free_transfer.toml").read_text()
+BROKEN = FREE.replace('name = "free_transfer"', "name = 3")
+
+
+def wait_for(client: TestClient, job_id: str, states=("succeeded", "failed", "cancelled"), timeout: float = 60.0) -> dict:
+    end = time.monotonic() + timeout
+    while True:
+        job = client.get(f"/jobs/{job_id}").json()
+        if job["state"] in states:
+            return job
+        assert time.monotonic() < end, f"job still {job['state']}"
+        time.sleep(0.1)
+
+
+def parse_sse(text: str) -> list[dict]:
+    events = []
+    for block in text.strip().split("\n\n"):
+        fields = dict(line.split(": ", 1) for line in block.splitlines() if not line.startswith(":"))
+        if fields:
+            events.append({"id": int(fields["id"]), "event": fields["event"], "data": json.loads(fields["data"])})
+    return events
+
+
+@pytest.fixture
+def idle(tmp_path):
+    """An app that accepts jobs and runs none (workers=0), with a small queue and body limit."""
+    with TestClient(create_app(tmp_path / "jobs.sqlite", workers=0, max_queued=3, max_body=200_000)) as client:
+        yield client
+
+
+@pytest.fixture(scope="module")
+def live(tmp_path_factory):
+    """An app with one worker process (module-wide: the worker loads the kernels once)."""
+    db = tmp_path_factory.mktemp("live") / "jobs.sqlite"
+    with TestClient(create_app(db, workers=1)) as client:
+        yield client
+
+
+def submit(client, body=None, **headers):
+    body = body or {"kind": "plan", "scenario": FREE, "filename": "scenarios/free_transfer.toml", "options": {"seed": 3}}
+    return client.post("/jobs", json=body, headers=headers)
+
+
+# ----------------------------------------------------------------------------- without workers
+
+
+def test_submit_answers_201_with_location_and_a_queued_job(idle):
+    r = submit(idle)
+    assert r.status_code == 201
+    job = r.json()
+    assert r.headers["location"] == f"/jobs/{job['id']}"
+    assert job["state"] == "queued" and job["kind"] == "plan" and job["options"] == {"seed": 3}
+    assert idle.get(r.headers["location"]).json()["id"] == job["id"]
+    assert [j["id"] for j in idle.get("/jobs").json()["jobs"]] == [job["id"]]
+    assert [j["id"] for j in idle.get("/jobs?state=queued").json()["jobs"]] == [job["id"]]
+    assert idle.get("/jobs?state=running").json()["jobs"] == []
+    assert idle.get("/jobs?state=bogus").status_code == 422
+    assert idle.get("/jobs/nope").status_code == 404
+    assert idle.get(f"/jobs/{job['id']}/result").status_code == 409
+
+
+def test_a_bad_scenario_is_422_with_the_clis_problem_lines(idle):
+    r = submit(idle, {"kind": "plan", "scenario": BROKEN, "filename": "broken.toml"})
+    assert r.status_code == 422
+    body = r.json()
+    with pytest.raises(ScenarioError) as cli:
+        path = ROOT / "tests" / "_broken_tmp.toml"
+        try:
+            path.write_text(BROKEN)
+            load_scenario(path)
+        finally:
+            path.unlink()
+    expected = [f"{p.key}: {p.reason}" for p in cli.value.problems]
+    assert [f"{p['key']}: {p['reason']}" for p in body["problems"]] == expected
+    assert body["detail"].splitlines()[0].startswith("broken.toml: scenario.name:")
+    assert "/tmp" not in body["detail"]
+    not_toml = submit(idle, {"kind": "plan", "scenario": "this is [not toml"})
+    assert not_toml.status_code == 422 and "scenario.toml: not valid TOML" in not_toml.json()["detail"]
+
+
+def test_bad_options_and_parameters_are_422_named_as_in_the_request(idle):
+    r = submit(idle, {"kind": "plan", "scenario": FREE, "options": {"seed": -1, "bogus": 1}})
+    assert r.status_code == 422 and [p["key"] for p in r.json()["problems"]] == ["options.bogus"]
+    r = submit(idle, {"kind": "plan", "scenario": FREE, "options": {"seed": -1}})
+    assert r.status_code == 422 and r.json()["problems"][0]["key"] == "options.seed"
+    r = submit(idle, {"kind": "plan", "scenario": FREE, "parameters": {"nope": 1.0}})
+    assert r.status_code == 422 and "nope" in r.json()["detail"]
+    r = submit(idle, {"kind": "simulate", "scenario": FREE, "options": {}})
+    assert r.status_code == 422 and r.json()["problems"][0]["key"] == "options.model"
+    assert submit(idle, {"kind": "sweep", "scenario": FREE}).status_code == 422
+
+
+@pytest.mark.parametrize("name", ["/etc/passwd", "../outside.obj", "meshes/../../x.obj", "a\\b.obj"])
+def test_a_file_name_outside_the_request_is_422(idle, name):
+    r = submit(idle, {"kind": "plan", "scenario": FREE, "files": {name: "v 0 0 0\n"}})
+    assert r.status_code == 422, r.text
+    assert "files[" in r.json()["problems"][0]["key"]
+
+
+def test_a_mesh_the_scenario_names_must_be_carried_by_the_request(idle):
+    scene = (SCENARIOS / "box_push_3d.toml").read_text()
+    assert '"meshes/wedge.obj"' in scene
+    for target in ("/etc/passwd", "../../../../etc/passwd"):
+        r = submit(idle, {"kind": "plan", "scenario": scene.replace("meshes/wedge.obj", target)})
+        assert r.status_code == 422, r.text
+        assert "leaves the request" in r.json()["detail"] or "absolute" in r.json()["detail"]
+    missing = submit(idle, {"kind": "plan", "scenario": scene})
+    assert missing.status_code == 422 and "not among the files the request carried" in missing.json()["detail"]
+    wedge = (SCENARIOS / "meshes" / "wedge.obj").read_text()
+    carried = submit(idle, {"kind": "plan", "scenario": scene, "files": {"meshes/wedge.obj": wedge}})
+    assert carried.status_code == 201, carried.text
+
+
+def test_oversized_bodies_are_413(idle):
+    r = submit(idle, {"kind": "plan", "scenario": FREE + "#" * 300_000})
+    assert r.status_code == 413
+
+
+def test_the_queue_limit_is_429_with_retry_after(idle):
+    for _ in range(3):
+        assert submit(idle).status_code == 201
+    r = submit(idle)
+    assert r.status_code == 429 and int(r.headers["retry-after"]) > 0
+    assert len(idle.get("/jobs").json()["jobs"]) == 3
+
+
+def test_an_idempotency_key_returns_the_same_job(idle):
+    first = submit(idle, **{"Idempotency-Key": "k1"})
+    again = submit(idle, **{"Idempotency-Key": "k1"})
+    assert first.status_code == 201 and again.status_code == 200
+    assert first.json()["id"] == again.json()["id"] and again.headers["location"] == first.headers["location"]
+    assert len(idle.get("/jobs").json()["jobs"]) == 1
+    other = submit(idle, {"kind": "plan", "scenario": FREE, "options": {"seed": 4}}, **{"Idempotency-Key": "k1"})
+    assert other.status_code == 409
+
+
+def test_cancelling_a_queued_job_is_at_once_and_ends_its_events(idle):
+    job = submit(idle).json()
+    r = idle.delete(f"/jobs/{job['id']}")
+    assert r.status_code == 200 and r.json()["state"] == "cancelled"
+    assert idle.delete("/jobs/nope").status_code == 404
+    events = parse_sse(idle.get(f"/jobs/{job['id']}/events").text)
+    assert [e["event"] for e in events] == ["state", "job_ended"] and [e["id"] for e in events] == [1, 2]
+    assert events[-1]["data"]["state"] == "cancelled"
+
+
+def test_a_token_is_needed_everywhere_but_the_description(tmp_path):
+    with TestClient(create_app(tmp_path / "jobs.sqlite", workers=0, token="s3cret")) as client:
+        assert client.get("/jobs").status_code == 401
+        assert client.get("/jobs", headers={"Authorization": "Bearer wrong"}).status_code == 401
+        assert submit(client).status_code == 401
+        assert client.get("/jobs/x/events").status_code == 401
+        assert client.get("/openapi.json").status_code == 200
+        assert client.get("/docs").status_code == 200
+        good = {"Authorization": "Bearer s3cret"}
+        assert client.get("/jobs", headers=good).status_code == 200
+        assert submit(client, **good).status_code == 201
+
+
+# ----------------------------------------------------------------------------- with a worker
+
+
+def cli_plan_json(scenario_path: Path, seed: int, parameters=None, **kwargs) -> str:
+    """plan.json as `ladder plan` writes it (run from the repository root)."""
+    import os
+
+    old = os.getcwd()
+    os.chdir(ROOT)
+    try:
+        scenario = load_scenario(scenario_path.relative_to(ROOT), parameters or {})
+        return plan_json_text(run_ladder(scenario, seed=seed, **kwargs))
+    finally:
+        os.chdir(old)
+
+
+def test_a_plan_job_succeeds_with_the_clis_plan_json_byte_for_byte(live):
+    r = submit(live)
+    assert r.status_code == 201
+    job = wait_for(live, r.json()["id"])
+    assert job["state"] == "succeeded", job
+    assert [rung["rung"] for rung in job["rungs"]] == ["geometric", "kinematic"]
+    assert job["progress"]["rung"] == "kinematic"
+    result = live.get(f"/jobs/{job['id']}/result")
+    assert result.status_code == 200 and result.headers["content-type"].startswith("application/json")
+    assert result.text == cli_plan_json(SCENARIOS / "free_transfer.toml", seed=3)
+    assert json.loads(result.text)["top_holds"] is True
+
+
+def test_events_have_ids_and_last_event_id_resumes_without_gaps(live):
+    job = submit(live, {"kind": "plan", "scenario": FREE, "options": {"seed": 5}}).json()
+    events = parse_sse(live.get(f"/jobs/{job['id']}/events").text)  # follows the job live to its end
+    kinds = [e["event"] for e in events]
+    assert kinds[0] == "state" and kinds[-1] == "job_ended" and events[-1]["data"]["state"] == "succeeded"
+    assert {"rung_started", "rung_ended"} <= set(kinds)
+    ids = [e["id"] for e in events]
+    assert ids == list(range(1, len(ids) + 1))
+    for cut in (1, len(ids) // 2, len(ids) - 1):
+        rest = parse_sse(live.get(f"/jobs/{job['id']}/events", headers={"Last-Event-ID": str(cut)}).text)
+        assert [e["id"] for e in rest] == ids[cut:]
+    assert live.get(f"/jobs/{job['id']}/events", headers={"Last-Event-ID": str(ids[-1])}).text == ""
+    assert live.get(f"/jobs/{job['id']}/events", headers={"Last-Event-ID": "x"}).status_code == 422
+
+
+def test_a_simulate_job_reports_as_ladder_simulate_json(live):
+    r = submit(live, {"kind": "simulate", "scenario": FREE, "options": {"model": "kinematic"}})
+    assert r.status_code == 201, r.text
+    job = wait_for(live, r.json()["id"])
+    assert job["state"] == "succeeded", job
+    summary = json.loads(live.get(f"/jobs/{job['id']}/result").text)
+    assert summary["model"] == "kinematic" and summary["file"] == "scenario.toml" and summary["outcome"] in ("goal", "unsafe", "none")
+
+
+def test_cancelling_a_running_job_stops_it(live):
+    # a flat plan on the paper's scene with a large budget runs for long enough to be cancelled
+    scene = (SCENARIOS / "two_finger_triangle.toml").read_text()
+    body = {"kind": "plan", "scenario": scene, "parameters": {"v1": 0.8}, "options": {"flat": True, "iterations": 10**6}}
+    job = submit(live, body).json()
+    wait_for(live, job["id"], states=("running",) + ("succeeded", "failed", "cancelled"))
+    assert live.delete(f"/jobs/{job['id']}").json()["cancel_requested"] is True
+    ended = wait_for(live, job["id"], timeout=30)
+    assert ended["state"] == "cancelled", ended
+    assert json.loads(live.get(f"/jobs/{job['id']}/result").text)["complete"] is False
+
+
+def test_a_job_left_running_by_a_dead_server_runs_again_on_restart(tmp_path):
+    db = tmp_path / "jobs.sqlite"
+    with TestClient(create_app(db, workers=0)) as client:
+        job = submit(client).json()
+    store = Store(db)  # the server died while the job ran
+    store.claim(job["id"])
+    store.add_event(job["id"], "rung_started", {"rung": "geometric"})
+    store.close()
+    with sqlite3.connect(db) as conn:
+        assert conn.execute("SELECT state FROM jobs").fetchone()[0] == "running"
+    with TestClient(create_app(db, workers=1)) as client:
+        ended = wait_for(client, job["id"])
+        assert ended["state"] == "succeeded" and ended["runs"] == 2
+        assert client.get(f"/jobs/{job['id']}/result").text == cli_plan_json(SCENARIOS / "free_transfer.toml", seed=3)
+        events = parse_sse(client.get(f"/jobs/{job['id']}/events").text)
+        assert [e["id"] for e in events] == list(range(1, len(events) + 1))
+        assert {"state": "queued", "requeued": True} in [e["data"] for e in events]
