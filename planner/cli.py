@@ -27,9 +27,7 @@ EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
 MAX_RUNS = 1_000_000
 
 #: Subcommands the design reserves whose machinery is not built yet, with what they will do.
-RESERVED = {
-    "serve": "serve planning requests over HTTP",
-}
+RESERVED: dict[str, str] = {}
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -46,6 +44,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_plan_parser(sub)
     _add_sweep_parser(sub)
     _add_bench_parser(sub)
+    _add_serve_parser(sub)
     _add_reserved_parsers(sub)
     return parser
 
@@ -207,6 +206,26 @@ def _add_bench_parser(sub: argparse._SubParsersAction) -> None:
     )
     bench.add_argument("--seeds", type=int, default=None, metavar="N", help="seeds 1..N per planning scene (default 20; --quick: 3)")
     bench.set_defaults(handler=cmd_bench)
+
+
+def _add_serve_parser(sub: argparse._SubParsersAction) -> None:
+    """Add the `serve` subcommand: the planning service over HTTP."""
+    serve = sub.add_parser(
+        "serve",
+        help="serve planning jobs over HTTP (FastAPI on uvicorn)",
+        description="Run the planning service: POST /jobs with a scenario's TOML text, follow GET /jobs/{id} or its "
+        "server-sent events at /jobs/{id}/events, fetch GET /jobs/{id}/result (a plan's plan.json, as `ladder plan` "
+        "writes it). Jobs live in SQLite (--db) and survive a restart. API description at /docs and /openapi.json. "
+        'Needs the serve extra: pip install "contact-ladder[serve]".',
+    )
+    serve.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1; any other needs --token)")
+    serve.add_argument("--port", type=int, default=8000, help="port (default 8000)")
+    serve.add_argument("--db", type=Path, default=Path("ladder-jobs.sqlite"), help="the jobs' SQLite database (default ladder-jobs.sqlite)")
+    serve.add_argument("--workers", type=int, default=1, help="worker processes running jobs (default 1; planning is CPU-bound)")
+    serve.add_argument("--token", help="require 'Authorization: Bearer TOKEN' on every request but /docs and /openapi.json")
+    serve.add_argument("--max-queued", type=int, default=100, help="jobs that may wait; more get 429 (default 100)")
+    serve.add_argument("--max-job-seconds", type=float, help="stop a job after this many seconds of running (default: no limit)")
+    serve.set_defaults(handler=cmd_serve)
 
 
 def _add_reserved_parsers(sub: argparse._SubParsersAction) -> None:
@@ -993,10 +1012,41 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+#: Hosts `ladder serve` binds without a token.
+LOOPBACK = ("127.0.0.1", "localhost", "::1")
+
+
+def cmd_serve(args: argparse.Namespace) -> int:
+    """`ladder serve`: the planning service on uvicorn (imported only here)."""
+    if args.host not in LOOPBACK and not args.token and not args.host.startswith("127."):
+        print(f"error: --host {args.host}: serving beyond this machine needs --token (every request must then carry it)", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    problems = positive("--workers", args.workers, integer=True) + positive("--max-queued", args.max_queued, integer=True)
+    problems += positive("--max-job-seconds", args.max_job_seconds)
+    if not 0 <= args.port <= 65535:
+        problems.append(Problem("--port", f"must be between 0 and 65535, got {args.port}"))
+    problems += check_out_file("--db", args.db)
+    missing = [m for m in ("fastapi", "uvicorn") if importlib.util.find_spec(m) is None]
+    if missing:
+        problems.append(
+            Problem("ladder serve", f'needs {" and ".join(missing)}: install the serve extra: pip install "contact-ladder[serve]"')
+        )
+    if problems:
+        raise ScenarioError("ladder serve", problems)
+    import uvicorn
+
+    from planner.service import create_app
+
+    app = create_app(args.db, workers=args.workers, token=args.token, max_queued=args.max_queued, max_job_seconds=args.max_job_seconds)
+    print(f"serving on http://{args.host}:{args.port} (jobs in {args.db}; API at /docs)", file=sys.stderr, flush=True)
+    uvicorn.run(app, host=args.host, port=args.port, log_level="info")
+    return EXIT_OK
+
+
 def cmd_reserved(args: argparse.Namespace) -> int:
     print(
         f"error: 'ladder {args.command}' is not built yet ({RESERVED[args.command]}); "
-        "available now: ladder check, ladder simulate, ladder plan, ladder sweep, ladder bench, ladder schema",
+        "available now: ladder check, ladder simulate, ladder plan, ladder sweep, ladder bench, ladder schema, ladder serve",
         file=sys.stderr,
     )
     return EXIT_BAD_INPUT

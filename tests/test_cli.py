@@ -91,11 +91,52 @@ def test_missing_file():
     assert "no/such/file.toml: no such file" in result.stderr
 
 
-@pytest.mark.parametrize("command", ["serve"])
-def test_reserved_commands_say_so(command):
-    result = ladder(command, "scenarios/two_finger_triangle.toml")
+def test_serve_beyond_loopback_needs_a_token():
+    result = ladder("serve", "--host", "0.0.0.0")
     assert result.returncode == 2
-    assert "not built yet" in result.stderr
+    assert "--token" in result.stderr and len(result.stderr.strip().splitlines()) == 1 and "Traceback" not in result.stderr
+
+
+def test_serve_checks_its_options():
+    result = ladder("serve", "--workers", "0", "--port", "70000")
+    assert result.returncode == 2
+    assert "--workers" in result.stderr and "--port" in result.stderr and "Traceback" not in result.stderr
+
+
+def test_serve_answers_on_loopback(tmp_path):
+    import socket
+    import urllib.request
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "planner", "serve", "--port", str(port), "--db", str(tmp_path / "jobs.sqlite"), "--token", "t"],
+        cwd=ROOT,
+        env=dict(os.environ, PYTHONPATH=str(ROOT)),
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+        for _ in range(200):
+            try:
+                with urllib.request.urlopen(f"http://127.0.0.1:{port}/openapi.json", timeout=1) as r:
+                    assert "/jobs" in json.loads(r.read())["paths"]
+                break
+            except OSError:
+                time.sleep(0.1)
+        else:
+            raise AssertionError("the server did not answer")
+        request = urllib.request.Request(f"http://127.0.0.1:{port}/jobs")
+        with pytest.raises(urllib.error.HTTPError) as denied:
+            urllib.request.urlopen(request, timeout=5)
+        assert denied.value.code == 401
+        request.add_header("Authorization", "Bearer t")
+        with urllib.request.urlopen(request, timeout=5) as r:
+            assert json.loads(r.read()) == {"jobs": []}
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.wait(timeout=30)
 
 
 def test_unknown_command_is_a_usage_error():
