@@ -24,6 +24,9 @@ from tests.conftest import ROOT, SCENARIOS  # noqa: E402
 
 FREE = (SCENARIOS / "free_transfer.toml").read_text()
 BROKEN = FREE.replace('name = "free_transfer"', "name = 3")
+#: A job that runs until stopped: the opening between the walls is narrower than the robot,
+#: so the geometric search spends its whole (large) budget.
+STUCK = {"kind": "plan", "scenario": FREE, "parameters": {"gap": 0.05}, "options": {"iterations": 10**7, "time_limit": 600}}
 
 
 def wait_for(client: TestClient, job_id: str, states=("succeeded", "failed", "cancelled"), timeout: float = 60.0) -> dict:
@@ -235,10 +238,7 @@ def test_a_simulate_job_reports_as_ladder_simulate_json(live):
 
 
 def test_cancelling_a_running_job_stops_it(live):
-    # a flat plan on the paper's scene with a large budget runs for long enough to be cancelled
-    scene = (SCENARIOS / "two_finger_triangle.toml").read_text()
-    body = {"kind": "plan", "scenario": scene, "parameters": {"v1": 0.8}, "options": {"flat": True, "iterations": 10**6}}
-    job = submit(live, body).json()
+    job = submit(live, STUCK).json()
     wait_for(live, job["id"], states=("running",) + ("succeeded", "failed", "cancelled"))
     assert live.delete(f"/jobs/{job['id']}").json()["cancel_requested"] is True
     ended = wait_for(live, job["id"], timeout=30)
@@ -263,3 +263,68 @@ def test_a_job_left_running_by_a_dead_server_runs_again_on_restart(tmp_path):
         events = parse_sse(client.get(f"/jobs/{job['id']}/events").text)
         assert [e["id"] for e in events] == list(range(1, len(events) + 1))
         assert {"state": "queued", "requeued": True} in [e["data"] for e in events]
+
+
+def test_kill_9_the_server_while_a_job_runs_and_restart(tmp_path):
+    """A real server killed with SIGKILL while a job runs: on restart the job runs again (here
+    it is then cancelled), the job queued behind it succeeds, none stays running."""
+    import os
+    import signal
+    import socket
+    import subprocess
+    import sys
+
+    import httpx
+
+    db = tmp_path / "jobs.sqlite"
+
+    def start():
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", 0))
+            port = s.getsockname()[1]
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "planner", "serve", "--port", str(port), "--db", str(db)],
+            cwd=ROOT,
+            env=dict(os.environ, PYTHONPATH=str(ROOT)),
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
+        client = httpx.Client(base_url=f"http://127.0.0.1:{port}", timeout=10)
+        for _ in range(300):
+            try:
+                client.get("/jobs")
+                return proc, client
+            except httpx.TransportError:
+                time.sleep(0.1)
+        raise AssertionError("the server did not start")
+
+    def wait(client, job_id, states, timeout=60.0):
+        end = time.monotonic() + timeout
+        while (job := client.get(f"/jobs/{job_id}").json())["state"] not in states:
+            assert time.monotonic() < end, job
+            time.sleep(0.1)
+        return job
+
+    proc, client = start()
+    try:
+        a = client.post("/jobs", json=STUCK).json()
+        b = client.post(
+            "/jobs", json={"kind": "plan", "scenario": FREE, "filename": "scenarios/free_transfer.toml", "options": {"seed": 3}}
+        ).json()
+        wait(client, a["id"], ("running",))
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(timeout=10)
+        client.close()
+    proc, client = start()
+    try:
+        assert wait(client, a["id"], ("running",))["runs"] == 2
+        client.delete(f"/jobs/{a['id']}")
+        assert wait(client, a["id"], ("succeeded", "failed", "cancelled"))["state"] == "cancelled"
+        assert wait(client, b["id"], ("succeeded", "failed", "cancelled"))["state"] == "succeeded"
+        assert client.get("/jobs?state=running").json()["jobs"] == []
+        assert client.get(f"/jobs/{b['id']}/result").text == cli_plan_json(SCENARIOS / "free_transfer.toml", seed=3)
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.wait(timeout=30)
+        client.close()

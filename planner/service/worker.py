@@ -3,6 +3,7 @@ events and result into the database itself (its own connection)."""
 
 from __future__ import annotations
 
+import os
 import time
 
 from models.scenario import ScenarioError
@@ -26,8 +27,11 @@ def run_job(db_path: str, job_id: str, max_seconds: float | None = None) -> str 
         inputs, options = json.loads(row["inputs"]), json.loads(row["options"])
         deadline = None if max_seconds is None else time.monotonic() + max_seconds
         state = {"cancel": False, "timeout": False, "checked": 0.0, "written": 0.0}
+        parent = os.getppid()
 
         def stop() -> bool:
+            if os.getppid() != parent:  # the server died (kill -9): the job stays running and is run again on restart
+                os._exit(0)
             now = time.monotonic()
             if deadline is not None and now > deadline:
                 state["timeout"] = True
