@@ -246,6 +246,14 @@ def test_cancelling_a_running_job_stops_it(live):
     assert json.loads(live.get(f"/jobs/{job['id']}/result").text)["complete"] is False
 
 
+def test_a_job_past_the_wall_time_limit_fails_keeping_its_rungs(tmp_path):
+    with TestClient(create_app(tmp_path / "jobs.sqlite", workers=1, max_job_seconds=1.0)) as client:
+        job = submit(client, STUCK).json()
+        ended = wait_for(client, job["id"], timeout=60)
+        assert ended["state"] == "failed" and "wall-time limit" in ended["error"]
+        assert json.loads(client.get(f"/jobs/{job['id']}/result").text)["complete"] is False
+
+
 def test_a_job_left_running_by_a_dead_server_runs_again_on_restart(tmp_path):
     db = tmp_path / "jobs.sqlite"
     with TestClient(create_app(db, workers=0)) as client:
