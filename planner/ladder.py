@@ -23,7 +23,7 @@ For each rung in order:
   state): the tree is also rooted at the states of the tracked (or replayed) prefix that still
   agrees with the previous plan, the prefix is spliced in front of a path that starts at one
   of them (OMPL-CRIB section 5), and RRT / EST draw part of their samples near the previous
-  plan's configurations (unless tracking could not follow them);
+  plan's configurations;
 - a rung with no usable previous plan plans from scratch ("planned").
 
 The ladder's budget is the flat baseline's: a rung may spend, on top of its own iterations,
@@ -389,11 +389,9 @@ def _search(step: _Step, previous, replay, tracked, planner, seeded: bool, guide
         # tracked states agree with the previous plan by construction (TRACK_TOLERANCE)
         m = len(replay.states) if tracked is not None else _agreeing(scenario, replay, previous)
         seeds, prefix_controls, prefix_durations = replay.states[:m], replay.controls[:m], np.array(replay.durations[:m])
-    # the geometric path moves passive bodies on their own: its states are no guide for physics;
-    # nor are a plan's that tracking and its repairs could not follow (the search is rooted at
-    # what did track; guided toward the rest, box_rotate_3d's top rung held in 2 of 5 hard
-    # seeds, unguided in 5 of 5: docs/measurements.md)
-    usable = previous is not None and previous.states and previous.rung != "geometric" and tracked is None
+    # the geometric path moves passive bodies on their own: its states are no guide for physics
+    # (after tracking failed the previous plan still guides: docs/measurements.md, "No guide")
+    usable = previous is not None and previous.states and previous.rung != "geometric"
     guide = np.array(previous.states) if usable and guided else None
     budget = step.iterations - (tracked.repair_iterations if tracked else 0)
     plan = _plan_with_restarts(
