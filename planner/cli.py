@@ -525,7 +525,6 @@ def _check_plan_args(args: argparse.Namespace) -> tuple[Scenario, list[str]]:
 
 def _run_plan(args: argparse.Namespace, scenario: Scenario, names: list[str]):
     """Run the ladder over `names`, showing progress on stderr; Ctrl-C ends the rung under way."""
-    from planner.ladder import run_ladder
 
     live = sys.stderr.isatty() and not args.json
     budgets = {n: args.iterations if args.iterations is not None else scenario.rung_settings(n).iterations for n in names}
@@ -550,19 +549,7 @@ def _run_plan(args: argparse.Namespace, scenario: Scenario, names: list[str]):
 
     with interrupt.deferred():  # Ctrl-C ends the rung under way; the rungs done are kept
         announce_compile()
-        result = run_ladder(
-            scenario,
-            rungs=names,
-            seed=args.seed,
-            iterations=args.iterations,
-            progress=progress,
-            flat=args.flat,
-            planner=args.planner,
-            time_limit=args.time_limit,
-            seeded=not args.no_seed_roots,
-            guided=not args.no_guide,
-            stop=interrupt.asked,
-        )
+        result = ladder_for(scenario, names, args, progress=progress, stop=interrupt.asked)
     if live:
         print("\r" + " " * 78 + "\r", end="", file=sys.stderr, flush=True)
     return result
@@ -602,6 +589,26 @@ def _write_plan_outputs(args: argparse.Namespace, scenario: Scenario, result) ->
         )
         plots.append(str(path))
     return report, plots
+
+
+def ladder_for(scenario: Scenario, names, args: argparse.Namespace, *, progress=None, stop=None, rung_done=None):
+    """`run_ladder` with the options of `ladder plan` (checked `args`): the CLI's and the service's."""
+    from planner.ladder import run_ladder
+
+    return run_ladder(
+        scenario,
+        rungs=names,
+        seed=args.seed,
+        iterations=args.iterations,
+        progress=progress,
+        flat=args.flat,
+        planner=args.planner,
+        time_limit=args.time_limit,
+        seeded=not args.no_seed_roots,
+        guided=not args.no_guide,
+        stop=stop,
+        rung_done=rung_done,
+    )
 
 
 def _print_plan(args: argparse.Namespace, scenario: Scenario, result, report: dict, plots: list[str]) -> None:

@@ -254,23 +254,10 @@ def run(kind: str, inputs: dict, options: dict, *, progress=None, rung_done=None
     with job_folder(inputs) as path:
         args, checked = check(kind, path, inputs.get("parameters") or {}, options, Path("."))
         if kind == "plan":
-            from planner.ladder import plan_json_text, run_ladder
+            from planner.ladder import plan_json_text
 
             scenario, names = checked
-            result = run_ladder(
-                scenario,
-                rungs=names,
-                seed=args.seed,
-                iterations=args.iterations,
-                progress=progress,
-                flat=args.flat,
-                planner=args.planner,
-                time_limit=args.time_limit,
-                seeded=not args.no_seed_roots,
-                guided=not args.no_guide,
-                stop=stop,
-                rung_done=rung_done,
-            )
+            result = cli.ladder_for(scenario, names, args, progress=progress, stop=stop, rung_done=rung_done)
             return plan_json_text(result), result.complete
         scenario, plan_controls, h, duration, total = checked
         result = cli._run_simulation(args, scenario, plan_controls, h, duration, total)
