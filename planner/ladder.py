@@ -9,16 +9,16 @@ For each rung in order:
 - a rung whose physics along the previous plan is the same as the previous rung's (the
   rigid and compliant variants of one model when no contact carries force at the same step
   size) is "skipped", with the reason, and inherits the plan;
-- a rung above a physics rung *tracks* the previous plan (`planner.tracking`): the previous
+- a rung replays the previous plan's controls first: if they reach the goal as they are, the
+  rung ends "replayed" (the cheapest way up: one rollout per control);
+- else a rung above a physics rung *tracks* the previous plan (`planner.tracking`): the previous
   plan's states, recorded per control period under its own rung, are a reference; the rung
   follows it in closed loop, one control period at a time, keeping the previous control while
   its result stays close and otherwise the best of a few sampled controls around it (with a
   one-period look-ahead); where no candidate stays close, a short OMPL search from the last
   tracked states to the reference further along repairs it locally, and tracking goes on.
-  Reaching the goal so, the rung ends "replayed" (no control changed), "tracked" or
-  "repaired" with no global search;
-- a rung above the geometric rung replays the path's commanded speeds ("replayed" if they
-  reach the goal);
+  Reaching the goal so, the rung ends "tracked" (or "replayed" when no control changed) or
+  "repaired", with no global search;
 - otherwise the rung plans again ("replanned"; "repaired" when its path starts at a tracked
   state): the tree is also rooted at the states of the tracked (or replayed) prefix that still
   agrees with the previous plan, the prefix is spliced in front of a path that starts at one
@@ -312,6 +312,12 @@ def _climb(step: _Step, previous: RungReport | None, planner, seeded: bool, guid
         if same:
             return _skipped(step, previous, same)
     replay, tracked = None, None
+    if carried:  # the cheapest first: the previous controls as they are (one rollout per control)
+        replay = _replay(step.scenario, step.rung, step.start(), previous, step.h, step.period)
+        if step.stopped():
+            return None
+        if replay.outcome == GOAL and replay.status == OK:
+            return _replayed(step, previous, replay)
     if carried and previous.rung != "geometric":
         tracked = _track(step, previous)
         replay = _Replay.of(tracked)
@@ -319,12 +325,6 @@ def _climb(step: _Step, previous: RungReport | None, planner, seeded: bool, guid
             return None
         if replay.outcome == GOAL and replay.status == OK:
             return _tracked(step, tracked, replay)
-    elif carried:
-        replay = _replay(step.scenario, step.rung, step.start(), previous, step.h, step.period)
-        if step.stopped():
-            return None
-        if replay.outcome == GOAL and replay.status == OK:
-            return _replayed(step, previous, replay)
     return _search(step, previous, replay, tracked, planner, seeded, guided, progress)
 
 
@@ -361,8 +361,8 @@ def _tracked(step: _Step, tracked: Tracked, replay: _Replay) -> RungReport:
 
 
 def _replayed(step: _Step, previous: RungReport, replay: _Replay) -> RungReport:
-    """A geometric path's commanded speeds that hold under the rung as they are (its states
-    move passive bodies on their own: the report's are this rung's)."""
+    """The previous plan's controls that hold under the rung as they are (the states are this
+    rung's: a geometric path's move passive bodies on their own)."""
     hold = [[0.0] * len(step.scenario.actuated)] * replay.held
     reason = PlanStatus.REPLAYED.message + (
         f" (its drives held still for {replay.held} control period(s) at the end)" if replay.held else ""
