@@ -247,8 +247,9 @@ def test_ctrl_c_during_simulate_is_exit_130_with_one_line(tmp_path):
 
 def test_ctrl_c_during_plan_keeps_the_rungs_done_marked_incomplete(tmp_path):
     out = tmp_path / "plan"
-    # box_push_3d seed 3: the dynamic rung replans for tens of seconds after three rungs are done
-    proc = popen("plan", str(SCENARIOS / "box_push_3d.toml"), "--seed", "3", "--out", str(out))
+    # box_push_3d seed 12: the dynamic rung searches for tens of seconds after three rungs are done
+    # (tracking the quasistatic plan and repairing it locally fail there)
+    proc = popen("plan", str(SCENARIOS / "box_push_3d.toml"), "--seed", "12", "--out", str(out))
     wait_for_line(proc, "planning: dynamic-rigid", limit=10)
     time.sleep(2.0)
     proc.send_signal(signal.SIGINT)
