@@ -572,7 +572,7 @@ def _write_plan_outputs(args: argparse.Namespace, scenario: Scenario, result) ->
             continue
         rung = rung_for(scenario, rung_report.rung)
         if rung.propagates:
-            h = scenario.rung_settings(rung_report.rung).h
+            h = rung_report.h
             replay = rung.rollout(
                 scenario, rung.initial_state(scenario), np.array(rung_report.controls), np.array(rung_report.durations), h
             )
@@ -581,11 +581,11 @@ def _write_plan_outputs(args: argparse.Namespace, scenario: Scenario, result) ->
             times = np.concatenate([[0.0], np.cumsum(rung_report.durations)])
             trajectory = np.array(rung_report.states)
         path = plot_rollouts(
-            args.out / f"plan.{rung_report.rung}.png",
+            args.out / f"plan.{rung_report.label}.png",
             scenario.coordinates,
             scenario.start,
-            [(rung_report.rung, times, trajectory)],
-            f"{scenario.spec.scenario.name}: plan under {rung_report.rung}",
+            [(rung_report.label, times, trajectory)],
+            f"{scenario.spec.scenario.name}: plan under {rung_report.label}",
         )
         plots.append(str(path))
     return report, plots
@@ -637,7 +637,7 @@ def _print_plan(args: argparse.Namespace, scenario: Scenario, result, report: di
         for r in result.rungs:
             distance = "-" if r.goal_distance is None else f"{r.goal_distance:.2g}"
             table.add_row(
-                r.rung,
+                r.label,
                 r.ended.label,
                 r.outcome,
                 f"{r.wall_s:.2f}",
@@ -654,7 +654,7 @@ def _print_plan(args: argparse.Namespace, scenario: Scenario, result, report: di
         console.print(table)
         for r in result.rungs:
             if r.reason:
-                console.print(f"{r.rung}: {r.reason}")
+                console.print(f"{r.label}: {r.reason}")
         if result.complete:
             print(
                 f"top rung holds: {'yes' if result.top_holds else 'no'}; plan written to {args.out / 'plan.json'}; "

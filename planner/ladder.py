@@ -51,7 +51,7 @@ from models.scenario import Problem, Scenario, ScenarioError
 from models.task import Outcome, classify, goal_distance
 from planner.ompl_adapter import plan_control, plan_geometric, steered_coordinates
 from planner.plan_status import PlanStatus
-from planner.tracking import Reference, Tracked, track
+from planner.tracking import TRACK_TOLERANCE, PoseError, Reference, Tracked, track
 
 #: Words of a rung's outcome and its solver status in a report.
 GOAL, NONE, OK = Outcome.GOAL.label, Outcome.NONE.label, "ok"
@@ -75,9 +75,16 @@ class RungReport:
     diverged_at: float | None = None  # where along the previous plan tracking was (last) lost, s
     repairs: int = 0  # local repairs tried (short searches from tracked states; see planner.tracking)
     rollouts: int = 0  # control periods rolled out by tracking (candidates), beside the search's propagations
+    h: float | None = None  # the time step this rung's plan was made and checked at, s (None: geometric)
+    stage: str = ""  # "coarse": the rung's model at a coarser step, planned before the rung itself (see COARSE_FACTORS)
     controls: list = field(default_factory=list)
     durations: list = field(default_factory=list)
     states: list = field(default_factory=list)
+
+    @property
+    def label(self) -> str:
+        """The rung's name, with the step for a coarse stage ("dynamic-rigid@0.005")."""
+        return f"{self.rung}@{self.h:g}" if self.stage else self.rung
 
 
 @dataclass
@@ -227,29 +234,57 @@ def run_ladder(
     reports: list[RungReport] = []
     previous: RungReport | None = None
     interrupted = False
-    for name in names:
+    for i, name in enumerate(names):
         if stopped():
             interrupted = True
             break
         budget.add(budgets[name], limits[name])
+        dearer = _no_cheaper(scenario, names[i:], settings)
+        if dearer:  # its iterations and time pass up unspent
+            report = RungReport(name, PlanStatus.OMITTED, f"{PlanStatus.OMITTED.message}: {dearer}", h=settings[name].h)
+            reports.append(report)
+            if rung_done:
+                rung_done(report)
+            continue
         if progress:
             progress(name, 0, 0)
         rung = rung_for(scenario, name)
         step = _Step(scenario, name, rung, settings[name], seed, budgets[name], budget.left(reports), budget, stop, time.perf_counter())
-        report = _climb(step, previous, planner, seeded, guided, progress)
-        if report is None:  # interrupted: the rung under way is dropped
+        climbed = _climb(step, previous, planner, seeded, guided, progress)
+        if climbed is None:  # interrupted: the rung under way is dropped
             interrupted = True
             break
+        own_h = step.h if step.rung.propagates else None
+        climbed = [r if r.stage else replace(r, h=own_h) for r in climbed]
+        report = climbed[-1]
         if not report.ended.holds and step.rung.propagates and name != names[-1]:
-            report = _goes_on(report)
-        reports.append(report)
-        if rung_done:
-            rung_done(report)
+            climbed[-1] = report = _goes_on(report)
+        for done in climbed:
+            reports.append(done)
+            if rung_done:
+                rung_done(done)
         if not step.rung.propagates:
             previous = report if report.durations else None
         else:
             previous = report if (report.ended.holds or (report.durations and report.states)) else None
     return LadderResult(str(scenario.path), int(seed), reports, scene_record(scenario), complete=not interrupted)
+
+
+def _no_cheaper(scenario: Scenario, names: list[str], settings: dict) -> str:
+    """Why the physics rung names[0] is left out ("" if it is not): it takes more steps per
+    control period than the physics rung above it (names[1]), so a propagation costs no less
+    there (box_push_3d's kinematic rung at 1e-2 s under a quasi-dynamic rung at one
+    0.1 s step per period: 0.35 against 0.3 ms, measured in docs/measurements.md, "Rungs no
+    cheaper"), while its plans still have to be carried up by one more rung."""
+    if len(names) < 2 or settings[names[0]].h is None or settings[names[1]].h is None:
+        return ""
+    here, above = (settings[n].control_period / settings[n].h for n in names[:2])
+    if round(here) <= round(above):
+        return ""
+    return (
+        f"{round(here)} step(s) per control period at h = {settings[names[0]].h:g} s against "
+        f"{round(above)} of {names[1]} at h = {settings[names[1]].h:g} s"
+    )
 
 
 class _Budget:
@@ -284,10 +319,11 @@ class _Step:
     budget: _Budget
     stop: object
     t0: float
+    step: float | None = None  # a coarse stage's time step (None: the rung's own)
 
     @property
     def h(self) -> float:
-        return self.settings.h
+        return self.step or self.settings.h
 
     @property
     def period(self) -> float:
@@ -300,32 +336,158 @@ class _Step:
         return bool(self.stop and self.stop())
 
 
-def _climb(step: _Step, previous: RungReport | None, planner, seeded: bool, guided: bool, progress) -> RungReport | None:
+def _climb(
+    step: _Step, previous: RungReport | None, planner, seeded: bool, guided: bool, progress, coarse: bool = True, replay=None
+) -> list[RungReport] | None:
     """How the rung takes the previous plan up, the cheapest way that holds: skip (the same
-    physics), track (or replay a geometric path), else search; None when stopped."""
+    physics), replay, else (with `coarse`) plan at a coarser step first and track that
+    (`_coarse_first`), else track, else search; the rung's reports (a coarse stage's, then
+    its own), None when stopped. `replay`: the previous plan already replayed at this step."""
     if not step.rung.propagates:
         report = _geometric(step.scenario, step.seed, step.own, step.budget.seconds(), stop=step.stop)
-        return None if step.stopped() else report
+        return None if step.stopped() else [report]
     carried = previous is not None and previous.durations
     if carried and previous.ended.holds:
-        same = _same_physics(step.scenario, previous, step.name)
+        same = _same_physics(step.scenario, previous, step.name, step.h)
         if same:
-            return _skipped(step, previous, same)
-    replay, tracked = None, None
-    if carried:  # the cheapest first: the previous controls as they are (one rollout per control)
+            return [_skipped(step, previous, same)]
+    tracked = None
+    if carried and replay is None:  # the cheapest first: the previous controls as they are (one rollout per control)
         replay = _replay(step.scenario, step.rung, step.start(), previous, step.h, step.period)
         if step.stopped():
             return None
-        if replay.outcome == GOAL and replay.status == OK:
-            return _replayed(step, previous, replay)
+    if carried and replay.outcome == GOAL and replay.status == OK:
+        return [_replayed(step, previous, replay)]
     if carried and previous.rung != "geometric":
+        if coarse and previous.ended.holds:  # not from a failed rung's partial plan (strike.toml: 3 of 5 seeds hold so, 5 of 5 not)
+            h = _coarser_step(step, previous, replay)
+            if h is not None:
+                return _coarse_first(step, previous, planner, seeded, guided, progress, h)
         tracked = _track(step, previous)
         replay = _Replay.of(tracked)
         if step.stopped():
             return None
         if replay.outcome == GOAL and replay.status == OK:
-            return _tracked(step, tracked, replay)
-    return _search(step, previous, replay, tracked, planner, seeded, guided, progress)
+            return [_tracked(step, tracked, replay)]
+    report = _search(step, previous, replay, tracked, planner, seeded, guided, progress)
+    return None if report is None else [report]
+
+
+#: A physics rung whose replay of the previous plan does not hold plans first with its own
+#: model at a step this many times its own (the largest that agrees, tried in this order) and
+#: then tracks that plan at its own step: a coarser step costs proportionally less per
+#: propagation, and where its trajectories agree with the rung's own (COARSE_AGREEMENT), what it
+#: plans the rung tracks closely. Measured: docs/measurements.md, "A coarser step first".
+COARSE_FACTORS = (5, 2)
+#: The coarser step's replay of the previous plan agrees with the rung's own replay: every
+#: state at a control switch within this distance (tracking's `PoseError`, m): half of what
+#: tracking tolerates, which leaves it room to correct (at TRACK_TOLERANCE box_push_3d takes
+#: 10x steps whose plans it tracks less far).
+COARSE_AGREEMENT = TRACK_TOLERANCE / 2
+
+
+def _coarser_step(step: _Step, previous: RungReport, replay: _Replay) -> float | None:
+    """The coarsest step (COARSE_FACTORS times the rung's; at most the control period, which it
+    divides) whose replay of the previous plan agrees with `replay`, the rung's own, at every
+    control switch both reached (COARSE_AGREEMENT) and ends the same way; None if none does."""
+    scenario, error = step.scenario, PoseError(step.scenario)
+    for factor in COARSE_FACTORS:
+        h = factor * step.h
+        steps = step.period / h
+        if h > step.period or abs(steps - round(steps)) > 1e-9:
+            continue
+        rough = _replay_controls(scenario, step.rung, step.start(), previous.controls, previous.durations, h, _Replay.empty(step.start()))
+        if step.stopped():
+            return None
+        if rough.status != OK or rough.outcome != replay.outcome:
+            continue
+        pairs = list(zip(rough.states, replay.states)) + [(rough.state, replay.state)]
+        if len(rough.states) == len(replay.states) and all(error(a.q, b.q) <= COARSE_AGREEMENT for a, b in pairs):
+            return h
+    return None
+
+
+def _coarse_first(step: _Step, previous: RungReport, planner, seeded: bool, guided: bool, progress, h: float) -> list[RungReport] | None:
+    """The rung's model at step h takes the previous plan up (a coarse stage, its own report),
+    then the rung at its own step takes the coarse stage's plan up (tracking it), within the
+    rung's iterations; a coarse stage that finds no plan leaves the rung the previous plan."""
+    rough = _climb(replace(step, step=h), previous, planner, seeded, guided, progress, coarse=False)
+    if rough is None:
+        return None
+    stage = replace(
+        rough[0],
+        h=h,
+        stage="coarse",
+        reason=f"at h = {h:g} s ({h / step.h:g} x the rung's step, whose replay of the previous plan it agrees with): "
+        + (rough[0].reason or rough[0].ended.message),
+    )
+    rest = replace(step, iterations=step.iterations - stage.iterations, t0=time.perf_counter())
+    if not stage.ended.holds:
+        own = _climb(rest, previous, planner, seeded, guided, progress, coarse=False)
+        return None if own is None else [stage, *own]
+    tracked = _track_rounds(rest, stage, h)
+    if step.stopped():
+        return None
+    replay = _Replay.of(tracked)
+    if replay.outcome == GOAL and replay.status == OK:
+        return [stage, _tracked(rest, tracked, replay)]
+    own = _search(rest, stage, replay, tracked, planner, seeded, guided, progress)
+    return None if own is None else [stage, own]
+
+
+#: Where the rung loses track of its coarse stage's plan for good (local repairs included), it
+#: plans again at the coarse step from the last tracked state and tracks that, up to this many
+#: times in all, before it searches at its own step (the expensive way); tracking makes no local
+#: repairs at the rung's own step here: re-planning at the coarse step is the cheaper repair.
+COARSE_ROUNDS = 6
+
+
+def _track_rounds(step: _Step, stage: RungReport, h: float) -> Tracked:
+    """Track the coarse stage's plan at the rung's own step; where tracking is lost, plan
+    again with the coarse step from the last tracked state (guided by the rest of the plan
+    being tracked) and track that, up to COARSE_ROUNDS plans in all, within the rung's
+    iterations. One run: the tracked controls of every round, from the start."""
+    scenario, rung, period = step.scenario, step.rung, step.period
+    start = step.start()
+    run = Tracked(start)
+    controls, durations = stage.controls, stage.durations
+    state, left = start, step.iterations
+    for k in range(COARSE_ROUNDS):
+        reference = Reference.of(scenario, rung, state, controls, durations, h, period)
+        part = track(
+            scenario, rung, state, reference, step.h, period, step.seed + k, repairs=0, time_limit=step.budget.seconds(), stop=step.stop
+        )
+        run.extend(part, first=k == 0)
+        left -= part.repair_iterations
+        if part.outcome == GOAL or step.stopped() or left <= 0 or k + 1 == COARSE_ROUNDS:
+            break
+        t = part.diverged_at if part.diverged_at is not None else len(part.controls) * period
+        guide = np.array([reference.configuration(x) for x in np.arange(t, reference.duration + 1e-9, period)])
+        plan = plan_control(
+            scenario,
+            rung,
+            run.state,
+            h=h,
+            control_period=period,
+            seed=step.seed + COARSE_STRIDE * (k + 1),
+            iterations=left,
+            guide=guide if len(guide) else None,
+            time_limit=step.budget.seconds(),
+            stop=step.stop,
+        )
+        left -= plan.iterations
+        run.repairs += 1
+        run.repair_iterations += plan.iterations
+        run.repair_propagations += plan.propagations
+        if not plan.exact:
+            break
+        run.repaired += 1
+        state, controls, durations = run.state, plan.controls, plan.durations
+    return run
+
+
+#: Seed offset between a rung's coarse re-plans.
+COARSE_STRIDE = 15485863
 
 
 def _skipped(step: _Step, previous: RungReport, reason: str) -> RungReport:
@@ -528,11 +690,11 @@ def assess(scenario: Scenario, name: str, controls, durations) -> dict:
 COMPLIANCE_SIBLINGS = ({"quasistatic-rigid", "quasistatic-compliant"}, {"dynamic-rigid", "dynamic-compliant"})
 
 
-def _same_physics(scenario: Scenario, previous: RungReport, name: str) -> str:
-    """Why rung `name` would compute exactly what `previous` computed, or "" if it might not."""
+def _same_physics(scenario: Scenario, previous: RungReport, name: str, h: float) -> str:
+    """Why rung `name` at step h would compute exactly what `previous` computed, or "" if it might not."""
     if previous.outcome != GOAL or previous.status != OK or {previous.rung, name} not in COMPLIANCE_SIBLINGS:
         return ""
-    if previous.contact_steps != 0 or scenario.rung_settings(previous.rung).h != scenario.rung_settings(name).h:
+    if previous.contact_steps != 0 or previous.h != h:
         return ""
     a, b = rung_for(scenario, previous.rung).model, rung_for(scenario, name).model
     if a._replace(compliant=b.compliant) != b:
@@ -721,7 +883,7 @@ def _track(step: _Step, previous: RungReport) -> Tracked:
         below.initial_state(scenario),
         previous.controls,
         previous.durations,
-        scenario.rung_settings(previous.rung).h,
+        previous.h,
         step.period,
     )
     return track(

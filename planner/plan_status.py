@@ -21,6 +21,10 @@ class PlanStatus(Enum):
     TRACKED = "the previous plan, tracked in closed loop (controls corrected per control period), reaches the goal under this rung"
     REPAIRED = "tracking the previous plan was lost; a search rooted at the tracked states found a plan into the goal set"
     SKIPPED = "the rung computes along the plan what the rung below computed: the plan holds as it is"
+    OMITTED = (
+        "the rung takes more steps per control period than the rung above it, so it is no cheaper to plan with: "
+        "left out, the plan below goes up past it"
+    )
     APPROXIMATE = "no path into the goal set within the budget; the closest one seeds the next rung"
     TIMEOUT = "no exact plan before the time limit ran out"
     BUDGET_EXHAUSTED = "no exact plan within the iteration budget"
@@ -56,6 +60,7 @@ _LABELS = {
     PlanStatus.TRACKED: "tracked",
     PlanStatus.REPAIRED: "repaired",
     PlanStatus.SKIPPED: "skipped",
+    PlanStatus.OMITTED: "omitted",
     PlanStatus.APPROXIMATE: "approximate",
     PlanStatus.TIMEOUT: "failed",
     PlanStatus.BUDGET_EXHAUSTED: "failed",

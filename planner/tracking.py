@@ -92,6 +92,30 @@ class Tracked:
         self.states.append(out.state)
         self.steps_min_psi.append((self.min_psi, self.contact_steps))
 
+    def extend(self, other: Tracked, first: bool) -> None:
+        """Continue this run with `other`, a run tracked from this run's state; its fraction,
+        divergence and loss are this run's when `first` (the first reference's), its counts add."""
+        for u, d, x, marks in zip(other.controls, other.durations, other.states + [other.state], other.steps_min_psi + [None]):
+            self.controls.append(u)
+            self.durations.append(d)
+            if marks is None:  # the goal: its state ends the run, not kept in `states`
+                break
+            self.states.append(x)
+            self.steps_min_psi.append((min(self.min_psi, marks[0]), self.contact_steps + marks[1]))
+        self.state, self.outcome, self.status = other.state, other.outcome, other.status
+        self.min_psi = min(self.min_psi, other.min_psi)
+        self.contact_steps += other.contact_steps
+        self.corrected += other.corrected
+        self.rollouts += other.rollouts
+        self.repairs += other.repairs
+        self.repaired += other.repaired
+        self.repair_propagations += other.repair_propagations
+        self.repair_iterations += other.repair_iterations
+        if first:
+            self.fraction, self.diverged_at, self.lost, self.drift = other.fraction, other.diverged_at, other.lost, other.drift
+        else:
+            self.lost, self.drift = other.lost, other.drift
+
     def truncate(self, n: int) -> None:
         """Keep the first n controls (and the states after them)."""
         del self.controls[n:], self.durations[n:], self.states[n:], self.steps_min_psi[n:]
@@ -186,20 +210,21 @@ def track(
     seed: int,
     *,
     iterations: int = MAX_REPAIRS * REPAIR_ITERATIONS,
+    repairs: int = MAX_REPAIRS,
     time_limit: float | None = None,
     stop=None,
 ) -> Tracked:
     """Follow `reference` under `rung` from `start` until the goal is reached or the
     reference (and TRACK_SETTLE periods toward its last configuration) runs out. Where
     tracking is lost, repair locally (`_repair`: a short search to the reference further
-    along, REPAIR_HORIZONS) and track on from there: at most MAX_REPAIRS repairs and
+    along, REPAIR_HORIZONS) and track on from there: at most `repairs` repairs and
     `iterations` search iterations in all."""
     rng = np.random.default_rng(seed)
     follower = _Follower(scenario, rung, reference, h, period, rng)
     run = Tracked(start)
     follower.follow(run, 0.0)
     deadline = None if time_limit is None else time.perf_counter() + time_limit
-    while run.lost and run.repairs < MAX_REPAIRS and not (stop and stop()):
+    while run.lost and run.repairs < repairs and not (stop and stop()):
         resumed = None
         for horizon in REPAIR_HORIZONS:
             left = None if deadline is None else deadline - time.perf_counter()

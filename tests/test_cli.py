@@ -262,7 +262,9 @@ def test_ctrl_c_during_plan_keeps_the_rungs_done_marked_incomplete(tmp_path):
     plan = json.loads((out / "plan.json").read_text())
     assert plan["complete"] is False and plan["top_holds"] is False
     assert [r["rung"] for r in plan["rungs"]] == ["geometric", "kinematic", "quasistatic-rigid"]
-    assert all(r["outcome"] == "goal" for r in plan["rungs"])
+    # the kinematic rung is left out (10 steps per control period against the quasistatic rung's one)
+    assert [r["ended"] for r in plan["rungs"]] == ["planned", "omitted", "replanned"]
+    assert plan["rungs"][0]["outcome"] == plan["rungs"][2]["outcome"] == "goal"
     assert json.loads((out / "report.json").read_text())["complete"] is False
 
 

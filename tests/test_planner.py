@@ -346,6 +346,8 @@ def test_a_rung_that_cannot_express_the_task_does_not_end_the_ladder():
         kinematic = next(r for r in result.rungs if r.rung == "kinematic")
         assert not kinematic.ended.holds and kinematic.outcome != "goal"
         assert "the ladder goes on" in kinematic.reason
-        assert [r.rung for r in result.rungs] == ["geometric", "kinematic", "dynamic-rigid"]
+        # the top rung may plan at a coarser step first (a coarse stage, `planner.ladder.COARSE_FACTORS`)
+        assert [r.rung for r in result.rungs if not r.stage] == ["geometric", "kinematic", "dynamic-rigid"]
+        assert all(r.rung == "dynamic-rigid" and r.h > result.rungs[-1].h for r in result.rungs if r.stage)
         held += result.top_holds
     assert held == 5
