@@ -45,6 +45,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_sweep_parser(sub)
     _add_bench_parser(sub)
     _add_serve_parser(sub)
+    _add_submit_parser(sub)
     _add_reserved_parsers(sub)
     return parser
 
@@ -226,6 +227,32 @@ def _add_serve_parser(sub: argparse._SubParsersAction) -> None:
     serve.add_argument("--max-queued", type=int, default=100, help="jobs that may wait; more get 429 (default 100)")
     serve.add_argument("--max-job-seconds", type=float, help="stop a job after this many seconds of running (default: no limit)")
     serve.set_defaults(handler=cmd_serve)
+
+
+def _add_submit_parser(sub: argparse._SubParsersAction) -> None:
+    """Add the `submit` subcommand: a plan job sent to a planning service (planner.service.client)."""
+    submit = sub.add_parser(
+        "submit",
+        help="submit a plan job to a planning service (ladder serve)",
+        description="Send a scenario file (and the meshes it names) to a planning service as a plan job and print "
+        "the job (its id and state, as GET /jobs/{id} answers). --wait follows it to its end, showing progress on "
+        "stderr; the exit code is then that of `ladder plan` (0 the top rung holds, 1 it does not or the job failed "
+        "or was cancelled). 2: bad input, the service refused the job or cannot be reached. "
+        'Needs httpx (the serve extra: pip install "contact-ladder[serve]").',
+    )
+    submit.add_argument("file", type=Path, help="scenario file (TOML)")
+    submit.add_argument(
+        "--server",
+        default=os.environ.get("LADDER_SERVER", "http://127.0.0.1:8000"),
+        help="the service's address (default $LADDER_SERVER, else http://127.0.0.1:8000)",
+    )
+    submit.add_argument("--token", default=os.environ.get("LADDER_TOKEN"), help="the service's bearer token (default $LADDER_TOKEN)")
+    _add_param_option(submit)
+    submit.add_argument("--seed", type=int, help="seed (default: the scenario's)")
+    submit.add_argument("--flat", action="store_true", help="plan directly at the top rung (the baseline)")
+    submit.add_argument("--wait", action="store_true", help="follow the job until it ends (its events), showing progress on stderr")
+    submit.add_argument("--json", action="store_true", help="print the job as one JSON object")
+    submit.set_defaults(handler=cmd_submit)
 
 
 def _add_reserved_parsers(sub: argparse._SubParsersAction) -> None:
@@ -1050,10 +1077,76 @@ def cmd_serve(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_submit(args: argparse.Namespace) -> int:
+    """`ladder submit`: a plan job sent to a planning service, printed (and followed with --wait)."""
+    if importlib.util.find_spec("httpx") is None:
+        raise ScenarioError(
+            "ladder submit", [Problem("ladder submit", 'needs httpx: install the serve extra: pip install "contact-ladder[serve]"')]
+        )
+    from planner.service.client import Client, ServiceError, job_request
+
+    options = {"seed": args.seed} if args.seed is not None else {}
+    if args.flat:
+        options["flat"] = True
+    body = job_request(args.file, "plan", parameters=parse_overrides(args.param), options=options)
+    try:
+        with Client(args.server, args.token) as client:
+            job = client.submit_request(body)
+            if not args.json:
+                print(f"job {job['id']}: {job['state']} ({client.url}/jobs/{job['id']})", file=sys.stderr if args.wait else sys.stdout)
+            if not args.wait:
+                if args.json:
+                    print(json.dumps(job, indent=2))
+                return EXIT_OK
+            job = client.wait(job["id"], on_event=_job_progress(live=sys.stderr.isatty()))
+            plan = json.loads(client.result(job["id"])) if job["result_available"] else None
+    except ServiceError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    if args.json:
+        print(json.dumps(job, indent=2))
+    else:
+        holds = plan is not None and plan.get("top_holds")
+        rungs = ", ".join(f"{r['rung']} {r['ended']}" for r in job.get("rungs", [])) or "none"
+        error = f": {job['error']}" if job.get("error") else ""
+        print(f"job {job['id']}: {job['state']}{error}; rungs: {rungs}; top rung holds: {'yes' if holds else 'no'}")
+        if job["result_available"]:
+            print(f"plan.json: {args.server.rstrip('/')}/jobs/{job['id']}/result")
+    return EXIT_OK if job["state"] == "succeeded" and plan is not None and plan.get("top_holds") else EXIT_FAILED
+
+
+def _job_progress(live: bool):
+    """What `ladder submit --wait` shows of a job's events on stderr: one live line on a
+    terminal, else one line per state, rung and end."""
+
+    def show(event) -> None:
+        data = event.data
+        if event.type == "progress":
+            if live:
+                print(
+                    f"\r{data['rung']}: {data['iterations']} iterations, {data['propagations']} propagations   ",
+                    end="",
+                    file=sys.stderr,
+                    flush=True,
+                )
+            return
+        text = {
+            "state": lambda: f"{data.get('state')}" + (" again (the server restarted)" if data.get("requeued") else ""),
+            "rung_started": lambda: f"planning: {data.get('rung')} ...",
+            "rung_ended": lambda: f"{data.get('rung')}: {data.get('ended')} ({data.get('outcome')}, {data.get('iterations')} iterations)",
+            "cancel_requested": lambda: "cancel requested",
+            "job_ended": lambda: f"ended: {data.get('state')}" + (f" ({data['error']})" if data.get("error") else ""),
+        }.get(event.type)
+        if text is not None:
+            print(("\r" + " " * 78 + "\r" if live else "") + text(), file=sys.stderr, flush=True)
+
+    return show
+
+
 def cmd_reserved(args: argparse.Namespace) -> int:
     print(
         f"error: 'ladder {args.command}' is not built yet ({RESERVED[args.command]}); "
-        "available now: ladder check, ladder simulate, ladder plan, ladder sweep, ladder bench, ladder schema, ladder serve",
+        "available now: ladder check, ladder simulate, ladder plan, ladder sweep, ladder bench, ladder schema, ladder serve, ladder submit",
         file=sys.stderr,
     )
     return EXIT_BAD_INPUT

@@ -7,7 +7,6 @@ from __future__ import annotations
 import json
 import sqlite3
 import time
-from pathlib import Path
 
 import pytest
 
@@ -17,10 +16,10 @@ pytest.importorskip("httpx")
 from fastapi.testclient import TestClient  # noqa: E402
 
 from models.scenario import ScenarioError, load_scenario  # noqa: E402
-from planner.ladder import plan_json_text, run_ladder  # noqa: E402
 from planner.service import create_app  # noqa: E402
 from planner.service.store import Store  # noqa: E402
 from tests.conftest import ROOT, SCENARIOS  # noqa: E402
+from tests.service_server import JOB_TIMEOUT_S, cli_plan_json  # noqa: E402
 
 FREE = (SCENARIOS / "free_transfer.toml").read_text()
 BROKEN = FREE.replace('name = "free_transfer"', "name = 3")
@@ -29,7 +28,7 @@ BROKEN = FREE.replace('name = "free_transfer"', "name = 3")
 STUCK = {"kind": "plan", "scenario": FREE, "parameters": {"gap": 0.05}, "options": {"iterations": 10**7, "time_limit": 600}}
 
 
-def wait_for(client: TestClient, job_id: str, states=("succeeded", "failed", "cancelled"), timeout: float = 60.0) -> dict:
+def wait_for(client: TestClient, job_id: str, states=("succeeded", "failed", "cancelled"), timeout: float = JOB_TIMEOUT_S) -> dict:
     end = time.monotonic() + timeout
     while True:
         job = client.get(f"/jobs/{job_id}").json()
@@ -187,19 +186,6 @@ def test_a_token_is_needed_everywhere_but_the_description(tmp_path):
 # ----------------------------------------------------------------------------- with a worker
 
 
-def cli_plan_json(scenario_path: Path, seed: int, parameters=None, **kwargs) -> str:
-    """plan.json as `ladder plan` writes it (run from the repository root)."""
-    import os
-
-    old = os.getcwd()
-    os.chdir(ROOT)
-    try:
-        scenario = load_scenario(scenario_path.relative_to(ROOT), parameters or {})
-        return plan_json_text(run_ladder(scenario, seed=seed, **kwargs))
-    finally:
-        os.chdir(old)
-
-
 def test_a_plan_job_succeeds_with_the_clis_plan_json_byte_for_byte(live):
     r = submit(live)
     assert r.status_code == 201
@@ -241,7 +227,7 @@ def test_cancelling_a_running_job_stops_it(live):
     job = submit(live, STUCK).json()
     wait_for(live, job["id"], states=("running",) + ("succeeded", "failed", "cancelled"))
     assert live.delete(f"/jobs/{job['id']}").json()["cancel_requested"] is True
-    ended = wait_for(live, job["id"], timeout=30)
+    ended = wait_for(live, job["id"])
     assert ended["state"] == "cancelled", ended
     assert json.loads(live.get(f"/jobs/{job['id']}/result").text)["complete"] is False
 
@@ -249,7 +235,7 @@ def test_cancelling_a_running_job_stops_it(live):
 def test_a_job_past_the_wall_time_limit_fails_keeping_its_rungs(tmp_path):
     with TestClient(create_app(tmp_path / "jobs.sqlite", workers=1, max_job_seconds=1.0)) as client:
         job = submit(client, STUCK).json()
-        ended = wait_for(client, job["id"], timeout=60)
+        ended = wait_for(client, job["id"])
         assert ended["state"] == "failed" and "wall-time limit" in ended["error"]
         assert json.loads(client.get(f"/jobs/{job['id']}/result").text)["complete"] is False
 
@@ -306,7 +292,7 @@ def test_kill_9_the_server_while_a_job_runs_and_restart(tmp_path):
                 time.sleep(0.1)
         raise AssertionError("the server did not start")
 
-    def wait(client, job_id, states, timeout=60.0):
+    def wait(client, job_id, states, timeout=JOB_TIMEOUT_S):
         end = time.monotonic() + timeout
         while (job := client.get(f"/jobs/{job_id}").json())["state"] not in states:
             assert time.monotonic() < end, job

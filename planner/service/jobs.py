@@ -63,7 +63,7 @@ def _inside(root: Path, path: Path) -> bool:
     return Path(os.path.realpath(path)).is_relative_to(root)
 
 
-def _file_references(raw: Any, where: str = "") -> Iterator[tuple[str, Any]]:
+def file_references(raw: Any, where: str = "") -> Iterator[tuple[str, Any]]:
     """Every `file = ...` in the scenario (mesh shapes), with its key path."""
     if isinstance(raw, dict):
         for key, value in raw.items():
@@ -71,10 +71,10 @@ def _file_references(raw: Any, where: str = "") -> Iterator[tuple[str, Any]]:
             if key == "file":
                 yield here, value
             else:
-                yield from _file_references(value, here)
+                yield from file_references(value, here)
     elif isinstance(raw, list):
         for i, value in enumerate(raw):
-            yield from _file_references(value, f"{where}[{i}]")
+            yield from file_references(value, f"{where}[{i}]")
 
 
 def write_inputs(root: Path, inputs: dict) -> Path:
@@ -102,7 +102,7 @@ def write_inputs(root: Path, inputs: dict) -> Path:
         raw = tomllib.loads(inputs["scenario"])
     except (tomllib.TOMLDecodeError, RecursionError):
         raw = {}  # the loader says what is wrong with the text
-    for key, value in _file_references(raw):
+    for key, value in file_references(raw):
         if not isinstance(value, str):
             continue
         problem = path_problem(key, value)
