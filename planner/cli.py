@@ -912,8 +912,11 @@ def _check_sweep_args(args: argparse.Namespace):
     return scenario, fixed, axes, models, runs
 
 
-def _run_sweep(args: argparse.Namespace, scenario: Scenario, fixed: dict, axes, models, runs: int):
-    """Run the sweep (and its refinement), with a progress bar on a terminal: (result, interrupted)."""
+def _run_sweep(args: argparse.Namespace, scenario: Scenario, fixed: dict, axes, models, runs: int, *, on_progress=None):
+    """Run the sweep (and its refinement), with a progress bar on a terminal: (result, interrupted).
+    `on_progress(data)` after each run ({"runs_done", "runs"}) and refinement step ({"refine_step",
+    "brackets"}): the service's sweep jobs; it may raise KeyboardInterrupt to stop the sweep,
+    keeping what is done."""
     from planner import sweep as sw
 
     live = sys.stderr.isatty() and not args.json
@@ -933,11 +936,15 @@ def _run_sweep(args: argparse.Namespace, scenario: Scenario, fixed: dict, axes, 
     def progress(done: int, total: int) -> None:
         if bar is not None:
             bar.update(task_id, completed=done, total=total)
+        if on_progress is not None:
+            on_progress({"runs_done": done, "runs": total})
         interrupt.check()
 
     def refine_progress(step: int, active: int) -> None:
         if bar is not None:
             bar.update(task_id, description=f"refine step {step}: {active} brackets", completed=0, total=None)
+        if on_progress is not None:
+            on_progress({"refine_step": step, "brackets": active})
         interrupt.check()
 
     where = args.executor or f"{args.workers or os.cpu_count() or 1} local workers"
@@ -1122,7 +1129,7 @@ def _job_progress(live: bool):
     def show(event) -> None:
         data = event.data
         if event.type == "progress":
-            if live:
+            if live and "rung" in data:
                 print(
                     f"\r{data['rung']}: {data['iterations']} iterations, {data['propagations']} propagations   ",
                     end="",

@@ -16,6 +16,7 @@ pytest.importorskip("httpx")
 from fastapi.testclient import TestClient  # noqa: E402
 
 from models.scenario import ScenarioError, load_scenario  # noqa: E402
+from planner.cli import main as cli_main  # noqa: E402
 from planner.service import create_app  # noqa: E402
 from planner.service.store import Store  # noqa: E402
 from tests.conftest import ROOT, SCENARIOS  # noqa: E402
@@ -230,6 +231,52 @@ def test_cancelling_a_running_job_stops_it(live):
     ended = wait_for(live, job["id"])
     assert ended["state"] == "cancelled", ended
     assert json.loads(live.get(f"/jobs/{job['id']}/result").text)["complete"] is False
+
+
+TRIANGLE = (SCENARIOS / "two_finger_triangle.toml").read_text()
+SWEEP = {"grid": ["v1=0.25:4:5:log"], "model": "kinematic,plastic=quasistatic-rigid", "refine": True, "tolerance": 0.05}
+
+
+def without_wall_times(sweep_json: str) -> dict:
+    data = json.loads(sweep_json)
+    for point in data["points"]:
+        del point["wall_s"]
+    return data
+
+
+def test_a_sweep_job_gives_the_sweep_json_of_ladder_sweep(live, tmp_path, monkeypatch):
+    body = {"kind": "sweep", "scenario": TRIANGLE, "filename": "scenarios/two_finger_triangle.toml", "parameters": {"v2": 1.0}}
+    r = submit(live, {**body, "options": SWEEP})
+    assert r.status_code == 201, r.text
+    job = wait_for(live, r.json()["id"])
+    assert job["state"] == "succeeded", job
+    assert job["progress"]["refine_step"] >= 1
+    served = live.get(f"/jobs/{job['id']}/result").text
+    monkeypatch.chdir(ROOT)
+    args = ["sweep", "scenarios/two_finger_triangle.toml", "--grid", SWEEP["grid"][0], "--model", SWEEP["model"], "--param", "v2=1"]
+    assert cli_main([*args, "--refine", "--tolerance", "0.05", "--workers", "1", "--json", "--out", str(tmp_path)]) == 0
+    cli = (tmp_path / "sweep.json").read_text()
+    assert without_wall_times(served) == without_wall_times(cli)
+    data = json.loads(served)
+    assert data["file"] == "scenarios/two_finger_triangle.toml" and data["complete"] is True
+    assert len(data["points"]) == 5 * 2 and data["boundaries"] and data["bands"]
+
+
+def test_bad_sweep_jobs_are_422_named_as_in_the_request(idle):
+    def problems(options, scenario=TRIANGLE):
+        r = submit(idle, {"kind": "sweep", "scenario": scenario, "options": options})
+        assert r.status_code == 422, r.text
+        return [f"{p['key']}: {p['reason']}" for p in r.json()["problems"]]
+
+    assert problems({"model": "kinematic"}) == ["options.grid: a sweep job needs a grid"]
+    assert problems({"grid": "v1=1:2:3", "model": "kinematic"})[0].startswith("options.grid: expected a list of strings")
+    assert problems({"grid": ["bogus=1:2:3"], "model": "kinematic"})[0].startswith("options.grid bogus: not a design parameter")
+    assert problems({"grid": ["v1=1:2:3"], "model": "nope"})[0].startswith("options.model")
+    assert problems({"grid": ["v1=0.1:4:200", "mu=0:1:100"], "model": "kinematic"})[0].startswith("options.grid: 20,000 runs")
+    no_policy = TRIANGLE[: TRIANGLE.index("[task.policy]")] + TRIANGLE[TRIANGLE.index("[ladder]") :]
+    assert problems({"grid": ["v1=1:2:3"], "model": "kinematic"}, no_policy) == [
+        "task.policy: a sweep runs the scenario's policy, and this file has none"
+    ]
 
 
 def test_a_job_past_the_wall_time_limit_fails_keeping_its_rungs(tmp_path):

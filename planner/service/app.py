@@ -3,7 +3,7 @@
 POST   /jobs                 submit (201, Location: /jobs/{id}); Idempotency-Key honoured
 GET    /jobs                 list (?state=)
 GET    /jobs/{id}            state, progress, per-rung reports
-GET    /jobs/{id}/result     the result file (a plan's plan.json, byte for byte the CLI's)
+GET    /jobs/{id}/result     the result file (a plan's plan.json, byte for byte the CLI's; a sweep's sweep.json)
 DELETE /jobs/{id}            cancel
 GET    /jobs/{id}/events     server-sent events (ids; Last-Event-ID resumes)
 """
@@ -46,14 +46,17 @@ class JobRequest(BaseModel):
     """A job: a scenario (TOML text and the files it names, as contents), parameter overrides and options."""
 
     model_config = ConfigDict(extra="forbid")
-    kind: Literal["plan", "simulate"] = Field(description="plan: up the ladder (or flat); simulate: the policy under one rung")
+    kind: Literal["plan", "simulate", "sweep"] = Field(
+        description="plan: up the ladder (or flat); simulate: the policy under one rung; sweep: the policy over a grid of parameters"
+    )
     scenario: str = Field(description="the scenario file's TOML text")
     filename: str = Field("scenario.toml", description="the scenario's relative file name (plan.json's `scenario`)")
     files: dict[str, str] = Field(default_factory=dict, description="files the scenario names (meshes), relative to it: name -> text")
     parameters: dict[str, float] = Field(default_factory=dict, description="design-parameter overrides (the CLI's --param)")
     options: dict[str, Any] = Field(
         default_factory=dict,
-        description="plan: seed, iterations, time_limit, flat, rungs, top, planner, seed_roots, guide; simulate: model, duration, step",
+        description="plan: seed, iterations, time_limit, flat, rungs, top, planner, seed_roots, guide; simulate: model, duration, "
+        "step; sweep: grid (a list of `ladder sweep --grid` texts), model (the --model text), refine, tolerance, duration, step",
     )
 
 

@@ -53,8 +53,16 @@ def run_job(db_path: str, job_id: str, max_seconds: float | None = None) -> str 
         def rung_done(report) -> None:
             store.add_event(job_id, "rung_ended", jobs.rung_view(report))
 
+        def sweep_progress(data: dict) -> None:
+            now = time.monotonic()
+            if now - state["written"] >= PROGRESS_EVERY or data.get("runs_done") == data.get("runs"):
+                store.set_progress(job_id, data, ("progress", data))
+                state["written"] = now
+
         try:
-            text, complete = jobs.run(row["kind"], inputs, options, progress=progress, rung_done=rung_done, stop=stop)
+            text, complete = jobs.run(
+                row["kind"], inputs, options, progress=progress, rung_done=rung_done, sweep_progress=sweep_progress, stop=stop
+            )
         except ScenarioError as exc:
             store.finish(job_id, "failed", error=str(exc))
             return "failed"
