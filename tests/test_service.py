@@ -8,6 +8,7 @@ import json
 import sqlite3
 import time
 
+import numpy as np
 import pytest
 
 pytest.importorskip("fastapi")
@@ -184,6 +185,36 @@ def test_a_token_is_needed_everywhere_but_the_description(tmp_path):
         assert submit(client, **good).status_code == 201
 
 
+def test_the_token_may_come_as_a_query_parameter_on_the_events_route_only(tmp_path):
+    with TestClient(create_app(tmp_path / "jobs.sqlite", workers=0, token="s3cret")) as client:
+        job = submit(client, **{"Authorization": "Bearer s3cret"}).json()
+        client.delete(f"/jobs/{job['id']}", headers={"Authorization": "Bearer s3cret"})
+        events = client.get(f"/jobs/{job['id']}/events?token=s3cret")
+        assert events.status_code == 200 and [e["event"] for e in parse_sse(events.text)] == ["state", "job_ended"]
+        assert client.get(f"/jobs/{job['id']}/events?token=wrong").status_code == 401
+        assert client.get(f"/jobs/{job['id']}?token=s3cret").status_code == 401
+        assert client.get("/jobs?token=s3cret").status_code == 401
+        page = client.get("/")  # the viewer's page asks for the token itself
+        assert page.status_code == 200 and page.headers["content-type"].startswith("text/html") and "EventSource" in page.text
+
+
+def test_the_scene_of_a_spatial_job_has_its_shapes_and_mesh_vertices(idle):
+    from models.geometry import read_obj
+
+    scene = (SCENARIOS / "box_push_3d.toml").read_text()
+    wedge = (SCENARIOS / "meshes" / "wedge.obj").read_text()
+    job = submit(idle, {"kind": "plan", "scenario": scene, "files": {"meshes/wedge.obj": wedge}}).json()
+    view = idle.get(f"/jobs/{job['id']}/scene").json()
+    assert view["dimension"] == 3 and "rungs" not in view
+    bodies = {b["name"]: b for b in view["bodies"]}
+    assert [b["name"] for b in view["bodies"]] == ["table", "box", "pusher", "wall", "wedge"]
+    assert bodies["box"]["shape"] == {"type": "box", "size": [0.2, 0.2, 0.1]} and bodies["box"]["moves"]
+    assert bodies["box"]["start"] == {"t": [0.0, 0.0, 0.05], "R": [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]}
+    assert bodies["wedge"]["shape"]["vertices"] == read_obj(SCENARIOS / "meshes" / "wedge.obj")[0].tolist()
+    assert not bodies["wall"]["moves"] and bodies["wall"]["start"]["t"] == [0.45, 0.35, 0.1]
+    assert idle.get("/jobs/nope/scene").status_code == 404
+
+
 # ----------------------------------------------------------------------------- with a worker
 
 
@@ -198,6 +229,14 @@ def test_a_plan_job_succeeds_with_the_clis_plan_json_byte_for_byte(live):
     assert result.status_code == 200 and result.headers["content-type"].startswith("application/json")
     assert result.text == cli_plan_json(SCENARIOS / "free_transfer.toml", seed=3)
     assert json.loads(result.text)["top_holds"] is True
+    view = live.get(f"/jobs/{job['id']}/scene").json()
+    plan = json.loads(result.text)
+    assert view["dimension"] == 2 and view["coordinates"] == ["robot.x", "robot.y"]
+    assert [r["rung"] for r in view["rungs"]] == [r["rung"] for r in plan["rungs"]]
+    for rung, planned in zip(view["rungs"], plan["rungs"]):
+        assert len(rung["times"]) == len(planned["states"]) and rung["times"][-1] == pytest.approx(sum(planned["durations"]))
+        assert np.allclose([p["robot"]["t"] for p in rung["placements"]], planned["states"], atol=1e-8)
+        assert set(rung["placements"][0]) == {"robot"}  # the walls and the pillar do not move
 
 
 def test_events_have_ids_and_last_event_id_resumes_without_gaps(live):

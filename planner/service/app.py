@@ -5,7 +5,9 @@ GET    /jobs                 list (?state=)
 GET    /jobs/{id}            state, progress, per-rung reports
 GET    /jobs/{id}/result     the result file (a plan's plan.json, byte for byte the CLI's; a sweep's sweep.json)
 DELETE /jobs/{id}            cancel
-GET    /jobs/{id}/events     server-sent events (ids; Last-Event-ID resumes)
+GET    /jobs/{id}/events     server-sent events (ids; Last-Event-ID resumes; ?token= for a browser's EventSource)
+GET    /jobs/{id}/scene      what the viewer draws: the scene's shapes, a plan's body placements per rung
+GET    /                     the viewer (static/index.html)
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ import hashlib
 import hmac
 import json
 import multiprocessing
+import re
 import threading
 import uuid
 from concurrent.futures import Future, ProcessPoolExecutor
@@ -22,18 +25,23 @@ from concurrent.futures.process import BrokenProcessPool
 from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import Any, Literal
+from urllib.parse import parse_qs
 
 from fastapi import FastAPI, Header, HTTPException, Query, Request, Response
-from fastapi.responses import JSONResponse, StreamingResponse
+from fastapi.responses import FileResponse, JSONResponse, StreamingResponse
 from pydantic import BaseModel, ConfigDict, Field
 
 from models.scenario import ScenarioError
 from planner.service import jobs
 from planner.service.store import STATES, TERMINAL, Store, iso
+from planner.service.view import scene_view
 from planner.service.worker import run_job
 
-#: Paths that need no token (the API's description).
-OPEN_PATHS = frozenset({"/openapi.json", "/docs", "/docs/oauth2-redirect", "/redoc"})
+#: Paths that need no token (the API's description, and the viewer's page, which asks for it).
+OPEN_PATHS = frozenset({"/openapi.json", "/docs", "/docs/oauth2-redirect", "/redoc", "/"})
+#: The one route that also takes the token as ?token=: a browser's EventSource cannot send headers.
+EVENTS_PATH = re.compile(r"/jobs/[^/]+/events")
+VIEWER = Path(__file__).parent / "static" / "index.html"
 DEFAULT_MAX_BODY = 2 * 1024 * 1024
 DEFAULT_MAX_QUEUED = 100
 RETRY_AFTER_S = 5
@@ -72,6 +80,9 @@ class _Guard:
         headers = {k.lower(): v for k, v in scope.get("headers", [])}
         if self.token and scope["path"] not in OPEN_PATHS:
             given = headers.get(b"authorization", b"").decode("latin-1")
+            if not given and EVENTS_PATH.fullmatch(scope["path"]):
+                query = parse_qs(scope.get("query_string", b"").decode("latin-1"))
+                given = f"Bearer {query['token'][0]}" if query.get("token") else ""
             if not hmac.compare_digest(given.encode(), f"Bearer {self.token}".encode()):
                 detail = "missing or wrong token: send 'Authorization: Bearer TOKEN'"
                 return await _send_json(send, 401, {"detail": detail}, [(b"www-authenticate", b"Bearer")])
@@ -297,8 +308,29 @@ def create_app(
         service.store.cancel(job_id)
         return _job_json(service, get_row(job_id))
 
+    @app.get("/", include_in_schema=False)
+    def viewer():
+        """The viewer: lists jobs, submits a scenario file, follows a job, animates its plan."""
+        return FileResponse(VIEWER, media_type="text/html")
+
+    @app.get("/jobs/{job_id}/scene")
+    def get_scene(job_id: str):
+        """What the viewer draws: the scene's bodies with their shapes (parameters applied) and,
+        for a plan job with a result, each rung's times and body placements per state."""
+        row = get_row(job_id)
+        result = row["result"] if row["kind"] == "plan" else None
+        try:
+            return scene_view(json.loads(row["inputs"]), result)
+        except ScenarioError as exc:  # accepted once; only a changed planner could refuse it now
+            raise HTTPException(409, f"the job's scenario no longer loads: {exc}") from None
+
     @app.get("/jobs/{job_id}/events")
-    async def events(job_id: str, request: Request, last_event_id: str | None = Header(None)):
+    async def events(
+        job_id: str,
+        request: Request,
+        last_event_id: str | None = Header(None),
+        token: str | None = Query(None, description="the bearer token, for clients that cannot send headers (EventSource)"),
+    ):
         """Server-sent events: state, rung_started, progress, rung_ended, job_ended (the last)."""
         get_row(job_id)
         try:
