@@ -116,6 +116,9 @@ def test_bad_options_and_parameters_are_422_named_as_in_the_request(idle):
     r = submit(idle, {"kind": "simulate", "scenario": FREE, "options": {}})
     assert r.status_code == 422 and r.json()["problems"][0]["key"] == "options.model"
     assert submit(idle, {"kind": "sweep", "scenario": FREE}).status_code == 422
+    r = submit(idle, {"kind": "bogus", "scenario": FREE, "extra": 1})  # not what the API's description allows: the same shape
+    assert r.status_code == 422 and [p["key"] for p in r.json()["problems"]] == ["body.kind", "body.extra"]
+    assert r.json()["file"] == "request" and r.json()["detail"].startswith("request: body.kind: Input should be 'plan'")
 
 
 @pytest.mark.parametrize("name", ["/etc/passwd", "../outside.obj", "meshes/../../x.obj", "a\\b.obj"])

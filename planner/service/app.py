@@ -28,10 +28,14 @@ from typing import Any, Literal
 from urllib.parse import parse_qs
 
 from fastapi import FastAPI, Header, HTTPException, Query, Request, Response
+from fastapi.exception_handlers import http_exception_handler
+from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, JSONResponse, StreamingResponse
 from pydantic import BaseModel, ConfigDict, Field
+from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.routing import Match
 
-from models.scenario import ScenarioError
+from models.scenario import Problem, ScenarioError
 from planner.service import jobs
 from planner.service.store import STATES, TERMINAL, Store, iso
 from planner.service.view import scene_view
@@ -66,6 +70,72 @@ class JobRequest(BaseModel):
         description="plan: seed, iterations, time_limit, flat, rungs, top, planner, seed_roots, guide; simulate: model, duration, "
         "step; sweep: grid (a list of `ladder sweep --grid` texts), model (the --model text), refine, tolerance, duration, step",
     )
+
+
+class ProblemItem(BaseModel):
+    key: str = Field(description="where: a key path of the scenario (bodies[2].pose), or of the request (options.seed)")
+    reason: str
+
+
+class Problems(BaseModel):
+    """Every 422: the CLI's `FILE: KEY: reason` lines, and the same as data."""
+
+    detail: str = Field(description="one `FILE: KEY: reason` line per problem, as the CLI prints them")
+    file: str = Field(description="the scenario's file name, or `request` for the request itself")
+    problems: list[ProblemItem]
+
+
+class Error(BaseModel):
+    detail: str
+
+
+class Links(BaseModel):
+    self: str
+    result: str
+    events: str
+
+
+class Job(BaseModel):
+    """A job as GET /jobs/{id} answers it (GET /jobs leaves out `rungs`)."""
+
+    id: str
+    kind: Literal["plan", "simulate", "sweep"]
+    state: Literal[STATES] = Field(description="queued, running, then succeeded, failed or cancelled")  # type: ignore[valid-type]
+    created: str = Field(description="ISO 8601, UTC")
+    updated: str = Field(description="ISO 8601, UTC")
+    filename: str
+    parameters: dict[str, float]
+    options: dict[str, Any]
+    progress: dict[str, Any] | None = Field(
+        description="a plan's rung, iterations, propagations; a sweep's runs_done and runs, or refine_step and brackets"
+    )
+    cancel_requested: bool
+    runs: int = Field(description="times a worker started the job (more than 1 after a restart)")
+    error: str | None
+    result_available: bool
+    links: Links
+    rungs: list[dict[str, Any]] | None = Field(None, description="a plan's per-rung reports, as its rungs finished")
+
+
+class JobList(BaseModel):
+    jobs: list[Job]
+
+
+#: What every route may answer besides its own (the guard's 401 with a token, 400 and 413 on bodies).
+COMMON_RESPONSES: dict[int | str, dict[str, Any]] = {
+    401: {"model": Error, "description": "missing or wrong bearer token (only when the service has one)"},
+}
+NOT_FOUND = {404: {"model": Error, "description": "no such job"}}
+UNPROCESSABLE = {422: {"model": Problems, "description": "bad input: the problems, one per line"}}
+
+
+class EventStream(StreamingResponse):
+    media_type = "text/event-stream"
+
+
+def _unprocessable(exc: ScenarioError) -> JSONResponse:
+    problems = [{"key": p.key, "reason": p.reason} for p in exc.problems]
+    return JSONResponse({"detail": str(exc), "file": exc.file, "problems": problems}, status_code=422)
 
 
 class _Guard:
@@ -138,10 +208,15 @@ class Service:
         self.max_queued = max_queued
         self.max_job_seconds = max_job_seconds
         self.store = Store(self.db_path)
+        self.closed = False
         self.pool: ProcessPoolExecutor | None = None
         self.lock = threading.Lock()
 
     def start(self) -> None:
+        """Run the jobs a stopped service left (also when this service was stopped before: an
+        app's lifespan may run more than once in tests)."""
+        if self.closed:
+            self.store, self.closed = Store(self.db_path), False
         for job_id in self.store.recover():
             self.submit(job_id)
 
@@ -158,6 +233,7 @@ class Service:
             for process in processes:
                 process.join(5)
         self.store.close()
+        self.closed = True
 
     def _pool(self) -> ProcessPoolExecutor:
         with self.lock:
@@ -245,9 +321,25 @@ def create_app(
         title="ladder planning service",
         description="Plans up the ladder of contact models, as `ladder plan` does, as jobs.",
         lifespan=lifespan,
+        responses=COMMON_RESPONSES,
     )
     app.state.service = service
     app.add_middleware(_Guard, token=token, max_body=max_body)
+
+    @app.exception_handler(StarletteHTTPException)
+    async def http_error(request: Request, exc: StarletteHTTPException):
+        """FastAPI's answer, but a 405's Allow lists every method of the path (Starlette names
+        only the first route's, and GET /jobs and POST /jobs are two routes)."""
+        if exc.status_code == 405:
+            methods = {m for r in app.router.routes if r.matches(request.scope)[0] != Match.NONE for m in getattr(r, "methods", ())}
+            exc.headers = {**(exc.headers or {}), "Allow": ", ".join(sorted(methods - {"HEAD"}))}
+        return await http_exception_handler(request, exc)
+
+    @app.exception_handler(RequestValidationError)
+    async def request_error(request: Request, exc: RequestValidationError):
+        """A request that is not what the description says: 422 as every other bad input."""
+        problems = [Problem(".".join(str(x) for x in e.get("loc", ())), str(e.get("msg", ""))) for e in exc.errors()]
+        return _unprocessable(ScenarioError("request", problems))
 
     def get_row(job_id: str):
         row = service.store.get(job_id)
@@ -255,15 +347,27 @@ def create_app(
             raise HTTPException(404, f"no job {job_id}")
         return row
 
-    @app.post("/jobs", status_code=201)
+    @app.post(
+        "/jobs",
+        status_code=201,
+        response_model=Job,
+        responses={
+            200: {"model": Job, "description": "the job this Idempotency-Key made before"},
+            201: {"description": "the job, queued; `Location` is its URL"},
+            400: {"model": Error, "description": "a bad Content-Length"},
+            409: {"model": Error, "description": "this Idempotency-Key came with another request"},
+            413: {"model": Error, "description": "the body is larger than the limit"},
+            429: {"model": Error, "description": "the queue is full; try again after `Retry-After` seconds"},
+            **UNPROCESSABLE,
+        },
+    )
     def submit(job: JobRequest, response: Response, idempotency_key: str | None = Header(None)):
         """Submit a job. A bad scenario is 422 with the CLI's `FILE: KEY: reason` lines."""
         inputs = {"filename": job.filename, "scenario": job.scenario, "files": job.files, "parameters": job.parameters}
         try:
             jobs.validate(job.kind, inputs, job.options)
         except ScenarioError as exc:
-            problems = [{"key": p.key, "reason": p.reason} for p in exc.problems]
-            return JSONResponse({"detail": str(exc), "file": exc.file, "problems": problems}, status_code=422)
+            return _unprocessable(exc)
         sha = hashlib.sha256(json.dumps({"kind": job.kind, **inputs, "options": job.options}, sort_keys=True).encode()).hexdigest()
         row, what = service.store.create_job(
             uuid.uuid4().hex, job.kind, inputs, job.options, key=idempotency_key, sha=sha, max_queued=service.max_queued
@@ -283,17 +387,26 @@ def create_app(
             service.submit(row["id"])
         return _job_json(service, row)
 
-    @app.get("/jobs")
+    @app.get("/jobs", response_model=JobList, response_model_exclude_unset=True, responses=UNPROCESSABLE)
     def list_jobs(state: str | None = Query(None, description="only jobs in this state")):
+        """The jobs, oldest first (without their rungs' reports)."""
         if state is not None and state not in STATES:
-            raise HTTPException(422, f"unknown state {state!r}; states: {', '.join(STATES)}")
+            return _unprocessable(ScenarioError("request", [Problem("state", f"unknown state {state!r}; states: {', '.join(STATES)}")]))
         return {"jobs": [_job_json(service, row, rungs=False) for row in service.store.list(state)]}
 
-    @app.get("/jobs/{job_id}")
+    @app.get("/jobs/{job_id}", response_model=Job, responses=NOT_FOUND)
     def get_job(job_id: str):
+        """A job: its state, progress and the reports of its rungs so far."""
         return _job_json(service, get_row(job_id))
 
-    @app.get("/jobs/{job_id}/result")
+    @app.get(
+        "/jobs/{job_id}/result",
+        responses={
+            200: {"content": {"application/json": {"schema": {"type": "object"}}}, "description": "the result file"},
+            **NOT_FOUND,
+            409: {"model": Error, "description": "the job has no result (yet)"},
+        },
+    )
     def get_result(job_id: str):
         """The result file: a plan's plan.json (as `ladder plan` writes it), a simulation's JSON."""
         row = get_row(job_id)
@@ -301,7 +414,7 @@ def create_app(
             raise HTTPException(409, f"job {job_id} is {row['state']}: no result" + (f" ({row['error']})" if row["error"] else ""))
         return Response(row["result"], media_type="application/json")
 
-    @app.delete("/jobs/{job_id}")
+    @app.delete("/jobs/{job_id}", response_model=Job, responses=NOT_FOUND)
     def cancel_job(job_id: str):
         """Cancel: a queued job at once; a running one stops at its next check (a plan keeps the rungs done)."""
         get_row(job_id)
@@ -313,8 +426,11 @@ def create_app(
         """The viewer: lists jobs, submits a scenario file, follows a job, animates its plan."""
         return FileResponse(VIEWER, media_type="text/html")
 
-    @app.get("/jobs/{job_id}/scene")
-    def get_scene(job_id: str):
+    @app.get(
+        "/jobs/{job_id}/scene",
+        responses={**NOT_FOUND, 409: {"model": Error, "description": "the job's scenario no longer loads"}},
+    )
+    def get_scene(job_id: str) -> dict[str, Any]:
         """What the viewer draws: the scene's bodies with their shapes (parameters applied) and,
         for a plan job with a result, each rung's times and body placements per state."""
         row = get_row(job_id)
@@ -324,7 +440,15 @@ def create_app(
         except ScenarioError as exc:  # accepted once; only a changed planner could refuse it now
             raise HTTPException(409, f"the job's scenario no longer loads: {exc}") from None
 
-    @app.get("/jobs/{job_id}/events")
+    @app.get(
+        "/jobs/{job_id}/events",
+        response_class=Response,  # no media type of its own: its 200 is text/event-stream, its errors JSON
+        responses={
+            200: {"content": {"text/event-stream": {"schema": {"type": "string"}}}, "description": "the events, live"},
+            **NOT_FOUND,
+            **UNPROCESSABLE,
+        },
+    )
     async def events(
         job_id: str,
         request: Request,
@@ -336,7 +460,7 @@ def create_app(
         try:
             after = int(last_event_id) if last_event_id else 0
         except ValueError:
-            raise HTTPException(422, "Last-Event-ID must be an event id (an integer)") from None
+            return _unprocessable(ScenarioError("request", [Problem("Last-Event-ID", "must be an event id (an integer)")]))
 
         async def stream():
             seq, quiet = after, 0.0
@@ -359,6 +483,6 @@ def create_app(
                         quiet = 0.0
                         yield ": keep-alive\n\n"
 
-        return StreamingResponse(stream(), media_type="text/event-stream", headers={"Cache-Control": "no-cache"})
+        return EventStream(stream(), headers={"Cache-Control": "no-cache"})
 
     return app
