@@ -302,11 +302,13 @@ def create_app(
     max_body: int = DEFAULT_MAX_BODY,
     max_queued: int = DEFAULT_MAX_QUEUED,
     max_job_seconds: float | None = None,
+    retry_after: int = RETRY_AFTER_S,
 ) -> FastAPI:
     """The service's app: jobs in SQLite at `db_path`, run by `workers` processes (0: accept
     jobs, run none), every route but /openapi.json and /docs behind `token` when given;
     bodies above `max_body` bytes get 413, a submission while `max_queued` jobs wait gets
-    429, a job running longer than `max_job_seconds` is stopped (failed, its rungs kept)."""
+    429 (with `Retry-After: retry_after` seconds), a job running longer than `max_job_seconds`
+    is stopped (failed, its rungs kept)."""
     service = Service(db_path, workers, max_queued, max_job_seconds)
 
     @asynccontextmanager
@@ -376,7 +378,7 @@ def create_app(
             return JSONResponse(
                 {"detail": f"the queue is full ({service.max_queued} jobs waiting); try again later"},
                 status_code=429,
-                headers={"Retry-After": str(RETRY_AFTER_S)},
+                headers={"Retry-After": str(retry_after)},
             )
         if what == "conflict":
             raise HTTPException(409, "this Idempotency-Key was used with a different request")
