@@ -222,7 +222,14 @@ def _add_serve_parser(sub: argparse._SubParsersAction) -> None:
     serve.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1; any other needs --token)")
     serve.add_argument("--port", type=int, default=8000, help="port (default 8000)")
     serve.add_argument("--db", type=Path, default=Path("ladder-jobs.sqlite"), help="the jobs' SQLite database (default ladder-jobs.sqlite)")
-    serve.add_argument("--workers", type=int, default=1, help="worker processes running jobs (default 1; planning is CPU-bound)")
+    where = serve.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, default=1, help="worker processes running jobs (default 1; planning is CPU-bound)")
+    where.add_argument(
+        "--executor",
+        metavar="dask://HOST:PORT",
+        help="run the jobs on a Dask distributed scheduler instead (its workers need the planner installed; one job per "
+        "worker process at a time)",
+    )
     serve.add_argument("--token", help="require 'Authorization: Bearer TOKEN' on every request but /docs and /openapi.json")
     serve.add_argument("--max-queued", type=int, default=100, help="jobs that may wait; more get 429 (default 100)")
     serve.add_argument("--max-job-seconds", type=float, help="stop a job after this many seconds of running (default: no limit)")
@@ -856,13 +863,7 @@ def _check_sweep_args(args: argparse.Namespace):
     problems = check_out_dir("--out", args.out)
     if args.workers is not None and args.workers < 1:
         problems.append(Problem("--workers", f"must be at least 1, got {args.workers}"))
-    if args.executor is not None:
-        if not args.executor.startswith("dask://") or not args.executor.removeprefix("dask://"):
-            problems.append(Problem("--executor", "expected dask://HOST:PORT"))
-        elif importlib.util.find_spec("distributed") is None:
-            problems.append(
-                Problem("--executor", 'a Dask executor needs the dask extra: install the dask extra: pip install "contact-ladder[dask]"')
-            )
+    problems += executor_problems(args.executor)
     for key, value in (("--duration", args.duration), ("--step", args.step), ("--tolerance", args.tolerance)):
         problems += positive(key, value)
     scenario = load_from_args(args, problems)
@@ -910,6 +911,17 @@ def _check_sweep_args(args: argparse.Namespace):
     if problems:
         raise ScenarioError(scenario.path, problems)
     return scenario, fixed, axes, models, runs
+
+
+def executor_problems(executor: str | None) -> list[Problem]:
+    """--executor (of sweep and serve): dask://HOST:PORT, with the dask extra installed."""
+    if executor is None:
+        return []
+    if not executor.startswith("dask://") or not executor.removeprefix("dask://"):
+        return [Problem("--executor", "expected dask://HOST:PORT")]
+    if importlib.util.find_spec("distributed") is None:
+        return [Problem("--executor", 'a Dask executor needs the dask extra: install the dask extra: pip install "contact-ladder[dask]"')]
+    return []
 
 
 def _run_sweep(args: argparse.Namespace, scenario: Scenario, fixed: dict, axes, models, runs: int, *, on_progress=None):
@@ -1066,7 +1078,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
     problems += positive("--max-job-seconds", args.max_job_seconds)
     if not 0 <= args.port <= 65535:
         problems.append(Problem("--port", f"must be between 0 and 65535, got {args.port}"))
-    problems += check_out_file("--db", args.db)
+    problems += check_out_file("--db", args.db) + executor_problems(args.executor)
     missing = [m for m in ("fastapi", "uvicorn") if importlib.util.find_spec(m) is None]
     if missing:
         problems.append(
@@ -1078,8 +1090,16 @@ def cmd_serve(args: argparse.Namespace) -> int:
 
     from planner.service import create_app
 
-    app = create_app(args.db, workers=args.workers, token=args.token, max_queued=args.max_queued, max_job_seconds=args.max_job_seconds)
-    print(f"serving on http://{args.host}:{args.port} (jobs in {args.db}; API at /docs)", file=sys.stderr, flush=True)
+    app = create_app(
+        args.db,
+        workers=args.workers,
+        token=args.token,
+        max_queued=args.max_queued,
+        max_job_seconds=args.max_job_seconds,
+        executor=args.executor,
+    )
+    where = f"jobs on {args.executor}" if args.executor else f"{args.workers} worker process(es)"
+    print(f"serving on http://{args.host}:{args.port} (jobs in {args.db}, {where}; API at /docs, viewer at /)", file=sys.stderr, flush=True)
     uvicorn.run(app, host=args.host, port=args.port, log_level="info")
     return EXIT_OK
 

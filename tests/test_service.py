@@ -321,6 +321,27 @@ def test_bad_sweep_jobs_are_422_named_as_in_the_request(idle):
     ]
 
 
+#: A simulation that runs until stopped: the fingers stay still (nothing ends it early), for
+#: 10^7 steps (minutes).
+LONG_SIMULATION = {
+    "kind": "simulate",
+    "scenario": TRIANGLE,
+    "parameters": {"v1": 0.0, "v2": 0.0},
+    "options": {"model": "dynamic-compliant", "duration": 1000.0, "step": 1e-4},
+}
+
+
+def test_cancelling_a_running_simulate_job_stops_it_mid_run(live):
+    job = submit(live, LONG_SIMULATION).json()
+    wait_for(live, job["id"], states=("running",) + ("succeeded", "failed", "cancelled"))
+    assert live.delete(f"/jobs/{job['id']}").json()["cancel_requested"] is True
+    ended = wait_for(live, job["id"])
+    assert ended["state"] == "cancelled" and ended["result_available"] is False, ended
+    assert live.get(f"/jobs/{job['id']}/result").status_code == 409
+    again = submit(live, {"kind": "simulate", "scenario": FREE, "options": {"model": "kinematic"}}).json()
+    assert wait_for(live, again["id"])["state"] == "succeeded"  # the worker's stop flag was cleared
+
+
 def test_a_job_past_the_wall_time_limit_fails_keeping_its_rungs(tmp_path):
     with TestClient(create_app(tmp_path / "jobs.sqlite", workers=1, max_job_seconds=1.0)) as client:
         job = submit(client, STUCK).json()

@@ -200,23 +200,34 @@ async def _send_json(send, status: int, data: dict, headers: list | None = None)
 
 
 class Service:
-    """The jobs' store and the worker pool."""
+    """The jobs' store and what runs them: a local worker pool, or a Dask cluster (`executor`,
+    dask://HOST:PORT, connected at once: ScenarioError when it cannot be reached)."""
 
-    def __init__(self, db_path: str | Path, workers: int, max_queued: int, max_job_seconds: float | None):
+    def __init__(self, db_path: str | Path, workers: int, max_queued: int, max_job_seconds: float | None, executor: str | None = None):
         self.db_path = str(db_path)
         self.workers = workers
         self.max_queued = max_queued
         self.max_job_seconds = max_job_seconds
+        self.executor = executor
         self.store = Store(self.db_path)
         self.closed = False
         self.pool: ProcessPoolExecutor | None = None
         self.lock = threading.Lock()
+        self.runner = None
+        if executor is not None:
+            from planner.service.remote import DaskRunner
+
+            self.runner = DaskRunner(executor, self.store, max_job_seconds)
 
     def start(self) -> None:
         """Run the jobs a stopped service left (also when this service was stopped before: an
         app's lifespan may run more than once in tests)."""
         if self.closed:
             self.store, self.closed = Store(self.db_path), False
+        if self.executor is not None and self.runner is None:
+            from planner.service.remote import DaskRunner
+
+            self.runner = DaskRunner(self.executor, self.store, self.max_job_seconds)
         for job_id in self.store.recover():
             self.submit(job_id)
 
@@ -232,6 +243,9 @@ class Service:
                 process.terminate()
             for process in processes:
                 process.join(5)
+        if self.runner is not None:
+            self.runner.close()  # a task under way finishes on the cluster unheard; the job runs again on restart
+            self.runner = None
         self.store.close()
         self.closed = True
 
@@ -243,6 +257,9 @@ class Service:
             return self.pool
 
     def submit(self, job_id: str) -> None:
+        if self.runner is not None:
+            self.runner.submit(job_id)
+            return
         if self.workers < 1:
             return  # accept jobs, run none (a store-only service, and the queue tests)
         try:
@@ -252,6 +269,12 @@ class Service:
                 self.pool = None
             future = self._pool().submit(run_job, self.db_path, job_id, self.max_job_seconds)
         future.add_done_callback(lambda f, job_id=job_id: self._done(job_id, f))
+
+    def cancel(self, job_id: str) -> None:
+        """DELETE /jobs/{id}: the store's cancel, and on Dask the task's cancel event."""
+        self.store.cancel(job_id)
+        if self.runner is not None:
+            self.runner.cancel(job_id)
 
     def _done(self, job_id: str, future: Future) -> None:
         if future.cancelled():
@@ -303,13 +326,15 @@ def create_app(
     max_queued: int = DEFAULT_MAX_QUEUED,
     max_job_seconds: float | None = None,
     retry_after: int = RETRY_AFTER_S,
+    executor: str | None = None,
 ) -> FastAPI:
     """The service's app: jobs in SQLite at `db_path`, run by `workers` processes (0: accept
     jobs, run none), every route but /openapi.json and /docs behind `token` when given;
     bodies above `max_body` bytes get 413, a submission while `max_queued` jobs wait gets
     429 (with `Retry-After: retry_after` seconds), a job running longer than `max_job_seconds`
-    is stopped (failed, its rungs kept)."""
-    service = Service(db_path, workers, max_queued, max_job_seconds)
+    is stopped (failed, its rungs kept). With `executor` (dask://HOST:PORT) jobs run on that
+    Dask cluster instead of `workers` local processes."""
+    service = Service(db_path, workers, max_queued, max_job_seconds, executor)
 
     @asynccontextmanager
     async def lifespan(app: FastAPI):
@@ -420,7 +445,7 @@ def create_app(
     def cancel_job(job_id: str):
         """Cancel: a queued job at once; a running one stops at its next check (a plan keeps the rungs done)."""
         get_row(job_id)
-        service.store.cancel(job_id)
+        service.cancel(job_id)
         return _job_json(service, get_row(job_id))
 
     @app.get("/", include_in_schema=False)

@@ -17,6 +17,7 @@ import dataclasses
 import json
 import os
 import tempfile
+import threading
 import tomllib
 from collections.abc import Callable, Iterator
 from pathlib import Path, PurePosixPath
@@ -294,6 +295,38 @@ def rung_view(report) -> dict:
     return data
 
 
+#: Seconds between a simulate job's looks at whether it should stop.
+STOP_POLL_S = 0.25
+
+
+@contextlib.contextmanager
+def _interrupt_when(stop: Callable[[], bool] | None) -> Iterator[None]:
+    """While the block runs, a thread asks `stop()` every STOP_POLL_S and, when it says so,
+    stops the deferred loops as Ctrl-C would (planner.interrupt.ask): a simulation's rollout
+    reads that flag between its chunks. The flag is cleared after (a worker runs many jobs)."""
+    from planner import interrupt
+
+    if stop is None:
+        yield
+        return
+    done = threading.Event()
+
+    def watch() -> None:
+        while not done.wait(STOP_POLL_S):
+            if stop():
+                interrupt.ask()
+                return
+
+    watcher = threading.Thread(target=watch, name="ladder-job-stop", daemon=True)
+    watcher.start()
+    try:
+        yield
+    finally:
+        done.set()
+        watcher.join()
+        interrupt.reset()
+
+
 def run(
     kind: str,
     inputs: dict,
@@ -331,7 +364,8 @@ def run(
             cli._write_sweep_outputs(args, result, checked[2])
             return (args.out / "sweep.json").read_text(), not interrupted
         scenario, plan_controls, h, duration, total = checked
-        result = cli._run_simulation(args, scenario, plan_controls, h, duration, total)
+        with _interrupt_when(stop):
+            result = cli._run_simulation(args, scenario, plan_controls, h, duration, total)
         if result is None:
             return None, False
         return json.dumps(cli._simulation_summary(args, scenario, result, h, duration), indent=2) + "\n", True
