@@ -27,7 +27,9 @@ def running_service(db: Path, **kwargs) -> Iterator[str]:
     sock = socket.socket()
     sock.bind(("127.0.0.1", 0))
     port = sock.getsockname()[1]
-    server = uvicorn.Server(uvicorn.Config(create_app(db, **kwargs), log_level="warning", lifespan="on"))
+    # a client still following a job's events holds the server up to the graceful timeout at the end
+    config = uvicorn.Config(create_app(db, **kwargs), log_level="warning", lifespan="on", timeout_graceful_shutdown=5)
+    server = uvicorn.Server(config)
     thread = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, daemon=True)
     thread.start()
     try:

@@ -117,3 +117,46 @@ def test_the_viewer_submits_the_paper_scene_follows_it_and_animates_the_plan(bro
             served = json.loads(client.result(job["id"]))
         expected = json.loads(cli_plan_json(SCENARIOS / "two_finger_triangle.toml", seed=2, parameters={"v1": 0.8}))
         assert served["rungs"] == expected["rungs"] and served["top_holds"] is True
+
+
+def test_the_viewer_draws_a_spatial_scene_from_above_and_a_sweeps_outcomes(browser, tmp_path, monkeypatch):
+    """box_push_3d (boxes, a sphere, a convex mesh, the table) seen from above, at its start (a
+    service that runs no job), and a sweep's outcomes over its grid."""
+    from planner.service.client import Client
+
+    monkeypatch.chdir(SCENARIOS.parent)
+    with running_service(tmp_path / "jobs.sqlite", workers=0) as url:
+        with Client(url) as client:
+            job = client.submit("scenarios/box_push_3d.toml")  # carries meshes/wedge.obj
+        page = browser.new_page(viewport={"width": 1400, "height": 1000})
+        errors = []
+        page.on("pageerror", lambda exc: errors.append(str(exc)))
+        page.goto(url + "/")
+        page.click(f"#jobs tr.job[data-id='{job['id']}']")
+        page.wait_for_selector("#job-state.queued")
+        page.evaluate(f"async () => startAnimation(await (await api('/jobs/{job['id']}/scene')).json())")
+        page.wait_for_function("Number(document.getElementById('view').dataset.drawn) > 0")
+        floor, obstacle = (0xF1, 0xED, 0xE4), (0x9A, 0x9A, 0x9A)
+        pixels = page.evaluate(COUNT_PIXELS, [ROBOT, OBJECT])
+        table = page.evaluate(COUNT_PIXELS, [floor, obstacle])
+        assert pixels["objects"] > 1000 and pixels["robots"] > 50  # the 0.2 m box, the 0.03 m sphere
+        assert table["robots"] > 0.5 * pixels["total"] and table["objects"] > 1000  # the table under all, the wall and the wedge
+        page.screenshot(path=str(tmp_path / "viewer-3d.png"), full_page=True)
+
+        sweep = {
+            "axes": [{"name": "v1", "values": [0.25, 1.0, 4.0], "log": True}],
+            "models": ["kinematic", "plastic"],
+            "points": [
+                {"model": m, "parameters": {"v1": v}, "outcome": outcome}
+                for m, outcomes in (("kinematic", ("unsafe", "goal", "goal")), ("plastic", ("unsafe", "goal", "none")))
+                for v, outcome in zip((0.25, 1.0, 4.0), outcomes)
+            ],
+        }
+        draws = "sweep => { anim = null; const view = document.getElementById('view'), before = Number(view.dataset.drawn); "
+        draws += "drawSweep(sweep); return Number(view.dataset.drawn) - before; }"
+        assert page.evaluate(draws, sweep) == 1  # the plan's animation stopped, the sweep drawn once
+        goal, unsafe = (0x2C, 0xA0, 0x2C), (0xD6, 0x27, 0x28)
+        dots = page.evaluate(COUNT_PIXELS, [goal, unsafe])
+        assert 1.3 < dots["robots"] / dots["objects"] < 1.7  # 3 goal dots, 2 unsafe ones
+        assert errors == []
+        page.close()  # its EventSource follows a job that never ends
