@@ -304,6 +304,21 @@ def test_a_sweep_job_gives_the_sweep_json_of_ladder_sweep(live, tmp_path, monkey
     assert len(data["points"]) == 5 * 2 and data["boundaries"] and data["bands"]
 
 
+def test_cancelling_a_running_sweep_job_keeps_the_runs_done(live):
+    options = {"grid": ["v1=0.25:4:400:log"], "model": "dynamic-compliant"}  # minutes of runs
+    job = submit(live, {"kind": "sweep", "scenario": TRIANGLE, "options": options}).json()
+    end = time.monotonic() + JOB_TIMEOUT_S
+    while (progress := live.get(f"/jobs/{job['id']}").json()["progress"]) is None:  # a run is done
+        assert time.monotonic() < end
+        time.sleep(0.1)
+    assert progress["runs"] == 400
+    assert live.delete(f"/jobs/{job['id']}").json()["cancel_requested"] is True
+    ended = wait_for(live, job["id"])
+    assert ended["state"] == "cancelled", ended
+    data = json.loads(live.get(f"/jobs/{job['id']}/result").text)
+    assert data["complete"] is False and 0 < len(data["points"]) < 400 and data["missing"] == 400 - len(data["points"])
+
+
 def test_bad_sweep_jobs_are_422_named_as_in_the_request(idle):
     def problems(options, scenario=TRIANGLE):
         r = submit(idle, {"kind": "sweep", "scenario": scenario, "options": options})
