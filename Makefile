@@ -32,8 +32,17 @@ demo: $(VENV)/.installed
 	$(VENV)/bin/ladder plan scenarios/two_finger_triangle.toml --param v1=0.8 --out $(OUT)/plan
 	@echo "outputs: $(OUT)/ (check summary, one simulation JSON and Fig. 4 plot per rung, and plan/: plan.json, report.json, a plot per rung)"
 
-test: $(VENV)/.installed-test
-	$(PY) -m pytest
+# The viewer's browser test drives Debian's chromium (Playwright's own browser download is not
+# used): make test installs it when it is missing (as root, as CI runs; otherwise it says how).
+CHROMIUM ?= /usr/bin/chromium
+
+$(CHROMIUM):
+	@if [ "$$(id -u)" != 0 ]; then echo "make test: the browser test needs $(CHROMIUM): run  sudo apt-get install chromium  (or make test CHROMIUM=/path/to/chromium)"; exit 1; fi
+	apt-get update -qq
+	DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium
+
+test: $(VENV)/.installed-test $(CHROMIUM)
+	LADDER_CHROMIUM=$(CHROMIUM) $(PY) -m pytest
 
 lint: $(VENV)/.installed-test
 	$(VENV)/bin/ruff check .

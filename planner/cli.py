@@ -45,6 +45,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_sweep_parser(sub)
     _add_bench_parser(sub)
     _add_serve_parser(sub)
+    _add_submit_parser(sub)
     _add_reserved_parsers(sub)
     return parser
 
@@ -221,11 +222,44 @@ def _add_serve_parser(sub: argparse._SubParsersAction) -> None:
     serve.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1; any other needs --token)")
     serve.add_argument("--port", type=int, default=8000, help="port (default 8000)")
     serve.add_argument("--db", type=Path, default=Path("ladder-jobs.sqlite"), help="the jobs' SQLite database (default ladder-jobs.sqlite)")
-    serve.add_argument("--workers", type=int, default=1, help="worker processes running jobs (default 1; planning is CPU-bound)")
+    where = serve.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, default=1, help="worker processes running jobs (default 1; planning is CPU-bound)")
+    where.add_argument(
+        "--executor",
+        metavar="dask://HOST:PORT",
+        help="run the jobs on a Dask distributed scheduler instead (its workers need the planner installed; one job per "
+        "worker process at a time)",
+    )
     serve.add_argument("--token", help="require 'Authorization: Bearer TOKEN' on every request but /docs and /openapi.json")
     serve.add_argument("--max-queued", type=int, default=100, help="jobs that may wait; more get 429 (default 100)")
     serve.add_argument("--max-job-seconds", type=float, help="stop a job after this many seconds of running (default: no limit)")
     serve.set_defaults(handler=cmd_serve)
+
+
+def _add_submit_parser(sub: argparse._SubParsersAction) -> None:
+    """Add the `submit` subcommand: a plan job sent to a planning service (planner.service.client)."""
+    submit = sub.add_parser(
+        "submit",
+        help="submit a plan job to a planning service (ladder serve)",
+        description="Send a scenario file (and the meshes it names) to a planning service as a plan job and print "
+        "the job (its id and state, as GET /jobs/{id} answers). --wait follows it to its end, showing progress on "
+        "stderr; the exit code is then that of `ladder plan` (0 the top rung holds, 1 it does not or the job failed "
+        "or was cancelled). 2: bad input, the service refused the job or cannot be reached. "
+        'Needs httpx (the serve extra: pip install "contact-ladder[serve]").',
+    )
+    submit.add_argument("file", type=Path, help="scenario file (TOML)")
+    submit.add_argument(
+        "--server",
+        default=os.environ.get("LADDER_SERVER", "http://127.0.0.1:8000"),
+        help="the service's address (default $LADDER_SERVER, else http://127.0.0.1:8000)",
+    )
+    submit.add_argument("--token", default=os.environ.get("LADDER_TOKEN"), help="the service's bearer token (default $LADDER_TOKEN)")
+    _add_param_option(submit)
+    submit.add_argument("--seed", type=int, help="seed (default: the scenario's)")
+    submit.add_argument("--flat", action="store_true", help="plan directly at the top rung (the baseline)")
+    submit.add_argument("--wait", action="store_true", help="follow the job until it ends (its events), showing progress on stderr")
+    submit.add_argument("--json", action="store_true", help="print the job as one JSON object")
+    submit.set_defaults(handler=cmd_submit)
 
 
 def _add_reserved_parsers(sub: argparse._SubParsersAction) -> None:
@@ -829,13 +863,7 @@ def _check_sweep_args(args: argparse.Namespace):
     problems = check_out_dir("--out", args.out)
     if args.workers is not None and args.workers < 1:
         problems.append(Problem("--workers", f"must be at least 1, got {args.workers}"))
-    if args.executor is not None:
-        if not args.executor.startswith("dask://") or not args.executor.removeprefix("dask://"):
-            problems.append(Problem("--executor", "expected dask://HOST:PORT"))
-        elif importlib.util.find_spec("distributed") is None:
-            problems.append(
-                Problem("--executor", 'a Dask executor needs the dask extra: install the dask extra: pip install "contact-ladder[dask]"')
-            )
+    problems += executor_problems(args.executor)
     for key, value in (("--duration", args.duration), ("--step", args.step), ("--tolerance", args.tolerance)):
         problems += positive(key, value)
     scenario = load_from_args(args, problems)
@@ -885,8 +913,22 @@ def _check_sweep_args(args: argparse.Namespace):
     return scenario, fixed, axes, models, runs
 
 
-def _run_sweep(args: argparse.Namespace, scenario: Scenario, fixed: dict, axes, models, runs: int):
-    """Run the sweep (and its refinement), with a progress bar on a terminal: (result, interrupted)."""
+def executor_problems(executor: str | None) -> list[Problem]:
+    """--executor (of sweep and serve): dask://HOST:PORT, with the dask extra installed."""
+    if executor is None:
+        return []
+    if not executor.startswith("dask://") or not executor.removeprefix("dask://"):
+        return [Problem("--executor", "expected dask://HOST:PORT")]
+    if importlib.util.find_spec("distributed") is None:
+        return [Problem("--executor", 'a Dask executor needs the dask extra: install the dask extra: pip install "contact-ladder[dask]"')]
+    return []
+
+
+def _run_sweep(args: argparse.Namespace, scenario: Scenario, fixed: dict, axes, models, runs: int, *, on_progress=None):
+    """Run the sweep (and its refinement), with a progress bar on a terminal: (result, interrupted).
+    `on_progress(data)` after each run ({"runs_done", "runs"}) and refinement step ({"refine_step",
+    "brackets"}): the service's sweep jobs; it may raise KeyboardInterrupt to stop the sweep,
+    keeping what is done."""
     from planner import sweep as sw
 
     live = sys.stderr.isatty() and not args.json
@@ -906,11 +948,15 @@ def _run_sweep(args: argparse.Namespace, scenario: Scenario, fixed: dict, axes, 
     def progress(done: int, total: int) -> None:
         if bar is not None:
             bar.update(task_id, completed=done, total=total)
+        if on_progress is not None:
+            on_progress({"runs_done": done, "runs": total})
         interrupt.check()
 
     def refine_progress(step: int, active: int) -> None:
         if bar is not None:
             bar.update(task_id, description=f"refine step {step}: {active} brackets", completed=0, total=None)
+        if on_progress is not None:
+            on_progress({"refine_step": step, "brackets": active})
         interrupt.check()
 
     where = args.executor or f"{args.workers or os.cpu_count() or 1} local workers"
@@ -1032,7 +1078,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
     problems += positive("--max-job-seconds", args.max_job_seconds)
     if not 0 <= args.port <= 65535:
         problems.append(Problem("--port", f"must be between 0 and 65535, got {args.port}"))
-    problems += check_out_file("--db", args.db)
+    problems += check_out_file("--db", args.db) + executor_problems(args.executor)
     missing = [m for m in ("fastapi", "uvicorn") if importlib.util.find_spec(m) is None]
     if missing:
         problems.append(
@@ -1044,16 +1090,90 @@ def cmd_serve(args: argparse.Namespace) -> int:
 
     from planner.service import create_app
 
-    app = create_app(args.db, workers=args.workers, token=args.token, max_queued=args.max_queued, max_job_seconds=args.max_job_seconds)
-    print(f"serving on http://{args.host}:{args.port} (jobs in {args.db}; API at /docs)", file=sys.stderr, flush=True)
+    app = create_app(
+        args.db,
+        workers=args.workers,
+        token=args.token,
+        max_queued=args.max_queued,
+        max_job_seconds=args.max_job_seconds,
+        executor=args.executor,
+    )
+    where = f"jobs on {args.executor}" if args.executor else f"{args.workers} worker process(es)"
+    print(f"serving on http://{args.host}:{args.port} (jobs in {args.db}, {where}; API at /docs, viewer at /)", file=sys.stderr, flush=True)
     uvicorn.run(app, host=args.host, port=args.port, log_level="info")
     return EXIT_OK
+
+
+def cmd_submit(args: argparse.Namespace) -> int:
+    """`ladder submit`: a plan job sent to a planning service, printed (and followed with --wait)."""
+    if importlib.util.find_spec("httpx") is None:
+        raise ScenarioError(
+            "ladder submit", [Problem("ladder submit", 'needs httpx: install the serve extra: pip install "contact-ladder[serve]"')]
+        )
+    from planner.service.client import Client, ServiceError, job_request
+
+    options = {"seed": args.seed} if args.seed is not None else {}
+    if args.flat:
+        options["flat"] = True
+    body = job_request(args.file, "plan", parameters=parse_overrides(args.param), options=options)
+    try:
+        with Client(args.server, args.token) as client:
+            job = client.submit_request(body)
+            if not args.json:
+                print(f"job {job['id']}: {job['state']} ({client.url}/jobs/{job['id']})", file=sys.stderr if args.wait else sys.stdout)
+            if not args.wait:
+                if args.json:
+                    print(json.dumps(job, indent=2))
+                return EXIT_OK
+            job = client.wait(job["id"], on_event=_job_progress(live=sys.stderr.isatty()))
+            plan = json.loads(client.result(job["id"])) if job["result_available"] else None
+    except ServiceError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    if args.json:
+        print(json.dumps(job, indent=2))
+    else:
+        holds = plan is not None and plan.get("top_holds")
+        rungs = ", ".join(f"{r['rung']} {r['ended']}" for r in job.get("rungs", [])) or "none"
+        error = f": {job['error']}" if job.get("error") else ""
+        print(f"job {job['id']}: {job['state']}{error}; rungs: {rungs}; top rung holds: {'yes' if holds else 'no'}")
+        if job["result_available"]:
+            print(f"plan.json: {args.server.rstrip('/')}/jobs/{job['id']}/result")
+    return EXIT_OK if job["state"] == "succeeded" and plan is not None and plan.get("top_holds") else EXIT_FAILED
+
+
+def _job_progress(live: bool):
+    """What `ladder submit --wait` shows of a job's events on stderr: one live line on a
+    terminal, else one line per state, rung and end."""
+
+    def show(event) -> None:
+        data = event.data
+        if event.type == "progress":
+            if live and "rung" in data:
+                print(
+                    f"\r{data['rung']}: {data['iterations']} iterations, {data['propagations']} propagations   ",
+                    end="",
+                    file=sys.stderr,
+                    flush=True,
+                )
+            return
+        text = {
+            "state": lambda: f"{data.get('state')}" + (" again (the server restarted)" if data.get("requeued") else ""),
+            "rung_started": lambda: f"planning: {data.get('rung')} ...",
+            "rung_ended": lambda: f"{data.get('rung')}: {data.get('ended')} ({data.get('outcome')}, {data.get('iterations')} iterations)",
+            "cancel_requested": lambda: "cancel requested",
+            "job_ended": lambda: f"ended: {data.get('state')}" + (f" ({data['error']})" if data.get("error") else ""),
+        }.get(event.type)
+        if text is not None:
+            print(("\r" + " " * 78 + "\r" if live else "") + text(), file=sys.stderr, flush=True)
+
+    return show
 
 
 def cmd_reserved(args: argparse.Namespace) -> int:
     print(
         f"error: 'ladder {args.command}' is not built yet ({RESERVED[args.command]}); "
-        "available now: ladder check, ladder simulate, ladder plan, ladder sweep, ladder bench, ladder schema, ladder serve",
+        "available now: ladder check, ladder simulate, ladder plan, ladder sweep, ladder bench, ladder schema, ladder serve, ladder submit",
         file=sys.stderr,
     )
     return EXIT_BAD_INPUT

@@ -61,5 +61,11 @@ def deferred():
         _state["deferring"] -= 1
 
 
+def ask() -> None:
+    """Ask the loops under way to stop, as a first Ctrl-C inside a deferred block does (the
+    service's cancel and wall-time limit of a simulate job, from a thread of the worker)."""
+    _state["asked"] = True
+
+
 def reset() -> None:
     _state["asked"] = False

@@ -7,8 +7,8 @@ from __future__ import annotations
 import json
 import sqlite3
 import time
-from pathlib import Path
 
+import numpy as np
 import pytest
 
 pytest.importorskip("fastapi")
@@ -17,10 +17,11 @@ pytest.importorskip("httpx")
 from fastapi.testclient import TestClient  # noqa: E402
 
 from models.scenario import ScenarioError, load_scenario  # noqa: E402
-from planner.ladder import plan_json_text, run_ladder  # noqa: E402
+from planner.cli import main as cli_main  # noqa: E402
 from planner.service import create_app  # noqa: E402
 from planner.service.store import Store  # noqa: E402
 from tests.conftest import ROOT, SCENARIOS  # noqa: E402
+from tests.service_server import JOB_TIMEOUT_S, cli_plan_json  # noqa: E402
 
 FREE = (SCENARIOS / "free_transfer.toml").read_text()
 BROKEN = FREE.replace('name = "free_transfer"', "name = 3")
@@ -29,7 +30,7 @@ BROKEN = FREE.replace('name = "free_transfer"', "name = 3")
 STUCK = {"kind": "plan", "scenario": FREE, "parameters": {"gap": 0.05}, "options": {"iterations": 10**7, "time_limit": 600}}
 
 
-def wait_for(client: TestClient, job_id: str, states=("succeeded", "failed", "cancelled"), timeout: float = 60.0) -> dict:
+def wait_for(client: TestClient, job_id: str, states=("succeeded", "failed", "cancelled"), timeout: float = JOB_TIMEOUT_S) -> dict:
     end = time.monotonic() + timeout
     while True:
         job = client.get(f"/jobs/{job_id}").json()
@@ -115,6 +116,9 @@ def test_bad_options_and_parameters_are_422_named_as_in_the_request(idle):
     r = submit(idle, {"kind": "simulate", "scenario": FREE, "options": {}})
     assert r.status_code == 422 and r.json()["problems"][0]["key"] == "options.model"
     assert submit(idle, {"kind": "sweep", "scenario": FREE}).status_code == 422
+    r = submit(idle, {"kind": "bogus", "scenario": FREE, "extra": 1})  # not what the API's description allows: the same shape
+    assert r.status_code == 422 and [p["key"] for p in r.json()["problems"]] == ["body.kind", "body.extra"]
+    assert r.json()["file"] == "request" and r.json()["detail"].startswith("request: body.kind: Input should be 'plan'")
 
 
 @pytest.mark.parametrize("name", ["/etc/passwd", "../outside.obj", "meshes/../../x.obj", "a\\b.obj"])
@@ -184,20 +188,37 @@ def test_a_token_is_needed_everywhere_but_the_description(tmp_path):
         assert submit(client, **good).status_code == 201
 
 
+def test_the_token_may_come_as_a_query_parameter_on_the_events_route_only(tmp_path):
+    with TestClient(create_app(tmp_path / "jobs.sqlite", workers=0, token="s3cret")) as client:
+        job = submit(client, **{"Authorization": "Bearer s3cret"}).json()
+        client.delete(f"/jobs/{job['id']}", headers={"Authorization": "Bearer s3cret"})
+        events = client.get(f"/jobs/{job['id']}/events?token=s3cret")
+        assert events.status_code == 200 and [e["event"] for e in parse_sse(events.text)] == ["state", "job_ended"]
+        assert client.get(f"/jobs/{job['id']}/events?token=wrong").status_code == 401
+        assert client.get(f"/jobs/{job['id']}?token=s3cret").status_code == 401
+        assert client.get("/jobs?token=s3cret").status_code == 401
+        page = client.get("/")  # the viewer's page asks for the token itself
+        assert page.status_code == 200 and page.headers["content-type"].startswith("text/html") and "EventSource" in page.text
+
+
+def test_the_scene_of_a_spatial_job_has_its_shapes_and_mesh_vertices(idle):
+    from models.geometry import read_obj
+
+    scene = (SCENARIOS / "box_push_3d.toml").read_text()
+    wedge = (SCENARIOS / "meshes" / "wedge.obj").read_text()
+    job = submit(idle, {"kind": "plan", "scenario": scene, "files": {"meshes/wedge.obj": wedge}}).json()
+    view = idle.get(f"/jobs/{job['id']}/scene").json()
+    assert view["dimension"] == 3 and "rungs" not in view
+    bodies = {b["name"]: b for b in view["bodies"]}
+    assert [b["name"] for b in view["bodies"]] == ["table", "box", "pusher", "wall", "wedge"]
+    assert bodies["box"]["shape"] == {"type": "box", "size": [0.2, 0.2, 0.1]} and bodies["box"]["moves"]
+    assert bodies["box"]["start"] == {"t": [0.0, 0.0, 0.05], "R": [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]}
+    assert bodies["wedge"]["shape"]["vertices"] == read_obj(SCENARIOS / "meshes" / "wedge.obj")[0].tolist()
+    assert not bodies["wall"]["moves"] and bodies["wall"]["start"]["t"] == [0.45, 0.35, 0.1]
+    assert idle.get("/jobs/nope/scene").status_code == 404
+
+
 # ----------------------------------------------------------------------------- with a worker
-
-
-def cli_plan_json(scenario_path: Path, seed: int, parameters=None, **kwargs) -> str:
-    """plan.json as `ladder plan` writes it (run from the repository root)."""
-    import os
-
-    old = os.getcwd()
-    os.chdir(ROOT)
-    try:
-        scenario = load_scenario(scenario_path.relative_to(ROOT), parameters or {})
-        return plan_json_text(run_ladder(scenario, seed=seed, **kwargs))
-    finally:
-        os.chdir(old)
 
 
 def test_a_plan_job_succeeds_with_the_clis_plan_json_byte_for_byte(live):
@@ -211,6 +232,14 @@ def test_a_plan_job_succeeds_with_the_clis_plan_json_byte_for_byte(live):
     assert result.status_code == 200 and result.headers["content-type"].startswith("application/json")
     assert result.text == cli_plan_json(SCENARIOS / "free_transfer.toml", seed=3)
     assert json.loads(result.text)["top_holds"] is True
+    view = live.get(f"/jobs/{job['id']}/scene").json()
+    plan = json.loads(result.text)
+    assert view["dimension"] == 2 and view["coordinates"] == ["robot.x", "robot.y"]
+    assert [r["rung"] for r in view["rungs"]] == [r["rung"] for r in plan["rungs"]]
+    for rung, planned in zip(view["rungs"], plan["rungs"]):
+        assert len(rung["times"]) == len(planned["states"]) and rung["times"][-1] == pytest.approx(sum(planned["durations"]))
+        assert np.allclose([p["robot"]["t"] for p in rung["placements"]], planned["states"], atol=1e-8)
+        assert set(rung["placements"][0]) == {"robot"}  # the walls and the pillar do not move
 
 
 def test_events_have_ids_and_last_event_id_resumes_without_gaps(live):
@@ -241,15 +270,97 @@ def test_cancelling_a_running_job_stops_it(live):
     job = submit(live, STUCK).json()
     wait_for(live, job["id"], states=("running",) + ("succeeded", "failed", "cancelled"))
     assert live.delete(f"/jobs/{job['id']}").json()["cancel_requested"] is True
-    ended = wait_for(live, job["id"], timeout=30)
+    ended = wait_for(live, job["id"])
     assert ended["state"] == "cancelled", ended
     assert json.loads(live.get(f"/jobs/{job['id']}/result").text)["complete"] is False
+
+
+TRIANGLE = (SCENARIOS / "two_finger_triangle.toml").read_text()
+SWEEP = {"grid": ["v1=0.25:4:5:log"], "model": "kinematic,plastic=quasistatic-rigid", "refine": True, "tolerance": 0.05}
+
+
+def without_wall_times(sweep_json: str) -> dict:
+    data = json.loads(sweep_json)
+    for point in data["points"]:
+        del point["wall_s"]
+    return data
+
+
+def test_a_sweep_job_gives_the_sweep_json_of_ladder_sweep(live, tmp_path, monkeypatch):
+    body = {"kind": "sweep", "scenario": TRIANGLE, "filename": "scenarios/two_finger_triangle.toml", "parameters": {"v2": 1.0}}
+    r = submit(live, {**body, "options": SWEEP})
+    assert r.status_code == 201, r.text
+    job = wait_for(live, r.json()["id"])
+    assert job["state"] == "succeeded", job
+    assert job["progress"]["refine_step"] >= 1
+    served = live.get(f"/jobs/{job['id']}/result").text
+    monkeypatch.chdir(ROOT)
+    args = ["sweep", "scenarios/two_finger_triangle.toml", "--grid", SWEEP["grid"][0], "--model", SWEEP["model"], "--param", "v2=1"]
+    assert cli_main([*args, "--refine", "--tolerance", "0.05", "--workers", "1", "--json", "--out", str(tmp_path)]) == 0
+    cli = (tmp_path / "sweep.json").read_text()
+    assert without_wall_times(served) == without_wall_times(cli)
+    data = json.loads(served)
+    assert data["file"] == "scenarios/two_finger_triangle.toml" and data["complete"] is True
+    assert len(data["points"]) == 5 * 2 and data["boundaries"] and data["bands"]
+
+
+def test_cancelling_a_running_sweep_job_keeps_the_runs_done(live):
+    options = {"grid": ["v1=0.25:4:400:log"], "model": "dynamic-compliant"}  # minutes of runs
+    job = submit(live, {"kind": "sweep", "scenario": TRIANGLE, "options": options}).json()
+    end = time.monotonic() + JOB_TIMEOUT_S
+    while (progress := live.get(f"/jobs/{job['id']}").json()["progress"]) is None:  # a run is done
+        assert time.monotonic() < end
+        time.sleep(0.1)
+    assert progress["runs"] == 400
+    assert live.delete(f"/jobs/{job['id']}").json()["cancel_requested"] is True
+    ended = wait_for(live, job["id"])
+    assert ended["state"] == "cancelled", ended
+    data = json.loads(live.get(f"/jobs/{job['id']}/result").text)
+    assert data["complete"] is False and 0 < len(data["points"]) < 400 and data["missing"] == 400 - len(data["points"])
+
+
+def test_bad_sweep_jobs_are_422_named_as_in_the_request(idle):
+    def problems(options, scenario=TRIANGLE):
+        r = submit(idle, {"kind": "sweep", "scenario": scenario, "options": options})
+        assert r.status_code == 422, r.text
+        return [f"{p['key']}: {p['reason']}" for p in r.json()["problems"]]
+
+    assert problems({"model": "kinematic"}) == ["options.grid: a sweep job needs a grid"]
+    assert problems({"grid": "v1=1:2:3", "model": "kinematic"})[0].startswith("options.grid: expected a list of strings")
+    assert problems({"grid": ["bogus=1:2:3"], "model": "kinematic"})[0].startswith("options.grid bogus: not a design parameter")
+    assert problems({"grid": ["v1=1:2:3"], "model": "nope"})[0].startswith("options.model")
+    assert problems({"grid": ["v1=0.1:4:200", "mu=0:1:100"], "model": "kinematic"})[0].startswith("options.grid: 20,000 runs")
+    no_policy = TRIANGLE[: TRIANGLE.index("[task.policy]")] + TRIANGLE[TRIANGLE.index("[ladder]") :]
+    assert problems({"grid": ["v1=1:2:3"], "model": "kinematic"}, no_policy) == [
+        "task.policy: a sweep runs the scenario's policy, and this file has none"
+    ]
+
+
+#: A simulation that runs until stopped: the fingers stay still (nothing ends it early), for
+#: 10^7 steps (minutes).
+LONG_SIMULATION = {
+    "kind": "simulate",
+    "scenario": TRIANGLE,
+    "parameters": {"v1": 0.0, "v2": 0.0},
+    "options": {"model": "dynamic-compliant", "duration": 1000.0, "step": 1e-4},
+}
+
+
+def test_cancelling_a_running_simulate_job_stops_it_mid_run(live):
+    job = submit(live, LONG_SIMULATION).json()
+    wait_for(live, job["id"], states=("running",) + ("succeeded", "failed", "cancelled"))
+    assert live.delete(f"/jobs/{job['id']}").json()["cancel_requested"] is True
+    ended = wait_for(live, job["id"])
+    assert ended["state"] == "cancelled" and ended["result_available"] is False, ended
+    assert live.get(f"/jobs/{job['id']}/result").status_code == 409
+    again = submit(live, {"kind": "simulate", "scenario": FREE, "options": {"model": "kinematic"}}).json()
+    assert wait_for(live, again["id"])["state"] == "succeeded"  # the worker's stop flag was cleared
 
 
 def test_a_job_past_the_wall_time_limit_fails_keeping_its_rungs(tmp_path):
     with TestClient(create_app(tmp_path / "jobs.sqlite", workers=1, max_job_seconds=1.0)) as client:
         job = submit(client, STUCK).json()
-        ended = wait_for(client, job["id"], timeout=60)
+        ended = wait_for(client, job["id"])
         assert ended["state"] == "failed" and "wall-time limit" in ended["error"]
         assert json.loads(client.get(f"/jobs/{job['id']}/result").text)["complete"] is False
 
@@ -306,7 +417,7 @@ def test_kill_9_the_server_while_a_job_runs_and_restart(tmp_path):
                 time.sleep(0.1)
         raise AssertionError("the server did not start")
 
-    def wait(client, job_id, states, timeout=60.0):
+    def wait(client, job_id, states, timeout=JOB_TIMEOUT_S):
         end = time.monotonic() + timeout
         while (job := client.get(f"/jobs/{job_id}").json())["state"] not in states:
             assert time.monotonic() < end, job

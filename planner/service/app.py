@@ -3,9 +3,11 @@
 POST   /jobs                 submit (201, Location: /jobs/{id}); Idempotency-Key honoured
 GET    /jobs                 list (?state=)
 GET    /jobs/{id}            state, progress, per-rung reports
-GET    /jobs/{id}/result     the result file (a plan's plan.json, byte for byte the CLI's)
+GET    /jobs/{id}/result     the result file (a plan's plan.json, byte for byte the CLI's; a sweep's sweep.json)
 DELETE /jobs/{id}            cancel
-GET    /jobs/{id}/events     server-sent events (ids; Last-Event-ID resumes)
+GET    /jobs/{id}/events     server-sent events (ids; Last-Event-ID resumes; ?token= for a browser's EventSource)
+GET    /jobs/{id}/scene      what the viewer draws: the scene's shapes, a plan's body placements per rung
+GET    /                     the viewer (static/index.html)
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ import hashlib
 import hmac
 import json
 import multiprocessing
+import re
 import threading
 import uuid
 from concurrent.futures import Future, ProcessPoolExecutor
@@ -22,18 +25,27 @@ from concurrent.futures.process import BrokenProcessPool
 from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import Any, Literal
+from urllib.parse import parse_qs
 
 from fastapi import FastAPI, Header, HTTPException, Query, Request, Response
-from fastapi.responses import JSONResponse, StreamingResponse
+from fastapi.exception_handlers import http_exception_handler
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import FileResponse, JSONResponse, StreamingResponse
 from pydantic import BaseModel, ConfigDict, Field
+from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.routing import Match
 
-from models.scenario import ScenarioError
+from models.scenario import Problem, ScenarioError
 from planner.service import jobs
 from planner.service.store import STATES, TERMINAL, Store, iso
+from planner.service.view import scene_view
 from planner.service.worker import run_job
 
-#: Paths that need no token (the API's description).
-OPEN_PATHS = frozenset({"/openapi.json", "/docs", "/docs/oauth2-redirect", "/redoc"})
+#: Paths that need no token (the API's description, and the viewer's page, which asks for it).
+OPEN_PATHS = frozenset({"/openapi.json", "/docs", "/docs/oauth2-redirect", "/redoc", "/"})
+#: The one route that also takes the token as ?token=: a browser's EventSource cannot send headers.
+EVENTS_PATH = re.compile(r"/jobs/[^/]+/events")
+VIEWER = Path(__file__).parent / "static" / "index.html"
 DEFAULT_MAX_BODY = 2 * 1024 * 1024
 DEFAULT_MAX_QUEUED = 100
 RETRY_AFTER_S = 5
@@ -46,15 +58,84 @@ class JobRequest(BaseModel):
     """A job: a scenario (TOML text and the files it names, as contents), parameter overrides and options."""
 
     model_config = ConfigDict(extra="forbid")
-    kind: Literal["plan", "simulate"] = Field(description="plan: up the ladder (or flat); simulate: the policy under one rung")
+    kind: Literal["plan", "simulate", "sweep"] = Field(
+        description="plan: up the ladder (or flat); simulate: the policy under one rung; sweep: the policy over a grid of parameters"
+    )
     scenario: str = Field(description="the scenario file's TOML text")
     filename: str = Field("scenario.toml", description="the scenario's relative file name (plan.json's `scenario`)")
     files: dict[str, str] = Field(default_factory=dict, description="files the scenario names (meshes), relative to it: name -> text")
     parameters: dict[str, float] = Field(default_factory=dict, description="design-parameter overrides (the CLI's --param)")
     options: dict[str, Any] = Field(
         default_factory=dict,
-        description="plan: seed, iterations, time_limit, flat, rungs, top, planner, seed_roots, guide; simulate: model, duration, step",
+        description="plan: seed, iterations, time_limit, flat, rungs, top, planner, seed_roots, guide; simulate: model, duration, "
+        "step; sweep: grid (a list of `ladder sweep --grid` texts), model (the --model text), refine, tolerance, duration, step",
     )
+
+
+class ProblemItem(BaseModel):
+    key: str = Field(description="where: a key path of the scenario (bodies[2].pose), or of the request (options.seed)")
+    reason: str
+
+
+class Problems(BaseModel):
+    """Every 422: the CLI's `FILE: KEY: reason` lines, and the same as data."""
+
+    detail: str = Field(description="one `FILE: KEY: reason` line per problem, as the CLI prints them")
+    file: str = Field(description="the scenario's file name, or `request` for the request itself")
+    problems: list[ProblemItem]
+
+
+class Error(BaseModel):
+    detail: str
+
+
+class Links(BaseModel):
+    self: str
+    result: str
+    events: str
+
+
+class Job(BaseModel):
+    """A job as GET /jobs/{id} answers it (GET /jobs leaves out `rungs`)."""
+
+    id: str
+    kind: Literal["plan", "simulate", "sweep"]
+    state: Literal[STATES] = Field(description="queued, running, then succeeded, failed or cancelled")  # type: ignore[valid-type]
+    created: str = Field(description="ISO 8601, UTC")
+    updated: str = Field(description="ISO 8601, UTC")
+    filename: str
+    parameters: dict[str, float]
+    options: dict[str, Any]
+    progress: dict[str, Any] | None = Field(
+        description="a plan's rung, iterations, propagations; a sweep's runs_done and runs, or refine_step and brackets"
+    )
+    cancel_requested: bool
+    runs: int = Field(description="times a worker started the job (more than 1 after a restart)")
+    error: str | None
+    result_available: bool
+    links: Links
+    rungs: list[dict[str, Any]] | None = Field(None, description="a plan's per-rung reports, as its rungs finished")
+
+
+class JobList(BaseModel):
+    jobs: list[Job]
+
+
+#: What every route may answer besides its own (the guard's 401 with a token, 400 and 413 on bodies).
+COMMON_RESPONSES: dict[int | str, dict[str, Any]] = {
+    401: {"model": Error, "description": "missing or wrong bearer token (only when the service has one)"},
+}
+NOT_FOUND = {404: {"model": Error, "description": "no such job"}}
+UNPROCESSABLE = {422: {"model": Problems, "description": "bad input: the problems, one per line"}}
+
+
+class EventStream(StreamingResponse):
+    media_type = "text/event-stream"
+
+
+def _unprocessable(exc: ScenarioError) -> JSONResponse:
+    problems = [{"key": p.key, "reason": p.reason} for p in exc.problems]
+    return JSONResponse({"detail": str(exc), "file": exc.file, "problems": problems}, status_code=422)
 
 
 class _Guard:
@@ -69,6 +150,9 @@ class _Guard:
         headers = {k.lower(): v for k, v in scope.get("headers", [])}
         if self.token and scope["path"] not in OPEN_PATHS:
             given = headers.get(b"authorization", b"").decode("latin-1")
+            if not given and EVENTS_PATH.fullmatch(scope["path"]):
+                query = parse_qs(scope.get("query_string", b"").decode("latin-1"))
+                given = f"Bearer {query['token'][0]}" if query.get("token") else ""
             if not hmac.compare_digest(given.encode(), f"Bearer {self.token}".encode()):
                 detail = "missing or wrong token: send 'Authorization: Bearer TOKEN'"
                 return await _send_json(send, 401, {"detail": detail}, [(b"www-authenticate", b"Bearer")])
@@ -116,18 +200,34 @@ async def _send_json(send, status: int, data: dict, headers: list | None = None)
 
 
 class Service:
-    """The jobs' store and the worker pool."""
+    """The jobs' store and what runs them: a local worker pool, or a Dask cluster (`executor`,
+    dask://HOST:PORT, connected at once: ScenarioError when it cannot be reached)."""
 
-    def __init__(self, db_path: str | Path, workers: int, max_queued: int, max_job_seconds: float | None):
+    def __init__(self, db_path: str | Path, workers: int, max_queued: int, max_job_seconds: float | None, executor: str | None = None):
         self.db_path = str(db_path)
         self.workers = workers
         self.max_queued = max_queued
         self.max_job_seconds = max_job_seconds
+        self.executor = executor
         self.store = Store(self.db_path)
+        self.closed = False
         self.pool: ProcessPoolExecutor | None = None
         self.lock = threading.Lock()
+        self.runner = None
+        if executor is not None:
+            from planner.service.remote import DaskRunner
+
+            self.runner = DaskRunner(executor, self.store, max_job_seconds)
 
     def start(self) -> None:
+        """Run the jobs a stopped service left (also when this service was stopped before: an
+        app's lifespan may run more than once in tests)."""
+        if self.closed:
+            self.store, self.closed = Store(self.db_path), False
+        if self.executor is not None and self.runner is None:
+            from planner.service.remote import DaskRunner
+
+            self.runner = DaskRunner(self.executor, self.store, self.max_job_seconds)
         for job_id in self.store.recover():
             self.submit(job_id)
 
@@ -143,7 +243,11 @@ class Service:
                 process.terminate()
             for process in processes:
                 process.join(5)
+        if self.runner is not None:
+            self.runner.close()  # a task under way finishes on the cluster unheard; the job runs again on restart
+            self.runner = None
         self.store.close()
+        self.closed = True
 
     def _pool(self) -> ProcessPoolExecutor:
         with self.lock:
@@ -153,6 +257,9 @@ class Service:
             return self.pool
 
     def submit(self, job_id: str) -> None:
+        if self.runner is not None:
+            self.runner.submit(job_id)
+            return
         if self.workers < 1:
             return  # accept jobs, run none (a store-only service, and the queue tests)
         try:
@@ -162,6 +269,12 @@ class Service:
                 self.pool = None
             future = self._pool().submit(run_job, self.db_path, job_id, self.max_job_seconds)
         future.add_done_callback(lambda f, job_id=job_id: self._done(job_id, f))
+
+    def cancel(self, job_id: str) -> None:
+        """DELETE /jobs/{id}: the store's cancel, and on Dask the task's cancel event."""
+        self.store.cancel(job_id)
+        if self.runner is not None:
+            self.runner.cancel(job_id)
 
     def _done(self, job_id: str, future: Future) -> None:
         if future.cancelled():
@@ -212,12 +325,16 @@ def create_app(
     max_body: int = DEFAULT_MAX_BODY,
     max_queued: int = DEFAULT_MAX_QUEUED,
     max_job_seconds: float | None = None,
+    retry_after: int = RETRY_AFTER_S,
+    executor: str | None = None,
 ) -> FastAPI:
     """The service's app: jobs in SQLite at `db_path`, run by `workers` processes (0: accept
     jobs, run none), every route but /openapi.json and /docs behind `token` when given;
     bodies above `max_body` bytes get 413, a submission while `max_queued` jobs wait gets
-    429, a job running longer than `max_job_seconds` is stopped (failed, its rungs kept)."""
-    service = Service(db_path, workers, max_queued, max_job_seconds)
+    429 (with `Retry-After: retry_after` seconds), a job running longer than `max_job_seconds`
+    is stopped (failed, its rungs kept). With `executor` (dask://HOST:PORT) jobs run on that
+    Dask cluster instead of `workers` local processes."""
+    service = Service(db_path, workers, max_queued, max_job_seconds, executor)
 
     @asynccontextmanager
     async def lifespan(app: FastAPI):
@@ -231,9 +348,25 @@ def create_app(
         title="ladder planning service",
         description="Plans up the ladder of contact models, as `ladder plan` does, as jobs.",
         lifespan=lifespan,
+        responses=COMMON_RESPONSES,
     )
     app.state.service = service
     app.add_middleware(_Guard, token=token, max_body=max_body)
+
+    @app.exception_handler(StarletteHTTPException)
+    async def http_error(request: Request, exc: StarletteHTTPException):
+        """FastAPI's answer, but a 405's Allow lists every method of the path (Starlette names
+        only the first route's, and GET /jobs and POST /jobs are two routes)."""
+        if exc.status_code == 405:
+            methods = {m for r in app.router.routes if r.matches(request.scope)[0] != Match.NONE for m in getattr(r, "methods", ())}
+            exc.headers = {**(exc.headers or {}), "Allow": ", ".join(sorted(methods - {"HEAD"}))}
+        return await http_exception_handler(request, exc)
+
+    @app.exception_handler(RequestValidationError)
+    async def request_error(request: Request, exc: RequestValidationError):
+        """A request that is not what the description says: 422 as every other bad input."""
+        problems = [Problem(".".join(str(x) for x in e.get("loc", ())), str(e.get("msg", ""))) for e in exc.errors()]
+        return _unprocessable(ScenarioError("request", problems))
 
     def get_row(job_id: str):
         row = service.store.get(job_id)
@@ -241,15 +374,27 @@ def create_app(
             raise HTTPException(404, f"no job {job_id}")
         return row
 
-    @app.post("/jobs", status_code=201)
+    @app.post(
+        "/jobs",
+        status_code=201,
+        response_model=Job,
+        responses={
+            200: {"model": Job, "description": "the job this Idempotency-Key made before"},
+            201: {"description": "the job, queued; `Location` is its URL"},
+            400: {"model": Error, "description": "a bad Content-Length"},
+            409: {"model": Error, "description": "this Idempotency-Key came with another request"},
+            413: {"model": Error, "description": "the body is larger than the limit"},
+            429: {"model": Error, "description": "the queue is full; try again after `Retry-After` seconds"},
+            **UNPROCESSABLE,
+        },
+    )
     def submit(job: JobRequest, response: Response, idempotency_key: str | None = Header(None)):
         """Submit a job. A bad scenario is 422 with the CLI's `FILE: KEY: reason` lines."""
         inputs = {"filename": job.filename, "scenario": job.scenario, "files": job.files, "parameters": job.parameters}
         try:
             jobs.validate(job.kind, inputs, job.options)
         except ScenarioError as exc:
-            problems = [{"key": p.key, "reason": p.reason} for p in exc.problems]
-            return JSONResponse({"detail": str(exc), "file": exc.file, "problems": problems}, status_code=422)
+            return _unprocessable(exc)
         sha = hashlib.sha256(json.dumps({"kind": job.kind, **inputs, "options": job.options}, sort_keys=True).encode()).hexdigest()
         row, what = service.store.create_job(
             uuid.uuid4().hex, job.kind, inputs, job.options, key=idempotency_key, sha=sha, max_queued=service.max_queued
@@ -258,7 +403,7 @@ def create_app(
             return JSONResponse(
                 {"detail": f"the queue is full ({service.max_queued} jobs waiting); try again later"},
                 status_code=429,
-                headers={"Retry-After": str(RETRY_AFTER_S)},
+                headers={"Retry-After": str(retry_after)},
             )
         if what == "conflict":
             raise HTTPException(409, "this Idempotency-Key was used with a different request")
@@ -269,17 +414,26 @@ def create_app(
             service.submit(row["id"])
         return _job_json(service, row)
 
-    @app.get("/jobs")
+    @app.get("/jobs", response_model=JobList, response_model_exclude_unset=True, responses=UNPROCESSABLE)
     def list_jobs(state: str | None = Query(None, description="only jobs in this state")):
+        """The jobs, oldest first (without their rungs' reports)."""
         if state is not None and state not in STATES:
-            raise HTTPException(422, f"unknown state {state!r}; states: {', '.join(STATES)}")
+            return _unprocessable(ScenarioError("request", [Problem("state", f"unknown state {state!r}; states: {', '.join(STATES)}")]))
         return {"jobs": [_job_json(service, row, rungs=False) for row in service.store.list(state)]}
 
-    @app.get("/jobs/{job_id}")
+    @app.get("/jobs/{job_id}", response_model=Job, responses=NOT_FOUND)
     def get_job(job_id: str):
+        """A job: its state, progress and the reports of its rungs so far."""
         return _job_json(service, get_row(job_id))
 
-    @app.get("/jobs/{job_id}/result")
+    @app.get(
+        "/jobs/{job_id}/result",
+        responses={
+            200: {"content": {"application/json": {"schema": {"type": "object"}}}, "description": "the result file"},
+            **NOT_FOUND,
+            409: {"model": Error, "description": "the job has no result (yet)"},
+        },
+    )
     def get_result(job_id: str):
         """The result file: a plan's plan.json (as `ladder plan` writes it), a simulation's JSON."""
         row = get_row(job_id)
@@ -287,21 +441,53 @@ def create_app(
             raise HTTPException(409, f"job {job_id} is {row['state']}: no result" + (f" ({row['error']})" if row["error"] else ""))
         return Response(row["result"], media_type="application/json")
 
-    @app.delete("/jobs/{job_id}")
+    @app.delete("/jobs/{job_id}", response_model=Job, responses=NOT_FOUND)
     def cancel_job(job_id: str):
         """Cancel: a queued job at once; a running one stops at its next check (a plan keeps the rungs done)."""
         get_row(job_id)
-        service.store.cancel(job_id)
+        service.cancel(job_id)
         return _job_json(service, get_row(job_id))
 
-    @app.get("/jobs/{job_id}/events")
-    async def events(job_id: str, request: Request, last_event_id: str | None = Header(None)):
+    @app.get("/", include_in_schema=False)
+    def viewer():
+        """The viewer: lists jobs, submits a scenario file, follows a job, animates its plan."""
+        return FileResponse(VIEWER, media_type="text/html")
+
+    @app.get(
+        "/jobs/{job_id}/scene",
+        responses={**NOT_FOUND, 409: {"model": Error, "description": "the job's scenario no longer loads"}},
+    )
+    def get_scene(job_id: str) -> dict[str, Any]:
+        """What the viewer draws: the scene's bodies with their shapes (parameters applied) and,
+        for a plan job with a result, each rung's times and body placements per state."""
+        row = get_row(job_id)
+        result = row["result"] if row["kind"] == "plan" else None
+        try:
+            return scene_view(json.loads(row["inputs"]), result)
+        except ScenarioError as exc:  # accepted once; only a changed planner could refuse it now
+            raise HTTPException(409, f"the job's scenario no longer loads: {exc}") from None
+
+    @app.get(
+        "/jobs/{job_id}/events",
+        response_class=Response,  # no media type of its own: its 200 is text/event-stream, its errors JSON
+        responses={
+            200: {"content": {"text/event-stream": {"schema": {"type": "string"}}}, "description": "the events, live"},
+            **NOT_FOUND,
+            **UNPROCESSABLE,
+        },
+    )
+    async def events(
+        job_id: str,
+        request: Request,
+        last_event_id: str | None = Header(None),
+        token: str | None = Query(None, description="the bearer token, for clients that cannot send headers (EventSource)"),
+    ):
         """Server-sent events: state, rung_started, progress, rung_ended, job_ended (the last)."""
         get_row(job_id)
         try:
             after = int(last_event_id) if last_event_id else 0
         except ValueError:
-            raise HTTPException(422, "Last-Event-ID must be an event id (an integer)") from None
+            return _unprocessable(ScenarioError("request", [Problem("Last-Event-ID", "must be an event id (an integer)")]))
 
         async def stream():
             seq, quiet = after, 0.0
@@ -324,6 +510,6 @@ def create_app(
                         quiet = 0.0
                         yield ": keep-alive\n\n"
 
-        return StreamingResponse(stream(), media_type="text/event-stream", headers={"Cache-Control": "no-cache"})
+        return EventStream(stream(), headers={"Cache-Control": "no-cache"})
 
     return app

@@ -17,6 +17,7 @@ import dataclasses
 import json
 import os
 import tempfile
+import threading
 import tomllib
 from collections.abc import Callable, Iterator
 from pathlib import Path, PurePosixPath
@@ -25,7 +26,7 @@ from typing import Any
 
 from models.scenario import Problem, ScenarioError
 
-KINDS = ("plan", "simulate")
+KINDS = ("plan", "simulate", "sweep")
 #: Options per kind and their types (the CLI's options of the same names).
 PLAN_OPTIONS = {
     "seed": int,
@@ -39,7 +40,15 @@ PLAN_OPTIONS = {
     "guide": bool,
 }
 SIMULATE_OPTIONS = {"model": str, "duration": float, "step": float}
-OPTIONS = {"plan": PLAN_OPTIONS, "simulate": SIMULATE_OPTIONS}
+#: A sweep's grid is a list of `ladder sweep --grid` texts; its model the `--model` text.
+SWEEP_OPTIONS = {"grid": list, "model": str, "refine": bool, "tolerance": float, "duration": float, "step": float}
+OPTIONS = {"plan": PLAN_OPTIONS, "simulate": SIMULATE_OPTIONS, "sweep": SWEEP_OPTIONS}
+REQUIRED = {"plan": (), "simulate": ("model",), "sweep": ("grid", "model")}
+#: The most runs (grid points x models) one sweep job may do: the service checks every run's
+#: scenario before it accepts the job (as `ladder sweep` does), in the request.
+MAX_SWEEP_RUNS = 10_000
+#: The folder, in the job's folder, where a job's CLI outputs are written (a sweep's sweep.json).
+OUT = ".ladder-out"
 
 
 def path_problem(key: str, name: Any) -> Problem | None:
@@ -63,7 +72,7 @@ def _inside(root: Path, path: Path) -> bool:
     return Path(os.path.realpath(path)).is_relative_to(root)
 
 
-def _file_references(raw: Any, where: str = "") -> Iterator[tuple[str, Any]]:
+def file_references(raw: Any, where: str = "") -> Iterator[tuple[str, Any]]:
     """Every `file = ...` in the scenario (mesh shapes), with its key path."""
     if isinstance(raw, dict):
         for key, value in raw.items():
@@ -71,10 +80,10 @@ def _file_references(raw: Any, where: str = "") -> Iterator[tuple[str, Any]]:
             if key == "file":
                 yield here, value
             else:
-                yield from _file_references(value, here)
+                yield from file_references(value, here)
     elif isinstance(raw, list):
         for i, value in enumerate(raw):
-            yield from _file_references(value, f"{where}[{i}]")
+            yield from file_references(value, f"{where}[{i}]")
 
 
 def write_inputs(root: Path, inputs: dict) -> Path:
@@ -102,7 +111,7 @@ def write_inputs(root: Path, inputs: dict) -> Path:
         raw = tomllib.loads(inputs["scenario"])
     except (tomllib.TOMLDecodeError, RecursionError):
         raw = {}  # the loader says what is wrong with the text
-    for key, value in _file_references(raw):
+    for key, value in file_references(raw):
         if not isinstance(value, str):
             continue
         problem = path_problem(key, value)
@@ -145,27 +154,51 @@ def _option_problems(kind: str, options: dict) -> list[Problem]:
             if want is int
             else (isinstance(value, int | float) and not isinstance(value, bool))
             if want is float
+            else (isinstance(value, list) and all(isinstance(v, str) for v in value))
+            if want is list
             else isinstance(value, str) or (name == "rungs" and isinstance(value, list) and all(isinstance(v, str) for v in value))
         )
         if not ok and value is not None:
-            problems.append(Problem(f"options.{name}", f"expected {want.__name__}, got {json.dumps(value)}"))
-    if kind == "simulate" and "model" not in options:
-        problems.append(Problem("options.model", "a simulate job needs a model (a rung)"))
+            expected = "a list of strings" if want is list else want.__name__
+            problems.append(Problem(f"options.{name}", f"expected {expected}, got {json.dumps(value)}"))
+    for name in REQUIRED[kind]:
+        if options.get(name) is None:
+            what = {"model": "a model (a rung)" if kind == "simulate" else "models (as ladder sweep --model)", "grid": "a grid"}[name]
+            problems.append(Problem(f"options.{name}", f"a {kind} job needs {what}"))
+    if kind == "sweep" and not problems:
+        problems += _sweep_size_problems(options)
     return problems
 
 
+def _sweep_size_problems(options: dict) -> list[Problem]:
+    """A sweep of more than MAX_SWEEP_RUNS runs (grid texts the CLI cannot read are its to report)."""
+    from planner import sweep as sw
+
+    try:
+        runs = sw.grid_size([sw.parse_axis(text) for text in options["grid"]]) * len(sw.parse_models(options["model"]))
+    except ScenarioError:
+        return []
+    if runs > MAX_SWEEP_RUNS:
+        return [
+            Problem("options.grid", f"{runs:,} runs, more than a sweep job may run ({MAX_SWEEP_RUNS:,}); use a coarser grid (and refine)")
+        ]
+    return []
+
+
 def _cli_key(key: str) -> str:
-    """The CLI's option names in problems, as the request's keys: --time-limit -> options.time_limit."""
+    """The CLI's option names in problems, as the request's keys: --time-limit -> options.time_limit,
+    --grid v1 -> options.grid v1."""
     if key.startswith("--param "):
         return "parameters." + key.removeprefix("--param ").partition("=")[0]
-    if key.startswith("--"):
-        name = key[2:].split(" ")[0].replace("-", "_")
-        return "options." + {"no_seed_roots": "seed_roots", "no_guide": "guide", "model": "model"}.get(name, name)
+    if key.startswith("--"):  # --grid v1 (an axis), --model plastic (a model's label): the rest is kept
+        name, space, rest = key[2:].partition(" ")
+        name = name.replace("-", "_")
+        return "options." + {"no_seed_roots": "seed_roots", "no_guide": "guide"}.get(name, name) + space + rest
     return key
 
 
 def cli_args(kind: str, path: Path, parameters: dict, options: dict, out: Path) -> SimpleNamespace:
-    """The namespace `ladder plan` / `ladder simulate` would parse for this job."""
+    """The namespace `ladder plan` / `ladder simulate` / `ladder sweep` would parse for this job."""
     param = [f"{k}={float(v)!r}" for k, v in parameters.items()]
     if kind == "plan":
         rungs = options.get("rungs")
@@ -181,6 +214,21 @@ def cli_args(kind: str, path: Path, parameters: dict, options: dict, out: Path) 
             flat=bool(options.get("flat", False)),
             no_seed_roots=not options.get("seed_roots", True),
             no_guide=not options.get("guide", True),
+            out=out,
+            json=True,
+        )
+    if kind == "sweep":
+        return SimpleNamespace(
+            file=path,
+            param=param,
+            grid=list(options.get("grid") or []),
+            model=options.get("model"),
+            workers=1,  # the job's own worker process runs the sweep's runs (the service's --workers is the parallelism)
+            executor=None,
+            refine=bool(options.get("refine", False)),
+            tolerance=options.get("tolerance", 1e-3),
+            duration=options.get("duration"),
+            step=options.get("step"),
             out=out,
             json=True,
         )
@@ -214,6 +262,8 @@ def check(kind: str, path: Path, parameters: dict, options: dict, out: Path) -> 
 
             checked = cli._check_plan_args(args)
             check_start(checked[0])
+        elif kind == "sweep":
+            checked = cli._check_sweep_args(args)
         else:
             checked = cli._check_simulate_args(args)
     except ScenarioError as exc:
@@ -245,22 +295,77 @@ def rung_view(report) -> dict:
     return data
 
 
-def run(kind: str, inputs: dict, options: dict, *, progress=None, rung_done=None, stop: Callable[[], bool] | None = None):
+#: Seconds between a simulate job's looks at whether it should stop.
+STOP_POLL_S = 0.25
+
+
+@contextlib.contextmanager
+def _interrupt_when(stop: Callable[[], bool] | None) -> Iterator[None]:
+    """While the block runs, a thread asks `stop()` every STOP_POLL_S and, when it says so,
+    stops the deferred loops as Ctrl-C would (planner.interrupt.ask): a simulation's rollout
+    reads that flag between its chunks. The flag is cleared after (a worker runs many jobs)."""
+    from planner import interrupt
+
+    if stop is None:
+        yield
+        return
+    done = threading.Event()
+
+    def watch() -> None:
+        while not done.wait(STOP_POLL_S):
+            if stop():
+                interrupt.ask()
+                return
+
+    watcher = threading.Thread(target=watch, name="ladder-job-stop", daemon=True)
+    watcher.start()
+    try:
+        yield
+    finally:
+        done.set()
+        watcher.join()
+        interrupt.reset()
+
+
+def run(
+    kind: str,
+    inputs: dict,
+    options: dict,
+    *,
+    progress=None,
+    rung_done=None,
+    sweep_progress: Callable[[dict], None] | None = None,
+    stop: Callable[[], bool] | None = None,
+):
     """Run a job from its inputs: (the result file's text, complete). A plan's text is plan.json
     (planner.ladder.plan_json_text, as `ladder plan` writes it); a simulation's is the JSON
-    `ladder simulate --json` prints."""
+    `ladder simulate --json` prints; a sweep's is the sweep.json `ladder sweep` writes.
+    `progress(rung, iterations, propagations)` and `rung_done(report)` follow a plan,
+    `sweep_progress(data)` a sweep; `stop()` True ends the job, keeping what is done."""
     from planner import cli
 
     with job_folder(inputs) as path:
-        args, checked = check(kind, path, inputs.get("parameters") or {}, options, Path("."))
+        args, checked = check(kind, path, inputs.get("parameters") or {}, options, Path(OUT))
         if kind == "plan":
             from planner.ladder import plan_json_text
 
             scenario, names = checked
             result = cli.ladder_for(scenario, names, args, progress=progress, stop=stop, rung_done=rung_done)
             return plan_json_text(result), result.complete
+        if kind == "sweep":
+
+            def on_progress(data: dict) -> None:
+                if sweep_progress is not None:
+                    sweep_progress(data)
+                if stop is not None and stop():
+                    raise KeyboardInterrupt  # the sweep stops between runs, keeping them
+
+            result, interrupted = cli._run_sweep(args, *checked, on_progress=on_progress)
+            cli._write_sweep_outputs(args, result, checked[2])
+            return (args.out / "sweep.json").read_text(), not interrupted
         scenario, plan_controls, h, duration, total = checked
-        result = cli._run_simulation(args, scenario, plan_controls, h, duration, total)
+        with _interrupt_when(stop):
+            result = cli._run_simulation(args, scenario, plan_controls, h, duration, total)
         if result is None:
             return None, False
         return json.dumps(cli._simulation_summary(args, scenario, result, h, duration), indent=2) + "\n", True

@@ -1,10 +1,15 @@
-"""What a worker process does: run one job from its stored inputs, writing its progress,
-events and result into the database itself (its own connection)."""
+"""What a worker does with one job: run it from its inputs, reporting progress and events to a
+sink and checking it for a cancel. A local worker process (`run_job`) reports straight into the
+database (its own connection); a Dask task (planner.service.remote) reports through Dask to the
+server, which writes them. Both run `execute`."""
 
 from __future__ import annotations
 
+import json
 import os
 import time
+from collections.abc import Callable
+from typing import Protocol
 
 from models.scenario import ScenarioError
 from planner.service import jobs
@@ -15,59 +20,100 @@ PROGRESS_EVERY = 0.5
 CANCEL_EVERY = 0.25
 
 
-def run_job(db_path: str, job_id: str, max_seconds: float | None = None) -> str | None:
-    """Run the job if it is still queued; its final state (None when it was not queued)."""
-    import json
+class Sink(Protocol):
+    """Where a running job's progress and events go, and whether it was asked to stop."""
 
+    def cancel_requested(self) -> bool: ...
+
+    def progress(self, data: dict, event: tuple[str, dict] | None = None) -> None: ...
+
+    def event(self, type_: str, data: dict) -> None: ...
+
+
+class StoreSink:
+    """A job's sink in the service's database (a local worker process)."""
+
+    def __init__(self, store: Store, job_id: str):
+        self.store, self.job_id = store, job_id
+
+    def cancel_requested(self) -> bool:
+        return self.store.cancel_requested(self.job_id)
+
+    def progress(self, data: dict, event: tuple[str, dict] | None = None) -> None:
+        self.store.set_progress(self.job_id, data, event)
+
+    def event(self, type_: str, data: dict) -> None:
+        self.store.add_event(self.job_id, type_, data)
+
+
+def execute(
+    kind: str, inputs: dict, options: dict, sink: Sink, max_seconds: float | None = None, *, check: Callable[[], None] | None = None
+) -> tuple[str, str | None, str | None]:
+    """Run a job: (its final state, the result file's text or None, its error or None).
+    `check()` runs at every stop check (a local worker exits there when the server died)."""
+    deadline = None if max_seconds is None else time.monotonic() + max_seconds
+    state = {"cancel": False, "timeout": False, "checked": 0.0, "written": 0.0}
+
+    def stop() -> bool:
+        if check is not None:
+            check()
+        now = time.monotonic()
+        if deadline is not None and now > deadline:
+            state["timeout"] = True
+        if now - state["checked"] >= CANCEL_EVERY:
+            state["checked"] = now
+            state["cancel"] = sink.cancel_requested()
+        return state["cancel"] or state["timeout"]
+
+    def progress(rung: str, iterations: int, propagations: int) -> None:
+        now = time.monotonic()
+        data = {"rung": rung, "iterations": iterations, "propagations": propagations}
+        if iterations == 0 and propagations == 0:
+            sink.progress(data, ("rung_started", {"rung": rung}))
+            state["written"] = now
+        elif now - state["written"] >= PROGRESS_EVERY:
+            sink.progress(data, ("progress", data))
+            state["written"] = now
+
+    def rung_done(report) -> None:
+        sink.event("rung_ended", jobs.rung_view(report))
+
+    def sweep_progress(data: dict) -> None:
+        now = time.monotonic()
+        if now - state["written"] >= PROGRESS_EVERY or data.get("runs_done") == data.get("runs"):
+            sink.progress(data, ("progress", data))
+            state["written"] = now
+
+    try:
+        text, complete = jobs.run(kind, inputs, options, progress=progress, rung_done=rung_done, sweep_progress=sweep_progress, stop=stop)
+    except ScenarioError as exc:
+        return "failed", None, str(exc)
+    except Exception as exc:  # a bug, reported on the job rather than lost
+        return "failed", None, f"internal error: {type(exc).__name__}: {exc}"
+    if complete:
+        return "succeeded", text, None
+    if state["timeout"] and not state["cancel"]:
+        return "failed", text, f"stopped at the wall-time limit of {max_seconds:g} s (what was done is in the result)"
+    return "cancelled", text, None
+
+
+def run_job(db_path: str, job_id: str, max_seconds: float | None = None) -> str | None:
+    """Run the job if it is still queued (a local worker process); its final state (None when
+    it was not queued)."""
     store = Store(db_path)
     try:
         if not store.claim(job_id):
             return None
         row = store.get(job_id)
-        inputs, options = json.loads(row["inputs"]), json.loads(row["options"])
-        deadline = None if max_seconds is None else time.monotonic() + max_seconds
-        state = {"cancel": False, "timeout": False, "checked": 0.0, "written": 0.0}
         parent = os.getppid()
 
-        def stop() -> bool:
+        def check() -> None:
             if os.getppid() != parent:  # the server died (kill -9): the job stays running and is run again on restart
                 os._exit(0)
-            now = time.monotonic()
-            if deadline is not None and now > deadline:
-                state["timeout"] = True
-            if now - state["checked"] >= CANCEL_EVERY:
-                state["checked"] = now
-                state["cancel"] = store.cancel_requested(job_id)
-            return state["cancel"] or state["timeout"]
 
-        def progress(rung: str, iterations: int, propagations: int) -> None:
-            now = time.monotonic()
-            data = {"rung": rung, "iterations": iterations, "propagations": propagations}
-            if iterations == 0 and propagations == 0:
-                store.set_progress(job_id, data, ("rung_started", {"rung": rung}))
-                state["written"] = now
-            elif now - state["written"] >= PROGRESS_EVERY:
-                store.set_progress(job_id, data, ("progress", data))
-                state["written"] = now
-
-        def rung_done(report) -> None:
-            store.add_event(job_id, "rung_ended", jobs.rung_view(report))
-
-        try:
-            text, complete = jobs.run(row["kind"], inputs, options, progress=progress, rung_done=rung_done, stop=stop)
-        except ScenarioError as exc:
-            store.finish(job_id, "failed", error=str(exc))
-            return "failed"
-        except Exception as exc:  # a bug, reported on the job rather than lost
-            store.finish(job_id, "failed", error=f"internal error: {type(exc).__name__}: {exc}")
-            return "failed"
-        if complete:
-            final = "succeeded"
-            error = None
-        elif state["timeout"] and not state["cancel"]:
-            final, error = "failed", f"stopped at the wall-time limit of {max_seconds:g} s (the rungs done are in the result)"
-        else:
-            final, error = "cancelled", None
+        final, text, error = execute(
+            row["kind"], json.loads(row["inputs"]), json.loads(row["options"]), StoreSink(store, job_id), max_seconds, check=check
+        )
         store.finish(job_id, final, result=text, error=error)
         return final
     finally:

@@ -1,0 +1,134 @@
+"""The service's client (planner.service.client) and `ladder submit`, against a real server on
+loopback (uvicorn in a thread): submit, follow, resume, results equal to the CLI's, and the
+errors a user sees (one line, exit 2, no traceback)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+pytest.importorskip("fastapi")
+pytest.importorskip("httpx")
+
+from planner.cli import main  # noqa: E402
+from planner.service.client import Client, ServiceError, job_request  # noqa: E402
+from tests.conftest import ROOT, SCENARIOS  # noqa: E402
+from tests.service_server import cli_plan_json, running_service, wait_for_state  # noqa: E402
+
+FREE = SCENARIOS / "free_transfer.toml"
+
+
+@pytest.fixture(scope="module")
+def live(tmp_path_factory):
+    """A service with one worker process (module-wide: the worker loads the kernels once)."""
+    with running_service(tmp_path_factory.mktemp("live") / "jobs.sqlite", workers=1) as url:
+        yield url
+
+
+@pytest.fixture
+def idle(tmp_path):
+    """A service that accepts jobs and runs none, with a token and a queue of 1."""
+    with running_service(tmp_path / "jobs.sqlite", workers=0, token="s3cret", max_queued=1) as url:
+        yield url
+
+
+def submit_cli(capsys, monkeypatch, *args):
+    """`ladder submit ARGS` run here from the repository root: (exit code, stdout, stderr)."""
+    monkeypatch.chdir(ROOT)
+    code = main(["submit", *args])
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_job_request_carries_the_meshes_the_scenario_names(monkeypatch):
+    monkeypatch.chdir(ROOT)
+    body = job_request("scenarios/box_push_3d.toml", parameters={"mu": 0.4}, options={"seed": 2})
+    assert body["filename"] == "scenarios/box_push_3d.toml"
+    assert body["files"] == {"meshes/wedge.obj": (SCENARIOS / "meshes" / "wedge.obj").read_text()}
+    assert body["scenario"] == (SCENARIOS / "box_push_3d.toml").read_text()
+    assert body["parameters"] == {"mu": 0.4} and body["options"] == {"seed": 2} and body["kind"] == "plan"
+    outside = job_request(FREE)  # an absolute path: the scenario goes by its file name
+    assert outside["filename"] == "free_transfer.toml" and outside["files"] == {}
+
+
+def test_submit_then_wait_prints_the_job_and_the_result_is_the_clis(live, capsys, monkeypatch):
+    code, out, err = submit_cli(capsys, monkeypatch, "scenarios/free_transfer.toml", "--server", live, "--seed", "3", "--json")
+    assert code == 0, err
+    job = json.loads(out)
+    assert job["state"] in ("queued", "running", "succeeded") and job["kind"] == "plan" and job["options"] == {"seed": 3}
+    code, out, err = submit_cli(capsys, monkeypatch, "scenarios/free_transfer.toml", "--server", live, "--seed", "3", "--wait")
+    assert code == 0, err
+    assert "planning: geometric ..." in err and "ended: succeeded" in err
+    assert "succeeded" in out and "top rung holds: yes" in out
+    with Client(live) as client:
+        first = wait_for_state(client, job["id"])
+        assert first["state"] == "succeeded"
+        assert client.result(job["id"]) == cli_plan_json(FREE, seed=3)
+        ids = [j["id"] for j in client.jobs()]
+        assert job["id"] in ids and len(ids) == len(set(ids)) == 2
+
+
+def test_wait_follows_the_events_and_events_resume_after_an_id(live):
+    with Client(live) as client:
+        job = client.submit(FREE, options={"seed": 5})
+        seen = []
+        ended = client.wait(job["id"], on_event=seen.append)
+        assert ended["state"] == "succeeded" and ended["id"] == job["id"]
+        assert [e.id for e in seen] == list(range(1, len(seen) + 1))
+        assert seen[-1].type == "job_ended" and seen[-1].data["state"] == "succeeded"
+        assert {"rung_started", "rung_ended"} <= {e.type for e in seen}
+        cut = len(seen) // 2
+        assert [e.id for e in client.events(job["id"], last_event_id=cut)] == [e.id for e in seen[cut:]]
+        assert list(client.events(job["id"], last_event_id=seen[-1].id)) == []
+
+
+def test_the_client_cancels_and_reports_refusals(idle):
+    with Client(idle, token="s3cret") as client:
+        job = client.submit(FREE, options={"seed": 3}, idempotency_key="k")
+        assert client.submit(FREE, options={"seed": 3}, idempotency_key="k")["id"] == job["id"]  # the same job
+        with pytest.raises(ServiceError) as full:
+            client.submit(FREE, options={"seed": 4})
+        assert full.value.status == 429 and full.value.retry_after > 0 and "queue is full" in str(full.value)
+        assert client.cancel(job["id"])["state"] == "cancelled"
+        assert client.wait(job["id"])["state"] == "cancelled"
+        with pytest.raises(ServiceError) as none:
+            client.result(job["id"])
+        assert none.value.status == 409
+        with pytest.raises(ServiceError) as missing:
+            client.get("nope")
+        assert missing.value.status == 404 and "no job nope" in str(missing.value)
+        bad = job_request(FREE, parameters={"nope": 1.0})
+        with pytest.raises(ServiceError) as refused:
+            client.submit_request(bad)
+        assert refused.value.status == 422 and str(refused.value).startswith("free_transfer.toml: parameters.nope:")
+    with Client(idle) as anonymous, pytest.raises(ServiceError) as denied:
+        anonymous.jobs()
+    assert denied.value.status == 401 and "--token" in str(denied.value)
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["scenarios/free_transfer.toml", "--server", "http://127.0.0.1:9"], "error: cannot reach the service at http://127.0.0.1:9"),
+        (["scenarios/free_transfer.toml", "--server", "127.0.0.1:8000"], "must start with http:// or https://"),
+        (["scenarios/no_such.toml"], "error: scenarios/no_such.toml: no such file"),
+        (["scenarios/free_transfer.toml", "--param", "gap"], "--param gap: expected NAME=NUMBER"),
+    ],
+)
+def test_submit_bad_input_is_one_line_and_exit_2(capsys, monkeypatch, args, message):
+    code, out, err = submit_cli(capsys, monkeypatch, *args)
+    assert code == 2 and out == ""
+    assert message in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+
+
+def test_submit_refused_by_the_service_is_exit_2_with_its_reasons(idle, capsys, monkeypatch):
+    code, out, err = submit_cli(capsys, monkeypatch, "scenarios/free_transfer.toml", "--server", idle)
+    assert code == 2 and out == "" and "401" in err and "--token" in err and "Traceback" not in err
+    monkeypatch.setenv("LADDER_TOKEN", "s3cret")
+    args = ["scenarios/free_transfer.toml", "--server", idle, "--seed", "-1", "--param", "nope=1"]
+    code, out, err = submit_cli(capsys, monkeypatch, *args)
+    assert code == 2 and out == "" and "Traceback" not in err
+    lines = err.splitlines()
+    assert lines[0].startswith("error: scenarios/free_transfer.toml: parameters.nope: the file has no parameter 'nope'")
+    assert lines[1] == "scenarios/free_transfer.toml: options.seed: must be between 0 and 4294967295, got -1"

@@ -1,0 +1,69 @@
+"""Jobs on a Dask cluster (`ladder serve --executor dask://...`): a LocalCluster of one worker
+process started here. The job's progress and events reach the database through Dask, its
+plan.json is the CLI's, and a cancel stops a running job and keeps a queued one from starting."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+pytest.importorskip("fastapi")
+distributed = pytest.importorskip("distributed")  # the test extra; CI installs it
+
+from fastapi.testclient import TestClient  # noqa: E402
+
+from models.scenario import ScenarioError  # noqa: E402
+from planner.service import create_app  # noqa: E402
+from tests.conftest import SCENARIOS  # noqa: E402
+from tests.service_server import cli_plan_json  # noqa: E402
+from tests.test_service import FREE, STUCK, parse_sse, submit, wait_for  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as local:
+        yield "dask://" + local.scheduler_address.removeprefix("tcp://")
+
+
+@pytest.fixture
+def on_dask(cluster, tmp_path):
+    with TestClient(create_app(tmp_path / "jobs.sqlite", executor=cluster)) as client:
+        yield client
+
+
+def test_a_plan_job_on_dask_reports_through_dask_and_gives_the_clis_plan(on_dask):
+    job = submit(on_dask).json()
+    ended = wait_for(on_dask, job["id"])
+    assert ended["state"] == "succeeded" and ended["runs"] == 1, ended
+    assert [r["rung"] for r in ended["rungs"]] == ["geometric", "kinematic"]
+    assert on_dask.get(f"/jobs/{job['id']}/result").text == cli_plan_json(SCENARIOS / "free_transfer.toml", seed=3)
+    events = parse_sse(on_dask.get(f"/jobs/{job['id']}/events").text)
+    kinds = [e["event"] for e in events]
+    assert [e["id"] for e in events] == list(range(1, len(events) + 1))
+    assert kinds[:2] == ["state", "state"] and [e["data"]["state"] for e in events[:2]] == ["queued", "running"]
+    assert kinds[-1] == "job_ended" and kinds.count("job_ended") == 1
+    assert kinds.index("rung_started") < kinds.index("rung_ended") < kinds.index("job_ended")
+    assert [e["data"]["rung"] for e in events if e["event"] == "rung_ended"] == ["geometric", "kinematic"]
+
+
+def test_cancel_on_dask_stops_the_running_job_and_the_queued_one_never_starts(on_dask):
+    running = submit(on_dask, STUCK).json()
+    queued = submit(on_dask, {"kind": "plan", "scenario": FREE, "options": {"seed": 4}}).json()  # behind it: one worker
+    wait_for(on_dask, running["id"], states=("running", "succeeded", "failed", "cancelled"))
+    assert on_dask.delete(f"/jobs/{queued['id']}").json()["state"] == "cancelled"
+    assert on_dask.delete(f"/jobs/{running['id']}").json()["cancel_requested"] is True
+    ended = wait_for(on_dask, running["id"])
+    assert ended["state"] == "cancelled" and json.loads(on_dask.get(f"/jobs/{running['id']}/result").text)["complete"] is False
+    after = submit(on_dask, {"kind": "plan", "scenario": FREE, "options": {"seed": 5}}).json()  # the worker is free again
+    assert wait_for(on_dask, after["id"])["state"] == "succeeded"
+    never = on_dask.get(f"/jobs/{queued['id']}").json()
+    assert never["state"] == "cancelled" and never["runs"] == 0 and never["progress"] is None
+
+
+def test_an_unreachable_scheduler_is_bad_input(tmp_path, monkeypatch):
+    from planner.service import remote
+
+    monkeypatch.setattr(remote, "CONNECT_TIMEOUT_S", 1)
+    with pytest.raises(ScenarioError, match="cannot reach the Dask scheduler"):
+        create_app(tmp_path / "jobs.sqlite", executor="dask://127.0.0.1:9")
