@@ -55,7 +55,7 @@ def ladder_vs_flat(
                     wall,
                     sum(r.propagations for r in result.rungs),
                     sum(r.rollouts for r in result.rungs),
-                    ", ".join(f"{r.rung}: {r.ended.label}" for r in result.rungs),
+                    ", ".join(f"{r.label}: {r.ended.label}" for r in result.rungs),
                 )
             )
             if progress:

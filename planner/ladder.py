@@ -9,8 +9,16 @@ For each rung in order:
 - a rung whose physics along the previous plan is the same as the previous rung's (the
   rigid and compliant variants of one model when no contact carries force at the same step
   size) is "skipped", with the reason, and inherits the plan;
+- a physics rung that takes more steps per control period than the physics rung above it is
+  "omitted": no cheaper to plan with, it is left out and its budget passes up;
 - a rung replays the previous plan's controls first: if they reach the goal as they are, the
   rung ends "replayed" (the cheapest way up: one rollout per control);
+- else, when the previous plan holds under its own rung, the rung plans first with its own
+  model at a coarser step (COARSE_FACTORS; the coarsest whose replay of the previous plan
+  agrees with the rung's own) -- a "coarse stage", reported as a rung of its own
+  (``dynamic-rigid@0.005``) -- and then tracks that plan at its own step, planning again at the
+  coarse step from where tracking is lost (`_track_rounds`); a coarse propagation costs a
+  fraction of the rung's, and the coarse plan is one the rung follows closely;
 - else a rung above a physics rung *tracks* the previous plan (`planner.tracking`): the previous
   plan's states, recorded per control period under its own rung, are a reference; the rung
   follows it in closed loop, one control period at a time, keeping the previous control while
