@@ -79,6 +79,8 @@ def test_the_viewer_submits_the_paper_scene_follows_it_and_animates_the_plan(bro
         page.click("#submit")
 
         page.wait_for_selector("#job-state.succeeded", timeout=timeout_ms)
+        # the state may show before the event stream delivers the job's last event
+        page.wait_for_function("document.querySelector('#log').innerText.includes('job_ended: succeeded')", timeout=timeout_ms)
         log = page.inner_text("#log")
         assert "state: running" in log and "rung_started: dynamic-compliant" in log and "job_ended: succeeded" in log
         assert "rung_ended: dynamic-compliant" in log  # the top rung, followed live through the events
