@@ -368,9 +368,9 @@ def _climb(
         return [_replayed(step, previous, replay)]
     if carried and previous.rung != "geometric":
         if coarse and previous.ended.holds:  # not from a failed rung's partial plan (strike.toml: 3 of 5 seeds hold so, 5 of 5 not)
-            h = _coarser_step(step, previous, replay)
-            if h is not None:
-                return _coarse_first(step, previous, planner, seeded, guided, progress, h)
+            found = _coarser_step(step, previous, replay)
+            if found is not None:
+                return _coarse_first(step, previous, planner, seeded, guided, progress, *found, replay)
         tracked = _track(step, previous)
         replay = _Replay.of(tracked)
         if step.stopped():
@@ -394,10 +394,11 @@ COARSE_FACTORS = (5, 2)
 COARSE_AGREEMENT = TRACK_TOLERANCE / 2
 
 
-def _coarser_step(step: _Step, previous: RungReport, replay: _Replay) -> float | None:
+def _coarser_step(step: _Step, previous: RungReport, replay: _Replay) -> tuple[float, _Replay] | None:
     """The coarsest step (COARSE_FACTORS times the rung's; at most the control period, which it
     divides) whose replay of the previous plan agrees with `replay`, the rung's own, at every
-    control switch both reached (COARSE_AGREEMENT) and ends the same way; None if none does."""
+    control switch both reached (COARSE_AGREEMENT) and ends the same way, and that replay;
+    None if none does."""
     scenario, error = step.scenario, PoseError(step.scenario)
     for factor in COARSE_FACTORS:
         h = factor * step.h
@@ -411,27 +412,32 @@ def _coarser_step(step: _Step, previous: RungReport, replay: _Replay) -> float |
             continue
         pairs = list(zip(rough.states, replay.states)) + [(rough.state, replay.state)]
         if len(rough.states) == len(replay.states) and all(error(a.q, b.q) <= COARSE_AGREEMENT for a, b in pairs):
-            return h
+            return h, rough
     return None
 
 
-def _coarse_first(step: _Step, previous: RungReport, planner, seeded: bool, guided: bool, progress, h: float) -> list[RungReport] | None:
+def _coarse_first(
+    step: _Step, previous: RungReport, planner, seeded: bool, guided: bool, progress, h: float, rough: _Replay, replay: _Replay
+) -> list[RungReport] | None:
     """The rung's model at step h takes the previous plan up (a coarse stage, its own report),
     then the rung at its own step takes the coarse stage's plan up (tracking it), within the
-    rung's iterations; a coarse stage that finds no plan leaves the rung the previous plan."""
-    rough = _climb(replace(step, step=h), previous, planner, seeded, guided, progress, coarse=False)
-    if rough is None:
+    rung's iterations; a coarse stage that finds no plan leaves the rung the previous plan (and
+    `replay`, its replay at the rung's own step)."""
+    # the coarse stage starts from the replay `_coarser_step` made (`rough`), settled as `_replay` would
+    settled = _settled(step.scenario, step.rung, rough, previous, h, step.period)
+    climbed = _climb(replace(step, step=h), previous, planner, seeded, guided, progress, coarse=False, replay=settled)
+    if climbed is None:
         return None
     stage = replace(
-        rough[0],
+        climbed[0],
         h=h,
         stage="coarse",
         reason=f"at h = {h:g} s ({h / step.h:g} x the rung's step, whose replay of the previous plan it agrees with): "
-        + (rough[0].reason or rough[0].ended.message),
+        + (climbed[0].reason or climbed[0].ended.message),
     )
     rest = replace(step, iterations=step.iterations - stage.iterations, t0=time.perf_counter())
     if not stage.ended.holds:
-        own = _climb(rest, previous, planner, seeded, guided, progress, coarse=False)
+        own = _climb(rest, previous, planner, seeded, guided, progress, coarse=False, replay=replay)
         return None if own is None else [stage, *own]
     tracked = _track_rounds(rest, stage, h)
     if step.stopped():
@@ -443,7 +449,7 @@ def _coarse_first(step: _Step, previous: RungReport, planner, seeded: bool, guid
     return None if own is None else [stage, own]
 
 
-#: Where the rung loses track of its coarse stage's plan for good (local repairs included), it
+#: Where the rung loses track of its coarse stage's plan, it
 #: plans again at the coarse step from the last tracked state and tracks that, up to this many
 #: times in all, before it searches at its own step (the expensive way); tracking makes no local
 #: repairs at the rung's own step here: re-planning at the coarse step is the cheaper repair.
@@ -927,6 +933,13 @@ def _replay(scenario, rung, start, previous, h, period: float | None = None) -> 
     with the drives held still (SETTLE_PERIODS); it is that one (`held` periods added) if it
     then reaches the goal."""
     run = _replay_controls(scenario, rung, start, previous.controls, previous.durations, h, _Replay.empty(start))
+    return _settled(scenario, rung, run, previous, h, period)
+
+
+def _settled(scenario, rung, run: _Replay, previous, h, period: float | None) -> _Replay:
+    """`run`, the previous plan's controls replayed (`_replay_controls`), or, when it ran through
+    every control without an outcome, its continuation with the drives held still if that
+    reaches the goal (see `_replay`)."""
     if period and run.outcome == NONE and run.status == OK and len(run.controls) == len(previous.controls):
         zero = [[0.0] * len(scenario.actuated)] * SETTLE_PERIODS
         settled = _replay_controls(scenario, rung, run.state, zero, [period] * SETTLE_PERIODS, h, run)
