@@ -52,6 +52,11 @@ class State:
         return {n: float(v) for n, v in zip(scenario.coordinates, self.q)}
 
 
+#: A rollout's status and outcome codes as its result spells them (looked up once, not per call).
+_STATUS_TEXT = {int(s): (s.label, s.message) for s in StepStatus}
+_OUTCOME_LABEL = {int(o): o.label for o in Outcome}
+
+
 @dataclass(frozen=True)
 class RolloutResult:
     state: State
@@ -232,19 +237,57 @@ class Rung:
         obstacles are); the result's times count from the start of this rollout."""
         if self.model is None:
             raise ValueError("the geometric rung has no dynamics to roll out; use valid()")
-        c = compiled(scenario)
-        durations = np.ascontiguousarray(np.atleast_1d(np.asarray(durations, float)))
-        controls = np.ascontiguousarray(np.asarray(controls, float).reshape(len(durations), len(scenario.actuated)))
+        durations = np.array(durations, dtype=float, ndmin=1)  # copies: contiguous, the caller's stays theirs
+        controls = np.array(controls, dtype=float).reshape(len(durations), len(scenario.actuated))
         if len(controls) != len(durations):
             raise ValueError(f"{len(controls)} controls but {len(durations)} durations")
         if record_every <= 0:
-            total = int(np.round(durations.sum() / h))
+            total = int(round(float(durations.sum()) / h))
             record_every = max(1, total // max(max_records - 2, 1))
+        start = time.perf_counter()
+        out = self._run(scenario, state, controls, durations, h, record_every, max_records, stop_at_outcome, t0)
+        wall = time.perf_counter() - start
+        status, message = _STATUS_TEXT[out.status]
+        return RolloutResult(
+            state=State(out.q, out.nu, out.q_ref, out.delta_n, out.delta_t),
+            t=float(out.t),
+            outcome=_OUTCOME_LABEL[out.outcome],
+            status=status,
+            message=message,
+            steps=int(out.steps),
+            lcp_solves=int(out.lcp_solves),
+            pivots=int(out.pivots),
+            max_residual=float(out.max_residual),
+            max_lcp_size=int(out.max_lcp_size),
+            wall_s=wall,
+            times=out.times,
+            trajectory=out.trajectory,
+            velocities=out.velocities,
+            pair_force=out.pair_force[: len(scenario.pairs)],
+            min_psi=float(out.min_psi),
+            force_steps=int(out.force_steps),
+            sweeps=int(out.sweeps),
+            pair_wrench=out.pair_wrench[: len(scenario.pairs)],
+        )
+
+    def advance(self, scenario: Scenario, state: State, control: np.ndarray, duration: float, h: float):
+        """`rollout` of one control, stopping at an outcome, with nothing recorded but the
+        final state: the planners' propagation, at the least cost per call. Returns (final
+        State, its `models.task.Outcome` value, the `StepStatus` value the run ended with)."""
+        controls = np.array(control, dtype=float).reshape(1, -1)
+        out = self._run(scenario, state, controls, np.array([float(duration)]), h, 1 << 30, 2, True, 0.0)
+        return State(out.q, out.nu, out.q_ref, out.delta_n, out.delta_t), int(out.outcome), int(out.status)
+
+    def _run(self, scenario, state, controls, durations, h, record_every, max_records, stop_at_outcome, t0):
+        """The compiled rollout on contiguous float arrays (the kernel works on copies of the
+        state's arrays); its raw `models.rollout.RolloutOutput`."""
+        if self.model is None:
+            raise ValueError("the geometric rung has no dynamics to roll out; use valid()")
+        c = compiled(scenario)
         scene = c.scene
         if c.scripted:  # the kernel moves scripted obstacles in the pose tables: its own copy
             scene = scene._replace(bf=scene.bf.copy(), base_pos=scene.base_pos.copy(), base_quat=scene.base_quat.copy())
-        start = time.perf_counter()
-        out = rollout_kernel(
+        return rollout_kernel(
             scene,
             c.drives,
             self.model,
@@ -263,29 +306,6 @@ class Rung:
             int(max_records),
             bool(stop_at_outcome),
             float(t0),
-        )
-        wall = time.perf_counter() - start
-        status = StepStatus(out.status)
-        return RolloutResult(
-            state=State(out.q, out.nu, out.q_ref, out.delta_n, out.delta_t),
-            t=float(out.t),
-            outcome=Outcome(out.outcome).label,
-            status=status.label,
-            message=status.message,
-            steps=int(out.steps),
-            lcp_solves=int(out.lcp_solves),
-            pivots=int(out.pivots),
-            max_residual=float(out.max_residual),
-            max_lcp_size=int(out.max_lcp_size),
-            wall_s=wall,
-            times=out.times,
-            trajectory=out.trajectory,
-            velocities=out.velocities,
-            pair_force=out.pair_force[: len(scenario.pairs)],
-            min_psi=float(out.min_psi),
-            force_steps=int(out.force_steps),
-            sweeps=int(out.sweeps),
-            pair_wrench=out.pair_wrench[: len(scenario.pairs)],
         )
 
     def rollout_chunked(

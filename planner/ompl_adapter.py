@@ -2,7 +2,7 @@
 
 An OMPL state is the rung's whole state flattened: [q, nu, q_ref, delta_n, delta_t, flag],
 where flag records how the rollout that produced it ended (0 running, 1 goal, 2 unsafe,
-3 numerical failure). The state space is a compound of the steered coordinates of q (weight
+3 numerical failure, 4 outside the limits below). The state space is a compound of the steered coordinates of q (weight
 1) and the rest (weight 1e-6), so nearest neighbours are found in the part of configuration
 space the planner can steer (`steered_coordinates`: in a spatial scene the height and
 orientation of a passive body only follow from contact, and uniform samples of them would
@@ -11,7 +11,8 @@ control period of physics steps in one compiled rollout (OMPL-CRIB section 8: co
 keep the Python callback cost small). Validity: flag is neither unsafe nor failure, q is in
 bounds, and no drive is wound up (its reference leads its position by more than a control
 period of full-speed travel: it is jammed, and the spring released later would throw what it
-touches; kinematic plans that jam a pusher against a wall failed this way under dynamics).
+touches; kinematic plans that jam a pusher against a wall failed this way under dynamics);
+the propagator checks the last two as it makes a state and flags it (`_Limits`).
 The goal region's distance is 0 exactly on states whose rollout reached the goal.
 
 Determinism (OMPL-CRIB section 6): the seed is set before any planner exists and the budget
@@ -27,10 +28,11 @@ import numpy as np
 
 from models.rungs import Rung, State
 from models.scenario import Scenario
+from models.stepper import StepStatus
 from models.task import Outcome, goal_distance
 from planner.plan_status import PlanStatus
 
-FLAG_RUNNING, FLAG_GOAL, FLAG_UNSAFE, FLAG_FAILED = 0.0, 1.0, 2.0, 3.0
+FLAG_RUNNING, FLAG_GOAL, FLAG_UNSAFE, FLAG_FAILED, FLAG_INVALID = 0.0, 1.0, 2.0, 3.0, 4.0
 #: Distance weight of everything but q in the state metric.
 AUXILIARY_WEIGHT = 1e-6
 #: Half-width of the sampling box of passive coordinates around the start (m or rad).
@@ -261,19 +263,20 @@ def plan_control(
     ou.setLogLevel(ou.LOG_NONE)
     ou.RNG.setSeed(int(seed) + 1)  # before any planner or sampler exists; OMPL wants > 0
     layout = _ControlLayout(scenario, start)
+    limits = _Limits(scenario, start, control_period)
     space, projection = _control_state_space(ob, layout, scenario, start)
     si = oc.SpaceInformation(space, _control_space(ob, oc, space, scenario))
     si.setPropagationStepSize(control_period)
     si.setMinMaxControlDuration(1, MAX_CONTROL_PERIODS)
-    propagate = _Propagator(scenario, rung, layout, h, reached)
+    propagate = _Propagator(scenario, rung, layout, limits, h, reached)
     si.setStatePropagator(propagate)
-    si.setStateValidityChecker(_Validity(scenario, layout, start, control_period))
+    si.setStateValidityChecker(_valid_checker(layout))
 
     ss = oc.SimpleSetup(si)
     roots = []
     for k, st in enumerate([start] + list(extra_starts or [])):
         root = space.allocState()
-        layout.write(root, flatten(st))
+        layout.write(root, flatten(st, limits.flag(st, FLAG_RUNNING)))
         roots.append(layout.read(root))
         if k == 0:
             ss.setStartState(root)
@@ -304,32 +307,28 @@ class _ControlLayout:
     def __init__(self, scenario: Scenario, start: State):
         self.sizes = _layout(scenario, start)
         self.nq = self.sizes[0]
+        self.n_flat = sum(self.sizes) + 1  # the flattened rung state (flatten)
         self.steered = np.array(steered_coordinates(scenario), dtype=int)
         self.unsteered = np.array([i for i in range(self.nq) if i not in set(self.steered.tolist())], dtype=int)
-        self.ns, self.nu = len(self.steered), len(self.unsteered)
-        self.n_aux = self.nu + sum(self.sizes[1:]) + 1  # the unsteered coordinates lead the auxiliary part
-        self.n_flat = self.nq + self.n_aux - self.nu  # the flattened rung state (flatten)
+        self.ns = len(self.steered)
+        # where each entry of the auxiliary part comes from in the flattened state
+        self.aux_at = np.concatenate([self.unsteered, np.arange(self.nq, self.n_flat)]).astype(int)
+        self.n_aux = len(self.aux_at)
 
     def read(self, s) -> np.ndarray:
         """The flattened rung state held by an OMPL state."""
-        x = np.empty(self.n_flat)
         q, a = s[0], s[1]
-        for k in range(self.ns):
-            x[self.steered[k]] = q[k]
-        for k in range(self.nu):
-            x[self.unsteered[k]] = a[k]
-        for i in range(self.n_aux - self.nu):
-            x[self.nq + i] = a[self.nu + i]
+        x = np.empty(self.n_flat)
+        x[self.steered] = [q[k] for k in range(self.ns)]
+        x[self.aux_at] = [a[k] for k in range(self.n_aux)]
         return x
 
     def write(self, s, x: np.ndarray) -> None:
         q, a = s[0], s[1]
-        for k in range(self.ns):
-            q[k] = float(x[self.steered[k]])
-        for k in range(self.nu):
-            a[k] = float(x[self.unsteered[k]])
-        for i in range(self.n_aux - self.nu):
-            a[self.nu + i] = float(x[self.nq + i])
+        for k, v in enumerate(x[self.steered].tolist()):
+            q[k] = v
+        for k, v in enumerate(x[self.aux_at].tolist()):
+            a[k] = v
 
     def q_of(self, s) -> np.ndarray:
         return self.read(s)[: self.nq]
@@ -392,13 +391,41 @@ def _control_space(ob, oc, space, scenario: Scenario):
     return cspace
 
 
+class _Limits:
+    """What makes a state invalid besides its flag: q outside the configuration limits, or a
+    drive wound up (its reference leads its position by more than one control period of travel
+    at full speed: it is jammed against something; in the kinematic rung references never
+    lead). `flag` marks such a state FLAG_INVALID (the propagator, as it makes a state; the
+    roots as they are written), so that the validity checker reads one number."""
+
+    def __init__(self, scenario: Scenario, start: State, control_period: float):
+        low, high = configuration_limits(scenario, start.q)
+        self.bounds = list(zip(low.tolist(), high.tolist()))
+        drive_q = [scenario.coordinates.index(n) for n in scenario.actuated]
+        self.drives = list(zip(range(len(drive_q)), drive_q, (control_period * scenario.max_speeds).tolist()))
+
+    def flag(self, state: State, flag: float) -> float:
+        """FLAG_INVALID for a running or goal state outside the limits, else `flag` (on
+        Python floats: numpy's reductions cost more than the check on a handful of numbers)."""
+        if flag != FLAG_RUNNING and flag != FLAG_GOAL:
+            return flag
+        q, q_ref = state.q.tolist(), state.q_ref.tolist()
+        for v, (lo, hi) in zip(q, self.bounds):
+            if not lo <= v <= hi:  # NaN is outside
+                return FLAG_INVALID
+        for j, i, windup in self.drives:
+            if abs(q_ref[j] - q[i]) > windup:
+                return FLAG_INVALID
+        return flag
+
+
 class _Propagator:
     """OMPL's state propagator: one compiled rollout of the rung per control (see the module
     docstring); the result's flag says how it ended (goal, also a `reached` subgoal; unsafe;
-    a numerical failure, counted)."""
+    a numerical failure, counted; outside the limits, `_Limits`)."""
 
-    def __init__(self, scenario: Scenario, rung: Rung, layout: _ControlLayout, h: float, reached=None):
-        self.scenario, self.rung, self.layout, self.h, self.reached = scenario, rung, layout, h, reached
+    def __init__(self, scenario: Scenario, rung: Rung, layout: _ControlLayout, limits: _Limits, h: float, reached=None):
+        self.scenario, self.rung, self.layout, self.limits, self.h, self.reached = scenario, rung, layout, limits, h, reached
         self.na = len(scenario.actuated)
         self.propagations = 0
         self.failures = 0
@@ -406,55 +433,34 @@ class _Propagator:
     def __call__(self, s, control, duration, result) -> None:
         self.propagations += 1
         x = self.layout.read(s)
-        state, flag = unflatten(x, self.layout.sizes)
-        u = np.array([control[j] for j in range(self.na)])
-        if flag != FLAG_RUNNING:
+        if x[-1] != FLAG_RUNNING:
             self.layout.write(result, x)
             return
-        out = self.rung.rollout(self.scenario, state, u.reshape(1, -1), [duration], self.h)
-        new_flag = FLAG_RUNNING
-        if not out.ok:
-            new_flag = FLAG_FAILED
+        state, _ = unflatten(x, self.layout.sizes)
+        end, outcome, status = self.rung.advance(self.scenario, state, [control[j] for j in range(self.na)], duration, self.h)
+        flag = FLAG_RUNNING
+        if status != StepStatus.OK:
+            flag = FLAG_FAILED
             self.failures += 1
-        elif out.outcome == Outcome.GOAL.label:
-            new_flag = FLAG_GOAL
-        elif out.outcome == Outcome.UNSAFE.label:
-            new_flag = FLAG_UNSAFE
-        elif self.reached is not None and self.reached(out.state.q):
-            new_flag = FLAG_GOAL
-        self.layout.write(result, flatten(out.state, new_flag))
+        elif outcome == Outcome.GOAL:
+            flag = FLAG_GOAL
+        elif outcome == Outcome.UNSAFE:
+            flag = FLAG_UNSAFE
+        elif self.reached is not None and self.reached(end.q):
+            flag = FLAG_GOAL
+        self.layout.write(result, flatten(end, self.limits.flag(end, flag)))
 
 
-class _Validity:
-    """OMPL's validity checker: the flag is neither unsafe nor failure, q is within the
-    configuration limits, and no drive is wound up (its reference leads its position by more
-    than one control period of travel at full speed: it is jammed against something; in the
-    kinematic rung references never lead)."""
+def _valid_checker(layout: _ControlLayout):
+    """OMPL's validity checker: the flag is running or goal (not unsafe, a failure, or outside
+    the limits: `_Limits`)."""
+    at = layout.n_aux - 1
 
-    def __init__(self, scenario: Scenario, layout: _ControlLayout, start: State, control_period: float):
-        self.layout = layout
-        self.q_low, self.q_high = configuration_limits(scenario, start.q)
-        self.drive_q = np.array([scenario.coordinates.index(n) for n in scenario.actuated], dtype=int)
-        self.windup = control_period * scenario.max_speeds
-        self.ref_at = layout.nq + layout.sizes[1]  # q_ref's place in the flattened state
+    def valid(s) -> bool:
+        flag = s[1][at]
+        return flag == FLAG_RUNNING or flag == FLAG_GOAL
 
-    def __call__(self, s) -> bool:
-        layout, q_low, q_high = self.layout, self.q_low, self.q_high
-        flag = layout.flag(s)
-        if flag == FLAG_UNSAFE or flag == FLAG_FAILED:
-            return False
-        for k in range(layout.ns):
-            if not q_low[layout.steered[k]] <= s[0][k] <= q_high[layout.steered[k]]:
-                return False
-        for k in range(layout.nu):
-            v = s[1][k]
-            if not q_low[layout.unsteered[k]] <= v <= q_high[layout.unsteered[k]]:
-                return False
-        if len(self.drive_q):
-            x = layout.read(s)
-            if np.any(np.abs(x[self.ref_at : self.ref_at + len(self.drive_q)] - x[self.drive_q]) > self.windup):
-                return False
-        return True
+    return valid
 
 
 def _control_goal(ob, si, layout: _ControlLayout, goal_heuristic, guide_q, scenario: Scenario, start: State, seed: int):
