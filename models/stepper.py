@@ -67,7 +67,7 @@ from models.kinematics import (
     quat_mul,
     quat_to_matrix,
 )
-from models.lcp import STATUS_SOLVED, STATUS_SOLVED_INACCURATE, complementarity_residual, lemke_kernel
+from models.lcp import STATUS_SOLVED, STATUS_SOLVED_INACCURATE, complementarity_residual, lemke_kernel, lemke_warm_kernel
 
 #: Quasistatic rungs: inertia scale standing in for eps -> 0 (times the mass matrix).
 QUASISTATIC_INERTIA = 1e-6
@@ -81,6 +81,12 @@ LCP_TOLERANCE = 1e-7
 #: each further retry adds 100 times more, up to LCP_REGULARIZATION * 100**(steps - 1) = 1e-5.
 LCP_REGULARIZATION = 1e-9
 LCP_REGULARIZATION_STEPS = 3
+#: A step's LCP is first tried on the previous step's complementary basis (`basis_table`); that
+#: point is accepted when its recomputed natural-map residual (on the LCP scaled to max |M| = 1)
+#: is at most this (1e5 below LCP_TOLERANCE, what the step accepts of a cold solve); else Lemke
+#: pivots from scratch. Not tighter: degenerate solutions carry round-off above 1e-14 whichever
+#: way they are found (a jammed grasp whose friction sits exactly on the cone's edge: 1e-13, cold).
+WARM_TOLERANCE = 1e-12
 #: A state entry above this in magnitude counts as diverged.
 DIVERGENCE_LIMIT = 1e10
 
@@ -240,6 +246,26 @@ class StepResult(NamedTuple):
     p_n: np.ndarray  # (nc,) normal impulse of each contact, N s
     p_t: np.ndarray  # (nc, 2) friction impulse in the (t, o) basis, zero where inactive ((0, 2): none)
     sweeps: int  # PGS sweeps taken
+    basis: np.ndarray  # int8 (slots + drives, 3 + d): the complementary basis of this step's LCP (`basis_table`)
+
+
+#: Columns of a basis table (`basis_table`): whether the row's contact / drive took part, then
+#: one flag per LCP variable (1: z basic, 0: w basic).
+BASIS_PRESENT = 0
+BASIS_NORMAL = 1  # a contact's p_n; a force-limited drive's x
+BASIS_GAMMA = 2  # a contact's gamma; a drive's slack s
+BASIS_DIRECTIONS = 3  # a contact's friction directions beta_j
+
+
+@numba.njit(cache=True)
+def basis_table(slots, drives, directions):
+    """An empty basis table (no row present): the warm start of a step that has none.
+
+    The Lemke solver's warm start travels between steps in this table, one row per contact slot
+    (`models.contact.ContactSet.slot`), then one per drive: the LCP variables of a contact or
+    drive that were basic (z, not w) at the last step that solved an LCP. Rows by slot, not by
+    LCP position, so the guess survives contacts that come and go."""
+    return np.zeros((slots + drives, BASIS_DIRECTIONS + directions), np.int8)
 
 
 # ----------------------------------------------------------------------------- mass and forces
@@ -456,25 +482,40 @@ def free_step(eps, theta, h, bi, Ainv, M_const, rhs_const, q, nu, q_ref, u, q_in
 
 
 @numba.njit(cache=True)
-def dynamics_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t):
+def dynamics_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis=None):
     """One step of eq. (3) given the contacts at q. Pure: returns a new StepResult.
 
     model, solver, drives: `Model`, `Solver`, `Drives`; tables: `SceneTables`; system: the
     `System` at q; contacts: a `models.contact.ContactSet` whose first nc entries are the
     contacts at q (bias: zeros without scripted obstacles); warm_n (slots,), warm_t (slots,
     2): PGS warm start by contact slot (the previous step's p_n, p_t; zeros for a cold start;
-    Lemke ignores them). A force-limited drive's impulse is solved with the contacts, by
+    Lemke ignores them); basis: Lemke's warm start, the previous step's `StepResult.basis`
+    (a `basis_table` of the contact buffers' slots, the drives and the friction directions;
+    None or an empty table: Lemke starts cold). The result's basis is this step's (the input's
+    where no LCP was solved). A force-limited drive's impulse is solved with the contacts, by
     Lemke. On the PGS path residual is `models.contact_pgs`'s and lcp_size the number of
     scalar impulses; where auto falls back to Lemke, sweeps still counts PGS's.
     """
+    if basis is None:
+        cold = basis_table(contacts.psi.shape[0], drives.v_index.shape[0], model.friction_directions if tables.spatial else 2)
+        return _dynamics_step(
+            model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, cold
+        )
+    return _dynamics_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis)
+
+
+@numba.njit(cache=True)
+def _dynamics_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis):
     use_pgs = solver.method == SOLVER_PGS or (solver.method == SOLVER_AUTO and nc >= solver.auto_contacts)
     if nc > 0 and use_pgs and not any_limited(drives.max_force):
-        out = _pgs_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t)
+        out = _pgs_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis)
         if out.status == StepStatus.OK or solver.method == SOLVER_PGS:
             return out
-        r = _lemke_step(model, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc)
-        return StepResult(r.q, r.nu, r.q_ref, r.delta_n, r.delta_t, r.status, r.pivots, r.residual, r.lcp_size, r.p_n, r.p_t, out.sweeps)
-    return _lemke_step(model, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc)
+        r = _lemke_step(model, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, basis)
+        return StepResult(
+            r.q, r.nu, r.q_ref, r.delta_n, r.delta_t, r.status, r.pivots, r.residual, r.lcp_size, r.p_n, r.p_t, out.sweeps, r.basis
+        )
+    return _lemke_step(model, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, basis)
 
 
 @numba.njit(cache=True)
@@ -563,7 +604,7 @@ def _active_contacts(W_n, nc):
 
 
 @numba.njit(cache=True)
-def _lemke_step(model, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc):
+def _lemke_step(model, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, basis):
     """dynamics_step with the dense LCP solved by Lemke (see `_contact_solve`)."""
     nu_free, q_ref_new, drive_a = _free_velocity(model, drives, tables, system, h, q, nu, q_ref, u)
     nu_new = nu_free
@@ -578,11 +619,12 @@ def _lemke_step(model, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t
     size = 0
     impulses = np.zeros(nc)
     frictions = np.zeros((nc, 2))
+    basis_new = basis
     # contacts that couple to a free DOF; friction only where mu > 0 and the tangent couples
     active = _active_contacts(contacts.W_n, nc)
     n_act = active.shape[0]
     if n_act > 0 or any_limited(drives.max_force):
-        nu_new, p_n, p_t, status, pivots, residual, size = _contact_solve(
+        nu_new, p_n, p_t, status, pivots, residual, size, basis_new = _contact_solve(
             model,
             tables.spatial,
             h,
@@ -596,6 +638,7 @@ def _lemke_step(model, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t
             delta_t,
             drives,
             drive_a,
+            basis,
         )
         for k in range(n_act):
             impulses[active[k]] = p_n[k]
@@ -604,22 +647,22 @@ def _lemke_step(model, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t
         if status == StepStatus.OK and model.compliant:
             delta_n_new, delta_t_new = _deformations(h, tables.pf, contacts.pair, contacts.slot, active, p_n, p_t, delta_n, delta_t)
     if status != StepStatus.OK:
-        return StepResult(q, nu, q_ref, delta_n, delta_t, status, pivots, residual, size, impulses, frictions, 0)
+        return StepResult(q, nu, q_ref, delta_n, delta_t, status, pivots, residual, size, impulses, frictions, 0, basis)
     q_new, bad = _integrate_checked(tables.bi, model.theta, h, q, nu, nu_new)
     if bad != StepStatus.OK:
-        return StepResult(q, nu, q_ref, delta_n, delta_t, bad, pivots, residual, size, impulses, frictions, 0)
-    return StepResult(q_new, nu_new, q_ref_new, delta_n_new, delta_t_new, status, pivots, residual, size, impulses, frictions, 0)
+        return StepResult(q, nu, q_ref, delta_n, delta_t, bad, pivots, residual, size, impulses, frictions, 0, basis)
+    return StepResult(q_new, nu_new, q_ref_new, delta_n_new, delta_t_new, status, pivots, residual, size, impulses, frictions, 0, basis_new)
 
 
 @numba.njit(cache=True)
-def _pgs_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t):
+def _pgs_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis):
     """dynamics_step with PGS on the contact impulses; every product body by body, so the
     step costs O(bodies + contacts) beyond what the caller built (`models.contact_pgs`)."""
     bi, bf = tables.bi, tables.bf
     nv = nu.shape[0]
     dofs, count, inv, ok = body_blocks(bi, system.A, system.Ainv)
     if not ok:
-        return StepResult(q, nu, q_ref, delta_n, delta_t, StepStatus.SINGULAR.value, 0, 0.0, 0, np.zeros(nc), np.zeros((nc, 2)), 0)
+        return StepResult(q, nu, q_ref, delta_n, delta_t, StepStatus.SINGULAR.value, 0, 0.0, 0, np.zeros(nc), np.zeros((nc, 2)), 0, basis)
     quasistatic = model.eps == 0.0
     eps = model.quasistatic_inertia if quasistatic else model.eps
     rhs = system.rhs_const.copy()
@@ -654,7 +697,7 @@ def _pgs_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, d
     )
     if r.status != PgsStatus.CONVERGED:
         bad = StepStatus.CONTACT_NOT_CONVERGED.value if r.status == PgsStatus.NOT_CONVERGED else StepStatus.NON_FINITE.value
-        return StepResult(q, nu, q_ref, delta_n, delta_t, bad, 0, r.residual, r.unknowns, r.p_n, r.p_t, r.sweeps)
+        return StepResult(q, nu, q_ref, delta_n, delta_t, bad, 0, r.residual, r.unknowns, r.p_n, r.p_t, r.sweeps, basis)
     delta_n_new, delta_t_new = delta_n, delta_t
     if model.compliant:
         active = r.active
@@ -667,9 +710,9 @@ def _pgs_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, d
         delta_n_new, delta_t_new = _deformations(h, tables.pf, contacts.pair, contacts.slot, active, pa, ta, delta_n, delta_t)
     q_new, bad = _integrate_checked(bi, model.theta, h, q, nu, r.nu)
     if bad != StepStatus.OK:
-        return StepResult(q, nu, q_ref, delta_n, delta_t, bad, 0, r.residual, r.unknowns, r.p_n, r.p_t, r.sweeps)
+        return StepResult(q, nu, q_ref, delta_n, delta_t, bad, 0, r.residual, r.unknowns, r.p_n, r.p_t, r.sweeps, basis)
     return StepResult(
-        q_new, r.nu, q_ref_new, delta_n_new, delta_t_new, StepStatus.OK.value, 0, r.residual, r.unknowns, r.p_n, r.p_t, r.sweeps
+        q_new, r.nu, q_ref_new, delta_n_new, delta_t_new, StepStatus.OK.value, 0, r.residual, r.unknowns, r.p_n, r.p_t, r.sweeps, basis
     )
 
 
@@ -859,8 +902,9 @@ def _drive_rows(Mlcp, qlcp, h, first_row, first_slack, lim, nl, kp, kd, max_forc
 
 
 @numba.njit(cache=True)
-def _contact_solve(model, spatial, h, A, Ainv, nu_free, active, pf, contacts, delta_n, delta_t, drives, drive_a):
-    """Build and solve the contact LCP. Returns (nu+, p_n, p_t, status, pivots, residual, size)."""
+def _contact_solve(model, spatial, h, A, Ainv, nu_free, active, pf, contacts, delta_n, delta_t, drives, drive_a, basis):
+    """Build and solve the contact LCP, first on the previous step's basis (`basis_table`).
+    Returns (nu+, p_n, p_t, status, pivots, residual, size, basis+)."""
     Mlcp, qlcp, AinvJ, coef, fric, nf, lim = contact_lcp(
         model, spatial, h, A, Ainv, nu_free, active, pf, contacts, delta_n, delta_t, drives, drive_a
     )
@@ -878,7 +922,9 @@ def _contact_solve(model, spatial, h, A, Ainv, nu_free, active, pf, contacts, de
     if scale > 0.0:
         Mlcp /= scale
         qlcp /= scale
-    z, w, status, pivots = lemke_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1))
+    slot = contacts.slot
+    guess = _basis_guess(basis, active, slot, fric, nf, d, lim, m, n)
+    z, w, status, pivots, basic_z, _ = lemke_warm_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1), guess, WARM_TOLERANCE)
     residual = complementarity_residual(Mlcp, qlcp, z)
     added = 0.0
     for k in range(LCP_REGULARIZATION_STEPS):
@@ -890,13 +936,13 @@ def _contact_solve(model, spatial, h, A, Ainv, nu_free, active, pf, contacts, de
         for r in range(nc + nd):
             Mlcp[r, r] += target - added
         added = target
-        z, w, status, more = lemke_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1))
+        z, w, status, more, basic_z, _ = lemke_warm_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1), guess, WARM_TOLERANCE)
         pivots += more
         residual = complementarity_residual(Mlcp, qlcp, z)
     p_n = z[:nc].copy()
     p_t = np.zeros((nc, 2))
     if (status != STATUS_SOLVED and status != STATUS_SOLVED_INACCURATE) or not (residual <= LCP_TOLERANCE):
-        return nu_free, p_n, p_t, StepStatus.LCP_FAILED.value, pivots, residual, n
+        return nu_free, p_n, p_t, StepStatus.LCP_FAILED.value, pivots, residual, n, basis
     for f in range(nf):
         k = fric[f]
         for j in range(d):
@@ -904,7 +950,69 @@ def _contact_solve(model, spatial, h, A, Ainv, nu_free, active, pf, contacts, de
             p_t[k, 0] += z[r] * coef[r - nc, 0]
             p_t[k, 1] += z[r] * coef[r - nc, 1]
     nu_new = nu_free + AinvJ @ z[:m]
-    return nu_new, p_n, p_t, StepStatus.OK.value, pivots, residual, n
+    basis_new = _basis_kept(basis, basic_z, active, slot, fric, nf, d, lim, m)
+    return nu_new, p_n, p_t, StepStatus.OK.value, pivots, residual, n, basis_new
+
+
+@numba.njit(cache=True)
+def _basis_guess(basis, active, slot, fric, nf, d, lim, m, n):
+    """The LCP's first guess of a complementary basis (True: z_i basic) from the previous
+    step's table (`basis_table`; rows: the contact slots, slot.shape[0] of them, then the
+    drives): each contact's and force-limited drive's flags; one that was not in the previous
+    LCP, or a table of another shape, guesses w basic (no force) on its rows."""
+    guess = np.zeros(n, np.bool_)
+    nc = active.shape[0]
+    nl = lim.shape[0]
+    slots = slot.shape[0]
+    if basis.shape[1] != BASIS_DIRECTIONS + d or basis.shape[0] < slots:
+        return guess
+    nd = nf * d
+    for k in range(nc):
+        s = slot[active[k]]
+        if basis[s, BASIS_PRESENT] != 0:
+            guess[k] = basis[s, BASIS_NORMAL] != 0
+    for f in range(nf):
+        s = slot[active[fric[f]]]
+        if basis[s, BASIS_PRESENT] != 0:
+            guess[m + f] = basis[s, BASIS_GAMMA] != 0
+            for j in range(d):
+                guess[nc + f * d + j] = basis[s, BASIS_DIRECTIONS + j] != 0
+    for e in range(nl):
+        r = slots + lim[e]
+        if r < basis.shape[0] and basis[r, BASIS_PRESENT] != 0:
+            guess[nc + nd + e] = basis[r, BASIS_NORMAL] != 0
+            guess[m + nf + e] = basis[r, BASIS_GAMMA] != 0
+    return guess
+
+
+@numba.njit(cache=True)
+def _basis_kept(basis, basic_z, active, slot, fric, nf, d, lim, m):
+    """The table (`basis_table`, shaped as the given one) of this step's final basis basic_z:
+    the rows of its contacts and force-limited drives present, all others absent. A table of
+    another shape than the LCP needs is replaced by one that fits nothing (no warm start)."""
+    out = np.zeros_like(basis)
+    slots = slot.shape[0]
+    if basis.shape[1] != BASIS_DIRECTIONS + d or basis.shape[0] < slots:
+        return out
+    nc = active.shape[0]
+    nl = lim.shape[0]
+    nd = nf * d
+    for k in range(nc):
+        s = slot[active[k]]
+        out[s, BASIS_PRESENT] = 1
+        out[s, BASIS_NORMAL] = basic_z[k]
+    for f in range(nf):
+        s = slot[active[fric[f]]]
+        out[s, BASIS_GAMMA] = basic_z[m + f]
+        for j in range(d):
+            out[s, BASIS_DIRECTIONS + j] = basic_z[nc + f * d + j]
+    for e in range(nl):
+        r = slots + lim[e]
+        if r < basis.shape[0]:
+            out[r, BASIS_PRESENT] = 1
+            out[r, BASIS_NORMAL] = basic_z[nc + nd + e]
+            out[r, BASIS_GAMMA] = basic_z[m + nf + e]
+    return out
 
 
 @numba.njit(cache=True)
