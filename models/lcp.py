@@ -57,6 +57,7 @@ __all__ = [
     "fc2d_reactions_from_lcp",
     "lemke_kernel",
     "lemke_warm_kernel",
+    "natural_map_residual",
     "pgs_kernel",
     "solve_lcp",
 ]
@@ -176,6 +177,19 @@ def _matvec_plus(M, z, q):
 
 
 @numba.njit(cache=True, error_model="numpy")
+def _matvec_on(M, z, q, J, nj):
+    """w = M z + q for a z that is zero outside the nj indices J[:nj]: O(n nj)."""
+    n = q.shape[0]
+    w = np.empty(n)
+    for i in range(n):
+        s = q[i]
+        for a in range(nj):
+            s += M[i, J[a]] * z[J[a]]
+        w[i] = s
+    return w
+
+
+@numba.njit(cache=True, error_model="numpy")
 def _natural_map_residual(z, w, q):
     """||min(z, w)||_inf / (1 + ||q||_inf); +inf if anything is non-finite."""
     n = q.shape[0]
@@ -194,6 +208,13 @@ def _natural_map_residual(z, w, q):
         if m > r:
             r = m
     return r / (1.0 + qmax)
+
+
+@numba.njit(cache=True, error_model="numpy")
+def natural_map_residual(z, w, q):
+    """`complementarity_residual` of z given w = M z + q already recomputed from M, q and z
+    (as the Lemke kernels return it): O(n)."""
+    return _natural_map_residual(z, w, q)
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -542,7 +563,7 @@ def lemke_warm_kernel(M, q, max_pivots, guess, tol):
                 nj += 1
         z, ok = _solve_on(M, q, work, nj)
         if ok:
-            w = _matvec_plus(M, z, q)
+            w = _matvec_on(M, z, q, work, nj)
             if _natural_map_residual(z, w, q) <= tol:
                 return z, w, STATUS_SOLVED, 0, guess.copy(), True
     z, w, status, pivots, basic_z = _lemke(M, q, max_pivots)

@@ -52,7 +52,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from models.contact_pgs import PgsStatus, block_solve, body_blocks, contact_pgs
+from models.contact_pgs import BODY_DOFS, PgsStatus, block_solve, body_blocks, contact_pgs
 from models.kinematics import (
     BF_INERTIA,
     BF_MASS,
@@ -67,7 +67,14 @@ from models.kinematics import (
     quat_mul,
     quat_to_matrix,
 )
-from models.lcp import STATUS_SOLVED, STATUS_SOLVED_INACCURATE, complementarity_residual, lemke_kernel, lemke_warm_kernel
+from models.lcp import (
+    STATUS_SOLVED,
+    STATUS_SOLVED_INACCURATE,
+    complementarity_residual,
+    lemke_kernel,
+    lemke_warm_kernel,
+    natural_map_residual,
+)
 
 #: Quasistatic rungs: inertia scale standing in for eps -> 0 (times the mass matrix).
 QUASISTATIC_INERTIA = 1e-6
@@ -568,9 +575,10 @@ def _integrate_checked(bi, theta, h, q, nu, nu_new):
 
 
 @numba.njit(cache=True)
-def _free_velocity(model, drives, tables, system, h, q, nu, q_ref, u):
+def _free_velocity(model, drives, tables, system, h, q, nu, q_ref, u, dofs, count, inv):
     """Stage assemble, without contacts: (nu_free = A^-1 rhs, q_ref+, a: the force-limited
-    drives' PD impulses at nu = 0, see `_drives`)."""
+    drives' PD impulses at nu = 0, see `_drives`); A^-1 from system.Ainv when A is constant,
+    else from its body blocks (dofs, count, inv: `models.contact_pgs.body_blocks`)."""
     bi, bf = tables.bi, tables.bf
     nv = nu.shape[0]
     quasistatic = model.eps == 0.0
@@ -580,14 +588,14 @@ def _free_velocity(model, drives, tables, system, h, q, nu, q_ref, u):
         if system.M_const.shape[0] == nv:
             rhs += eps * (system.M_const @ nu)
         else:
-            rhs += eps * (mass_matrix(bi, bf, q, nv) @ nu)
+            rhs += eps * mass_times(bi, bf, q, nu)
         if tables.spatial:
             rhs += h * eps * gyroscopic_force(bi, bf, q, nu, nv)
     q_ref_new, drive_a = _drives(h, q, q_ref, u, drives, rhs)
     if system.Ainv.shape[0] == nv:
         nu_free = system.Ainv @ rhs
     else:
-        nu_free = np.linalg.solve(system.A, rhs)
+        nu_free = block_solve(dofs, count, inv, rhs)
     return nu_free, q_ref_new, drive_a
 
 
@@ -606,7 +614,12 @@ def _active_contacts(W_n, nc):
 @numba.njit(cache=True)
 def _lemke_step(model, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, basis):
     """dynamics_step with the dense LCP solved by Lemke (see `_contact_solve`)."""
-    nu_free, q_ref_new, drive_a = _free_velocity(model, drives, tables, system, h, q, nu, q_ref, u)
+    # A is block diagonal by body: its blocks' inverses serve the free velocity (when A changes
+    # with q) and the Delassus matrix (`_delassus`)
+    dofs, count, inv, ok = body_blocks(tables.bi, system.A, system.Ainv)
+    if not ok:
+        return StepResult(q, nu, q_ref, delta_n, delta_t, StepStatus.SINGULAR.value, 0, 0.0, 0, np.zeros(nc), np.zeros((nc, 2)), 0, basis)
+    nu_free, q_ref_new, drive_a = _free_velocity(model, drives, tables, system, h, q, nu, q_ref, u, dofs, count, inv)
     nu_new = nu_free
     delta_n_new = delta_n  # rigid models keep them zero; compliant ones get new arrays below
     delta_t_new = delta_t
@@ -628,10 +641,12 @@ def _lemke_step(model, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t
             model,
             tables.spatial,
             h,
-            system.A,
-            system.Ainv,
+            dofs,
+            count,
+            inv,
             nu_free,
             active,
+            tables.pi,
             tables.pf,
             contacts,
             delta_n,
@@ -717,12 +732,19 @@ def _pgs_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, d
 
 
 @numba.njit(cache=True)
-def contact_lcp(model, spatial, h, A, Ainv, nu_free, active, pf, contacts, delta_n, delta_t, drives, drive_a):
+def contact_lcp(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, drives, drive_a):
     """Assemble the contact LCP of the active contacts and the force-limited drives.
 
-    Unknowns z = (p_n (nc), beta (nf * d), x (nl), gamma (nf), s (nl)); returns (M, q, A^-1 J,
-    coef, fric, nf, lim) with J = [W_n | D | E] and coef the friction directions in the (t, o)
-    basis, lim the indices of the nl force-limited drives.
+    Unknowns z = (p_n (nc), beta (nf * d), x (nl), gamma (nf), s (nl)); with J = [W_n | D | E]
+    the top-left block of M is J^T A^-1 J. It is assembled over the DOFs contacts touch: J = B C,
+    B the generators (the Jacobian columns of each contact's n, t, o and the drives' unit DOFs,
+    `_generators`), C how each LCP column combines them (a friction direction is cos t + sin o),
+    and the Delassus matrix G = B^T A^-1 B from A's body blocks (dofs, count, inv:
+    `models.contact_pgs.body_blocks`), so M = C^T G C costs O(contacts^2), not O(nv contacts^2).
+
+    Returns (M, q, Y = A^-1 B, gen0, c0, gen1, c1: LCP column r < m is c0[r] B[:, gen0[r]] +
+    c1[r] B[:, gen1[r]], coef: the friction directions in the (t, o) basis, fric, nf, lim: the
+    indices of the nl force-limited drives).
 
     A force-limited drive j (limit F, P = h F) is a bounded impulse p = x - P, x in [0, 2P]:
     unbounded it would be a - b v (a: its PD impulse at v = 0, `_drives`; b = h (h kp + kd); v
@@ -741,22 +763,21 @@ def contact_lcp(model, spatial, h, A, Ainv, nu_free, active, pf, contacts, delta
     fric, nf = _friction_contacts(spatial, active, c_pair, pf, W_t, W_o)
     nd = nf * d
     m = nc + nd + nl
-    J, coef = _lcp_jacobian(spatial, d, nv, m, active, fric, nf, lim, nl, v_index, W_n, W_t, W_o)
-    if Ainv.shape[0] == nv:
-        AinvJ = Ainv @ J
-    else:
-        AinvJ = np.linalg.solve(A, J)
+    body, ldof, nloc, Bl = _generators(spatial, active, fric, nf, lim, nl, v_index, pi, c_pair, W_n, W_t, W_o, dofs, count)
+    Y, G = _delassus(body, ldof, nloc, Bl, dofs, count, inv, nv)
+    gen0, c0, gen1, c1, coef = _combinations(spatial, d, nc, fric, nf, nl)
     n = m + nf + nl
     Mlcp = np.zeros((n, n))
     qlcp = np.zeros(n)
-    Jt = np.ascontiguousarray(J.T)
-    Mlcp[:m, :m] = Jt @ AinvJ
-    Jt_nu = Jt @ nu_free
+    _fill_jacobian_block(Mlcp, G, gen0, c0, gen1, c1, m)
+    Jt_nu = np.empty(m)
+    for r in range(m):
+        Jt_nu[r] = c0[r] * _sparse_dot(Bl, ldof, nloc, gen0[r], nu_free) + c1[r] * _sparse_dot(Bl, ldof, nloc, gen1[r], nu_free)
     _normal_rows(Mlcp, qlcp, compliant, h, active, pf, c_pair, c_psi, c_slot, c_bias, Jt_nu, delta_n)
     _friction_rows(Mlcp, qlcp, compliant, h, d, m, active, fric, nf, coef, pf, c_pair, c_slot, c_bias, Jt_nu, delta_t)
     _scale_gamma(Mlcp, d, m, nc, nf)
     _drive_rows(Mlcp, qlcp, h, nc + nd, m + nf, lim, nl, kp, kd, max_force, drive_a, Jt_nu)
-    return Mlcp, qlcp, AinvJ, coef, fric, nf, lim[:nl]
+    return Mlcp, qlcp, Y, gen0, c0, gen1, c1, coef, fric, nf, lim[:nl]
 
 
 @numba.njit(cache=True)
@@ -789,34 +810,166 @@ def _friction_contacts(spatial, active, c_pair, pf, W_t, W_o):
     return fric, nf
 
 
+#: Local DOFs of a generator (`_generators`): the DOFs of the (at most two) bodies it touches.
+LOCAL_DOFS = 2 * BODY_DOFS
+
+
 @numba.njit(cache=True)
-def _lcp_jacobian(spatial, d, nv, m, active, fric, nf, lim, nl, v_index, W_n, W_t, W_o):
-    """J = [W_n | D | E] (nv, m) over the active contacts, the d friction directions of each
-    friction contact and the force-limited drives' unit DOFs, and coef: the friction
-    directions in the (t, o) basis (a Jacobian column is linear in its direction)."""
+def _generators(spatial, active, fric, nf, lim, nl, v_index, pi, c_pair, W_n, W_t, W_o, dofs, count):
+    """The columns B that the LCP's J = B C combines, gathered on the DOFs they touch: each
+    active contact's normal (generator k), each friction contact's t (nc + f) and, in space, o
+    (nc + nf + f), each force-limited drive's unit DOF (last). Returns (body (ng, 2): the bodies
+    with DOFs each touches, -1 padded; ldof (ng, LOCAL_DOFS): those bodies' DOFs, body by body;
+    nloc (ng,): how many; Bl (ng, LOCAL_DOFS): the column's entries there)."""
     nc = active.shape[0]
-    nd = nf * d
-    coef = np.zeros((max(nd, 1), 2))
-    J = np.zeros((nv, m))
+    nt = 2 if spatial else 1
+    ng = nc + nt * nf + nl
+    body = np.full((ng, 2), -1, np.int64)
+    ldof = np.zeros((ng, LOCAL_DOFS), np.int64)
+    nloc = np.zeros(ng, np.int64)
+    Bl = np.zeros((ng, LOCAL_DOFS))
     for k in range(nc):
-        for v in range(nv):
-            J[v, k] = W_n[v, active[k]]
+        i = active[k]
+        s = 0
+        for side in range(2):
+            b = pi[c_pair[i], side]
+            if count[b] > 0:
+                body[k, s] = b
+                s += 1
+        _gather(body, ldof, nloc, Bl, dofs, count, W_n, i, k)
     for f in range(nf):
-        i = active[fric[f]]
-        for j in range(d):
-            r = f * d + j
-            if spatial:
-                ang = 2.0 * np.pi * j / d
-                coef[r, 0], coef[r, 1] = np.cos(ang), np.sin(ang)
-            else:
-                coef[r, 0] = 1.0 if j == 0 else -1.0
-            for v in range(nv):
-                J[v, nc + r] = coef[r, 0] * W_t[v, i]
-                if spatial:
-                    J[v, nc + r] += coef[r, 1] * W_o[v, i]
+        k = fric[f]
+        for a in range(nt):
+            g = nc + a * nf + f
+            body[g, 0], body[g, 1] = body[k, 0], body[k, 1]
+            _gather(body, ldof, nloc, Bl, dofs, count, W_t if a == 0 else W_o, active[k], g)
     for e in range(nl):
-        J[v_index[lim[e]], nc + nd + e] = 1.0
-    return J, coef
+        g = nc + nt * nf + e
+        v = v_index[lim[e]]
+        for b in range(count.shape[0]):
+            for r in range(count[b]):
+                if dofs[b, r] == v:
+                    body[g, 0] = b
+        b = body[g, 0]
+        if b >= 0:
+            nloc[g] = count[b]
+            for r in range(count[b]):
+                ldof[g, r] = dofs[b, r]
+                Bl[g, r] = 1.0 if dofs[b, r] == v else 0.0
+    return body, ldof, nloc, Bl
+
+
+@numba.njit(cache=True, inline="always")
+def _gather(body, ldof, nloc, Bl, dofs, count, W, i, g):
+    """Generator g is column i of W: its entries on its bodies' DOFs."""
+    a = 0
+    for s in range(2):
+        b = body[g, s]
+        if b < 0:
+            continue
+        for r in range(count[b]):
+            v = dofs[b, r]
+            ldof[g, a] = v
+            Bl[g, a] = W[v, i]
+            a += 1
+    nloc[g] = a
+
+
+@numba.njit(cache=True, inline="always")
+def _sparse_dot(Bl, ldof, nloc, g, x):
+    """B[:, g] . x over generator g's local DOFs."""
+    acc = 0.0
+    for a in range(nloc[g]):
+        acc += Bl[g, a] * x[ldof[g, a]]
+    return acc
+
+
+@numba.njit(cache=True)
+def _delassus(body, ldof, nloc, Bl, dofs, count, inv, nv):
+    """(Y = A^-1 B (nv, ng), G = B^T A^-1 B (ng, ng)) over the DOFs of the bodies each generator
+    touches: A is block diagonal by body (inv: its blocks' inverses), so Y[:, g] lives on g's
+    bodies and G[g1, g2] is zero unless g1 and g2 share one. G is symmetric: its upper triangle
+    is mirrored."""
+    ng = nloc.shape[0]
+    Y = np.zeros((nv, ng))
+    for g in range(ng):
+        a0 = 0
+        for s in range(2):
+            b = body[g, s]
+            if b < 0:
+                continue
+            m = count[b]
+            for r in range(m):
+                acc = 0.0
+                for c in range(m):
+                    acc += inv[b, r, c] * Bl[g, a0 + c]
+                Y[dofs[b, r], g] = acc
+            a0 += m
+    G = np.zeros((ng, ng))
+    for g1 in range(ng):
+        p, r = body[g1, 0], body[g1, 1]
+        for g2 in range(g1, ng):
+            if p != body[g2, 0] and p != body[g2, 1] and (r < 0 or (r != body[g2, 0] and r != body[g2, 1])):
+                continue
+            acc = 0.0
+            for a in range(nloc[g1]):
+                acc += Bl[g1, a] * Y[ldof[g1, a], g2]
+            G[g1, g2] = acc
+            G[g2, g1] = acc
+    return Y, G
+
+
+@numba.njit(cache=True)
+def _fill_jacobian_block(Mlcp, G, gen0, c0, gen1, c1, m):
+    """M[:m, :m] = C^T G C (symmetric: the upper triangle is mirrored), through the rows of
+    C^T G (m, ng)."""
+    ng = G.shape[0]
+    P = np.empty((m, ng))
+    for r in range(m):
+        a0, a1, x0, x1 = gen0[r], gen1[r], c0[r], c1[r]
+        for g in range(ng):
+            P[r, g] = x0 * G[a0, g] + x1 * G[a1, g]
+    for r in range(m):
+        for c in range(r, m):
+            v = P[r, gen0[c]] * c0[c] + P[r, gen1[c]] * c1[c]
+            Mlcp[r, c] = v
+            Mlcp[c, r] = v
+
+
+@numba.njit(cache=True)
+def _combinations(spatial, d, nc, fric, nf, nl):
+    """C of J = B C: LCP column r < m is c0[r] B[:, gen0[r]] + c1[r] B[:, gen1[r]] (c1 = 0 for a
+    single generator); and coef (max(nf d, 1), 2): the friction directions in the (t, o) basis
+    (space: d directions around the cone; the plane: +t and -t)."""
+    nt = 2 if spatial else 1
+    nd = nf * d
+    m = nc + nd + nl
+    gen0 = np.empty(m, np.int64)
+    gen1 = np.empty(m, np.int64)
+    c0 = np.ones(m)
+    c1 = np.zeros(m)
+    coef = np.zeros((max(nd, 1), 2))
+    cs = np.empty((d, 2))
+    for j in range(d):
+        if spatial:
+            ang = 2.0 * np.pi * j / d
+            cs[j, 0], cs[j, 1] = np.cos(ang), np.sin(ang)
+        else:
+            cs[j, 0], cs[j, 1] = (1.0 if j == 0 else -1.0), 0.0
+    for k in range(nc):
+        gen0[k] = gen1[k] = k
+    for f in range(nf):
+        for j in range(d):
+            r = nc + f * d + j
+            coef[r - nc, 0], coef[r - nc, 1] = cs[j, 0], cs[j, 1]
+            gen0[r] = nc + f
+            c0[r] = cs[j, 0]
+            gen1[r] = nc + nf + f if spatial else nc + f
+            c1[r] = cs[j, 1]
+    for e in range(nl):
+        r = nc + nd + e
+        gen0[r] = gen1[r] = nc + nt * nf + e
+    return gen0, c0, gen1, c1, coef
 
 
 @numba.njit(cache=True)
@@ -902,11 +1055,11 @@ def _drive_rows(Mlcp, qlcp, h, first_row, first_slack, lim, nl, kp, kd, max_forc
 
 
 @numba.njit(cache=True)
-def _contact_solve(model, spatial, h, A, Ainv, nu_free, active, pf, contacts, delta_n, delta_t, drives, drive_a, basis):
+def _contact_solve(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, drives, drive_a, basis):
     """Build and solve the contact LCP, first on the previous step's basis (`basis_table`).
     Returns (nu+, p_n, p_t, status, pivots, residual, size, basis+)."""
-    Mlcp, qlcp, AinvJ, coef, fric, nf, lim = contact_lcp(
-        model, spatial, h, A, Ainv, nu_free, active, pf, contacts, delta_n, delta_t, drives, drive_a
+    Mlcp, qlcp, Y, gen0, c0, gen1, c1, coef, fric, nf, lim = contact_lcp(
+        model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, drives, drive_a
     )
     nc = active.shape[0]
     d = model.friction_directions if spatial else 2
@@ -915,17 +1068,14 @@ def _contact_solve(model, spatial, h, A, Ainv, nu_free, active, pf, contacts, de
     n = qlcp.shape[0]
     # LCP(s M, s q) has the solutions of LCP(M, q): scale to unit size for Lemke's pivot
     # tolerances (quasistatic rungs make M ~ 1 / QUASISTATIC_INERTIA)
-    scale = 0.0
-    for r in range(n):
-        for c in range(n):
-            scale = max(scale, abs(Mlcp[r, c]))
+    scale = _largest_entry(Mlcp, m)
     if scale > 0.0:
         Mlcp /= scale
         qlcp /= scale
     slot = contacts.slot
     guess = _basis_guess(basis, active, slot, fric, nf, d, lim, m, n)
     z, w, status, pivots, basic_z, _ = lemke_warm_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1), guess, WARM_TOLERANCE)
-    residual = complementarity_residual(Mlcp, qlcp, z)
+    residual = natural_map_residual(z, w, qlcp)  # w = M z + q, recomputed by the kernel
     added = 0.0
     for k in range(LCP_REGULARIZATION_STEPS):
         if (status == STATUS_SOLVED or status == STATUS_SOLVED_INACCURATE) and residual <= LCP_TOLERANCE:
@@ -938,20 +1088,39 @@ def _contact_solve(model, spatial, h, A, Ainv, nu_free, active, pf, contacts, de
         added = target
         z, w, status, more, basic_z, _ = lemke_warm_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1), guess, WARM_TOLERANCE)
         pivots += more
-        residual = complementarity_residual(Mlcp, qlcp, z)
+        residual = natural_map_residual(z, w, qlcp)
     p_n = z[:nc].copy()
     p_t = np.zeros((nc, 2))
     if (status != STATUS_SOLVED and status != STATUS_SOLVED_INACCURATE) or not (residual <= LCP_TOLERANCE):
         return nu_free, p_n, p_t, StepStatus.LCP_FAILED.value, pivots, residual, n, basis
+    # the generators' impulses t = C z: p_n, then each friction contact's impulse along t and o
+    t = np.zeros(Y.shape[1])
+    for r in range(m):
+        t[gen0[r]] += c0[r] * z[r]
+        t[gen1[r]] += c1[r] * z[r]
     for f in range(nf):
-        k = fric[f]
-        for j in range(d):
-            r = nc + f * d + j
-            p_t[k, 0] += z[r] * coef[r - nc, 0]
-            p_t[k, 1] += z[r] * coef[r - nc, 1]
-    nu_new = nu_free + AinvJ @ z[:m]
+        p_t[fric[f], 0] = t[nc + f]
+        if spatial:
+            p_t[fric[f], 1] = t[nc + nf + f]
+    nu_new = nu_free + Y @ t
     basis_new = _basis_kept(basis, basic_z, active, slot, fric, nf, d, lim, m)
     return nu_new, p_n, p_t, StepStatus.OK.value, pivots, residual, n, basis_new
+
+
+@numba.njit(cache=True)
+def _largest_entry(Mlcp, m):
+    """max |M| of a contact LCP without scanning it all: its top-left m x m block J^T A^-1 J
+    (plus compliance and drive terms) is positive semidefinite, so no entry there exceeds the
+    largest diagonal one; the rest (gamma and slack rows and columns, each row's magnitudes
+    mirrored in its column) is read in its rows."""
+    n = Mlcp.shape[0]
+    scale = 0.0
+    for r in range(m):
+        scale = max(scale, abs(Mlcp[r, r]))
+    for r in range(m, n):
+        for c in range(n):
+            scale = max(scale, abs(Mlcp[r, c]))
+    return scale
 
 
 @numba.njit(cache=True)

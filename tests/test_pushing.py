@@ -174,10 +174,16 @@ def test_the_warm_started_contact_solve_is_the_cold_one_and_nearly_free(offset):
     """Lemke starts each step from the previous step's basis (`models.stepper.basis_table`,
     carried in `State.lcp_basis`): a push, central and turning the box, as one call against
     the same steps solved from scratch each (one-step calls from states without a basis).
-    The states agree to round-off, and the warm run pivots on few steps only: it starts cold,
-    and pivots where the contacts change (the pusher arriving) or, as the box turns, where its
-    sliding friction moves to another side of the polyhedral cone. Measured: 32 pivots over
-    the 1850 steps central (cold: 15 a step), 177 turning."""
+
+    The warm run pivots on few steps only: it starts cold, and pivots where the contacts change
+    (the pusher arriving) or, as the box turns, where its sliding friction moves to another side
+    of the polyhedral cone. Measured: 32 pivots over the 1850 steps central (cold: 15 a step),
+    177 turning. The states agree up to the push's indeterminacy: a rigid box on four corners,
+    pushed by a rigid sphere with friction, has a continuum of contact forces (the pusher's
+    vertical friction anywhere in +-mu N: the table's normal force, so its friction, and the
+    pushing force move by up to 0.3 N, the pusher's lag behind its reference by 3e-5 m); Lemke
+    returns a vertex, and which one (from scratch or from the last basis) is round-off's choice.
+    Measured: 3.2e-5 m apart central, 6e-6 turning; every solve exact (residual <= 1e-12)."""
     scenario = load_scenario(PUSH)
     r = rung(scenario, "dynamic-rigid")
     h = 1e-3
@@ -186,14 +192,14 @@ def test_the_warm_started_contact_solve_is_the_cold_one_and_nearly_free(offset):
     q[scenario.coordinates.index("pusher.y")] = offset
     start = replace(start, q=q, q_ref=q[[scenario.coordinates.index(a) for a in scenario.actuated]].copy())
     warm = r.rollout(scenario, start, np.array([[0.2, 0.0]]), [PUSH_TIME], h, stop_at_outcome=False)
-    state, pivots = start, 0
+    state, pivots, residual = start, 0, 0.0
     for _ in range(warm.steps):
         out = r.rollout(scenario, replace(state, lcp_basis=np.zeros((0, 0), np.int8)), np.array([[0.2, 0.0]]), [h], h)
-        state, pivots = out.state, pivots + out.pivots
+        state, pivots, residual = out.state, pivots + out.pivots, max(residual, out.max_residual)
         assert out.status == "ok"
     assert warm.status == "ok" and warm.force_steps > 1000
-    np.testing.assert_allclose(warm.state.q, state.q, rtol=0, atol=1e-9)
-    np.testing.assert_allclose(warm.state.nu, state.nu, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(warm.state.q, state.q, rtol=0, atol=1e-4)
+    np.testing.assert_allclose(warm.state.nu, state.nu, rtol=0, atol=1e-3)
     assert pivots > 10 * warm.force_steps  # cold: every contact step pivots (about 15 times)
     assert warm.pivots < (0.05 if offset == 0.0 else 0.2) * warm.force_steps
-    assert warm.max_residual <= 1e-12
+    assert warm.max_residual <= 1e-12 and residual <= 1e-12
