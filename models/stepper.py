@@ -743,8 +743,7 @@ def contact_lcp(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, co
     `models.contact_pgs.body_blocks`), so M = C^T G C costs O(contacts^2), not O(nv contacts^2).
 
     Returns (M, q, Y = A^-1 B, gen0, c0, gen1, c1: LCP column r < m is c0[r] B[:, gen0[r]] +
-    c1[r] B[:, gen1[r]], coef: the friction directions in the (t, o) basis, fric, nf, lim: the
-    indices of the nl force-limited drives).
+    c1[r] B[:, gen1[r]], fric, nf, lim: the indices of the nl force-limited drives).
 
     A force-limited drive j (limit F, P = h F) is a bounded impulse p = x - P, x in [0, 2P]:
     unbounded it would be a - b v (a: its PD impulse at v = 0, `_drives`; b = h (h kp + kd); v
@@ -765,11 +764,11 @@ def contact_lcp(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, co
     m = nc + nd + nl
     body, ldof, nloc, Bl = _generators(spatial, active, fric, nf, lim, nl, v_index, pi, c_pair, W_n, W_t, W_o, dofs, count)
     Y, G = _delassus(body, ldof, nloc, Bl, dofs, count, inv, nv)
-    gen0, c0, gen1, c1, coef = _combinations(spatial, d, nc, fric, nf, nl)
+    gen0, c0, gen1, c1, coef, cs = _combinations(spatial, d, nc, fric, nf, nl)
     n = m + nf + nl
     Mlcp = np.zeros((n, n))
     qlcp = np.zeros(n)
-    _fill_jacobian_block(Mlcp, G, gen0, c0, gen1, c1, m)
+    _fill_jacobian_block(Mlcp, G, gen0, c0, gen1, c1, cs, spatial, nc, nf, nl)
     Jt_nu = np.empty(m)
     for r in range(m):
         Jt_nu[r] = c0[r] * _sparse_dot(Bl, ldof, nloc, gen0[r], nu_free) + c1[r] * _sparse_dot(Bl, ldof, nloc, gen1[r], nu_free)
@@ -777,7 +776,7 @@ def contact_lcp(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, co
     _friction_rows(Mlcp, qlcp, compliant, h, d, m, active, fric, nf, coef, pf, c_pair, c_slot, c_bias, Jt_nu, delta_t)
     _scale_gamma(Mlcp, d, m, nc, nf)
     _drive_rows(Mlcp, qlcp, h, nc + nd, m + nf, lim, nl, kp, kd, max_force, drive_a, Jt_nu)
-    return Mlcp, qlcp, Y, gen0, c0, gen1, c1, coef, fric, nf, lim[:nl]
+    return Mlcp, qlcp, Y, gen0, c0, gen1, c1, fric, nf, lim[:nl]
 
 
 @numba.njit(cache=True)
@@ -920,27 +919,37 @@ def _delassus(body, ldof, nloc, Bl, dofs, count, inv, nv):
 
 
 @numba.njit(cache=True)
-def _fill_jacobian_block(Mlcp, G, gen0, c0, gen1, c1, m):
-    """M[:m, :m] = C^T G C (symmetric: the upper triangle is mirrored), through the rows of
-    C^T G (m, ng)."""
+def _fill_jacobian_block(Mlcp, G, gen0, c0, gen1, c1, cs, spatial, nc, nf, nl):
+    """M[:m, :m] = C^T G C, row by row: the row p = (C^T G)[r] (ng), then each column group
+    from it (a normal's generator, a friction contact's d directions cs from its t and o
+    generators, a drive's DOF), so the inner loops are contiguous."""
     ng = G.shape[0]
-    P = np.empty((m, ng))
+    d = cs.shape[0]
+    nt = 2 if spatial else 1
+    nd = nf * d
+    m = nc + nd + nl
+    p = np.empty(ng)
     for r in range(m):
         a0, a1, x0, x1 = gen0[r], gen1[r], c0[r], c1[r]
         for g in range(ng):
-            P[r, g] = x0 * G[a0, g] + x1 * G[a1, g]
-    for r in range(m):
-        for c in range(r, m):
-            v = P[r, gen0[c]] * c0[c] + P[r, gen1[c]] * c1[c]
-            Mlcp[r, c] = v
-            Mlcp[c, r] = v
+            p[g] = x0 * G[a0, g] + x1 * G[a1, g]
+        for k in range(nc):
+            Mlcp[r, k] = p[k]
+        for f in range(nf):
+            pt = p[nc + f]
+            po = p[nc + nf + f] if spatial else 0.0
+            first = nc + f * d
+            for j in range(d):
+                Mlcp[r, first + j] = pt * cs[j, 0] + po * cs[j, 1]
+        for e in range(nl):
+            Mlcp[r, nc + nd + e] = p[nc + nt * nf + e]
 
 
 @numba.njit(cache=True)
 def _combinations(spatial, d, nc, fric, nf, nl):
     """C of J = B C: LCP column r < m is c0[r] B[:, gen0[r]] + c1[r] B[:, gen1[r]] (c1 = 0 for a
-    single generator); and coef (max(nf d, 1), 2): the friction directions in the (t, o) basis
-    (space: d directions around the cone; the plane: +t and -t)."""
+    single generator); coef (max(nf d, 1), 2): each friction row's direction in the (t, o)
+    basis; cs (d, 2): the d directions (space: around the cone; the plane: +t and -t)."""
     nt = 2 if spatial else 1
     nd = nf * d
     m = nc + nd + nl
@@ -969,7 +978,7 @@ def _combinations(spatial, d, nc, fric, nf, nl):
     for e in range(nl):
         r = nc + nd + e
         gen0[r] = gen1[r] = nc + nt * nf + e
-    return gen0, c0, gen1, c1, coef
+    return gen0, c0, gen1, c1, coef, cs
 
 
 @numba.njit(cache=True)
@@ -1058,7 +1067,7 @@ def _drive_rows(Mlcp, qlcp, h, first_row, first_slack, lim, nl, kp, kd, max_forc
 def _contact_solve(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, drives, drive_a, basis):
     """Build and solve the contact LCP, first on the previous step's basis (`basis_table`).
     Returns (nu+, p_n, p_t, status, pivots, residual, size, basis+)."""
-    Mlcp, qlcp, Y, gen0, c0, gen1, c1, coef, fric, nf, lim = contact_lcp(
+    Mlcp, qlcp, Y, gen0, c0, gen1, c1, fric, nf, lim = contact_lcp(
         model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, drives, drive_a
     )
     nc = active.shape[0]
