@@ -62,6 +62,11 @@ class State:
         return {n: float(v) for n, v in zip(scenario.coordinates, self.q)}
 
 
+#: A rollout's status and outcome codes as its result spells them (looked up once, not per call).
+_STATUS_TEXT = {int(s): (s.label, s.message) for s in StepStatus}
+_OUTCOME_LABEL = {int(o): o.label for o in Outcome}
+
+
 def _basis_of(state: State) -> np.ndarray:
     """The state's warm start as the kernel takes it (a copy; empty when it has none)."""
     basis = np.asarray(state.lcp_basis)
@@ -249,12 +254,12 @@ class Rung:
         if self.model is None:
             raise ValueError("the geometric rung has no dynamics to roll out; use valid()")
         c = compiled(scenario)
-        durations = np.ascontiguousarray(np.atleast_1d(np.asarray(durations, float)))
-        controls = np.ascontiguousarray(np.asarray(controls, float).reshape(len(durations), len(scenario.actuated)))
+        durations = np.array(durations, dtype=float, ndmin=1)  # copies: contiguous, the caller's stays theirs
+        controls = np.array(controls, dtype=float).reshape(len(durations), len(scenario.actuated))
         if len(controls) != len(durations):
             raise ValueError(f"{len(controls)} controls but {len(durations)} durations")
         if record_every <= 0:
-            total = int(np.round(durations.sum() / h))
+            total = int(round(float(durations.sum()) / h))
             record_every = max(1, total // max(max_records - 2, 1))
         scene = c.scene
         if c.scripted:  # the kernel moves scripted obstacles in the pose tables: its own copy
@@ -282,13 +287,13 @@ class Rung:
             float(t0),
         )
         wall = time.perf_counter() - start
-        status = StepStatus(out.status)
+        status, message = _STATUS_TEXT[out.status]
         return RolloutResult(
             state=State(out.q, out.nu, out.q_ref, out.delta_n, out.delta_t, out.basis),
             t=float(out.t),
-            outcome=Outcome(out.outcome).label,
-            status=status.label,
-            message=status.message,
+            outcome=_OUTCOME_LABEL[out.outcome],
+            status=status,
+            message=message,
             steps=int(out.steps),
             lcp_solves=int(out.lcp_solves),
             pivots=int(out.pivots),
