@@ -187,16 +187,21 @@ def inert_pairs(scenario: Scenario) -> tuple:
     return tuple(out)
 
 
+def _unmapped(body) -> list[str]:
+    """What of a body the MuJoCo builds do not map (planar and spatial alike)."""
+    problems = [f"{body.name}: scripted obstacle velocities are not mapped"] if body.velocity else []
+    for dof, drive in body.actuators.items():
+        if drive.max_force is not None:
+            problems.append(f"{body.name}.actuators.{dof}: max_force is not mapped")
+    return problems
+
+
 def _check_supported(scenario: Scenario) -> None:
     problems = []
     if scenario.dimension != 2:
         problems.append("the MuJoCo peer builds planar scenes only")
     for body in scenario.spec.bodies:
-        if body.velocity:
-            problems.append(f"{body.name}: scripted obstacle velocities are not mapped")
-        for dof, drive in body.actuators.items():
-            if drive.max_force is not None:
-                problems.append(f"{body.name}.actuators.{dof}: max_force is not mapped")
+        problems += _unmapped(body)
         for dof in body.dofs:
             if dof not in _AXES:
                 problems.append(f"{body.name}: DOF {dof!r} is not planar")
@@ -244,12 +249,18 @@ def mjcf(scenario: Scenario, h: float, contact: str, weights: dict[str, float] |
     pairs = [_pair(scenario, pair, contact, weights) for pair in scenario.pairs if pair not in leave_out]
     qpos = _n(*(start[c] for c in scenario.coordinates))
     act = _n(*(start[c] for c in scenario.actuated))
+    option = f'timestep="{_n(h)}" gravity="{_n(gx, gy, 0.0)}" cone="{cone}"'
+    return _mjcf_document(scenario, option, assets, world, pairs, actuators, qpos, act)
+
+
+def _mjcf_document(scenario: Scenario, option: str, assets, world, pairs, actuators, qpos: str, act: str) -> str:
+    """An MJCF model from its parts (the planar and the spatial builds share it)."""
     key = f'<key qpos="{qpos}"' + (f' act="{act}"' if act else "") + "/>"
     return "\n".join(
         [
             f'<mujoco model="{scenario.spec.scenario.name}">',
             '  <compiler angle="radian"/>',
-            f'  <option timestep="{_n(h)}" gravity="{_n(gx, gy, 0.0)}" cone="{cone}"/>',
+            f"  <option {option}/>",
             "  <asset>",
             *assets,
             "  </asset>",
@@ -339,11 +350,7 @@ def build_spatial(scenario: Scenario, h: float) -> Peer:
         raise ValueError(f"step h = {h} is not a positive number")
     problems = [] if scenario.dimension == 3 else ["build_spatial maps spatial scenes only"]
     for body in scenario.spec.bodies:
-        if body.velocity:
-            problems.append(f"{body.name}: scripted obstacle velocities are not mapped")
-        for dof, drive in body.actuators.items():
-            if drive.max_force is not None:
-                problems.append(f"{body.name}.actuators.{dof}: max_force is not mapped")
+        problems += _unmapped(body)
         dofs = set(body.dofs)
         if dofs and not (dofs <= set(_AXES_3D) or dofs == {"x", "y", "z", "rotation"}):
             problems.append(f"{body.name}: DOFs {sorted(dofs)} are not mapped (translations, or all six)")
@@ -403,28 +410,8 @@ def mjcf_spatial(scenario: Scenario, h: float) -> str:
     ]
     start_q = dict(zip(scenario.coordinates, scenario.start))
     act = _n(*(start_q[c] for c in scenario.actuated))
-    key = f'<key qpos="{_n(*scenario.start)}"' + (f' act="{act}"' if act else "") + "/>"
-    return "\n".join(
-        [
-            f'<mujoco model="{scenario.spec.scenario.name}">',
-            '  <compiler angle="radian"/>',
-            f'  <option timestep="{_n(h)}" gravity="{_n(gx, gy, gz)}"/>',
-            "  <asset>",
-            *assets,
-            "  </asset>",
-            "  <worldbody>",
-            *world,
-            "  </worldbody>",
-            "  <contact>",
-            *pairs,
-            "  </contact>",
-            "  <actuator>",
-            *actuators,
-            "  </actuator>",
-            f"  <keyframe>{key}</keyframe>",
-            "</mujoco>",
-        ]
-    )
+    option = f'timestep="{_n(h)}" gravity="{_n(gx, gy, gz)}"'
+    return _mjcf_document(scenario, option, assets, world, pairs, actuators, _n(*scenario.start), act)
 
 
 def _quaternion(R: np.ndarray) -> np.ndarray:
