@@ -23,7 +23,7 @@ import numba
 import numpy as np
 
 from models.contact2d import collide_2d
-from models.contact3d import collide_pair_3d, tangent_basis
+from models.contact3d import _pose, collide_pair_3d, tangent_basis
 from models.kinematics import (
     BF_BOUND,
     BF_HSN,
@@ -44,7 +44,6 @@ from models.kinematics import (
     V_ANGLE,
     V_WX,
     SceneData,
-    body_pose_3d,
     planar_poses,
     positions,
 )
@@ -192,30 +191,29 @@ def detect_planar_into(bi, bf, verts, pi, q, nu, h, margin, c_pair, c_psi, c_n, 
     return nc
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _world_aabb(S, q, b):
-    p, R = body_pose_3d(S, q, b)
-    lo = np.full(3, np.inf)
-    hi = np.full(3, -np.inf)
+    """Body b's world bounding box at q, (lo x, y, z, hi x, y, z): without allocating, and
+    inlined (the broadphase runs every step; a call would reference-count all of S's arrays)."""
+    (px, py, pz), R = _pose(S, q, b)
+    lx, ly, lz, hx, hy, hz = np.inf, np.inf, np.inf, -np.inf, -np.inf, -np.inf
     for i in range(S.vstart[b], S.vstart[b] + S.vcount[b]):
-        for k in range(3):
-            v = p[k] + R[k, 0] * S.verts[i, 0] + R[k, 1] * S.verts[i, 1] + R[k, 2] * S.verts[i, 2]
-            lo[k] = min(lo[k], v)
-            hi[k] = max(hi[k], v)
+        vx, vy, vz = S.verts[i, 0], S.verts[i, 1], S.verts[i, 2]
+        x = px + R[0][0] * vx + R[0][1] * vy + R[0][2] * vz
+        y = py + R[1][0] * vx + R[1][1] * vy + R[1][2] * vz
+        z = pz + R[2][0] * vx + R[2][1] * vy + R[2][2] * vz
+        lx, ly, lz = min(lx, x), min(ly, y), min(lz, z)
+        hx, hy, hz = max(hx, x), max(hy, y), max(hz, z)
     r = S.radius[b]
-    return lo - r, hi + r
+    return lx - r, ly - r, lz - r, hx + r, hy + r, hz + r
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _aabbs_apart(S, q, a, b, reach):
     """Second broadphase stage in space: world bounding boxes farther apart than reach."""
-    lo_a, hi_a = _world_aabb(S, q, a)
-    lo_b, hi_b = _world_aabb(S, q, b)
-    apart = False
-    for k in range(3):
-        if lo_b[k] - hi_a[k] > reach or lo_a[k] - hi_b[k] > reach:
-            apart = True
-    return apart
+    a0, a1, a2, a3, a4, a5 = _world_aabb(S, q, a)
+    b0, b1, b2, b3, b4, b5 = _world_aabb(S, q, b)
+    return b0 - a3 > reach or a0 - b3 > reach or b1 - a4 > reach or a1 - b4 > reach or b2 - a5 > reach or a2 - b5 > reach
 
 
 @numba.njit(cache=True)

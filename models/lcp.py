@@ -56,6 +56,8 @@ __all__ = [
     "fc2d_coulomb_error",
     "fc2d_reactions_from_lcp",
     "lemke_kernel",
+    "lemke_warm_kernel",
+    "natural_map_residual",
     "pgs_kernel",
     "solve_lcp",
 ]
@@ -175,6 +177,19 @@ def _matvec_plus(M, z, q):
 
 
 @numba.njit(cache=True, error_model="numpy")
+def _matvec_on(M, z, q, J, nj):
+    """w = M z + q for a z that is zero outside the nj indices J[:nj]: O(n nj)."""
+    n = q.shape[0]
+    w = np.empty(n)
+    for i in range(n):
+        s = q[i]
+        for a in range(nj):
+            s += M[i, J[a]] * z[J[a]]
+        w[i] = s
+    return w
+
+
+@numba.njit(cache=True, error_model="numpy")
 def _natural_map_residual(z, w, q):
     """||min(z, w)||_inf / (1 + ||q||_inf); +inf if anything is non-finite."""
     n = q.shape[0]
@@ -193,6 +208,13 @@ def _natural_map_residual(z, w, q):
         if m > r:
             r = m
     return r / (1.0 + qmax)
+
+
+@numba.njit(cache=True, error_model="numpy")
+def natural_map_residual(z, w, q):
+    """`complementarity_residual` of z given w = M z + q already recomputed from M, q and z
+    (as the Lemke kernels return it): O(n)."""
+    return _natural_map_residual(z, w, q)
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -478,12 +500,22 @@ def lemke_kernel(M, q, max_pivots):
     STATUS_NON_FINITE_OUTPUT.  q >= 0 returns z = 0 with 0 pivots; n = 0 returns empty
     arrays and STATUS_SOLVED.  The kernel does not check its input (see `solve_lcp`).
     """
+    z, w, status, pivots, _ = _lemke(M, q, max_pivots)
+    return z, w, status, pivots
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _lemke(M, q, max_pivots):
+    """`lemke_kernel`, also returning the final basis as flags: basic_z[i] is True where z_i
+    (not w_i) is basic in the complementary basis the path ended on (all False for q >= 0;
+    meaningless unless the status is STATUS_SOLVED)."""
     n = q.shape[0]
     z = np.zeros(n)
+    basic_z = np.zeros(n, np.bool_)
     if n == 0:
-        return z, np.zeros(0), STATUS_SOLVED, 0
+        return z, np.zeros(0), STATUS_SOLVED, 0, basic_z
     if _nonnegative(q):
-        return z, _matvec_plus(M, z, q), STATUS_SOLVED, 0
+        return z, _matvec_plus(M, z, q), STATUS_SOLVED, 0, basic_z
 
     qscale = _max_abs(q)
     Binv = np.eye(n)
@@ -500,7 +532,42 @@ def lemke_kernel(M, q, max_pivots):
     z = _z_from_basis(basis, qbar, n)
     w = _matvec_plus(M, z, q)
     z, w, status = _lemke_polish(M, q, basis, cand, z, w, status)
-    return z, w, status, pivots
+    for i in range(n):
+        if n <= basis[i] < 2 * n:
+            basic_z[basis[i] - n] = True
+    return z, w, status, pivots, basic_z
+
+
+@numba.njit(cache=True, error_model="numpy")
+def lemke_warm_kernel(M, q, max_pivots, guess, tol):
+    """Lemke's method started from a guessed complementary basis: exact, and free when the
+    guess is right (e.g. the previous time step's basis while the contacts persist).
+
+    guess: bool (n,), True where z_i is to be basic (w_i otherwise). The guess is tried
+    first: z_J = -M[J, J]^-1 q_J on J = {i : guess[i]}, z = 0 elsewhere, and w = M z + q
+    recomputed; it is accepted when that point's natural-map residual
+    (`complementarity_residual`: z >= 0, w >= 0 and z^T w = 0 at once) is at most tol. Else
+    (or when M[J, J] is numerically singular) `lemke_kernel` runs from scratch.
+
+    Returns (z, w, status, pivots, basic_z, warm): as `lemke_kernel`, plus the final basis as
+    flags (basic_z, the next guess; the guess itself when it was accepted) and whether the
+    guess was accepted (then pivots = 0 and status = STATUS_SOLVED).
+    """
+    n = q.shape[0]
+    if n > 0:
+        work = np.empty(n, np.int64)
+        nj = 0
+        for i in range(n):
+            if guess[i]:
+                work[nj] = i
+                nj += 1
+        z, ok = _solve_on(M, q, work, nj)
+        if ok:
+            w = _matvec_on(M, z, q, work, nj)
+            if _natural_map_residual(z, w, q) <= tol:
+                return z, w, STATUS_SOLVED, 0, guess.copy(), True
+    z, w, status, pivots, basic_z = _lemke(M, q, max_pivots)
+    return z, w, status, pivots, basic_z, False
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
@@ -620,17 +687,25 @@ def _basis_point(M, q, basis, n, work):
         if n <= basis[i] < 2 * n:
             work[nj] = basis[i] - n
             nj += 1
+    return _solve_on(M, q, work, nj)
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _solve_on(M, q, J, nj):
+    """(z, ok): z_J = -M[J, J]^-1 q_J on the nj indices J[:nj], z = 0 elsewhere; ok is False
+    when M[J, J] is numerically singular (then z = 0)."""
+    n = q.shape[0]
     A = np.empty((nj, nj))
     b = np.empty(nj)
     for a in range(nj):
-        b[a] = -q[work[a]]
+        b[a] = -q[J[a]]
         for c in range(nj):
-            A[a, c] = M[work[a], work[c]]
+            A[a, c] = M[J[a], J[c]]
     x, ok = _gauss_solve(A, b)
     z2 = np.zeros(n)
     if ok:
         for a in range(nj):
-            z2[work[a]] = x[a]
+            z2[J[a]] = x[a]
     return z2, ok
 
 

@@ -43,6 +43,7 @@ from models.stepper import (
     StepStatus,
     System,
     any_limited,
+    basis_table,
     dynamics_step,
     free_step,
     gravity_force,
@@ -78,6 +79,7 @@ class RolloutOutput(NamedTuple):
     force_steps: int  # steps with a positive normal contact impulse
     sweeps: int  # PGS sweeps over all steps
     pair_wrench: np.ndarray  # (n_pairs, 3) world-frame force on each pair's second body over the last step, N
+    basis: np.ndarray  # int8: Lemke's warm start for the next call (`models.stepper.basis_table`)
 
 
 # ----------------------------------------------------------------------------- the stages
@@ -326,6 +328,7 @@ def rollout_kernel(
     q_ref,
     delta_n,
     delta_t,
+    basis,
     controls,
     durations,
     h,
@@ -358,6 +361,11 @@ def rollout_kernel(
     u_op, u_index, u_lo, u_hi = unsafe
     q_index, v_index, kp, kd, lower, upper, _, max_force = D
     stack = np.zeros(max(g_op.shape[0], u_op.shape[0]) + 1, np.bool_)
+    slots, directions = c_psi.shape[0], model.friction_directions if dimension == 3 else 2
+    if basis.shape[0] != slots + v_index.shape[0] or basis.shape[1] != 3 + directions:
+        basis = basis_table(slots, v_index.shape[0], directions)
+    # the warm start is dropped at the steps that start a period of model.warm_period (Model)
+    warm_every = int(np.round(model.warm_period / h)) if model.warm_period > 0.0 else 0
     system = _start_system(S, D, model, h, q)
     A, Ainv, M_const, rhs_const = system
     constant_A, limited = not has_rotations(bi), any_limited(max_force)
@@ -372,6 +380,8 @@ def rollout_kernel(
             break
         u = controls[k]
         for _ in range(int(np.round(durations[k] / h))):
+            if warm_every > 0 and int(np.round((t0 + t) / h)) % warm_every == 0:
+                basis[:, :] = 0
             if scripted:  # obstacles where they are at this time
                 place_scripted(bf, S.base_pos, S.base_quat, t0 + t)
             # stage detect (SceneData crosses a call only in space, where detection needs it)
@@ -411,8 +421,10 @@ def rollout_kernel(
                 if not constant_A:
                     A = system_matrix(bi, bf, q, nv, eps_eff, h, v_index, kp, kd, max_force)
                     system = System(A, Ainv, M_const, rhs_const)
-                r = dynamics_step(model, solver, D, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t)
-                q2, nu2, q_ref2, dn2, dt2, st, piv, res, size, p_n, p_t, sw = r
+                r = dynamics_step(
+                    model, solver, D, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis
+                )
+                q2, nu2, q_ref2, dn2, dt2, st, piv, res, size, p_n, p_t, sw, basis = r
                 if keep_warm and st == StepStatus.OK:
                     n_warm = _keep_warm(nc, c_slot, p_n, p_t, warm_n, warm_t, warm_slots, n_warm)
             sweeps, lcp_solves, max_size, pivots, max_residual = _tally(
@@ -472,4 +484,5 @@ def rollout_kernel(
         force_steps,
         sweeps,
         pair_wrench,
+        basis,
     )

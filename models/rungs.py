@@ -38,15 +38,25 @@ GEOMETRIC_TOLERANCE = 1e-9
 DEFAULT_RECORDS = 2000
 
 
+def _no_basis() -> np.ndarray:
+    return np.zeros((0, 0), np.int8)
+
+
 @dataclass(frozen=True)
 class State:
-    """A rung's state: q, nu, the drives' reference positions, contact deformations."""
+    """A rung's state: q, nu, the drives' reference positions, contact deformations; and
+    lcp_basis, the contact solver's warm start (the complementary basis of the last contact
+    LCP solved, `models.stepper.basis_table`; empty: none). lcp_basis is no physics: a step
+    solves its LCP exactly whatever it holds (it is only tried first), and a state without it
+    (e.g. rebuilt from a planner's state vector) steps as well; a rollout that continues from
+    its result state takes the same steps as one longer rollout."""
 
     q: np.ndarray
     nu: np.ndarray
     q_ref: np.ndarray
     delta_n: np.ndarray
     delta_t: np.ndarray
+    lcp_basis: np.ndarray = field(default_factory=_no_basis)
 
     def named(self, scenario: Scenario) -> dict[str, float]:
         return {n: float(v) for n, v in zip(scenario.coordinates, self.q)}
@@ -55,6 +65,12 @@ class State:
 #: A rollout's status and outcome codes as its result spells them (looked up once, not per call).
 _STATUS_TEXT = {int(s): (s.label, s.message) for s in StepStatus}
 _OUTCOME_LABEL = {int(o): o.label for o in Outcome}
+
+
+def _basis_of(state: State) -> np.ndarray:
+    """The state's warm start as the kernel takes it (a copy; empty when it has none)."""
+    basis = np.asarray(state.lcp_basis)
+    return np.array(basis, np.int8) if basis.ndim == 2 else _no_basis()
 
 
 @dataclass(frozen=True)
@@ -249,7 +265,7 @@ class Rung:
         wall = time.perf_counter() - start
         status, message = _STATUS_TEXT[out.status]
         return RolloutResult(
-            state=State(out.q, out.nu, out.q_ref, out.delta_n, out.delta_t),
+            state=State(out.q, out.nu, out.q_ref, out.delta_n, out.delta_t, out.basis),
             t=float(out.t),
             outcome=_OUTCOME_LABEL[out.outcome],
             status=status,
@@ -299,6 +315,7 @@ class Rung:
             state.q_ref.copy(),
             state.delta_n.copy(),
             state.delta_t.copy(),
+            _basis_of(state),
             controls,
             durations,
             float(h),
@@ -492,12 +509,13 @@ def pair_signed_distances(scenario: Scenario, q: np.ndarray) -> np.ndarray:
 
 def rung_for(scenario: Scenario, name: str) -> Rung:
     """The registry's rung with the scenario's settings for it (`Scenario.rung_settings`:
-    theta, friction directions, contact solver)."""
+    theta, friction directions, contact solver; its control period drops Lemke's warm start,
+    `models.stepper.Model.warm_period`)."""
     rung = RUNGS[name]
     if rung.model is None:
         return rung
     settings = scenario.rung_settings(name)
-    model = rung.model._replace(theta=settings.theta, friction_directions=settings.friction_directions)
+    model = rung.model._replace(theta=settings.theta, friction_directions=settings.friction_directions, warm_period=settings.control_period)
     if settings.inertia is not None and model.eps == 0.0:
         model = model._replace(quasistatic_inertia=settings.inertia)
     return replace(rung, model=model, solver=contact_solver(settings.contact_solver))

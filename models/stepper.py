@@ -52,7 +52,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from models.contact_pgs import PgsStatus, block_solve, body_blocks, contact_pgs
+from models.contact_pgs import BODY_DOFS, PgsStatus, block_solve, body_blocks, contact_pgs
 from models.kinematics import (
     BF_INERTIA,
     BF_MASS,
@@ -67,7 +67,14 @@ from models.kinematics import (
     quat_mul,
     quat_to_matrix,
 )
-from models.lcp import STATUS_SOLVED, STATUS_SOLVED_INACCURATE, complementarity_residual, lemke_kernel
+from models.lcp import (
+    STATUS_SOLVED,
+    STATUS_SOLVED_INACCURATE,
+    complementarity_residual,
+    lemke_kernel,
+    lemke_warm_kernel,
+    natural_map_residual,
+)
 
 #: Quasistatic rungs: inertia scale standing in for eps -> 0 (times the mass matrix).
 QUASISTATIC_INERTIA = 1e-6
@@ -81,6 +88,12 @@ LCP_TOLERANCE = 1e-7
 #: each further retry adds 100 times more, up to LCP_REGULARIZATION * 100**(steps - 1) = 1e-5.
 LCP_REGULARIZATION = 1e-9
 LCP_REGULARIZATION_STEPS = 3
+#: A step's LCP is first tried on the previous step's complementary basis (`basis_table`); that
+#: point is accepted when its recomputed natural-map residual (on the LCP scaled to max |M| = 1)
+#: is at most this (1e5 below LCP_TOLERANCE, what the step accepts of a cold solve); else Lemke
+#: pivots from scratch. Not tighter: degenerate solutions carry round-off above 1e-14 whichever
+#: way they are found (a jammed grasp whose friction sits exactly on the cone's edge: 1e-13, cold).
+WARM_TOLERANCE = 1e-12
 #: A state entry above this in magnitude counts as diverged.
 DIVERGENCE_LIMIT = 1e10
 
@@ -133,6 +146,11 @@ class Model(NamedTuple):
     # eps = 0 (quasistatic): the inertia scale the memoryless step keeps; QUASISTATIC_INERTIA
     # stands in for the limit eps -> 0, 1 is a quasi-dynamic step with full inertia
     quasistatic_inertia: float = QUASISTATIC_INERTIA
+    # s: Lemke's warm start (`basis_table`) is dropped at every multiple of this time (0: it
+    # never is). A planner's control period: a planner propagates a plan one control period
+    # per call, each starting cold from a state vector, and its one-call replay must solve the
+    # same contact problems (at a degenerate LCP another basis is another exact solution)
+    warm_period: float = 0.0
 
 
 class Drives(NamedTuple):
@@ -240,6 +258,26 @@ class StepResult(NamedTuple):
     p_n: np.ndarray  # (nc,) normal impulse of each contact, N s
     p_t: np.ndarray  # (nc, 2) friction impulse in the (t, o) basis, zero where inactive ((0, 2): none)
     sweeps: int  # PGS sweeps taken
+    basis: np.ndarray  # int8 (slots + drives, 3 + d): the complementary basis of this step's LCP (`basis_table`)
+
+
+#: Columns of a basis table (`basis_table`): whether the row's contact / drive took part, then
+#: one flag per LCP variable (1: z basic, 0: w basic).
+BASIS_PRESENT = 0
+BASIS_NORMAL = 1  # a contact's p_n; a force-limited drive's x
+BASIS_GAMMA = 2  # a contact's gamma; a drive's slack s
+BASIS_DIRECTIONS = 3  # a contact's friction directions beta_j
+
+
+@numba.njit(cache=True)
+def basis_table(slots, drives, directions):
+    """An empty basis table (no row present): the warm start of a step that has none.
+
+    The Lemke solver's warm start travels between steps in this table, one row per contact slot
+    (`models.contact.ContactSet.slot`), then one per drive: the LCP variables of a contact or
+    drive that were basic (z, not w) at the last step that solved an LCP. Rows by slot, not by
+    LCP position, so the guess survives contacts that come and go."""
+    return np.zeros((slots + drives, BASIS_DIRECTIONS + directions), np.int8)
 
 
 # ----------------------------------------------------------------------------- mass and forces
@@ -456,25 +494,40 @@ def free_step(eps, theta, h, bi, Ainv, M_const, rhs_const, q, nu, q_ref, u, q_in
 
 
 @numba.njit(cache=True)
-def dynamics_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t):
+def dynamics_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis=None):
     """One step of eq. (3) given the contacts at q. Pure: returns a new StepResult.
 
     model, solver, drives: `Model`, `Solver`, `Drives`; tables: `SceneTables`; system: the
     `System` at q; contacts: a `models.contact.ContactSet` whose first nc entries are the
     contacts at q (bias: zeros without scripted obstacles); warm_n (slots,), warm_t (slots,
     2): PGS warm start by contact slot (the previous step's p_n, p_t; zeros for a cold start;
-    Lemke ignores them). A force-limited drive's impulse is solved with the contacts, by
+    Lemke ignores them); basis: Lemke's warm start, the previous step's `StepResult.basis`
+    (a `basis_table` of the contact buffers' slots, the drives and the friction directions;
+    None or an empty table: Lemke starts cold). The result's basis is this step's (the input's
+    where no LCP was solved). A force-limited drive's impulse is solved with the contacts, by
     Lemke. On the PGS path residual is `models.contact_pgs`'s and lcp_size the number of
     scalar impulses; where auto falls back to Lemke, sweeps still counts PGS's.
     """
+    if basis is None:
+        cold = basis_table(contacts.psi.shape[0], drives.v_index.shape[0], model.friction_directions if tables.spatial else 2)
+        return _dynamics_step(
+            model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, cold
+        )
+    return _dynamics_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis)
+
+
+@numba.njit(cache=True)
+def _dynamics_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis):
     use_pgs = solver.method == SOLVER_PGS or (solver.method == SOLVER_AUTO and nc >= solver.auto_contacts)
     if nc > 0 and use_pgs and not any_limited(drives.max_force):
-        out = _pgs_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t)
+        out = _pgs_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis)
         if out.status == StepStatus.OK or solver.method == SOLVER_PGS:
             return out
-        r = _lemke_step(model, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc)
-        return StepResult(r.q, r.nu, r.q_ref, r.delta_n, r.delta_t, r.status, r.pivots, r.residual, r.lcp_size, r.p_n, r.p_t, out.sweeps)
-    return _lemke_step(model, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc)
+        r = _lemke_step(model, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, basis)
+        return StepResult(
+            r.q, r.nu, r.q_ref, r.delta_n, r.delta_t, r.status, r.pivots, r.residual, r.lcp_size, r.p_n, r.p_t, out.sweeps, r.basis
+        )
+    return _lemke_step(model, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, basis)
 
 
 @numba.njit(cache=True)
@@ -527,9 +580,10 @@ def _integrate_checked(bi, theta, h, q, nu, nu_new):
 
 
 @numba.njit(cache=True)
-def _free_velocity(model, drives, tables, system, h, q, nu, q_ref, u):
+def _free_velocity(model, drives, tables, system, h, q, nu, q_ref, u, dofs, count, inv):
     """Stage assemble, without contacts: (nu_free = A^-1 rhs, q_ref+, a: the force-limited
-    drives' PD impulses at nu = 0, see `_drives`)."""
+    drives' PD impulses at nu = 0, see `_drives`); A^-1 from system.Ainv when A is constant,
+    else from its body blocks (dofs, count, inv: `models.contact_pgs.body_blocks`)."""
     bi, bf = tables.bi, tables.bf
     nv = nu.shape[0]
     quasistatic = model.eps == 0.0
@@ -539,14 +593,14 @@ def _free_velocity(model, drives, tables, system, h, q, nu, q_ref, u):
         if system.M_const.shape[0] == nv:
             rhs += eps * (system.M_const @ nu)
         else:
-            rhs += eps * (mass_matrix(bi, bf, q, nv) @ nu)
+            rhs += eps * mass_times(bi, bf, q, nu)
         if tables.spatial:
             rhs += h * eps * gyroscopic_force(bi, bf, q, nu, nv)
     q_ref_new, drive_a = _drives(h, q, q_ref, u, drives, rhs)
     if system.Ainv.shape[0] == nv:
         nu_free = system.Ainv @ rhs
     else:
-        nu_free = np.linalg.solve(system.A, rhs)
+        nu_free = block_solve(dofs, count, inv, rhs)
     return nu_free, q_ref_new, drive_a
 
 
@@ -563,9 +617,14 @@ def _active_contacts(W_n, nc):
 
 
 @numba.njit(cache=True)
-def _lemke_step(model, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc):
+def _lemke_step(model, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, basis):
     """dynamics_step with the dense LCP solved by Lemke (see `_contact_solve`)."""
-    nu_free, q_ref_new, drive_a = _free_velocity(model, drives, tables, system, h, q, nu, q_ref, u)
+    # A is block diagonal by body: its blocks' inverses serve the free velocity (when A changes
+    # with q) and the Delassus matrix (`_delassus`)
+    dofs, count, inv, ok = body_blocks(tables.bi, system.A, system.Ainv)
+    if not ok:
+        return StepResult(q, nu, q_ref, delta_n, delta_t, StepStatus.SINGULAR.value, 0, 0.0, 0, np.zeros(nc), np.zeros((nc, 2)), 0, basis)
+    nu_free, q_ref_new, drive_a = _free_velocity(model, drives, tables, system, h, q, nu, q_ref, u, dofs, count, inv)
     nu_new = nu_free
     delta_n_new = delta_n  # rigid models keep them zero; compliant ones get new arrays below
     delta_t_new = delta_t
@@ -578,24 +637,28 @@ def _lemke_step(model, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t
     size = 0
     impulses = np.zeros(nc)
     frictions = np.zeros((nc, 2))
+    basis_new = basis
     # contacts that couple to a free DOF; friction only where mu > 0 and the tangent couples
     active = _active_contacts(contacts.W_n, nc)
     n_act = active.shape[0]
     if n_act > 0 or any_limited(drives.max_force):
-        nu_new, p_n, p_t, status, pivots, residual, size = _contact_solve(
+        nu_new, p_n, p_t, status, pivots, residual, size, basis_new = _contact_solve(
             model,
             tables.spatial,
             h,
-            system.A,
-            system.Ainv,
+            dofs,
+            count,
+            inv,
             nu_free,
             active,
+            tables.pi,
             tables.pf,
             contacts,
             delta_n,
             delta_t,
             drives,
             drive_a,
+            basis,
         )
         for k in range(n_act):
             impulses[active[k]] = p_n[k]
@@ -604,22 +667,22 @@ def _lemke_step(model, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t
         if status == StepStatus.OK and model.compliant:
             delta_n_new, delta_t_new = _deformations(h, tables.pf, contacts.pair, contacts.slot, active, p_n, p_t, delta_n, delta_t)
     if status != StepStatus.OK:
-        return StepResult(q, nu, q_ref, delta_n, delta_t, status, pivots, residual, size, impulses, frictions, 0)
+        return StepResult(q, nu, q_ref, delta_n, delta_t, status, pivots, residual, size, impulses, frictions, 0, basis)
     q_new, bad = _integrate_checked(tables.bi, model.theta, h, q, nu, nu_new)
     if bad != StepStatus.OK:
-        return StepResult(q, nu, q_ref, delta_n, delta_t, bad, pivots, residual, size, impulses, frictions, 0)
-    return StepResult(q_new, nu_new, q_ref_new, delta_n_new, delta_t_new, status, pivots, residual, size, impulses, frictions, 0)
+        return StepResult(q, nu, q_ref, delta_n, delta_t, bad, pivots, residual, size, impulses, frictions, 0, basis)
+    return StepResult(q_new, nu_new, q_ref_new, delta_n_new, delta_t_new, status, pivots, residual, size, impulses, frictions, 0, basis_new)
 
 
 @numba.njit(cache=True)
-def _pgs_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t):
+def _pgs_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis):
     """dynamics_step with PGS on the contact impulses; every product body by body, so the
     step costs O(bodies + contacts) beyond what the caller built (`models.contact_pgs`)."""
     bi, bf = tables.bi, tables.bf
     nv = nu.shape[0]
     dofs, count, inv, ok = body_blocks(bi, system.A, system.Ainv)
     if not ok:
-        return StepResult(q, nu, q_ref, delta_n, delta_t, StepStatus.SINGULAR.value, 0, 0.0, 0, np.zeros(nc), np.zeros((nc, 2)), 0)
+        return StepResult(q, nu, q_ref, delta_n, delta_t, StepStatus.SINGULAR.value, 0, 0.0, 0, np.zeros(nc), np.zeros((nc, 2)), 0, basis)
     quasistatic = model.eps == 0.0
     eps = model.quasistatic_inertia if quasistatic else model.eps
     rhs = system.rhs_const.copy()
@@ -654,7 +717,7 @@ def _pgs_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, d
     )
     if r.status != PgsStatus.CONVERGED:
         bad = StepStatus.CONTACT_NOT_CONVERGED.value if r.status == PgsStatus.NOT_CONVERGED else StepStatus.NON_FINITE.value
-        return StepResult(q, nu, q_ref, delta_n, delta_t, bad, 0, r.residual, r.unknowns, r.p_n, r.p_t, r.sweeps)
+        return StepResult(q, nu, q_ref, delta_n, delta_t, bad, 0, r.residual, r.unknowns, r.p_n, r.p_t, r.sweeps, basis)
     delta_n_new, delta_t_new = delta_n, delta_t
     if model.compliant:
         active = r.active
@@ -667,19 +730,25 @@ def _pgs_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, d
         delta_n_new, delta_t_new = _deformations(h, tables.pf, contacts.pair, contacts.slot, active, pa, ta, delta_n, delta_t)
     q_new, bad = _integrate_checked(bi, model.theta, h, q, nu, r.nu)
     if bad != StepStatus.OK:
-        return StepResult(q, nu, q_ref, delta_n, delta_t, bad, 0, r.residual, r.unknowns, r.p_n, r.p_t, r.sweeps)
+        return StepResult(q, nu, q_ref, delta_n, delta_t, bad, 0, r.residual, r.unknowns, r.p_n, r.p_t, r.sweeps, basis)
     return StepResult(
-        q_new, r.nu, q_ref_new, delta_n_new, delta_t_new, StepStatus.OK.value, 0, r.residual, r.unknowns, r.p_n, r.p_t, r.sweeps
+        q_new, r.nu, q_ref_new, delta_n_new, delta_t_new, StepStatus.OK.value, 0, r.residual, r.unknowns, r.p_n, r.p_t, r.sweeps, basis
     )
 
 
 @numba.njit(cache=True)
-def contact_lcp(model, spatial, h, A, Ainv, nu_free, active, pf, contacts, delta_n, delta_t, drives, drive_a):
+def contact_lcp(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, drives, drive_a):
     """Assemble the contact LCP of the active contacts and the force-limited drives.
 
-    Unknowns z = (p_n (nc), beta (nf * d), x (nl), gamma (nf), s (nl)); returns (M, q, A^-1 J,
-    coef, fric, nf, lim) with J = [W_n | D | E] and coef the friction directions in the (t, o)
-    basis, lim the indices of the nl force-limited drives.
+    Unknowns z = (p_n (nc), beta (nf * d), x (nl), gamma (nf), s (nl)); with J = [W_n | D | E]
+    the top-left block of M is J^T A^-1 J. It is assembled over the DOFs contacts touch: J = B C,
+    B the generators (the Jacobian columns of each contact's n, t, o and the drives' unit DOFs,
+    `_generators`), C how each LCP column combines them (a friction direction is cos t + sin o),
+    and the Delassus matrix G = B^T A^-1 B from A's body blocks (dofs, count, inv:
+    `models.contact_pgs.body_blocks`), so M = C^T G C costs O(contacts^2), not O(nv contacts^2).
+
+    Returns (M, q, Y = A^-1 B, gen0, c0, gen1, c1: LCP column r < m is c0[r] B[:, gen0[r]] +
+    c1[r] B[:, gen1[r]], fric, nf, lim: the indices of the nl force-limited drives).
 
     A force-limited drive j (limit F, P = h F) is a bounded impulse p = x - P, x in [0, 2P]:
     unbounded it would be a - b v (a: its PD impulse at v = 0, `_drives`; b = h (h kp + kd); v
@@ -698,22 +767,21 @@ def contact_lcp(model, spatial, h, A, Ainv, nu_free, active, pf, contacts, delta
     fric, nf = _friction_contacts(spatial, active, c_pair, pf, W_t, W_o)
     nd = nf * d
     m = nc + nd + nl
-    J, coef = _lcp_jacobian(spatial, d, nv, m, active, fric, nf, lim, nl, v_index, W_n, W_t, W_o)
-    if Ainv.shape[0] == nv:
-        AinvJ = Ainv @ J
-    else:
-        AinvJ = np.linalg.solve(A, J)
+    body, ldof, nloc, Bl = _generators(spatial, active, fric, nf, lim, nl, v_index, pi, c_pair, W_n, W_t, W_o, dofs, count)
+    Y, G = _delassus(body, ldof, nloc, Bl, dofs, count, inv, nv)
+    gen0, c0, gen1, c1, coef, cs = _combinations(spatial, d, nc, fric, nf, nl)
     n = m + nf + nl
     Mlcp = np.zeros((n, n))
     qlcp = np.zeros(n)
-    Jt = np.ascontiguousarray(J.T)
-    Mlcp[:m, :m] = Jt @ AinvJ
-    Jt_nu = Jt @ nu_free
+    _fill_jacobian_block(Mlcp, G, gen0, c0, gen1, c1, cs, spatial, nc, nf, nl)
+    Jt_nu = np.empty(m)
+    for r in range(m):
+        Jt_nu[r] = c0[r] * _sparse_dot(Bl, ldof, nloc, gen0[r], nu_free) + c1[r] * _sparse_dot(Bl, ldof, nloc, gen1[r], nu_free)
     _normal_rows(Mlcp, qlcp, compliant, h, active, pf, c_pair, c_psi, c_slot, c_bias, Jt_nu, delta_n)
     _friction_rows(Mlcp, qlcp, compliant, h, d, m, active, fric, nf, coef, pf, c_pair, c_slot, c_bias, Jt_nu, delta_t)
     _scale_gamma(Mlcp, d, m, nc, nf)
     _drive_rows(Mlcp, qlcp, h, nc + nd, m + nf, lim, nl, kp, kd, max_force, drive_a, Jt_nu)
-    return Mlcp, qlcp, AinvJ, coef, fric, nf, lim[:nl]
+    return Mlcp, qlcp, Y, gen0, c0, gen1, c1, fric, nf, lim[:nl]
 
 
 @numba.njit(cache=True)
@@ -746,34 +814,176 @@ def _friction_contacts(spatial, active, c_pair, pf, W_t, W_o):
     return fric, nf
 
 
+#: Local DOFs of a generator (`_generators`): the DOFs of the (at most two) bodies it touches.
+LOCAL_DOFS = 2 * BODY_DOFS
+
+
 @numba.njit(cache=True)
-def _lcp_jacobian(spatial, d, nv, m, active, fric, nf, lim, nl, v_index, W_n, W_t, W_o):
-    """J = [W_n | D | E] (nv, m) over the active contacts, the d friction directions of each
-    friction contact and the force-limited drives' unit DOFs, and coef: the friction
-    directions in the (t, o) basis (a Jacobian column is linear in its direction)."""
+def _generators(spatial, active, fric, nf, lim, nl, v_index, pi, c_pair, W_n, W_t, W_o, dofs, count):
+    """The columns B that the LCP's J = B C combines, gathered on the DOFs they touch: each
+    active contact's normal (generator k), each friction contact's t (nc + f) and, in space, o
+    (nc + nf + f), each force-limited drive's unit DOF (last). Returns (body (ng, 2): the bodies
+    with DOFs each touches, -1 padded; ldof (ng, LOCAL_DOFS): those bodies' DOFs, body by body;
+    nloc (ng,): how many; Bl (ng, LOCAL_DOFS): the column's entries there)."""
     nc = active.shape[0]
-    nd = nf * d
-    coef = np.zeros((max(nd, 1), 2))
-    J = np.zeros((nv, m))
+    nt = 2 if spatial else 1
+    ng = nc + nt * nf + nl
+    body = np.full((ng, 2), -1, np.int64)
+    ldof = np.zeros((ng, LOCAL_DOFS), np.int64)
+    nloc = np.zeros(ng, np.int64)
+    Bl = np.zeros((ng, LOCAL_DOFS))
     for k in range(nc):
-        for v in range(nv):
-            J[v, k] = W_n[v, active[k]]
+        i = active[k]
+        s = 0
+        for side in range(2):
+            b = pi[c_pair[i], side]
+            if count[b] > 0:
+                body[k, s] = b
+                s += 1
+        _gather(body, ldof, nloc, Bl, dofs, count, W_n, i, k)
     for f in range(nf):
-        i = active[fric[f]]
-        for j in range(d):
-            r = f * d + j
-            if spatial:
-                ang = 2.0 * np.pi * j / d
-                coef[r, 0], coef[r, 1] = np.cos(ang), np.sin(ang)
-            else:
-                coef[r, 0] = 1.0 if j == 0 else -1.0
-            for v in range(nv):
-                J[v, nc + r] = coef[r, 0] * W_t[v, i]
-                if spatial:
-                    J[v, nc + r] += coef[r, 1] * W_o[v, i]
+        k = fric[f]
+        for a in range(nt):
+            g = nc + a * nf + f
+            body[g, 0], body[g, 1] = body[k, 0], body[k, 1]
+            _gather(body, ldof, nloc, Bl, dofs, count, W_t if a == 0 else W_o, active[k], g)
     for e in range(nl):
-        J[v_index[lim[e]], nc + nd + e] = 1.0
-    return J, coef
+        g = nc + nt * nf + e
+        v = v_index[lim[e]]
+        for b in range(count.shape[0]):
+            for r in range(count[b]):
+                if dofs[b, r] == v:
+                    body[g, 0] = b
+        b = body[g, 0]
+        if b >= 0:
+            nloc[g] = count[b]
+            for r in range(count[b]):
+                ldof[g, r] = dofs[b, r]
+                Bl[g, r] = 1.0 if dofs[b, r] == v else 0.0
+    return body, ldof, nloc, Bl
+
+
+@numba.njit(cache=True, inline="always")
+def _gather(body, ldof, nloc, Bl, dofs, count, W, i, g):
+    """Generator g is column i of W: its entries on its bodies' DOFs."""
+    a = 0
+    for s in range(2):
+        b = body[g, s]
+        if b < 0:
+            continue
+        for r in range(count[b]):
+            v = dofs[b, r]
+            ldof[g, a] = v
+            Bl[g, a] = W[v, i]
+            a += 1
+    nloc[g] = a
+
+
+@numba.njit(cache=True, inline="always")
+def _sparse_dot(Bl, ldof, nloc, g, x):
+    """B[:, g] . x over generator g's local DOFs."""
+    acc = 0.0
+    for a in range(nloc[g]):
+        acc += Bl[g, a] * x[ldof[g, a]]
+    return acc
+
+
+@numba.njit(cache=True)
+def _delassus(body, ldof, nloc, Bl, dofs, count, inv, nv):
+    """(Y = A^-1 B (nv, ng), G = B^T A^-1 B (ng, ng)) over the DOFs of the bodies each generator
+    touches: A is block diagonal by body (inv: its blocks' inverses), so Y[:, g] lives on g's
+    bodies and G[g1, g2] is zero unless g1 and g2 share one. G is symmetric: its upper triangle
+    is mirrored."""
+    ng = nloc.shape[0]
+    Y = np.zeros((nv, ng))
+    for g in range(ng):
+        a0 = 0
+        for s in range(2):
+            b = body[g, s]
+            if b < 0:
+                continue
+            m = count[b]
+            for r in range(m):
+                acc = 0.0
+                for c in range(m):
+                    acc += inv[b, r, c] * Bl[g, a0 + c]
+                Y[dofs[b, r], g] = acc
+            a0 += m
+    G = np.zeros((ng, ng))
+    for g1 in range(ng):
+        p, r = body[g1, 0], body[g1, 1]
+        for g2 in range(g1, ng):
+            if p != body[g2, 0] and p != body[g2, 1] and (r < 0 or (r != body[g2, 0] and r != body[g2, 1])):
+                continue
+            acc = 0.0
+            for a in range(nloc[g1]):
+                acc += Bl[g1, a] * Y[ldof[g1, a], g2]
+            G[g1, g2] = acc
+            G[g2, g1] = acc
+    return Y, G
+
+
+@numba.njit(cache=True)
+def _fill_jacobian_block(Mlcp, G, gen0, c0, gen1, c1, cs, spatial, nc, nf, nl):
+    """M[:m, :m] = C^T G C, row by row: the row p = (C^T G)[r] (ng), then each column group
+    from it (a normal's generator, a friction contact's d directions cs from its t and o
+    generators, a drive's DOF), so the inner loops are contiguous."""
+    ng = G.shape[0]
+    d = cs.shape[0]
+    nt = 2 if spatial else 1
+    nd = nf * d
+    m = nc + nd + nl
+    p = np.empty(ng)
+    for r in range(m):
+        a0, a1, x0, x1 = gen0[r], gen1[r], c0[r], c1[r]
+        for g in range(ng):
+            p[g] = x0 * G[a0, g] + x1 * G[a1, g]
+        for k in range(nc):
+            Mlcp[r, k] = p[k]
+        for f in range(nf):
+            pt = p[nc + f]
+            po = p[nc + nf + f] if spatial else 0.0
+            first = nc + f * d
+            for j in range(d):
+                Mlcp[r, first + j] = pt * cs[j, 0] + po * cs[j, 1]
+        for e in range(nl):
+            Mlcp[r, nc + nd + e] = p[nc + nt * nf + e]
+
+
+@numba.njit(cache=True)
+def _combinations(spatial, d, nc, fric, nf, nl):
+    """C of J = B C: LCP column r < m is c0[r] B[:, gen0[r]] + c1[r] B[:, gen1[r]] (c1 = 0 for a
+    single generator); coef (max(nf d, 1), 2): each friction row's direction in the (t, o)
+    basis; cs (d, 2): the d directions (space: around the cone; the plane: +t and -t)."""
+    nt = 2 if spatial else 1
+    nd = nf * d
+    m = nc + nd + nl
+    gen0 = np.empty(m, np.int64)
+    gen1 = np.empty(m, np.int64)
+    c0 = np.ones(m)
+    c1 = np.zeros(m)
+    coef = np.zeros((max(nd, 1), 2))
+    cs = np.empty((d, 2))
+    for j in range(d):
+        if spatial:
+            ang = 2.0 * np.pi * j / d
+            cs[j, 0], cs[j, 1] = np.cos(ang), np.sin(ang)
+        else:
+            cs[j, 0], cs[j, 1] = (1.0 if j == 0 else -1.0), 0.0
+    for k in range(nc):
+        gen0[k] = gen1[k] = k
+    for f in range(nf):
+        for j in range(d):
+            r = nc + f * d + j
+            coef[r - nc, 0], coef[r - nc, 1] = cs[j, 0], cs[j, 1]
+            gen0[r] = nc + f
+            c0[r] = cs[j, 0]
+            gen1[r] = nc + nf + f if spatial else nc + f
+            c1[r] = cs[j, 1]
+    for e in range(nl):
+        r = nc + nd + e
+        gen0[r] = gen1[r] = nc + nt * nf + e
+    return gen0, c0, gen1, c1, coef, cs
 
 
 @numba.njit(cache=True)
@@ -859,10 +1069,11 @@ def _drive_rows(Mlcp, qlcp, h, first_row, first_slack, lim, nl, kp, kd, max_forc
 
 
 @numba.njit(cache=True)
-def _contact_solve(model, spatial, h, A, Ainv, nu_free, active, pf, contacts, delta_n, delta_t, drives, drive_a):
-    """Build and solve the contact LCP. Returns (nu+, p_n, p_t, status, pivots, residual, size)."""
-    Mlcp, qlcp, AinvJ, coef, fric, nf, lim = contact_lcp(
-        model, spatial, h, A, Ainv, nu_free, active, pf, contacts, delta_n, delta_t, drives, drive_a
+def _contact_solve(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, drives, drive_a, basis):
+    """Build and solve the contact LCP, first on the previous step's basis (`basis_table`).
+    Returns (nu+, p_n, p_t, status, pivots, residual, size, basis+)."""
+    Mlcp, qlcp, Y, gen0, c0, gen1, c1, fric, nf, lim = contact_lcp(
+        model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, drives, drive_a
     )
     nc = active.shape[0]
     d = model.friction_directions if spatial else 2
@@ -871,15 +1082,14 @@ def _contact_solve(model, spatial, h, A, Ainv, nu_free, active, pf, contacts, de
     n = qlcp.shape[0]
     # LCP(s M, s q) has the solutions of LCP(M, q): scale to unit size for Lemke's pivot
     # tolerances (quasistatic rungs make M ~ 1 / QUASISTATIC_INERTIA)
-    scale = 0.0
-    for r in range(n):
-        for c in range(n):
-            scale = max(scale, abs(Mlcp[r, c]))
+    scale = _largest_entry(Mlcp, m)
     if scale > 0.0:
         Mlcp /= scale
         qlcp /= scale
-    z, w, status, pivots = lemke_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1))
-    residual = complementarity_residual(Mlcp, qlcp, z)
+    slot = contacts.slot
+    guess = _basis_guess(basis, active, slot, fric, nf, d, lim, m, n)
+    z, w, status, pivots, basic_z, _ = lemke_warm_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1), guess, WARM_TOLERANCE)
+    residual = natural_map_residual(z, w, qlcp)  # w = M z + q, recomputed by the kernel
     added = 0.0
     for k in range(LCP_REGULARIZATION_STEPS):
         if (status == STATUS_SOLVED or status == STATUS_SOLVED_INACCURATE) and residual <= LCP_TOLERANCE:
@@ -890,21 +1100,102 @@ def _contact_solve(model, spatial, h, A, Ainv, nu_free, active, pf, contacts, de
         for r in range(nc + nd):
             Mlcp[r, r] += target - added
         added = target
-        z, w, status, more = lemke_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1))
+        z, w, status, more, basic_z, _ = lemke_warm_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1), guess, WARM_TOLERANCE)
         pivots += more
-        residual = complementarity_residual(Mlcp, qlcp, z)
+        residual = natural_map_residual(z, w, qlcp)
     p_n = z[:nc].copy()
     p_t = np.zeros((nc, 2))
     if (status != STATUS_SOLVED and status != STATUS_SOLVED_INACCURATE) or not (residual <= LCP_TOLERANCE):
-        return nu_free, p_n, p_t, StepStatus.LCP_FAILED.value, pivots, residual, n
+        return nu_free, p_n, p_t, StepStatus.LCP_FAILED.value, pivots, residual, n, basis
+    # the generators' impulses t = C z: p_n, then each friction contact's impulse along t and o
+    t = np.zeros(Y.shape[1])
+    for r in range(m):
+        t[gen0[r]] += c0[r] * z[r]
+        t[gen1[r]] += c1[r] * z[r]
     for f in range(nf):
-        k = fric[f]
+        p_t[fric[f], 0] = t[nc + f]
+        if spatial:
+            p_t[fric[f], 1] = t[nc + nf + f]
+    nu_new = nu_free + Y @ t
+    basis_new = _basis_kept(basis, basic_z, active, slot, fric, nf, d, lim, m)
+    return nu_new, p_n, p_t, StepStatus.OK.value, pivots, residual, n, basis_new
+
+
+@numba.njit(cache=True)
+def _largest_entry(Mlcp, m):
+    """max |M| of a contact LCP without scanning it all: its top-left m x m block J^T A^-1 J
+    (plus compliance and drive terms) is positive semidefinite, so no entry there exceeds the
+    largest diagonal one; the rest (gamma and slack rows and columns, each row's magnitudes
+    mirrored in its column) is read in its rows."""
+    n = Mlcp.shape[0]
+    scale = 0.0
+    for r in range(m):
+        scale = max(scale, abs(Mlcp[r, r]))
+    for r in range(m, n):
+        for c in range(n):
+            scale = max(scale, abs(Mlcp[r, c]))
+    return scale
+
+
+@numba.njit(cache=True)
+def _basis_guess(basis, active, slot, fric, nf, d, lim, m, n):
+    """The LCP's first guess of a complementary basis (True: z_i basic) from the previous
+    step's table (`basis_table`; rows: the contact slots, slot.shape[0] of them, then the
+    drives): each contact's and force-limited drive's flags; one that was not in the previous
+    LCP, or a table of another shape, guesses w basic (no force) on its rows."""
+    guess = np.zeros(n, np.bool_)
+    nc = active.shape[0]
+    nl = lim.shape[0]
+    slots = slot.shape[0]
+    if basis.shape[1] != BASIS_DIRECTIONS + d or basis.shape[0] < slots:
+        return guess
+    nd = nf * d
+    for k in range(nc):
+        s = slot[active[k]]
+        if basis[s, BASIS_PRESENT] != 0:
+            guess[k] = basis[s, BASIS_NORMAL] != 0
+    for f in range(nf):
+        s = slot[active[fric[f]]]
+        if basis[s, BASIS_PRESENT] != 0:
+            guess[m + f] = basis[s, BASIS_GAMMA] != 0
+            for j in range(d):
+                guess[nc + f * d + j] = basis[s, BASIS_DIRECTIONS + j] != 0
+    for e in range(nl):
+        r = slots + lim[e]
+        if r < basis.shape[0] and basis[r, BASIS_PRESENT] != 0:
+            guess[nc + nd + e] = basis[r, BASIS_NORMAL] != 0
+            guess[m + nf + e] = basis[r, BASIS_GAMMA] != 0
+    return guess
+
+
+@numba.njit(cache=True)
+def _basis_kept(basis, basic_z, active, slot, fric, nf, d, lim, m):
+    """The table (`basis_table`, shaped as the given one) of this step's final basis basic_z:
+    the rows of its contacts and force-limited drives present, all others absent. A table of
+    another shape than the LCP needs is replaced by one that fits nothing (no warm start)."""
+    out = np.zeros_like(basis)
+    slots = slot.shape[0]
+    if basis.shape[1] != BASIS_DIRECTIONS + d or basis.shape[0] < slots:
+        return out
+    nc = active.shape[0]
+    nl = lim.shape[0]
+    nd = nf * d
+    for k in range(nc):
+        s = slot[active[k]]
+        out[s, BASIS_PRESENT] = 1
+        out[s, BASIS_NORMAL] = basic_z[k]
+    for f in range(nf):
+        s = slot[active[fric[f]]]
+        out[s, BASIS_GAMMA] = basic_z[m + f]
         for j in range(d):
-            r = nc + f * d + j
-            p_t[k, 0] += z[r] * coef[r - nc, 0]
-            p_t[k, 1] += z[r] * coef[r - nc, 1]
-    nu_new = nu_free + AinvJ @ z[:m]
-    return nu_new, p_n, p_t, StepStatus.OK.value, pivots, residual, n
+            out[s, BASIS_DIRECTIONS + j] = basic_z[nc + f * d + j]
+    for e in range(nl):
+        r = slots + lim[e]
+        if r < basis.shape[0]:
+            out[r, BASIS_PRESENT] = 1
+            out[r, BASIS_NORMAL] = basic_z[nc + nd + e]
+            out[r, BASIS_GAMMA] = basic_z[m + nf + e]
+    return out
 
 
 @numba.njit(cache=True)

@@ -52,8 +52,18 @@ DOF. Our stepper drops such contacts (a zero Jacobian column); MuJoCo solves the
 every step. ``build(..., drop_inert=True)`` leaves those pairs out (`inert_pairs`): the
 same trajectory (tests/test_peers.py), fewer constraint rows.
 
-Unsupported scenario features (3D, scripted obstacle velocities, actuator force limits)
-raise ValueError in `build`.
+Spatial scenes (`build_spatial`, e.g. box_push_3d) map with MuJoCo's own contact model, as
+the issue's comparison did: each scenario pair an explicit ``<pair>`` with friction mu
+(condim 3) and MuJoCo's default solref, solimp and (pyramidal) cone; our rigid rungs have no
+K or C to map. plane {p : n.p <= offset} -> a plane geom; box -> box (half sizes); sphere ->
+sphere; convex mesh -> a mesh asset from the same OBJ file (scaled); a body with the DOFs
+x, y, z and rotation -> a free joint (qpos = x, y, z, qw, qx, qy, qz: the scenario's q); a
+body with translations only -> slide joints along the world axes; fixed bodies and the
+bodies' start placements come from `Scenario.placements`. Drives as in the plane.
+
+Unsupported scenario features (scripted obstacle velocities, actuator force limits; in space
+also DOF sets other than translations or all six) raise ValueError in `build` /
+`build_spatial`.
 """
 
 from __future__ import annotations
@@ -62,6 +72,7 @@ import contextlib
 import math
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 import mujoco
 import numpy as np
@@ -82,6 +93,7 @@ CONTACT_MAPPINGS = ("force", "direct")
 DIVERGENCE_WARNINGS = ("mjWARN_BADQPOS", "mjWARN_BADQVEL", "mjWARN_BADQACC")
 
 _AXES = {"x": ("slide", "1 0 0"), "y": ("slide", "0 1 0"), "theta": ("hinge", "0 0 1")}
+_AXES_3D = {"x": ("slide", "1 0 0"), "y": ("slide", "0 1 0"), "z": ("slide", "0 0 1")}
 
 
 def version() -> str:
@@ -175,16 +187,21 @@ def inert_pairs(scenario: Scenario) -> tuple:
     return tuple(out)
 
 
+def _unmapped(body) -> list[str]:
+    """What of a body the MuJoCo builds do not map (planar and spatial alike)."""
+    problems = [f"{body.name}: scripted obstacle velocities are not mapped"] if body.velocity else []
+    for dof, drive in body.actuators.items():
+        if drive.max_force is not None:
+            problems.append(f"{body.name}.actuators.{dof}: max_force is not mapped")
+    return problems
+
+
 def _check_supported(scenario: Scenario) -> None:
     problems = []
     if scenario.dimension != 2:
         problems.append("the MuJoCo peer builds planar scenes only")
     for body in scenario.spec.bodies:
-        if body.velocity:
-            problems.append(f"{body.name}: scripted obstacle velocities are not mapped")
-        for dof, drive in body.actuators.items():
-            if drive.max_force is not None:
-                problems.append(f"{body.name}.actuators.{dof}: max_force is not mapped")
+        problems += _unmapped(body)
         for dof in body.dofs:
             if dof not in _AXES:
                 problems.append(f"{body.name}: DOF {dof!r} is not planar")
@@ -232,12 +249,18 @@ def mjcf(scenario: Scenario, h: float, contact: str, weights: dict[str, float] |
     pairs = [_pair(scenario, pair, contact, weights) for pair in scenario.pairs if pair not in leave_out]
     qpos = _n(*(start[c] for c in scenario.coordinates))
     act = _n(*(start[c] for c in scenario.actuated))
+    option = f'timestep="{_n(h)}" gravity="{_n(gx, gy, 0.0)}" cone="{cone}"'
+    return _mjcf_document(scenario, option, assets, world, pairs, actuators, qpos, act)
+
+
+def _mjcf_document(scenario: Scenario, option: str, assets, world, pairs, actuators, qpos: str, act: str) -> str:
+    """An MJCF model from its parts (the planar and the spatial builds share it)."""
     key = f'<key qpos="{qpos}"' + (f' act="{act}"' if act else "") + "/>"
     return "\n".join(
         [
             f'<mujoco model="{scenario.spec.scenario.name}">',
             '  <compiler angle="radian"/>',
-            f'  <option timestep="{_n(h)}" gravity="{_n(gx, gy, 0.0)}" cone="{cone}"/>',
+            f"  <option {option}/>",
             "  <asset>",
             *assets,
             "  </asset>",
@@ -266,8 +289,8 @@ def _pos(body, dofs) -> str:
     return _n(0.0 if "x" in dofs else body.pose.x, 0.0 if "y" in dofs else body.pose.y, 0.0)
 
 
-def _joint(body, dof: str) -> str:
-    kind, axis = _AXES[dof]
+def _joint(body, dof: str, axes=_AXES) -> str:
+    kind, axis = axes[dof]
     drive = body.actuators.get(dof)
     damping = f' damping="{_n(drive.kd)}"' if drive is not None else ""
     return f'<joint name="{body.name}.{dof}" type="{kind}" axis="{axis}"{damping}/>'
@@ -314,6 +337,107 @@ def _pair(scenario: Scenario, pair, contact: str, weights) -> str:
     else:
         law = f'solref="{_n(-pair.K, -pair.C)}"'
     return f'    <pair geom1="{pair.body_a}" geom2="{pair.body_b}"{friction} {law}/>'
+
+
+# ----------------------------------------------------------------------------- space
+
+
+def build_spatial(scenario: Scenario, h: float) -> Peer:
+    """Compile a spatial `scenario` in MuJoCo at step h with MuJoCo's own contact model (module
+    docstring): qpos is the scenario's q, ctrl is `Peer.ctrl(u)`. Raises ValueError for what
+    the mapping does not cover."""
+    if not (h > 0 and math.isfinite(h)):
+        raise ValueError(f"step h = {h} is not a positive number")
+    problems = [] if scenario.dimension == 3 else ["build_spatial maps spatial scenes only"]
+    for body in scenario.spec.bodies:
+        problems += _unmapped(body)
+        dofs = set(body.dofs)
+        if dofs and not (dofs <= set(_AXES_3D) or dofs == {"x", "y", "z", "rotation"}):
+            problems.append(f"{body.name}: DOFs {sorted(dofs)} are not mapped (translations, or all six)")
+    if problems:
+        raise ValueError(f"{scenario.path}: " + "; ".join(problems))
+    xml = mjcf_spatial(scenario, h)
+    model = mujoco.MjModel.from_xml_string(xml)
+    if model.nq != len(scenario.coordinates):
+        raise ValueError(f"{scenario.path}: MuJoCo has {model.nq} qpos, the scenario {len(scenario.coordinates)} coordinates")
+    autoreset = getattr(mujoco.mjtDisableBit, "mjDSBL_AUTORESET", None)
+    if autoreset is not None:
+        model.opt.disableflags |= int(autoreset)
+    return Peer(scenario, h, "mujoco", xml, model)
+
+
+def mjcf_spatial(scenario: Scenario, h: float) -> str:
+    """The MJCF of a spatial `scenario` (module docstring)."""
+    gx, gy, gz = scenario.spec.scene.gravity
+    start = scenario.placements(np.asarray(scenario.start, float))
+    base = Path(scenario.path).resolve().parent if scenario.path is not None else None
+    assets, world = [], []
+    for body in scenario.spec.bodies:
+        place = start[body.name]
+        geom, asset = _geom_3d(body, base)
+        assets += asset
+        if not body.dofs:  # fixed: the geom where the body is
+            world.append(
+                f'    <body name="{body.name}" pos="{_n(*place.translation)}" quat="{_n(*_quaternion(place.rotation))}">{geom}</body>'
+            )
+            continue
+        if "rotation" in body.dofs:
+            joints = f'<freejoint name="{body.name}"/>'
+            pos, quat = place.translation, _quaternion(place.rotation)
+            inertia = body.inertia if isinstance(body.inertia, tuple | list) else (body.inertia,) * 3
+        else:  # slides along the world axes: the body sits at its pose off its DOFs' axes
+            joints = "".join(_joint(body, dof, _AXES_3D) for dof in ("x", "y", "z") if dof in body.dofs)
+            pos = [0.0 if axis in body.dofs else value for axis, value in zip("xyz", place.translation)]
+            quat = _quaternion(place.rotation)
+            inertia = (PLACEHOLDER_INERTIA * body.mass,) * 3
+        world.append(
+            f'    <body name="{body.name}" pos="{_n(*pos)}" quat="{_n(*quat)}">{joints}'
+            f'<inertial pos="0 0 0" mass="{_n(body.mass)}" diaginertia="{_n(*inertia)}"/>{geom}</body>'
+        )
+    actuators = []
+    for name in scenario.actuated:
+        body_name, dof = name.rsplit(".", 1)
+        drive = scenario.body(body_name).actuators[dof]
+        actuators.append(
+            f'    <general name="{name}" joint="{name}" dyntype="integrator" gainprm="{_n(drive.kp)}" biastype="affine" '
+            f'biasprm="{_n(0.0, -drive.kp, 0.0)}"{_actrange(drive)}/>\n'
+            f'    <general name="{name}.feedforward" joint="{name}" gainprm="{_n(drive.kd)}"/>'
+        )
+    pairs = [
+        f'    <pair geom1="{p.body_a}" geom2="{p.body_b}"'
+        + (f' condim="3" friction="{_n(p.mu, p.mu, 0.005, 0.0001, 0.0001)}"/>' if p.mu > 0 else ' condim="1"/>')
+        for p in scenario.pairs
+    ]
+    start_q = dict(zip(scenario.coordinates, scenario.start))
+    act = _n(*(start_q[c] for c in scenario.actuated))
+    option = f'timestep="{_n(h)}" gravity="{_n(gx, gy, gz)}"'
+    return _mjcf_document(scenario, option, assets, world, pairs, actuators, _n(*scenario.start), act)
+
+
+def _quaternion(R: np.ndarray) -> np.ndarray:
+    """(w, x, y, z) of a rotation matrix (MuJoCo's quat attribute)."""
+    quat = np.zeros(4)
+    mujoco.mju_mat2Quat(quat, np.ascontiguousarray(R, float).ravel())
+    return quat
+
+
+def _geom_3d(body, base) -> tuple[str, list[str]]:
+    """(geom element in the body frame, asset elements) of a spatial shape."""
+    s = body.shape
+    head = f'<geom name="{body.name}" contype="0" conaffinity="0"'
+    if s.type == "plane":  # {p : n.p <= offset}: MuJoCo's plane is solid below its z = 0
+        n = np.array(s.normal, float) / np.linalg.norm(s.normal)
+        return f'{head} type="plane" size="0 0 1" pos="{_n(*(s.offset * n))}" zaxis="{_n(*n)}"/>', []
+    if s.type == "sphere":
+        return f'{head} type="sphere" size="{_n(s.radius)}"/>', []
+    if s.type == "box":
+        return f'{head} type="box" size="{_n(*(np.array(s.size, float) / 2))}"/>', []
+    if s.type == "mesh":
+        path = (base / s.file) if base is not None else s.file
+        return f'{head} type="mesh" mesh="{body.name}.mesh"/>', [
+            f'    <mesh name="{body.name}.mesh" file="{path}" scale="{_n(s.scale, s.scale, s.scale)}"/>'
+        ]
+    raise ValueError(f"{body.name}: shape {s.type!r} is not mapped to MuJoCo")
 
 
 # ----------------------------------------------------------------------------- running

@@ -46,6 +46,10 @@ def test_throughput_and_scaling_report_every_rung(quick):
     _, r = quick
     assert {row["rung"] for row in r["throughput"]["rows"]} >= {"kinematic", "quasistatic-rigid", "dynamic-compliant"}
     assert all(row["outcome"] == "goal" and row["steps_per_s"] > 0 for row in r["throughput"]["rows"])
+    # the runs until the grasp are free flight; the contact rows are steps that push
+    assert all(row["contact_steps"] == 0 for row in r["throughput"]["rows"] if row["rung"].startswith("dynamic"))
+    contact = r["throughput"]["contact"]["rows"]
+    assert len(contact) == 4 and all(row["contact_steps"] > 0.5 * row["steps"] and row["us_per_step"] > 0 for row in contact)
     peer = r["throughput"]["peer"]
     assert "skipped" in peer or "steps_per_s" in peer
     if "skipped" not in peer:

@@ -24,6 +24,7 @@ from models.lcp import (
     fc2d_coulomb_error,
     fc2d_reactions_from_lcp,
     lemke_kernel,
+    lemke_warm_kernel,
     pgs_kernel,
     solve_lcp,
 )
@@ -352,6 +353,49 @@ def test_lemke_kernel_direct_call_contract():
     assert pivots == 3
     z, w, code, pivots = lemke_kernel(M, q, 2)
     assert code == lcp.STATUS_MAX_ITERATIONS and pivots == 2
+
+
+def test_lemke_warm_start_on_the_right_basis_takes_no_pivot():
+    """A guess of the solution's basis is verified, not trusted: the right one is accepted with
+    0 pivots and the cold solution; a wrong one, a singular one and a neighbouring problem's
+    fall back to pivoting and still solve exactly, returning the basis they ended on."""
+    M = np.array([[2.0, 1.0], [1.0, 2.0]])
+    q = np.array([-5.0, -6.0])
+    z_cold, _, _, pivots = lemke_kernel(M, q, 100)
+    z, w, code, pivots, basic_z, warm = lemke_warm_kernel(M, q, 100, np.array([True, True]), 1e-12)
+    assert warm and pivots == 0 and code == lcp.STATUS_SOLVED
+    np.testing.assert_allclose(z, z_cold, rtol=1e-15)
+    np.testing.assert_allclose(w, M @ z + q, atol=1e-14)
+    assert basic_z.tolist() == [True, True]
+    for guess in ([False, False], [True, False], [False, True]):  # z = 0 or a negative z / w
+        z, w, code, pivots, basic_z, warm = lemke_warm_kernel(M, q, 100, np.array(guess), 1e-12)
+        assert not warm and pivots == 3 and code == lcp.STATUS_SOLVED
+        np.testing.assert_allclose(z, z_cold, rtol=1e-14)
+        assert basic_z.tolist() == [True, True]
+    # a singular guess: M[J, J] = 0
+    S = np.array([[0.0, 1.0], [-1.0, 1.0]])
+    z, w, code, pivots, basic_z, warm = lemke_warm_kernel(S, np.array([-1.0, 1.0]), 100, np.array([True, False]), 1e-12)
+    assert not warm and code == lcp.STATUS_SOLVED and natural_residual(S, [-1.0, 1.0], z) < 1e-14
+    # contact-like problems (as `random_fc2d`, whose solvability holds for any free velocity):
+    # the basis of one solves its neighbour, a slightly different free velocity, without a pivot
+    rng = np.random.default_rng(3)
+    warm_count = 0
+    for _ in range(20):
+        nc, ndof = 4, 6
+        J = rng.integers(-3, 4, size=(2 * nc, ndof)).astype(float)
+        W = J @ np.diag(rng.choice([0.5, 1.0, 2.0], ndof)) @ J.T
+        v, gap = rng.integers(-8, 9, ndof) / 4.0, np.zeros(2 * nc)
+        gap[0::2] = rng.integers(0, 5, nc) / 4.0 * (rng.random(nc) < 0.5)
+        mu = rng.integers(1, 9, nc) / 8.0
+        base = contact_lcp_from_fc2d(W, J @ v + gap, mu)
+        _, _, code, _, basic_z, _ = lemke_warm_kernel(base.M, base.q, 1000, np.zeros(base.q.size, np.bool_), 1e-12)
+        assert code == lcp.STATUS_SOLVED
+        near = contact_lcp_from_fc2d(W, J @ (v + 1e-7 * rng.standard_normal(ndof)) + gap, mu)
+        z, w, code, pivots, _, warm = lemke_warm_kernel(near.M, near.q, 1000, basic_z, 1e-12)
+        assert code == lcp.STATUS_SOLVED and natural_residual(near.M, near.q, z) <= 1e-12
+        warm_count += warm
+        assert not warm or pivots == 0
+    assert warm_count >= 15
 
 
 # ------------------------------------------------------------------------------------------

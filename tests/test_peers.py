@@ -136,3 +136,21 @@ def test_leaving_out_the_inert_palm_triangle_pair_changes_nothing(scene, contact
     a, b = peers.run(kept, u, 1.7, period=0.01), peers.run(dropped, u, 1.7, period=0.01)
     assert abs(a.q[-1, 0]) > 1e-3  # the triangle has moved
     assert np.allclose(a.q, b.q, rtol=0.0, atol=1e-9)
+
+
+def test_a_spatial_scene_builds_with_qpos_as_its_coordinates_and_the_box_is_pushed():
+    """box_push_3d in MuJoCo (`peers.build_spatial`: free joint for the box, slides for the
+    pusher, MuJoCo's own contact model): the keyframe is the scenario's start, and a second of
+    the straight push moves the box forward on the table. A planar scene is refused."""
+    scenario = load_scenario(SCENARIOS / "box_push_3d.toml")
+    peer = peers.build_spatial(scenario, 1e-3)
+    assert peer.model.nq == len(scenario.coordinates) and peer.model.nu == 2 * len(scenario.actuated)
+    data = mujoco.MjData(peer.model)
+    peer.reset(data, np.array([0.2, 0.0]))
+    np.testing.assert_allclose(peer.q(data), scenario.start, atol=1e-12)
+    mujoco.mj_step(peer.model, data, nstep=1000)
+    q = dict(zip(scenario.coordinates, peer.q(data)))
+    assert q["pusher.x"] == pytest.approx(0.0, abs=2e-3)  # -0.2 + 0.2 m/s for 1 s
+    assert 0.05 < q["box.x"] < 0.2 and q["box.z"] == pytest.approx(0.05, abs=2e-3)
+    with pytest.raises(ValueError, match="spatial"):
+        peers.build_spatial(load_scenario(SCENARIOS / "two_finger_triangle.toml"), 1e-3)
