@@ -279,17 +279,29 @@ def contact_steps(quick: bool = False) -> dict:
     the grasp, one call of CONTACT_SQUEEZE_STEPS; and box_push_3d's straight push
     (dynamic-rigid at the scenario's h and friction directions) timed from its first contact in
     calls of one control period each, as a planner calls it. Each row: steps, steps with a
-    contact force, median wall and us per step (`repeat` rounds)."""
+    contact force, median wall and us per step (`repeat` rounds), and MuJoCo on the same run
+    timed in turns with ours (`peer_turns`): the paper's scene in its fastest mapping
+    (`direct`, the inert palm-triangle pair left out), box_push_3d with MuJoCo's own contact
+    model (`peers.build_spatial`), stepped in the same calls."""
     from models.rungs import rung_for
     from models.scenario import load_scenario
 
+    try:
+        from planner import peers
+    except ImportError:
+        peers = None
     repeat = 3 if quick else 7
     rows = []
     tri = load_scenario(SCENARIOS / "two_finger_triangle.toml")
     steps = CONTACT_SQUEEZE_STEPS
+    squeeze = np.array([[-1.0, -1.0]])
+    peer = None if peers is None else peers.build(tri, 1e-4, "direct", drop_inert=True)
     for rung in ("quasistatic-rigid", "dynamic-rigid", "dynamic-compliant"):
-        wall, out = _timed(lambda rung=rung: _rollout(tri, rung, 1e-4, steps * 1e-4, np.array([[-1.0, -1.0]]), records=2), repeat)
-        rows.append(_contact_row("two_finger_triangle, v1 = v2 = 1 through the squeeze", rung, 1e-4, out.steps, out.force_steps, wall))
+        ours = lambda rung=rung: _rollout(tri, rung, 1e-4, steps * 1e-4, squeeze, records=2)  # noqa: E731
+        theirs = None if peer is None else (lambda: peers.timed_run(peer, squeeze[0], steps))
+        wall, out, mujoco = peer_turns(ours, theirs, repeat)
+        row = _contact_row("two_finger_triangle, v1 = v2 = 1 through the squeeze", rung, 1e-4, out.steps, out.force_steps, wall)
+        rows.append(row | _peer_columns(mujoco, out.steps, wall))
     box = load_scenario(SCENARIOS / "box_push_3d.toml")
     rung = rung_for(box, "dynamic-rigid")
     settings = box.rung_settings("dynamic-rigid")
@@ -297,17 +309,50 @@ def contact_steps(quick: bool = False) -> dict:
     u = np.array([[box.spec.task.policy.speeds.get(name, 0.0) for name in box.actuated]])
     first, span = CONTACT_PUSH_S
     start = rung.rollout(box, rung.initial_state(box), u, [first], h, stop_at_outcome=False).state
+    calls = int(round(span / period)) // (5 if quick else 1)
 
     def push():
         state, taken, pushed = start, 0, 0
-        for _ in range(int(round(span / period)) // (5 if quick else 1)):
+        for _ in range(calls):
             out = rung.rollout(box, state, u, [period], h)
             state, taken, pushed = out.state, taken + out.steps, pushed + out.force_steps
         return taken, pushed
 
-    wall, (taken, pushed) = _timed(push, repeat)
-    rows.append(_contact_row(f"box_push_3d, pushing (calls of {period:g} s)", "dynamic-rigid", h, taken, pushed, wall))
-    return {"rows": rows, "repeat": repeat}
+    per_call = int(round(period / h))
+    spatial = None if peers is None else peers.build_spatial(box, h)
+    skip = int(round(first / h))
+    theirs = None if spatial is None else (lambda: peers.timed_run(spatial, u[0], calls * per_call, after=skip, per_call=per_call))
+    wall, (taken, pushed), mujoco = peer_turns(push, theirs, repeat)
+    row = _contact_row(f"box_push_3d, pushing (calls of {period:g} s)", "dynamic-rigid", h, taken, pushed, wall)
+    rows.append(row | _peer_columns(mujoco, calls * per_call, wall))
+    return {"rows": rows, "repeat": repeat, "peer": None if peers is None else f"MuJoCo {peers.version()}"}
+
+
+def peer_turns(ours, theirs, repeat: int):
+    """ours() and theirs() (MuJoCo: -> (wall, ...)) timed in turns, `repeat` rounds after a
+    warm-up one, so that load from other work on the machine hits both alike: (median wall of
+    ours, ours' last result, {median wall, median of the rounds' ratios} of theirs or None
+    without it)."""
+    walls, theirs_walls = [], []
+    for round_ in range(-1, repeat):  # round -1 warms up
+        t0 = time.perf_counter()
+        result = ours()
+        wall = time.perf_counter() - t0
+        other = None if theirs is None else theirs()[0]
+        if round_ >= 0:
+            walls.append(wall)
+            theirs_walls.append(other)
+    if theirs is None:
+        return float(np.median(walls)), result, None
+    ratio = float(np.median(np.array(theirs_walls) / np.array(walls)))
+    return float(np.median(walls)), result, {"median_wall_s": float(np.median(theirs_walls)), "speed_ratio": ratio}
+
+
+def _peer_columns(mujoco: dict | None, steps: int, wall: float) -> dict:
+    """A contact row's MuJoCo columns: its us per step and ours / MuJoCo in steps per second."""
+    if mujoco is None:
+        return {"mujoco_us_per_step": None, "speed_vs_mujoco": None}
+    return {"mujoco_us_per_step": mujoco["median_wall_s"] / max(steps, 1) * 1e6, "speed_vs_mujoco": mujoco["speed_ratio"]}
 
 
 def _contact_row(scene: str, rung: str, h: float, steps: int, contact: int, wall: float) -> dict:
@@ -891,15 +936,21 @@ def contact_markdown(contact: dict | None) -> list[str]:
         "### Steps with contact",
         "",
         "The runs above until the grasp are free flight (no step carries a contact force). Here the "
-        f"steps where contacts push: medians of {contact['repeat']} rounds.",
+        f"steps where contacts push: medians of {contact['repeat']} rounds, each ours then "
+        f"{contact.get('peer') or 'MuJoCo (not installed: not timed)'} on the same run (the paper's scene: the `direct` "
+        "mapping, palm-triangle left out; box_push_3d: MuJoCo's own contact model, `peers.build_spatial`, "
+        "stepped in the same calls from the same first contact). Speed: ours / MuJoCo in steps per second, "
+        "the median of the rounds' ratios.",
         "",
-        "| scene | rung | h | steps | with contact force | median wall (s) | us/step |",
-        "|---|---|---|---|---|---|---|",
+        "| scene | rung | h | steps | with contact force | median wall (s) | us/step | MuJoCo us/step | speed vs MuJoCo |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for row in contact["rows"]:
+        mj = row.get("mujoco_us_per_step")
+        theirs = "- | -" if mj is None else f"{mj:.2f} | {row['speed_vs_mujoco']:.2f}x"
         lines.append(
             f"| {row['scene']} | {row['rung']} | {row['h']:g} | {row['steps']} | {row['contact_steps']} "
-            f"| {row['median_wall_s']:.4f} | {row['us_per_step']:.2f} |"
+            f"| {row['median_wall_s']:.4f} | {row['us_per_step']:.2f} | {theirs} |"
         )
     return lines
 

@@ -454,15 +454,23 @@ def _warnings_to(sink: list[str]):
         mujoco.set_mju_user_warning(previous)
 
 
-def timed_run(peer: Peer, u: np.ndarray, steps: int, data: mujoco.MjData | None = None) -> tuple[float, np.ndarray]:
-    """(wall seconds, q at the end) of `steps` steps from the start state with commanded
-    speeds u. Only the stepping is timed: one call into MuJoCo (``mj_step(nstep=...)``), no
-    Python per step, nothing checked on the way. Pass `data` to reuse its memory."""
+def timed_run(
+    peer: Peer, u: np.ndarray, steps: int, data: mujoco.MjData | None = None, *, after: int = 0, per_call: int = 0
+) -> tuple[float, np.ndarray]:
+    """(wall seconds, q at the end) of `steps` steps with commanded speeds u, from the start
+    state stepped on `after` untimed steps. Only the stepping is timed: one call into MuJoCo
+    (``mj_step(nstep=...)``), or calls of `per_call` steps each (as a planner calls a
+    simulator, one control period a call), nothing checked on the way. Pass `data` to reuse
+    its memory."""
     data = mujoco.MjData(peer.model) if data is None else data
     with _warnings_to([]):
         peer.reset(data, u)
+        if after:
+            mujoco.mj_step(peer.model, data, nstep=after)
+        chunk = per_call if per_call > 0 else steps
         t0 = time.perf_counter()
-        mujoco.mj_step(peer.model, data, nstep=steps)
+        for done in range(0, steps, chunk):
+            mujoco.mj_step(peer.model, data, nstep=min(chunk, steps - done))
         wall = time.perf_counter() - t0
     return wall, peer.q(data)
 

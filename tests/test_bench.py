@@ -52,7 +52,8 @@ def test_throughput_and_scaling_report_every_rung(quick):
     assert len(contact) == 4 and all(row["contact_steps"] > 0.5 * row["steps"] and row["us_per_step"] > 0 for row in contact)
     peer = r["throughput"]["peer"]
     assert "skipped" in peer or "steps_per_s" in peer
-    if "skipped" not in peer:
+    if "skipped" not in peer:  # the contact rows are timed against MuJoCo too
+        assert all(row["mujoco_us_per_step"] > 0 and row["speed_vs_mujoco"] > 0 for row in contact)
         assert {row["contact"] for row in peer["rows"]} == {"force", "direct"} and peer["ratio"] > 0
         assert peer["inert_pairs"] == ["palm-triangle"] and len(peer["rows"]) == 4  # each mapping with and without it
         assert all(row["steps"] == peer["steps"] and row["end"]["outcome"] == "goal" for row in peer["rows"])  # MuJoCo at the grasp too
