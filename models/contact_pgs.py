@@ -215,9 +215,13 @@ def _apply_inverse(inv, a, b, ca, cb, J, Y, k):
 
 @numba.njit(cache=True)
 def _inside(f0, f1, radius, cosines, sines):
+    """Whether (f0, f1) lies in the polygon of `polygon_minimiser` (no vertices: the disk of
+    the exact cone)."""
     if not (radius > 0.0):
         return f0 == 0.0 and f1 == 0.0
     d = cosines.shape[0]
+    if d == 0:
+        return f0 * f0 + f1 * f1 <= (1.0 + INSIDE_TOL) * radius * radius
     for j in range(d):
         j2 = (j + 1) % d
         ax, ay = radius * cosines[j], radius * sines[j]
@@ -239,6 +243,8 @@ def polygon_minimiser(f0, f1, u0, u1, g00, g01, g11, radius, cosines, sines):
     """
     if not (radius > 0.0):
         return 0.0, 0.0
+    if cosines.shape[0] == 0:  # no vertices: the exact cone's disk
+        return disk_minimiser(f0, f1, u0, u1, g00, g01, g11, radius)
     det = g00 * g11 - g01 * g01
     trace = g00 + g11
     if det > SINGULAR_BLOCK * trace * trace:
@@ -266,6 +272,77 @@ def polygon_minimiser(f0, f1, u0, u1, g00, g01, g11, radius, cosines, sines):
         if value < best:
             best, b0, b1 = value, f0 + p0, f1 + p1
     return b0, b1
+
+
+#: Newton iterations of the disk minimiser's multiplier (it converges in a handful).
+DISK_ITERATIONS = 60
+
+
+@numba.njit(cache=True)
+def disk_minimiser(f0, f1, u0, u1, g00, g01, g11, radius):
+    """argmin over |f| <= radius of u.(f - f_old) + 1/2 (f - f_old)^T G (f - f_old): the
+    friction block of the exact Coulomb cone (eq. 4: every direction of sliding meets exactly
+    mu p_n), as `polygon_minimiser` is of the polygon. In x = f it is the trust-region problem
+    min 1/2 x^T G x + c^T x, |x| <= radius, c = u - G f_old: the unconstrained minimiser when it
+    lies inside, else x(lam) = -(G + lam I)^-1 c on the circle, lam >= 0 the root of
+    1/|x(lam)| - 1/radius (safeguarded Newton in G's eigenbasis; that function is increasing
+    and nearly linear in lam). G singular with c in its range: of the minimisers, the one
+    nearest f_old."""
+    if not (radius > 0.0):
+        return 0.0, 0.0
+    c0 = u0 - (g00 * f0 + g01 * f1)
+    c1 = u1 - (g01 * f0 + g11 * f1)
+    det = g00 * g11 - g01 * g01
+    trace = g00 + g11
+    if det > SINGULAR_BLOCK * trace * trace:
+        x0 = -(g11 * c0 - g01 * c1) / det
+        x1 = -(g00 * c1 - g01 * c0) / det
+        if x0 * x0 + x1 * x1 <= radius * radius:
+            return x0, x1
+    # G = a e_a e_a^T + b e_b e_b^T, a >= b >= 0
+    half = 0.5 * (g00 - g11)
+    root = np.sqrt(half * half + g01 * g01)
+    a, b = max(0.5 * trace + root, 0.0), max(0.5 * trace - root, 0.0)
+    phi = 0.5 * np.arctan2(2.0 * g01, g00 - g11)
+    ea0, ea1 = np.cos(phi), np.sin(phi)
+    eb0, eb1 = -ea1, ea0
+    ca, cb = c0 * ea0 + c1 * ea1, c0 * eb0 + c1 * eb1
+    size_c = np.sqrt(c0 * c0 + c1 * c1)
+    if size_c == 0.0:
+        return 0.0, 0.0
+    tiny = SINGULAR_BLOCK * max(trace, 1e-300)
+    if b <= tiny and abs(cb) <= SINGULAR_BLOCK * size_c:
+        # singular, c in the range: minimisers -ca/a e_a + t e_b; the one nearest f_old, in the disk
+        xa = -ca / a if a > tiny else 0.0
+        if xa * xa <= radius * radius:
+            reach = np.sqrt(radius * radius - xa * xa)
+            t = min(max(f0 * eb0 + f1 * eb1, -reach), reach)
+            return xa * ea0 + t * eb0, xa * ea1 + t * eb1
+    lo, hi = 0.0, size_c / radius  # |x(hi)| <= |c| / (b + hi) <= radius
+    lam = lo
+    for _ in range(DISK_ITERATIONS):
+        da, db = a + lam, b + lam
+        if not (da > 0.0 and db > 0.0):
+            lam = 0.5 * (lo + hi) if lam <= lo else lam
+            da, db = a + lam, b + lam
+        xa, xb = -ca / da, -cb / db
+        size = np.sqrt(xa * xa + xb * xb)
+        value = 1.0 / size - 1.0 / radius
+        if value < 0.0:
+            lo = lam
+        else:
+            hi = lam
+        if abs(value) * radius <= 1e-15 or hi - lo <= 1e-15 * hi:
+            break
+        slope = (ca * ca / (da * da * da) + cb * cb / (db * db * db)) / (size * size * size)
+        step = lam - value / slope if slope > 0.0 else 0.5 * (lo + hi)
+        lam = step if lo < step < hi else 0.5 * (lo + hi)
+    da, db = a + lam, b + lam
+    xa, xb = -ca / da, -cb / db
+    size = np.sqrt(xa * xa + xb * xb)
+    if size > radius:  # round-off: onto the circle
+        xa, xb = xa * radius / size, xb * radius / size
+    return xa * ea0 + xb * eb0, xa * ea1 + xb * eb1
 
 
 @numba.njit(cache=True)
@@ -346,7 +423,7 @@ def contact_pgs(
     """
     compliant, directions = model.compliant, model.friction_directions
     c_slot = contacts.slot
-    d = directions if spatial else 2
+    d = (0 if model.exact_cone else directions) if spatial else 2  # 0: the exact cone's disk
     cosines = np.empty(d)
     sines = np.empty(d)
     for j in range(d):
@@ -517,9 +594,10 @@ def _warm_start(n, spatial, d, active, c_slot, warm_n, warm_t, cdof, cm, yn, yt,
             f1 = warm_t[slot, 1] if spatial else 0.0
             radius = mu[k] * p_n[k]
             if spatial and not _inside(f0, f1, radius, cosines, sines):
-                # shrink onto the polygon's inscribed circle (radius mu p_n cos(pi / d))
+                # shrink onto the polygon's inscribed circle (radius mu p_n cos(pi / d); the
+                # exact cone's, d = 0: its disk)
                 size = np.sqrt(f0 * f0 + f1 * f1)
-                shrink = radius * np.cos(np.pi / d) / size
+                shrink = radius * (np.cos(np.pi / d) if d > 0 else 1.0) / size
                 f0, f1 = shrink * f0, shrink * f1
             elif not spatial:
                 f0 = min(max(f0, -radius), radius)

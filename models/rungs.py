@@ -515,7 +515,12 @@ def rung_for(scenario: Scenario, name: str) -> Rung:
     if rung.model is None:
         return rung
     settings = scenario.rung_settings(name)
-    model = rung.model._replace(theta=settings.theta, friction_directions=settings.friction_directions, warm_period=settings.control_period)
+    model = rung.model._replace(
+        theta=settings.theta,
+        friction_directions=settings.friction_directions,
+        warm_period=settings.control_period,
+        exact_cone=settings.friction_cone == "exact",
+    )
     if settings.inertia is not None and model.eps == 0.0:
         model = model._replace(quasistatic_inertia=settings.inertia)
     return replace(rung, model=model, solver=contact_solver(settings.contact_solver))

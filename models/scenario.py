@@ -96,7 +96,8 @@ class RungSettings:
     RRTConnect unless the entry names one; else the ladder's); iterations: planner
     iterations; time_limit: wall-clock cap on its planning, s; contact_solver: lemke, pgs or
     auto; friction_directions: sides of the spatial friction cone (None for geometric);
-    theta: theta-rule weight; inertia: a quasistatic rung's inertia scale (None: the default)."""
+    friction_cone: polygon (those sides) or exact (the circular cone, by PGS); theta:
+    theta-rule weight; inertia: a quasistatic rung's inertia scale (None: the default)."""
 
     name: str
     h: float | None
@@ -108,6 +109,7 @@ class RungSettings:
     friction_directions: int | None
     theta: float
     inertia: float | None = None  # quasistatic rungs' inertia scale (None: the stepper's default)
+    friction_cone: str = "polygon"
 
 
 def resolve_rung_settings(ladder: LadderSpec, name: str) -> RungSettings:
@@ -130,6 +132,7 @@ def resolve_rung_settings(ladder: LadderSpec, name: str) -> RungSettings:
         friction_directions=given("friction_directions") or family.friction_directions,
         theta=1.0 if entry is None else entry.theta,
         inertia=given("inertia"),
+        friction_cone=given("friction_cone") or "polygon",
     )
 
 
@@ -767,6 +770,11 @@ def _check_ladder(spec: ScenarioSpec) -> list[Problem]:
         if planner not in CONTROL_PLANNERS:
             which = f"{key}.planner" if rung.planner else "ladder.planner"
             out.append(Problem(which, f"{planner!r} is not a control planner; use one of {', '.join(CONTROL_PLANNERS)}"))
+        if rung.friction_cone == "exact" and rung.contact_solver == "lemke":
+            out.append(Problem(f"{key}.friction_cone", 'the exact cone is solved by PGS: not with contact_solver = "lemke"'))
+        limited = [f"{b.name}.{dof}" for b in spec.bodies for dof, d in b.actuators.items() if d.max_force is not None]
+        if rung.friction_cone == "exact" and limited:
+            out.append(Problem(f"{key}.friction_cone", f"the exact cone's PGS does not take force-limited drives ({', '.join(limited)})"))
         period = rung.control_period or ladder.control_period
         if rung.h is not None and rung.h > period:
             out.append(Problem(f"{key}.h", f"time step {rung.h} exceeds the control period {period}"))

@@ -448,6 +448,12 @@ class RungSpec(Strict):
     friction_directions: _int(ge=2, le=64) | None = Field(
         None, description="directions of the polyhedral friction cone (spatial scenes; planar: 2)"
     )
+    friction_cone: Literal["polygon", "exact"] | None = Field(
+        None,
+        description="spatial friction: polygon (default: the polyhedral cone of friction_directions sides, an LCP) "
+        "or exact (the circular Coulomb cone, mu of friction in every direction of sliding, solved by PGS: not "
+        "with contact_solver = lemke or force-limited drives)",
+    )
     inertia: Annotated[Num, Field(gt=0, le=1)] | None = Field(
         None,
         description="quasistatic rungs: the inertia scale their memoryless step keeps (default 1e-6, the limit "

@@ -151,6 +151,10 @@ class Model(NamedTuple):
     # per call, each starting cold from a state vector, and its one-call replay must solve the
     # same contact problems (at a degenerate LCP another basis is another exact solution)
     warm_period: float = 0.0
+    # in space, friction in the exact circular Coulomb cone (eq. 4: mu p_n in every direction of
+    # sliding) instead of the polygon of friction_directions sides: PGS solves it
+    # (`models.contact_pgs.disk_minimiser`); Lemke's LCP is the polygon's
+    exact_cone: bool = False
 
 
 class Drives(NamedTuple):
@@ -518,11 +522,11 @@ def dynamics_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_
 
 @numba.njit(cache=True)
 def _dynamics_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis):
-    use_pgs = solver.method == SOLVER_PGS or (solver.method == SOLVER_AUTO and nc >= solver.auto_contacts)
+    use_pgs = model.exact_cone or solver.method == SOLVER_PGS or (solver.method == SOLVER_AUTO and nc >= solver.auto_contacts)
     if nc > 0 and use_pgs and not any_limited(drives.max_force):
         out = _pgs_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis)
-        if out.status == StepStatus.OK or solver.method == SOLVER_PGS:
-            return out
+        if out.status == StepStatus.OK or solver.method == SOLVER_PGS or model.exact_cone:
+            return out  # (no LCP of the exact cone to fall back on)
         r = _lemke_step(model, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, basis)
         return StepResult(
             r.q, r.nu, r.q_ref, r.delta_n, r.delta_t, r.status, r.pivots, r.residual, r.lcp_size, r.p_n, r.p_t, out.sweeps, r.basis

@@ -31,6 +31,7 @@ import platform
 import socket
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -278,13 +279,15 @@ def contact_steps(quick: bool = False) -> dict:
     until the grasp: the paper's scene (v1 = v2 = 1) run on through the squeeze that follows
     the grasp, one call of CONTACT_SQUEEZE_STEPS; and box_push_3d's straight push
     (dynamic-rigid at the scenario's h and friction directions) timed from its first contact in
-    calls of one control period each, as a planner calls it. Each row: steps, steps with a
+    calls of one control period each, as a planner calls it, with the scenario's polygonal
+    cone (Lemke) and with the exact cone (PGS). Each row: steps, steps with a
     contact force, median wall and us per step (`repeat` rounds), and MuJoCo on the same run
     timed in turns with ours (`peer_turns`): the paper's scene in its fastest mapping
     (`direct`, the inert palm-triangle pair left out), box_push_3d with MuJoCo's own contact
     model (`peers.build_spatial`), stepped in the same calls."""
     from models.rungs import rung_for
     from models.scenario import load_scenario
+    from models.stepper import contact_solver
 
     try:
         from planner import peers
@@ -311,10 +314,10 @@ def contact_steps(quick: bool = False) -> dict:
     start = rung.rollout(box, rung.initial_state(box), u, [first], h, stop_at_outcome=False).state
     calls = int(round(span / period)) // (5 if quick else 1)
 
-    def push():
+    def push(stepper):
         state, taken, pushed = start, 0, 0
         for _ in range(calls):
-            out = rung.rollout(box, state, u, [period], h)
+            out = stepper.rollout(box, state, u, [period], h)
             state, taken, pushed = out.state, taken + out.steps, pushed + out.force_steps
         return taken, pushed
 
@@ -322,9 +325,12 @@ def contact_steps(quick: bool = False) -> dict:
     spatial = None if peers is None else peers.build_spatial(box, h)
     skip = int(round(first / h))
     theirs = None if spatial is None else (lambda: peers.timed_run(spatial, u[0], calls * per_call, after=skip, per_call=per_call))
-    wall, (taken, pushed), mujoco = peer_turns(push, theirs, repeat)
-    row = _contact_row(f"box_push_3d, pushing (calls of {period:g} s)", "dynamic-rigid", h, taken, pushed, wall)
-    rows.append(row | _peer_columns(mujoco, calls * per_call, wall))
+    polygon = f"dynamic-rigid ({settings.friction_directions}-sided cone, {settings.contact_solver})"
+    exact = replace(rung, solver=contact_solver("pgs"), model=rung.model._replace(exact_cone=True))
+    for label, stepper in ((polygon, rung), ("dynamic-rigid (exact cone, pgs)", exact)):
+        wall, (taken, pushed), mujoco = peer_turns(lambda stepper=stepper: push(stepper), theirs, repeat)
+        row = _contact_row(f"box_push_3d, pushing (calls of {period:g} s)", label, h, taken, pushed, wall)
+        rows.append(row | _peer_columns(mujoco, calls * per_call, wall))
     return {"rows": rows, "repeat": repeat, "peer": None if peers is None else f"MuJoCo {peers.version()}"}
 
 

@@ -49,7 +49,7 @@ def test_throughput_and_scaling_report_every_rung(quick):
     # the runs until the grasp are free flight; the contact rows are steps that push
     assert all(row["contact_steps"] == 0 for row in r["throughput"]["rows"] if row["rung"].startswith("dynamic"))
     contact = r["throughput"]["contact"]["rows"]
-    assert len(contact) == 4 and all(row["contact_steps"] > 0.5 * row["steps"] and row["us_per_step"] > 0 for row in contact)
+    assert len(contact) == 5 and all(row["contact_steps"] > 0.5 * row["steps"] and row["us_per_step"] > 0 for row in contact)
     peer = r["throughput"]["peer"]
     assert "skipped" in peer or "steps_per_s" in peer
     if "skipped" not in peer:  # the contact rows are timed against MuJoCo too

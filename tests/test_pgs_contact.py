@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from models.contact import CONTACT_MARGIN, ContactSet, contact_frames
-from models.contact_pgs import polygon_minimiser
+from models.contact_pgs import disk_minimiser, polygon_minimiser
 from models.rungs import RUNGS, compiled, rung_for
 from models.scenario import ScenarioError, load_scenario
 from models.schema import CONTACT_SOLVERS
@@ -230,6 +230,62 @@ def test_polygon_minimiser_satisfies_its_variational_inequality(d):
         outside = edges[:, 0] * (f[1] - radius * vertices[:, 1]) - edges[:, 1] * (f[0] - radius * vertices[:, 0])
         assert np.all(outside >= -1e-9 * radius * radius), (trial, f)
         assert np.all((radius * vertices - f) @ gradient >= -scale), (trial, f, gradient)
+
+
+def test_disk_minimiser_satisfies_its_variational_inequality():
+    """The exact cone's friction block: f in the disk of the radius, and no point of the disk
+    lowers the objective to first order (gradient . (y - f) >= 0 for every |y| <= radius, i.e.
+    gradient . f + radius |gradient| = 0), singular blocks included."""
+    rng = np.random.default_rng(7)
+    for trial in range(2000):
+        B = rng.normal(size=(2, 2 if trial % 4 else 1))  # every fourth block singular
+        Gt = B @ B.T
+        f_old, u, radius = rng.normal(size=2), rng.normal(size=2) * 3, rng.uniform(0.1, 2.0)
+        f = np.array(disk_minimiser(f_old[0], f_old[1], u[0], u[1], Gt[0, 0], Gt[0, 1], Gt[1, 1], radius))
+        gradient = u + Gt @ (f - f_old)
+        scale = 1e-9 * (1 + np.abs(u).max() + np.abs(Gt).max()) * radius
+        assert np.linalg.norm(f) <= radius * (1 + 1e-12), (trial, f)
+        assert gradient @ f + radius * np.linalg.norm(gradient) <= scale, (trial, f, gradient)
+
+
+@pytest.mark.parametrize("angle_deg", [0.0, 22.5, 30.0, 100.0])
+def test_exact_cone_box_slides_at_any_angle_decelerating_at_mu_g_along_its_velocity(angle_deg):
+    """Eq. (4)'s cone: a box sliding on the table in any direction meets exactly mu of friction
+    against its velocity, so it decelerates at mu g on a straight line (the semi-implicit
+    step: by mu g h a step, exactly). The 8-sided polygon meets mu cos(22.5 deg) between its
+    vertices and pulls the velocity toward one: it fails the same closed form off its vertices."""
+    sc = load_scenario(SCENARIOS / "box_push_3d.toml")
+    mu, steps, speed = 0.4, 50, 0.5
+    angle = math.radians(angle_deg)
+    ix, iy = sc.velocities.index("box.x"), sc.velocities.index("box.y")
+    exact = replace(rung_for(sc, "dynamic-rigid"), solver=contact_solver("pgs"))
+    exact = replace(exact, model=exact.model._replace(exact_cone=True))
+    polygon = rung_for(sc, "dynamic-rigid")
+    errors = {}
+    for name, rung in (("exact", exact), ("polygon", polygon)):
+        start = rung.initial_state(sc)
+        nu = start.nu.copy()
+        nu[ix], nu[iy] = speed * math.cos(angle), speed * math.sin(angle)
+        result = rung.rollout(sc, replace(start, nu=nu), np.zeros((1, 2)), [steps * H], H, stop_at_outcome=False)
+        assert result.status == "ok"
+        expected = (speed - steps * mu * G * H) * np.array([math.cos(angle), math.sin(angle)])
+        errors[name] = np.max(np.abs(result.state.nu[[ix, iy]] - expected))
+    assert errors["exact"] < 1e-6
+    if angle_deg % 45.0 != 0.0:  # off the polygon's vertices
+        assert errors["polygon"] > 1e-3
+
+
+def test_the_exact_cone_is_a_rung_setting_solved_by_pgs(tmp_path):
+    text = (SCENARIOS / "box_push_3d.toml").read_text()
+    path = tmp_path / "cone.toml"
+    exact = 'model = "dynamic-rigid"\nfriction_cone = "exact"\n'
+    path.write_text(text.replace('model = "dynamic-rigid"\n', exact).replace("meshes/", str(SCENARIOS / "meshes") + "/"))
+    assert rung_for(load_scenario(path), "dynamic-rigid").model.exact_cone
+    path.write_text(
+        text.replace('model = "dynamic-rigid"\n', exact + 'contact_solver = "lemke"\n').replace("meshes/", str(SCENARIOS / "meshes") + "/")
+    )
+    with pytest.raises(ScenarioError, match="friction_cone"):
+        load_scenario(path)
 
 
 # ----------------------------------------------------------------------------- random scenes
