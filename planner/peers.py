@@ -237,15 +237,7 @@ def mjcf(scenario: Scenario, h: float, contact: str, weights: dict[str, float] |
             f"    <body {placed}>{joints}"
             f'<inertial pos="0 0 0" mass="{_n(body.mass)}" diaginertia="{_n(inertia, inertia, inertia)}"/>{geom}</body>'
         )
-    actuators = []
-    for name in scenario.actuated:  # ctrl order: the scenario's actuated coordinates
-        body_name, dof = name.rsplit(".", 1)
-        drive = scenario.body(body_name).actuators[dof]
-        actuators.append(
-            f'    <general name="{name}" joint="{name}" dyntype="integrator" gainprm="{_n(drive.kp)}" biastype="affine" '
-            f'biasprm="{_n(0.0, -drive.kp, 0.0)}"{_actrange(drive)}/>\n'
-            f'    <general name="{name}.feedforward" joint="{name}" gainprm="{_n(drive.kd)}"/>'
-        )
+    actuators = _actuators(scenario)
     pairs = [_pair(scenario, pair, contact, weights) for pair in scenario.pairs if pair not in leave_out]
     qpos = _n(*(start[c] for c in scenario.coordinates))
     act = _n(*(start[c] for c in scenario.actuated))
@@ -294,6 +286,22 @@ def _joint(body, dof: str, axes=_AXES) -> str:
     drive = body.actuators.get(dof)
     damping = f' damping="{_n(drive.kd)}"' if drive is not None else ""
     return f'<joint name="{body.name}.{dof}" type="{kind}" axis="{axis}"{damping}/>'
+
+
+def _actuators(scenario: Scenario) -> list[str]:
+    """Each drive as MuJoCo actuators, in ctrl order (the scenario's actuated coordinates): an
+    integrator whose state is the reference position, with the drive's stiffness, and the
+    commanded speed through the damping as a feed-forward (`Peer.ctrl`)."""
+    actuators = []
+    for name in scenario.actuated:
+        body_name, dof = name.rsplit(".", 1)
+        drive = scenario.body(body_name).actuators[dof]
+        actuators.append(
+            f'    <general name="{name}" joint="{name}" dyntype="integrator" gainprm="{_n(drive.kp)}" biastype="affine" '
+            f'biasprm="{_n(0.0, -drive.kp, 0.0)}"{_actrange(drive)}/>\n'
+            f'    <general name="{name}.feedforward" joint="{name}" gainprm="{_n(drive.kd)}"/>'
+        )
+    return actuators
 
 
 def _actrange(drive) -> str:
@@ -394,15 +402,7 @@ def mjcf_spatial(scenario: Scenario, h: float) -> str:
             f'    <body name="{body.name}" pos="{_n(*pos)}" quat="{_n(*quat)}">{joints}'
             f'<inertial pos="0 0 0" mass="{_n(body.mass)}" diaginertia="{_n(*inertia)}"/>{geom}</body>'
         )
-    actuators = []
-    for name in scenario.actuated:
-        body_name, dof = name.rsplit(".", 1)
-        drive = scenario.body(body_name).actuators[dof]
-        actuators.append(
-            f'    <general name="{name}" joint="{name}" dyntype="integrator" gainprm="{_n(drive.kp)}" biastype="affine" '
-            f'biasprm="{_n(0.0, -drive.kp, 0.0)}"{_actrange(drive)}/>\n'
-            f'    <general name="{name}.feedforward" joint="{name}" gainprm="{_n(drive.kd)}"/>'
-        )
+    actuators = _actuators(scenario)
     pairs = [
         f'    <pair geom1="{p.body_a}" geom2="{p.body_b}"'
         + (f' condim="3" friction="{_n(p.mu, p.mu, 0.005, 0.0001, 0.0001)}"/>' if p.mu > 0 else ' condim="1"/>')
