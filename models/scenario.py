@@ -744,6 +744,17 @@ def _check_task(
     return out
 
 
+def _exact_cone_problems(spec: ScenarioSpec, rung, key: str) -> list[Problem]:
+    """A rung with the exact friction cone: PGS solves it, without force-limited drives."""
+    out = []
+    if rung.contact_solver == "lemke":
+        out.append(Problem(f"{key}.friction_cone", 'the exact cone is solved by PGS: not with contact_solver = "lemke"'))
+    limited = [f"{b.name}.{dof}" for b in spec.bodies for dof, d in b.actuators.items() if d.max_force is not None]
+    if limited:
+        out.append(Problem(f"{key}.friction_cone", f"the exact cone's PGS does not take force-limited drives ({', '.join(limited)})"))
+    return out
+
+
 def _check_ladder(spec: ScenarioSpec) -> list[Problem]:
     out = []
     ladder = spec.ladder
@@ -770,11 +781,8 @@ def _check_ladder(spec: ScenarioSpec) -> list[Problem]:
         if planner not in CONTROL_PLANNERS:
             which = f"{key}.planner" if rung.planner else "ladder.planner"
             out.append(Problem(which, f"{planner!r} is not a control planner; use one of {', '.join(CONTROL_PLANNERS)}"))
-        if rung.friction_cone == "exact" and rung.contact_solver == "lemke":
-            out.append(Problem(f"{key}.friction_cone", 'the exact cone is solved by PGS: not with contact_solver = "lemke"'))
-        limited = [f"{b.name}.{dof}" for b in spec.bodies for dof, d in b.actuators.items() if d.max_force is not None]
-        if rung.friction_cone == "exact" and limited:
-            out.append(Problem(f"{key}.friction_cone", f"the exact cone's PGS does not take force-limited drives ({', '.join(limited)})"))
+        if rung.friction_cone == "exact":
+            out += _exact_cone_problems(spec, rung, key)
         period = rung.control_period or ladder.control_period
         if rung.h is not None and rung.h > period:
             out.append(Problem(f"{key}.h", f"time step {rung.h} exceeds the control period {period}"))

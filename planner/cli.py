@@ -509,7 +509,7 @@ def rung_order_problems(key: str, names: list[str]) -> list[Problem]:
 
     from models.scenario import _check_ladder
 
-    rung = lambda name: SimpleNamespace(model=name, h=None, planner=None, control_period=None)  # noqa: E731
+    rung = lambda name: SimpleNamespace(model=name, h=None, planner=None, control_period=None, friction_cone=None)  # noqa: E731
     stub = SimpleNamespace(ladder=SimpleNamespace(rungs=[rung(n) for n in names], planner="RRT", control_period=1.0))
     return [Problem(key, p.reason) for p in _check_ladder(stub) if p.key.endswith(".model")]
 
