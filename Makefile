@@ -59,7 +59,7 @@ bench: $(VENV)/.installed-test
 	$(PY) -m pytest -m slow tests/bench --benchmark-enable -s
 
 # ladder bench: work-precision, throughput, scaling, ladder vs flat over 20 seeds -> docs/benchmarks.md
-# (about an hour, mostly the spatial scenes' flat runs; PLANNING=two_finger_triangle,four_finger_grasp:
+# (about twenty minutes, mostly the spatial scenes' flat runs; PLANNING=two_finger_triangle,four_finger_grasp:
 # a few minutes).
 PLANNING ?= two_finger_triangle,four_finger_grasp,box_push_3d,box_rotate_3d
 bench-doc: $(VENV)/.installed

@@ -202,8 +202,8 @@ def _add_bench_parser(sub: argparse._SubParsersAction) -> None:
         "--planning",
         metavar="SCENE,...",
         help="scenes of the ladder-vs-flat section (default: two_finger_triangle,four_finger_grasp, "
-        "the planar scenes, as make bench-doc; box_push_3d and box_rotate_3d take about half an hour "
-        "each: their flat runs take up to minutes per seed)",
+        "the planar scenes; make bench-doc plans all four: box_push_3d takes about ten minutes and "
+        "box_rotate_3d about five, mostly their flat runs, up to a minute per seed)",
     )
     bench.add_argument("--seeds", type=int, default=None, metavar="N", help="seeds 1..N per planning scene (default 20; --quick: 3)")
     bench.set_defaults(handler=cmd_bench)
