@@ -486,3 +486,59 @@ def rollout_kernel(
         pair_wrench,
         basis,
     )
+
+
+# ----------------------------------------------------------------------------- the cost split
+
+#: Stages `stage_loop` repeats (`ladder bench`'s cost split of a contact step); SETUP repeats none.
+STAGE_SETUP, STAGE_DETECT, STAGE_CLASSIFY, STAGE_JACOBIANS, STAGE_SOLVE = -1, 0, 1, 2, 3
+
+
+@numba.njit(cache=True)
+def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, delta_t, u, h, repeats):
+    """One stage of a dynamics step of `rollout_kernel`, `repeats` times at the state (q, nu,
+    q_ref, delta_n, delta_t) under command u: STAGE_DETECT the contacts (broadphase, narrowphase),
+    STAGE_CLASSIFY the pair distances and the task's goal and unsafe predicates, STAGE_JACOBIANS
+    the contact frames' Jacobian columns, STAGE_SOLVE the rung's dynamics step (A where it
+    depends on q, the contact problem's assembly, its solve warm-started from the state's own
+    first solve as in a steady push (Lemke's basis, PGS's impulses), the integration). Every
+    stage runs once first (STAGE_SETUP: only that), so a
+    stage's cost per call is (time(stage) - time(STAGE_SETUP)) / repeats. For `ladder bench`
+    (planar scenes without scripted obstacles, or spatial ones). Returns the contacts found."""
+    bi, bf, pi, verts, nv, dimension = S.bi, S.bf, S.pi, S.verts, S.nv, S.dimension
+    tables = SceneTables(bi, bf, pi, S.pf, dimension == 3)
+    contacts, first_slot = contact_buffers(pi, nv)
+    c_pair, c_psi, c_slot, W_n, W_t, W_o, c_bias = contacts
+    c_n, c_t, c_o, c_pa, c_pb, warm_n, warm_t, warm_slots = _contact_frames(c_psi.shape[0])
+    unsupported, pair_psi, _, _, scratch = _pair_buffers(pi.shape[0], bi.shape[0])
+    g_op, g_index, g_lo, g_hi = goal
+    u_op, u_index, u_lo, u_hi = unsafe
+    stack = np.zeros(max(g_op.shape[0], u_op.shape[0]) + 1, np.bool_)
+    directions = model.friction_directions if dimension == 3 else 2
+    basis = basis_table(c_psi.shape[0], D.v_index.shape[0], directions)
+    system = _start_system(S, D, model, h, q)
+    rotating = has_rotations(bi)
+    eps_eff = model.quasistatic_inertia if model.eps == 0.0 else model.eps
+    nc = 0
+    for k in range(repeats + 1):
+        if k == 0 or stage == STAGE_DETECT:
+            if dimension == 3:
+                nc, _ = detect_spatial(S, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported)
+            else:
+                nc = detect_planar_into(bi, bf, verts, pi, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, scratch)
+        if k == 0 or stage == STAGE_CLASSIFY:
+            _distances(nc, c_pair, c_psi, c_slot, first_slot, pair_psi)
+            _classify_with(g_op, g_index, g_lo, g_hi, u_op, u_index, u_lo, u_hi, q, pair_psi, stack)
+        if k == 0 or stage == STAGE_JACOBIANS:
+            _assemble(bi, bf, pi, dimension, q, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, W_n, W_t, W_o, c_bias, False, True)
+        if k == 0 or stage == STAGE_SOLVE:
+            if rotating:  # as rollout_kernel: A depends on q
+                A = system_matrix(bi, bf, q, nv, eps_eff, h, D.v_index, D.kp, D.kd, D.max_force)
+                system = System(A, system.Ainv, system.M_const, system.rhs_const)
+            r = dynamics_step(model, solver, D, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis)
+            if k == 0:  # the warm starts (Lemke's basis, PGS's impulses) of a steady push
+                basis = r.basis
+                _keep_warm(nc, c_slot, r.p_n, r.p_t, warm_n, warm_t, warm_slots, 0)
+        if stage == STAGE_SETUP:
+            break
+    return nc

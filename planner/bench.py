@@ -331,7 +331,44 @@ def contact_steps(quick: bool = False) -> dict:
         wall, (taken, pushed), mujoco = peer_turns(lambda stepper=stepper: push(stepper), theirs, repeat)
         row = _contact_row(f"box_push_3d, pushing (calls of {period:g} s)", label, h, taken, pushed, wall)
         rows.append(row | _peer_columns(mujoco, calls * per_call, wall))
-    return {"rows": rows, "repeat": repeat, "peer": None if peers is None else f"MuJoCo {peers.version()}"}
+    squeezed = _rollout(tri, "dynamic-rigid", 1e-4, 2.0, squeeze, records=2).state  # 0.5 s into the squeeze
+    split = [
+        _cost_split("two_finger_triangle, squeezing", tri, rung_for(tri, "dynamic-rigid"), squeezed, squeeze[0], 1e-4, quick),
+        _cost_split(f"box_push_3d, pushing ({polygon})", box, rung, start, u[0], h, quick),
+        _cost_split("box_push_3d, pushing (dynamic-rigid, exact cone, pgs)", box, exact, start, u[0], h, quick),
+    ]
+    return {"rows": rows, "repeat": repeat, "peer": None if peers is None else f"MuJoCo {peers.version()}", "split": split}
+
+
+#: Calls per stage of the cost split (`_cost_split`; --quick: a tenth).
+SPLIT_REPEATS = 20_000
+
+
+def _cost_split(scene: str, scenario, rung, state, u: np.ndarray, h: float, quick: bool) -> dict:
+    """Where a contact step's time goes, at one state (`models.rollout.stage_loop`): detection,
+    the pair distances and the task's predicates, the contact Jacobians, and the dynamics step
+    (the contact problem's assembly and warm-started solve, the integration), in us per call
+    (best of 3 runs of SPLIT_REPEATS calls, less the setup's time)."""
+    from models import rollout as R
+    from models.rungs import compiled
+
+    c = compiled(scenario)
+    repeats = SPLIT_REPEATS // (10 if quick else 1)
+    args = (c.scene, c.drives, rung.model, rung.solver, c.goal, c.unsafe, state.q, state.nu, state.q_ref, state.delta_n, state.delta_t)
+
+    def run(stage: int, n: int) -> tuple[float, int]:
+        best, contacts = np.inf, 0
+        for _ in range(3):
+            t0 = time.perf_counter()
+            contacts = R.stage_loop(stage, *args, np.asarray(u, float), float(h), n)
+            best = min(best, time.perf_counter() - t0)
+        return best, contacts
+
+    setup, contacts = run(R.STAGE_SETUP, repeats)
+    stages = {"detection": R.STAGE_DETECT, "distances and predicates": R.STAGE_CLASSIFY, "Jacobians": R.STAGE_JACOBIANS}
+    stages["contact problem and integration"] = R.STAGE_SOLVE
+    us = {name: max(run(stage, repeats)[0] - setup, 0.0) / repeats * 1e6 for name, stage in stages.items()}
+    return {"scene": scene, "contacts": contacts, "us": us, "repeats": repeats}
 
 
 def peer_turns(ours, theirs, repeat: int):
@@ -958,6 +995,20 @@ def contact_markdown(contact: dict | None) -> list[str]:
             f"| {row['scene']} | {row['rung']} | {row['h']:g} | {row['steps']} | {row['contact_steps']} "
             f"| {row['median_wall_s']:.4f} | {row['us_per_step']:.2f} | {theirs} |"
         )
+    if contact.get("split"):
+        names = list(contact["split"][0]["us"])
+        lines += [
+            "",
+            "Where a contact step's time goes, at one state of each run (`models.rollout.stage_loop`: each stage "
+            f"repeated {contact['split'][0]['repeats']:,} times at the state, best of 3, us per call; the rest of a "
+            "step in the table above is the rollout's bookkeeping: records, forces, the warm start's table):",
+            "",
+            "| state | contacts | " + " | ".join(names) + " | sum |",
+            "|---|---|" + "---|" * (len(names) + 1),
+        ]
+        for split in contact["split"]:
+            cells = " | ".join(f"{split['us'][name]:.2f}" for name in names)
+            lines.append(f"| {split['scene']} | {split['contacts']} | {cells} | {sum(split['us'].values()):.2f} |")
     return lines
 
 

@@ -50,6 +50,12 @@ def test_throughput_and_scaling_report_every_rung(quick):
     assert all(row["contact_steps"] == 0 for row in r["throughput"]["rows"] if row["rung"].startswith("dynamic"))
     contact = r["throughput"]["contact"]["rows"]
     assert len(contact) == 5 and all(row["contact_steps"] > 0.5 * row["steps"] and row["us_per_step"] > 0 for row in contact)
+    # the cost split of a contact step, at a squeezing and two pushing states: every stage timed, the solve the largest
+    split = r["throughput"]["contact"]["split"]
+    assert [s["contacts"] for s in split] == [2, 5, 5]
+    for s in split:
+        assert set(s["us"]) == {"detection", "distances and predicates", "Jacobians", "contact problem and integration"}
+        assert s["us"]["contact problem and integration"] == max(s["us"].values()) > 0
     peer = r["throughput"]["peer"]
     assert "skipped" in peer or "steps_per_s" in peer
     if "skipped" not in peer:  # the contact rows are timed against MuJoCo too
