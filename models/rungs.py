@@ -251,8 +251,6 @@ class Rung:
     ) -> RolloutResult:
         """Run controls[k] for durations[k] from state, which is at time t0 (where scripted
         obstacles are); the result's times count from the start of this rollout."""
-        if self.model is None:
-            raise ValueError("the geometric rung has no dynamics to roll out; use valid()")
         durations = np.array(durations, dtype=float, ndmin=1)  # copies: contiguous, the caller's stays theirs
         controls = np.array(controls, dtype=float).reshape(len(durations), len(scenario.actuated))
         if len(controls) != len(durations):

@@ -282,7 +282,7 @@ def contact_steps(quick: bool = False) -> dict:
     calls of one control period each, as a planner calls it, with the scenario's polygonal
     cone (Lemke) and with the exact cone (PGS). Each row: steps, steps with a
     contact force, median wall and us per step (`repeat` rounds), and MuJoCo on the same run
-    timed in turns with ours (`peer_turns`): the paper's scene in its fastest mapping
+    timed in turns with ours (`in_turns`): the paper's scene in its fastest mapping
     (`direct`, the inert palm-triangle pair left out), box_push_3d with MuJoCo's own contact
     model (`peers.build_spatial`), stepped in the same calls."""
     from models.rungs import rung_for
@@ -301,10 +301,12 @@ def contact_steps(quick: bool = False) -> dict:
     peer = None if peers is None else peers.build(tri, 1e-4, "direct", drop_inert=True)
     for rung in ("quasistatic-rigid", "dynamic-rigid", "dynamic-compliant"):
         ours = lambda rung=rung: _rollout(tri, rung, 1e-4, steps * 1e-4, squeeze, records=2)  # noqa: E731
-        theirs = None if peer is None else (lambda: peers.timed_run(peer, squeeze[0], steps))
-        wall, out, mujoco = peer_turns(ours, theirs, repeat)
-        row = _contact_row("two_finger_triangle, v1 = v2 = 1 through the squeeze", rung, 1e-4, out.steps, out.force_steps, wall)
-        rows.append(row | _peer_columns(mujoco, out.steps, wall))
+        theirs = [] if peer is None else [lambda: peers.timed_run(peer, squeeze[0], steps)]
+        walls, out, _ = in_turns(ours, theirs, repeat)
+        row = _contact_row(
+            "two_finger_triangle, v1 = v2 = 1 through the squeeze", rung, 1e-4, out.steps, out.force_steps, float(np.median(walls[:, 0]))
+        )
+        rows.append(row | _peer_columns(walls, out.steps))
     box = load_scenario(SCENARIOS / "box_push_3d.toml")
     rung = rung_for(box, "dynamic-rigid")
     settings = box.rung_settings("dynamic-rigid")
@@ -324,13 +326,13 @@ def contact_steps(quick: bool = False) -> dict:
     per_call = int(round(period / h))
     spatial = None if peers is None else peers.build_spatial(box, h)
     skip = int(round(first / h))
-    theirs = None if spatial is None else (lambda: peers.timed_run(spatial, u[0], calls * per_call, after=skip, per_call=per_call))
+    theirs = [] if spatial is None else [lambda: peers.timed_run(spatial, u[0], calls * per_call, after=skip, per_call=per_call)]
     polygon = f"dynamic-rigid ({settings.friction_directions}-sided cone, {settings.contact_solver})"
     exact = replace(rung, solver=contact_solver("pgs"), model=rung.model._replace(exact_cone=True))
     for label, stepper in ((polygon, rung), ("dynamic-rigid (exact cone, pgs)", exact)):
-        wall, (taken, pushed), mujoco = peer_turns(lambda stepper=stepper: push(stepper), theirs, repeat)
-        row = _contact_row(f"box_push_3d, pushing (calls of {period:g} s)", label, h, taken, pushed, wall)
-        rows.append(row | _peer_columns(mujoco, calls * per_call, wall))
+        walls, (taken, pushed), _ = in_turns(lambda stepper=stepper: push(stepper), theirs, repeat)
+        row = _contact_row(f"box_push_3d, pushing (calls of {period:g} s)", label, h, taken, pushed, float(np.median(walls[:, 0])))
+        rows.append(row | _peer_columns(walls, calls * per_call))
     squeezed = _rollout(tri, "dynamic-rigid", 1e-4, 2.0, squeeze, records=2).state  # 0.5 s into the squeeze
     split = [
         _cost_split("two_finger_triangle, squeezing", tri, rung_for(tri, "dynamic-rigid"), squeezed, squeeze[0], 1e-4, quick),
@@ -371,31 +373,35 @@ def _cost_split(scene: str, scenario, rung, state, u: np.ndarray, h: float, quic
     return {"scene": scene, "contacts": contacts, "us": us, "repeats": repeats}
 
 
-def peer_turns(ours, theirs, repeat: int):
-    """ours() and theirs() (MuJoCo: -> (wall, ...)) timed in turns, `repeat` rounds after a
-    warm-up one, so that load from other work on the machine hits both alike: (median wall of
-    ours, ours' last result, {median wall, median of the rounds' ratios} of theirs or None
-    without it)."""
-    walls, theirs_walls = [], []
+def in_turns(ours, theirs: list, repeat: int):
+    """ours() and each of theirs (MuJoCo runs: () -> (wall of the stepping alone, end)) timed
+    in turns, `repeat` rounds after a warm-up one, so that load from other work on the machine
+    hits them alike. Returns (walls (repeat, 1 + len(theirs)): ours, then theirs; ours' last
+    result; theirs' last ends)."""
+    walls = np.zeros((repeat, 1 + len(theirs)))
+    result, ends = None, [None] * len(theirs)
     for round_ in range(-1, repeat):  # round -1 warms up
         t0 = time.perf_counter()
         result = ours()
-        wall = time.perf_counter() - t0
-        other = None if theirs is None else theirs()[0]
+        row = [time.perf_counter() - t0]
+        for k, run in enumerate(theirs):
+            wall, ends[k] = run()
+            row.append(wall)
         if round_ >= 0:
-            walls.append(wall)
-            theirs_walls.append(other)
-    if theirs is None:
-        return float(np.median(walls)), result, None
-    ratio = float(np.median(np.array(theirs_walls) / np.array(walls)))
-    return float(np.median(walls)), result, {"median_wall_s": float(np.median(theirs_walls)), "speed_ratio": ratio}
+            walls[round_] = row
+    return walls, result, ends
 
 
-def _peer_columns(mujoco: dict | None, steps: int, wall: float) -> dict:
-    """A contact row's MuJoCo columns: its us per step and ours / MuJoCo in steps per second."""
-    if mujoco is None:
+def _peer_columns(walls: np.ndarray, steps: int) -> dict:
+    """A contact row's MuJoCo columns from `in_turns`' walls (MuJoCo's `steps` steps in the
+    second column, if timed): its us per step and ours / MuJoCo in steps per second, the median
+    of the rounds' ratios."""
+    if walls.shape[1] < 2:
         return {"mujoco_us_per_step": None, "speed_vs_mujoco": None}
-    return {"mujoco_us_per_step": mujoco["median_wall_s"] / max(steps, 1) * 1e6, "speed_vs_mujoco": mujoco["speed_ratio"]}
+    return {
+        "mujoco_us_per_step": float(np.median(walls[:, 1])) / max(steps, 1) * 1e6,
+        "speed_vs_mujoco": float(np.median(walls[:, 1] / walls[:, 0])),
+    }
 
 
 def _contact_row(scene: str, rung: str, h: float, steps: int, contact: int, wall: float) -> dict:
@@ -435,14 +441,7 @@ def mujoco_peer(scenario, u, steps: int, h: float, ours, quick: bool = False) ->
     built = [
         peers.build(scenario, h, contact, drop) for contact in peers.CONTACT_MAPPINGS for drop in ((False, True) if inert else (False,))
     ]
-    walls = np.zeros((repeat, 1 + len(built)))
-    ends = [None] * len(built)
-    for round_ in range(-1, repeat):  # round -1 warms up
-        t0 = time.perf_counter()
-        ours()
-        walls[round_, 0] = time.perf_counter() - t0
-        for k, peer in enumerate(built):
-            walls[round_, 1 + k], ends[k] = peers.timed_run(peer, u, steps)
+    walls, _, ends = in_turns(ours, [lambda peer=peer: peers.timed_run(peer, u, steps) for peer in built], repeat)
     median = np.median(walls, axis=0)
     rows = [
         {

@@ -73,11 +73,13 @@ def flatten(state: State, flag: float = FLAG_RUNNING) -> np.ndarray:
 
 
 def unflatten(x: np.ndarray, sizes) -> tuple[State, float]:
+    """The State held by a flattened one (its arrays are views into x: the rollouts copy what
+    they step) and its flag."""
     nq, nv, na, nd, _ = sizes
     i = 0
     parts = []
     for n in (nq, nv, na, nd, 2 * nd):
-        parts.append(np.array(x[i : i + n]))
+        parts.append(x[i : i + n])
         i += n
     return State(parts[0], parts[1], parts[2], parts[3], parts[4].reshape(nd, 2)), float(x[i])
 
