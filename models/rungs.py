@@ -27,7 +27,7 @@ from models.contact import has_script, pair_min_distances
 from models.family import FAMILY
 from models.kinematics import PI_INERT, SceneData, compile_scene
 from models.predicates import OP_TOUCH, Program, compile_predicate, evaluate_with
-from models.rollout import rollout_kernel
+from models.rollout import propagate_kernel, rollout_kernel
 from models.scenario import Scenario
 from models.stepper import LEMKE, Drives, Model, Solver, StepStatus, contact_solver
 from models.task import Outcome
@@ -284,13 +284,35 @@ class Rung:
             pair_wrench=out.pair_wrench[: len(scenario.pairs)],
         )
 
-    def advance(self, scenario: Scenario, state: State, control: np.ndarray, duration: float, h: float):
-        """`rollout` of one control, stopping at an outcome, with nothing recorded but the
-        final state: the planners' propagation, at the least cost per call. Returns (final
-        State, its `models.task.Outcome` value, the `StepStatus` value the run ended with)."""
-        controls = np.array(control, dtype=float).reshape(1, -1)
-        out = self._run(scenario, state, controls, np.array([float(duration)]), h, 1 << 30, 2, True, 0.0)
-        return State(out.q, out.nu, out.q_ref, out.delta_n, out.delta_t), int(out.outcome), int(out.status)
+    def propagator(self, scenario: Scenario, h: float, sizes, low, high, drive_q, windup):
+        """The planners' propagation at step h (`models.rollout.propagate_kernel`: one control
+        from a flattened state into another, with the limits checked), bound to this rung and
+        scene: a function (x, u, duration, y) -> the run's `StepStatus` value, which writes the
+        flattened final state, flagged, into y. sizes: (nq, nv, na, nd) of the flattening;
+        low, high: the configuration limits; drive_q, windup: each drive's coordinate and the
+        lead of its reference that winds it up. Nothing else crosses into Python per call."""
+        if self.model is None:
+            raise ValueError("the geometric rung has no dynamics to roll out; use valid()")
+        c = compiled(scenario)
+        sizes = np.array(sizes, dtype=np.int64)
+        low, high, windup = (np.ascontiguousarray(a, dtype=float) for a in (low, high, windup))
+        drive_q, h = np.ascontiguousarray(drive_q, dtype=np.int64), float(h)
+
+        def bind(scene):
+            return numba.typed.List(
+                [(scene, c.drives, self.model, self.solver, c.goal, c.unsafe, sizes, low, high, drive_q, windup, _no_basis())]
+            )
+
+        bound = bind(c.scene)
+
+        def propagate(x: np.ndarray, u: np.ndarray, duration: float, y: np.ndarray) -> int:
+            here = bound
+            if c.scripted:  # the kernel moves scripted obstacles in the pose tables: its own copy
+                scene = c.scene
+                here = bind(scene._replace(bf=scene.bf.copy(), base_pos=scene.base_pos.copy(), base_quat=scene.base_quat.copy()))
+            return propagate_kernel(here, x, u, duration, h, y)
+
+        return propagate
 
     def _run(self, scenario, state, controls, durations, h, record_every, max_records, stop_at_outcome, t0):
         """The compiled rollout on contiguous float arrays (the kernel works on copies of the

@@ -26,13 +26,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from models.rollout import FLAG_GOAL, FLAG_INVALID, FLAG_RUNNING
 from models.rungs import Rung, State
 from models.scenario import Scenario
 from models.stepper import StepStatus
-from models.task import Outcome, goal_distance
+from models.task import goal_distance
 from planner.plan_status import PlanStatus
 
-FLAG_RUNNING, FLAG_GOAL, FLAG_UNSAFE, FLAG_FAILED, FLAG_INVALID = 0.0, 1.0, 2.0, 3.0, 4.0
 #: Distance weight of everything but q in the state metric.
 AUXILIARY_WEIGHT = 1e-6
 #: Half-width of the sampling box of passive coordinates around the start (m or rad).
@@ -397,38 +397,34 @@ class _Limits:
     """What makes a state invalid besides its flag: q outside the configuration limits, or a
     drive wound up (its reference leads its position by more than one control period of travel
     at full speed: it is jammed against something; in the kinematic rung references never
-    lead). `flag` marks such a state FLAG_INVALID (the propagator, as it makes a state; the
-    roots as they are written), so that the validity checker reads one number."""
+    lead). Such a state is flagged FLAG_INVALID (by the propagation kernel as it makes a state,
+    `models.rollout.propagate_kernel`; by `flag` as the roots are written), so that the
+    validity checker reads one number."""
 
     def __init__(self, scenario: Scenario, start: State, control_period: float):
-        low, high = configuration_limits(scenario, start.q)
-        self.bounds = list(zip(low.tolist(), high.tolist()))
-        drive_q = [scenario.coordinates.index(n) for n in scenario.actuated]
-        self.drives = list(zip(range(len(drive_q)), drive_q, (control_period * scenario.max_speeds).tolist()))
+        self.low, self.high = configuration_limits(scenario, start.q)
+        self.drive_q = np.array([scenario.coordinates.index(n) for n in scenario.actuated], dtype=np.int64)
+        self.windup = control_period * np.asarray(scenario.max_speeds, dtype=float)
 
     def flag(self, state: State, flag: float) -> float:
-        """FLAG_INVALID for a running or goal state outside the limits, else `flag` (on
-        Python floats: numpy's reductions cost more than the check on a handful of numbers)."""
+        """FLAG_INVALID for a running or goal state outside the limits, else `flag`."""
         if flag != FLAG_RUNNING and flag != FLAG_GOAL:
             return flag
-        q, q_ref = state.q.tolist(), state.q_ref.tolist()
-        for v, (lo, hi) in zip(q, self.bounds):
-            if not lo <= v <= hi:  # NaN is outside
-                return FLAG_INVALID
-        for j, i, windup in self.drives:
-            if abs(q_ref[j] - q[i]) > windup:
-                return FLAG_INVALID
-        return flag
+        inside = np.all((self.low <= state.q) & (state.q <= self.high))  # NaN is outside
+        wound = np.any(np.abs(state.q_ref - state.q[self.drive_q]) > self.windup)
+        return flag if inside and not wound else FLAG_INVALID
 
 
 class _Propagator:
-    """OMPL's state propagator: one compiled rollout of the rung per control (see the module
-    docstring); the result's flag says how it ended (goal, also a `reached` subgoal; unsafe;
-    a numerical failure, counted; outside the limits, `_Limits`)."""
+    """OMPL's state propagator: one compiled propagation of the rung per control
+    (`Rung.propagator`: the rollout, its outcome and the limits, `_Limits`, as the flag of the
+    state it makes; see the module docstring), and a `reached` subgoal checked on a running
+    state; numerical failures are counted."""
 
     def __init__(self, scenario: Scenario, rung: Rung, layout: _ControlLayout, limits: _Limits, h: float, reached=None):
-        self.scenario, self.rung, self.layout, self.limits, self.h, self.reached = scenario, rung, layout, limits, h, reached
+        self.layout, self.reached = layout, reached
         self.na = len(scenario.actuated)
+        self.step = rung.propagator(scenario, h, layout.sizes[:4], limits.low, limits.high, limits.drive_q, limits.windup)
         self.propagations = 0
         self.failures = 0
 
@@ -438,19 +434,12 @@ class _Propagator:
         if x[-1] != FLAG_RUNNING:
             self.layout.write(result, x)
             return
-        state, _ = unflatten(x, self.layout.sizes)
-        end, outcome, status = self.rung.advance(self.scenario, state, [control[j] for j in range(self.na)], duration, self.h)
-        flag = FLAG_RUNNING
-        if status != StepStatus.OK:
-            flag = FLAG_FAILED
+        y = np.empty_like(x)
+        if self.step(x, np.array([control[j] for j in range(self.na)]), float(duration), y) != StepStatus.OK:
             self.failures += 1
-        elif outcome == Outcome.GOAL:
-            flag = FLAG_GOAL
-        elif outcome == Outcome.UNSAFE:
-            flag = FLAG_UNSAFE
-        elif self.reached is not None and self.reached(end.q):
-            flag = FLAG_GOAL
-        self.layout.write(result, flatten(end, self.limits.flag(end, flag)))
+        if self.reached is not None and y[-1] == FLAG_RUNNING and self.reached(y[: self.layout.nq]):
+            y[-1] = FLAG_GOAL
+        self.layout.write(result, y)
 
 
 def _valid_checker(layout: _ControlLayout):
