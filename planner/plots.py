@@ -462,3 +462,38 @@ def plot_fan(path: Path, panels: list[tuple[str, list[tuple[float, str, np.ndarr
     fig.suptitle(_wrap(title, 110))
     fig.tight_layout(rect=(0, 0.1, 1, 1))
     return _save(fig, path, svg=True)
+
+
+# ----------------------------------------------------------------------------- point labels
+
+#: Offsets (points) tried in turn for a point's label, nearest first.
+LABEL_OFFSETS = ((5, 4), (5, -11), (-8, 6), (-8, -13), (5, 14), (5, -21), (-8, 16), (-8, -23))
+
+
+def label_points(ax, points, texts, fontsize: float = 6.5) -> list:
+    """Label data points without overlap: each label takes the first offset (LABEL_OFFSETS)
+    where it overlaps no label placed before; a label whose text is already shown where it
+    would overlap (the same step of a coinciding curve) is left out, as is one with no free
+    offset inside the axes. Call after the axes' limits are final. Returns the annotations placed."""
+    fig = ax.figure
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    frame = ax.get_window_extent(renderer)
+    placed: list = []
+    boxes: list = []
+    for (x, y), text in zip(points, texts):
+        for dx, dy in LABEL_OFFSETS:
+            note = ax.annotate(
+                text, (x, y), xytext=(dx, dy), textcoords="offset points", fontsize=fontsize, color="0.2", ha="left" if dx >= 0 else "right"
+            )
+            box = note.get_window_extent(renderer)
+            clash = [k for k, other in enumerate(boxes) if box.overlaps(other)]
+            inside = frame.x0 <= box.x0 and box.x1 <= frame.x1 and frame.y0 <= box.y0 and box.y1 <= frame.y1
+            if not clash and inside:
+                placed.append(note)
+                boxes.append(box)
+                break
+            note.remove()
+            if any(placed[k].get_text() == text for k in clash):
+                break  # this step is labelled right there already
+    return placed
