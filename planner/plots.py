@@ -354,7 +354,8 @@ def plot_feasible_sets(path: Path, result) -> Path:
 
 def log_ticks(axis, low: float, high: float) -> list[float]:
     """Readable ticks on a log axis spanning [low, high]: 1-2-5 steps per decade (fewer when it
-    spans many decades), labelled as plain numbers. Returns the ticks."""
+    spans many decades, more within one) and the range's ends, labelled as plain numbers.
+    Returns the ticks."""
     from matplotlib.ticker import FixedLocator, FuncFormatter, NullFormatter
 
     low, high = sorted((float(low), float(high)))
@@ -368,6 +369,10 @@ def log_ticks(axis, low: float, high: float) -> list[float]:
         for m in steps
         if low * (1 - 1e-9) <= m * 10.0**e <= high * (1 + 1e-9)
     ]
+    for end in (low, high):  # the range's ends, unless a tick sits nearly there
+        if low > 0 and all(abs(math.log10(end / t)) > 0.12 * max(decades, 1) for t in ticks):
+            ticks.append(end)
+    ticks.sort()
     axis.set_major_locator(FixedLocator(ticks))
     axis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
     axis.set_minor_formatter(NullFormatter())
