@@ -213,7 +213,11 @@ def stability(quick: bool = False) -> dict:
 
 
 def plot_work_precision(data: dict, out: Path) -> list[str]:
+    """Per scene, error against wall time per rung (log-log), each point labelled with its step
+    h once (`planner.plots.label_points`: no two labels overlap). Returns the PNGs' paths."""
     import matplotlib
+
+    from planner.plots import LINE_STYLES, MARKERS, label_points
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -222,16 +226,19 @@ def plot_work_precision(data: dict, out: Path) -> list[str]:
     for scene in sorted({r["scene"] for r in data["rows"]}):
         fig, ax = plt.subplots(figsize=(6, 4.2))
         rows = [r for r in data["rows"] if r["scene"] == scene]
-        for rung in dict.fromkeys(r["rung"] for r in rows):
+        points, texts = [], []
+        for k, rung in enumerate(dict.fromkeys(r["rung"] for r in rows)):
             mine = [r for r in rows if r["rung"] == rung]
-            ax.loglog([r["wall_s"] for r in mine], [max(r["error"], 1e-16) for r in mine], "o-", label=rung)
-            for r in mine:
-                ax.annotate(f"{r['h']:g}", (r["wall_s"], max(r["error"], 1e-16)), fontsize=6)
+            xy = [(r["wall_s"], max(r["error"], 1e-16)) for r in mine]
+            ax.loglog(*zip(*xy), marker=MARKERS[k % len(MARKERS)], ls=LINE_STYLES[k % len(LINE_STYLES)], ms=5, mfc="none", label=rung)
+            points += xy
+            texts += [f"h={r['h']:g}" for r in mine]
         ax.set_xlabel("wall time (s)")
         ax.set_ylabel("error (m)")
         ax.set_title(f"work-precision: {scene}")
         ax.legend(fontsize=7)
         fig.tight_layout()
+        label_points(ax, points, texts)  # after the layout: labels placed where they land
         path = out / f"work_precision.{scene}.png"
         fig.savefig(path, dpi=110)
         plt.close(fig)

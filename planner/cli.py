@@ -386,8 +386,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
         plot_rollouts(
             args.plot,
-            scenario.coordinates,
-            scenario.start,
+            scenario,
             [(args.model, result.times, result.trajectory)],
             f"{scenario.spec.scenario.name}: {args.model}, h = {h:g}, outcome {result.outcome}",
         )
@@ -616,8 +615,7 @@ def _write_plan_outputs(args: argparse.Namespace, scenario: Scenario, result) ->
             trajectory = np.array(rung_report.states)
         path = plot_rollouts(
             args.out / f"plan.{rung_report.label}.png",
-            scenario.coordinates,
-            scenario.start,
+            scenario,
             [(rung_report.label, times, trajectory)],
             f"{scenario.spec.scenario.name}: plan under {rung_report.label}",
         )

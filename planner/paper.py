@@ -54,6 +54,7 @@ RATIOS = "v1=0.25:4:41:log"
 DURATION = 8.0  # s: the slowest finger (0.25 m/s) needs about 6 s to reach the triangle
 STEP = 1e-4
 TOLERANCE = 1e-3
+V2_SLICES = (0.5, 2.0)  # m/s: Fig. 5's other finger speeds, beside the main sweep's v2 = 1
 PAPER_BAND = (0.7, 1.4)  # read off the paper's Fig. 4 (a) and stated in its text
 
 
@@ -69,7 +70,7 @@ def derived_band(scenario) -> tuple[float, float]:
 
 def run(out: Path, doc: Path, workers: int | None, progress=print) -> dict:
     from models.scenario import load_scenario
-    from planner.plots import plot_fan, plot_feasible_sets
+    from planner.plots import plot_fan, plot_feasible_sets, plot_feasible_sets_3d
 
     out.mkdir(parents=True, exist_ok=True)
     scenario = load_scenario(SCENE)
@@ -115,7 +116,16 @@ def run(out: Path, doc: Path, workers: int | None, progress=print) -> dict:
     bands = sw.bands(combined, "v1")
     (out / "paper-sweep.json").write_text(json.dumps({**combined.to_json(), "bands": bands, "timings": timings}, indent=1) + "\n")
     (out / "paper-sweep.csv").write_text(combined.to_csv())
-    fig5 = plot_feasible_sets(out / "fig5.png", combined)
+    plot_feasible_sets(out / "sweep-map.png", combined)
+    with sw.Executor(workers) as executor:
+        slices = {1.0: per_model, **{v2: _speed_slice(v2, axes[1], models, executor, progress) for v2 in V2_SLICES}}
+    fig5 = plot_feasible_sets_3d(
+        out / "fig5.png",
+        _fig5_panels(slices),
+        "Fig. 5 analogue: Z_F (green) and Z_A (red) over the finger speed set points and mu; "
+        f"finger speed 2 in {{{', '.join(f'{v:g}' for v in sorted(slices))}}}, finger speed 1 = rho x finger speed 2 "
+        "(rho in [0.25, 4], 41 log-spaced), band edges refined to 1e-3",
+    )
 
     # Fig. 4: a fan of ratios at mu = 0.5, full trajectories
     from models.rungs import rung_for
@@ -137,8 +147,7 @@ def run(out: Path, doc: Path, workers: int | None, progress=print) -> dict:
     fig4 = plot_fan(
         out / "fig4.png",
         panels,
-        scenario.coordinates,
-        scenario.start,
+        scenario,
         "Fig. 4 analogue: trajectories for speed ratios 0.4 .. 2.5 at mu = 0.5 (green: grasp, red: slipped out)",
     )
 
@@ -151,6 +160,43 @@ def run(out: Path, doc: Path, workers: int | None, progress=print) -> dict:
     doc.parent.mkdir(parents=True, exist_ok=True)
     doc.write_text(text)
     return {"bands": bands, "timings": timings, "total_s": total}
+
+
+def _speed_slice(v2: float, mu_axis, models, executor, progress) -> dict:
+    """The Fig. 5 sweep at finger speed 2 = v2: rho in [0.25, 4] (finger speed 1 = rho v2) x
+    mu, refined, per model; runs last DURATION / v2 so the slowest finger arrives as at v2 = 1."""
+    low, high, count, _ = RATIOS.split("=")[1].split(":")
+    axis = sw.parse_axis(f"v1={float(low) * v2:g}:{float(high) * v2:g}:{count}:log")
+    out = {}
+    for model in models:
+        h = STEP if model.rung != "quasistatic-rigid" else None
+        result = sw.sweep(str(SCENE), [axis, mu_axis], [model], fixed={"v2": v2}, h=h, duration=DURATION / v2, executor=executor)
+        out[model.label] = sw.refine(result, tolerance=TOLERANCE, executor=executor)
+        progress(f"{model.label} at v2 = {v2:g}: {len(result.points)} runs, {len(out[model.label].boundaries)} boundaries")
+    return out
+
+
+def _fig5_panels(slices: dict) -> list:
+    """plot_feasible_sets_3d's panels from {v2: {model: SweepResult}}: every run as a point
+    (v1, v2, mu, outcome) and the refined edges of each single band of v1 as boundaries."""
+    panels = []
+    for model, title in TITLES.items():
+        points, boundaries = [], []
+        for v2, per_model in sorted(slices.items()):
+            result = per_model[model]
+            for p in result.points:
+                if p is not None:
+                    points.append({"v1": p.parameters["v1"], "v2": v2, "mu": p.parameters["mu"], "outcome": p.outcome})
+            for mu in MUS:
+                edges = _band(sw.bands(result, "v1"), model, mu)
+                if len(edges) != 1:
+                    continue
+                if not edges[0]["from_is_grid_end"]:
+                    boundaries.append({"v1": edges[0]["from"], "v2": v2, "mu": mu, "side": "low"})
+                if not edges[0]["to_is_grid_end"]:
+                    boundaries.append({"v1": edges[0]["to"], "v2": v2, "mu": mu, "side": "high"})
+        panels.append((title, points, boundaries))
+    return panels
 
 
 def _band(bands: dict, model: str, mu: float):
@@ -183,7 +229,17 @@ def report(bands, derived, timings, total, doc_dir: Path, out: Path, fig4: Path,
     lines = _report_intro(total, runs)
     for model in TITLES:
         lines.append(f"| {TITLES[model]} | " + " | ".join(_fmt(_band(bands, model, m)) for m in MUS) + " |")
-    lines += ["", f"![Fig. 5 analogue]({rel(fig5)})", "", f"![Fig. 4 analogue]({rel(fig4)})", "", "## Against the paper's statements", ""]
+    lines += [
+        "",
+        f"![Fig. 5 analogue]({rel(fig5)})",
+        "",
+        *_fig5_caption(),
+        "",
+        f"![Fig. 5 at v2 = 1 as a map]({rel(out / 'sweep-map.png')})",
+        "",
+    ]
+    lines += ["The v2 = 1 slice as a map over (v1, mu): black ticks are the refined boundaries.", ""]
+    lines += [f"![Fig. 4 analogue]({rel(fig4)})", "", *_fig4_caption(), "", "## Against the paper's statements", ""]
     lines.append(_quasistatic_statement(bands, derived))
     lines.append(_wide_statement(bands, mu_edges))
     lines.append(_plastic_statement(bands))
@@ -194,6 +250,35 @@ def report(bands, derived, timings, total, doc_dir: Path, out: Path, fig4: Path,
         lines.append(f"| {model} | {t['grid_s']:.2f} | {t['refine_s']:.2f} |")
     lines += ["", f"Raw results: `{rel(out / 'paper-sweep.json')}`, `{rel(out / 'paper-sweep.csv')}`.", ""]
     return "\n".join(lines)
+
+
+def _fig5_caption() -> list[str]:
+    return [
+        "Fig. 5 in the paper's axes (finger speed 1, finger speed 2, mu), one panel per model: every run is a dot,",
+        "green where it grasps (Z_F), red where the triangle slips out (Z_A); the green surfaces pass through the",
+        "refined edges of Z_F (black dots) along finger speed 1 at each finger speed 2 and mu < 1. Finger speed 2",
+        f"takes {', '.join(f'{v:g}' for v in sorted((1.0, *V2_SLICES)))} m/s (only the slice at 1 m/s is the band table above;",
+        "the others are swept the same way for the figure). At mu = 1.2 every run grasps: no edge, the whole quadrant.",
+    ]
+
+
+def _fig4_caption() -> list[str]:
+    from models.scenario import load_scenario
+    from planner.cspace import two_finger_cspace
+
+    space = two_finger_cspace(load_scenario(SCENE))
+    edge = space.goal_edge
+    ends = " to ".join("(" + ", ".join(f"{v:.3f}" for v in p) + ")" for p in edge) if edge is not None else "none"
+    return [
+        "Fig. 4 as the paper draws it: the C-space (x1, x2, x3) of the scene, x3 in [-1.5, 1.5]. The shaded facets",
+        "are the four finger-face strata of C_free's boundary (each finger disc touching each of the triangle's upper",
+        "faces), the grey lines the rest of the polyhedron (finger limits x1, x2 in [0, 2]); all computed from the",
+        f"scene's geometry (`planner.cspace`). The blue goal edge, both fingers on their faces, runs from {ends}",
+        "for our r = 0.05 discs (the paper's point fingers: (1, 2, -0.5) to (2, 1, 0.5)): the discs touch a face",
+        "r sqrt 2 higher, and the edge ends where a disc's contact point reaches the peak, inside the scenario's",
+        "goal box |x3| <= 0.5 (between there and 0.5 a finger touches the peak's vertex). Runs are clipped to the",
+        "axes; the star is the start, a dot a run's end, an open triangle where a run leaves the axes.",
+    ]
 
 
 def _report_intro(total, runs: int) -> list[str]:
