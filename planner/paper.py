@@ -6,6 +6,8 @@
   {0.3, 0.5, 0.8, 1.2}, under the four models of Fig. 4, with the class boundaries refined
   by bisection to 1e-3 (relative);
 - the Fig. 4 fan: trajectories in (x1, x2, x3) for nine ratios per model, at mu = 0.5;
+- Table 1 in numbers (`planner.table1`): each model reduction's distance as its parameter
+  goes to its limit, and Definition 1 for a few kinematic inputs;
 
 and writes the bands of successful ratios, the plots and a point-by-point comparison with
 the paper's statements. Every number in the document comes from this run.
@@ -157,6 +159,9 @@ def run(out: Path, doc: Path, workers: int | None, progress=print) -> dict:
             lo, hi = mu_edges.get(b["model"], (math.inf, -math.inf))
             mu_edges[b["model"]] = (min(lo, b["boundary"]), max(hi, b["boundary"]))
     text = report(bands, derived_band(scenario), timings, total, doc.parent, out, fig4, fig5, len(combined.points), mu_edges)
+    from planner import table1
+
+    text += "\n" + "\n".join(table1.report(table1.run()))
     doc.parent.mkdir(parents=True, exist_ok=True)
     doc.write_text(text)
     return {"bands": bands, "timings": timings, "total_s": total}
