@@ -36,8 +36,15 @@ from models.contact import (
     scripted_bias,
     tangents_packed,
 )
+from models.kinematics import body_pose_3d
 from models.predicates import evaluate, evaluate_with
 from models.stepper import (
+    LAW_ACTIVE,
+    LAW_AXIS,
+    LAW_BODY,
+    LAW_MAX_SPEED,
+    LAW_RATE,
+    LAW_TARGET,
     SOLVER_LEMKE,
     SceneTables,
     StepStatus,
@@ -312,6 +319,28 @@ def _finish(
     return outcome, n_rec
 
 
+@numba.njit(cache=True)
+def law_speeds(S, law, q, q_index, u, out):
+    """The commanded speeds of a step under feedback laws (`models.stepper.Drives.law`): out[j]
+    = u[j] for a drive without a law, else the law's desired speed (kp / kd) (target - q_j),
+    limited to its max speed, where the target is a coordinate value or the world coordinate,
+    along the drive's axis, of a point fixed in a body at q. Its drive (kp = 0) then applies
+    kd (out[j] - v): the force of the law's quadratic well, with damping (`models.rungs.policy_drives`)."""
+    for j in range(law.shape[0]):
+        out[j] = u[j]
+        if law[j, LAW_ACTIVE] == 0.0:
+            continue
+        b, target = int(law[j, LAW_BODY]), law[j, LAW_TARGET]
+        if b >= 0:
+            p, R = body_pose_3d(S, q, b)  # planar bodies too: their yaw is the angle, z = 0
+            axis = int(law[j, LAW_AXIS])
+            target = p[axis]
+            for k in range(3):
+                target += R[axis, k] * law[j, LAW_TARGET + k]
+        v, top = law[j, LAW_RATE] * (target - q[q_index[j]]), law[j, LAW_MAX_SPEED]
+        out[j] = min(max(v, -top), top)
+
+
 # ----------------------------------------------------------------------------- the rollout
 
 
@@ -359,7 +388,10 @@ def rollout_kernel(
     unsupported, pair_psi, pair_force, pair_wrench, scratch = _pair_buffers(pi.shape[0], bi.shape[0])
     g_op, g_index, g_lo, g_hi = goal  # hoisted: reading a tuple's array in the loop costs a reference count
     u_op, u_index, u_lo, u_hi = unsafe
-    q_index, v_index, kp, kd, lower, upper, _, max_force = D
+    q_index, v_index, kp, kd, lower, upper, _, max_force, law = D
+    has_law = False
+    for j in range(law.shape[0]):
+        has_law = has_law or law[j, LAW_ACTIVE] != 0.0
     stack = np.zeros(max(g_op.shape[0], u_op.shape[0]) + 1, np.bool_)
     slots, directions = c_psi.shape[0], model.friction_directions if dimension == 3 else 2
     if basis.shape[0] != slots + v_index.shape[0] or basis.shape[1] != 3 + directions:
@@ -379,6 +411,8 @@ def rollout_kernel(
         if status != StepStatus.OK or (outcome != Outcome.NONE and stop_at_outcome):
             break
         u = controls[k]
+        if has_law:
+            u = u.copy()  # the laws' speeds, step by step
         for _ in range(int(np.round(durations[k] / h))):
             if warm_every > 0 and int(np.round((t0 + t) / h)) % warm_every == 0:
                 basis[:, :] = 0
@@ -402,6 +436,8 @@ def rollout_kernel(
                 break
             if nc > 0:
                 _assemble(bi, bf, pi, dimension, q, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, W_n, W_t, W_o, c_bias, scripted, not kinematic)
+            if has_law:
+                law_speeds(S, law, q, q_index, controls[k], u)
             # stages solve and integrate: the rung's step kernel (in line: arguments of an inlined
             # stage are reference-counted each step, which slowed the cheap rungs by about 10%)
             p_t, dn2, dt2, sw = np.zeros((0, 2)), delta_n, delta_t, 0

@@ -29,7 +29,21 @@ from models.kinematics import PI_INERT, SceneData, compile_scene
 from models.predicates import OP_TOUCH, Program, compile_predicate, evaluate_with
 from models.rollout import propagate_kernel, rollout_kernel
 from models.scenario import Scenario
-from models.stepper import LEMKE, Drives, Model, Solver, StepStatus, contact_solver
+from models.stepper import (
+    LAW_ACTIVE,
+    LAW_AXIS,
+    LAW_BODY,
+    LAW_COLUMNS,
+    LAW_MAX_SPEED,
+    LAW_RATE,
+    LAW_TARGET,
+    LEMKE,
+    Drives,
+    Model,
+    Solver,
+    StepStatus,
+    contact_solver,
+)
 from models.task import Outcome
 
 #: Tolerance of the geometric rung's non-penetration check (m).
@@ -71,6 +85,40 @@ def _basis_of(state: State) -> np.ndarray:
     """The state's warm start as the kernel takes it (a copy; empty when it has none)."""
     basis = np.asarray(state.lcp_basis)
     return np.array(basis, np.int8) if basis.ndim == 2 else _no_basis()
+
+
+def policy_drives(scenario: Scenario, drives: Drives) -> Drives:
+    """`drives` as the scenario's policy runs them: a drive with a feedback law (`[task.policy]
+    laws`, `models.schema.Law`) is a damper kd (v_des - v) toward the law's desired speed
+    (kp = 0 in the drive; `models.rollout.law_speeds` sets v_des each step), which is the force
+    kp (target - q) - kd v of the law's quadratic well wherever the speed limit does not act."""
+    policy = scenario.spec.task.policy
+    if policy is None or not policy.laws:
+        return drives
+    kp, kd, law = drives.kp.copy(), drives.kd.copy(), drives.law.copy()
+    bodies = [b.name for b in scenario.spec.bodies]
+    for name, spec in policy.laws.items():
+        j = scenario.actuated.index(name)
+        kp[j], kd[j] = 0.0, spec.kd
+        law[j, LAW_ACTIVE], law[j, LAW_RATE] = 1.0, spec.kp / spec.kd
+        law[j, LAW_MAX_SPEED] = np.inf if spec.max_speed is None else spec.max_speed
+        target = spec.target
+        if isinstance(target, (int, float)):
+            law[j, LAW_BODY], law[j, LAW_TARGET] = -1.0, target
+        else:
+            law[j, LAW_BODY] = bodies.index(target.body)
+            law[j, LAW_AXIS] = "xyz".index(name.rsplit(".", 1)[-1])
+            law[j, LAW_TARGET : LAW_TARGET + len(target.point)] = target.point
+    return drives._replace(kp=kp, kd=kd, law=law)
+
+
+def policy_controls(scenario: Scenario, duration: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The scenario's policy as a rollout takes it (with `laws=True`): one control, its
+    commanded speeds (0 for a drive it gives none; a drive under a law takes the law's speed
+    each step), held for `duration` (default: the policy's)."""
+    policy = scenario.spec.task.policy
+    controls = np.array([[policy.speeds.get(name, 0.0) for name in scenario.actuated]])
+    return controls, np.array([float(duration if duration is not None else policy.duration)])
 
 
 @dataclass(frozen=True)
@@ -129,6 +177,7 @@ class Compiled:
 
     scene: SceneData
     drives: Drives
+    policy_drives: Drives  # the drives as the scenario's policy runs them: its feedback laws (`policy_drives`)
     goal: Program
     unsafe: Program
     capacity: int
@@ -175,6 +224,7 @@ def compiled(scenario: Scenario) -> Compiled:
         upper=np.array(upper, float)[perm] if perm else np.zeros(0),
         gravity=gravity,
         max_force=np.array(max_force, float)[perm] if perm else np.zeros(0),
+        law=np.zeros((len(perm), LAW_COLUMNS)),
     )
     goal = compile_predicate(scenario, scenario.spec.task.goal)
     unsafe = compile_predicate(scenario, scenario.spec.task.unsafe)
@@ -186,6 +236,7 @@ def compiled(scenario: Scenario) -> Compiled:
     result = Compiled(
         scene=S,
         drives=drives,
+        policy_drives=policy_drives(scenario, drives),
         goal=goal,
         unsafe=unsafe,
         capacity=max(int(S.pair_max_contacts.sum()), 1),
@@ -248,9 +299,12 @@ class Rung:
         max_records: int = DEFAULT_RECORDS,
         stop_at_outcome: bool = True,
         t0: float = 0.0,
+        laws: bool = False,
     ) -> RolloutResult:
         """Run controls[k] for durations[k] from state, which is at time t0 (where scripted
-        obstacles are); the result's times count from the start of this rollout."""
+        obstacles are); the result's times count from the start of this rollout. laws: the
+        drives follow the feedback laws of the scenario's policy (`policy_drives`; the controls
+        are `policy_controls`)."""
         durations = np.array(durations, dtype=float, ndmin=1)  # copies: contiguous, the caller's stays theirs
         controls = np.array(controls, dtype=float).reshape(len(durations), len(scenario.actuated))
         if len(controls) != len(durations):
@@ -259,7 +313,7 @@ class Rung:
             total = int(round(float(durations.sum()) / h))
             record_every = max(1, total // max(max_records - 2, 1))
         start = time.perf_counter()
-        out = self._run(scenario, state, controls, durations, h, record_every, max_records, stop_at_outcome, t0)
+        out = self._run(scenario, state, controls, durations, h, record_every, max_records, stop_at_outcome, t0, laws)
         wall = time.perf_counter() - start
         status, message = _STATUS_TEXT[out.status]
         return RolloutResult(
@@ -314,7 +368,7 @@ class Rung:
 
         return propagate
 
-    def _run(self, scenario, state, controls, durations, h, record_every, max_records, stop_at_outcome, t0):
+    def _run(self, scenario, state, controls, durations, h, record_every, max_records, stop_at_outcome, t0, laws=False):
         """The compiled rollout on contiguous float arrays (the kernel works on copies of the
         state's arrays); its raw `models.rollout.RolloutOutput`."""
         if self.model is None:
@@ -325,7 +379,7 @@ class Rung:
             scene = scene._replace(bf=scene.bf.copy(), base_pos=scene.base_pos.copy(), base_quat=scene.base_quat.copy())
         return rollout_kernel(
             scene,
-            c.drives,
+            c.policy_drives if laws else c.drives,
             self.model,
             self.solver,
             c.goal,
@@ -358,6 +412,7 @@ class Rung:
         first_chunk: int = 2000,
         progress=None,
         t0: float = 0.0,
+        laws: bool = False,
     ) -> RolloutResult:
         """`rollout` (stopping at an outcome) in compiled calls of about `chunk_s` seconds of
         wall time each, so that a long run can report progress and be stopped between them:
@@ -401,6 +456,7 @@ class Rung:
                 max_records=n // record_every + 3,
                 stop_at_outcome=True,
                 t0=t0 + done * h,
+                laws=laws,
             )
             results.append(out)
             done += out.steps

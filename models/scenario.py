@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 import tomllib
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any
@@ -164,6 +164,18 @@ class Scenario:
 
     def body(self, name: str) -> BodySpec:
         return next(b for b in self.spec.bodies if b.name == name)
+
+    def with_policy(self, name: str | None) -> Scenario:
+        """This scenario running `[task.policies] name` as its policy (None: as it is);
+        ScenarioError naming the key when it has no such policy."""
+        if name is None:
+            return self
+        policies = self.spec.task.policies
+        if name not in policies:
+            known = ", ".join(policies) or "none"
+            raise ScenarioError(self.path, [Problem(key_path(("task", "policies")), f"no policy named {name!r} (policies: {known})")])
+        task = self.spec.task.model_copy(update={"policy": policies[name]})
+        return replace(self, spec=self.spec.model_copy(update={"task": task}))
 
     def rung_settings(self, name: str) -> RungSettings:
         """Rung `name`'s settings with every default resolved (`RungSettings`); any rung of
@@ -732,15 +744,41 @@ def _check_task(
             out.append(Problem(key, f"{name!r} is not an actuated coordinate (actuated: {', '.join(actuated) or 'none'})"))
         elif lo >= hi:
             out.append(Problem(key, f"lower bound {lo} is not below upper bound {hi}"))
-    if task.policy is not None:
-        for name in task.policy.speeds:
+    policies = [(("task", "policy"), task.policy)] if task.policy is not None else []
+    policies += [(("task", "policies", name), policy) for name, policy in task.policies.items()]
+    for loc, policy in policies:
+        out += _check_policy(spec, policy, loc, actuated)
+    return out
+
+
+def _check_policy(spec: ScenarioSpec, policy, loc: tuple, actuated: list[str]) -> list[Problem]:
+    """A policy's speeds and laws name actuated coordinates; laws only in a feedback policy, and
+    one at least; a law's body target names a body, a point of the scene's dimension, and a
+    drive along x, y or z (whose world coordinate the point's position gives)."""
+    out, known = [], f"(actuated: {', '.join(actuated) or 'none'})"
+    for part in ("speeds", "laws"):
+        for name in getattr(policy, part):
             if name not in actuated:
-                out.append(
-                    Problem(
-                        key_path(("task", "policy", "speeds", name)),
-                        f"{name!r} is not an actuated coordinate (actuated: {', '.join(actuated) or 'none'})",
-                    )
-                )
+                out.append(Problem(key_path((*loc, part, name)), f"{name!r} is not an actuated coordinate {known}"))
+    if policy.type == "constant_speed" and policy.laws:
+        out.append(Problem(key_path((*loc, "laws")), 'feedback laws need type = "feedback"'))
+    if policy.type == "feedback" and not policy.laws:
+        out.append(Problem(key_path((*loc, "laws")), "a feedback policy needs at least one law"))
+    both = sorted(set(policy.speeds) & set(policy.laws))
+    if both:
+        out.append(Problem(key_path((*loc, "speeds")), f"{', '.join(both)}: a drive has a speed or a law, not both"))
+    bodies = [b.name for b in spec.bodies]
+    for name, law in policy.laws.items():
+        target = law.target
+        if isinstance(target, (int, float)):
+            continue
+        key = key_path((*loc, "laws", name, "target"))
+        if target.body not in bodies:
+            out.append(Problem(f"{key}.body", f"no body named {target.body!r} (bodies: {', '.join(bodies)})"))
+        if len(target.point) != spec.scene.dimension:
+            out.append(Problem(f"{key}.point", f"a point of {spec.scene.dimension} coordinates, not {len(target.point)}"))
+        if name.rsplit(".", 1)[-1] not in ("x", "y", "z"):
+            out.append(Problem(key, f"a body's point is a target only for a drive along x, y or z, not {name!r}"))
     return out
 
 

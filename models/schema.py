@@ -407,11 +407,33 @@ AnyPredicate.model_rebuild()
 NotPredicate.model_rebuild()
 
 
-class Policy(Strict):
-    """Parametric open-loop policy for sweeps: constant commanded speed per actuated DOF."""
+class FeatureTarget(Strict):
+    """A point fixed in a body: a feedback law's moving target."""
 
-    type: Literal["constant_speed"]
-    speeds: dict[str, Speed] = Field(description="actuated coordinate name -> commanded speed")
+    body: Name = Field(description="the body the point is fixed in")
+    point: tuple[Length, ...] = Field(description="the point in the body's frame, m ([x, y] planar, [x, y, z] spatial)")
+
+
+class Law(Strict):
+    """A feedback law of one drive: the force of the quadratic potential U = kp/2 (q - target)^2
+    with damping kd, kd (v_des - v) with v_des = (kp / kd) (target - q) limited to max_speed
+    (a velocity-limited attractive well; a PD law to the target where the limit does not act).
+    The target is a coordinate value, or a point fixed in a body (the coordinate of its world
+    position along the drive's axis, as that body moves)."""
+
+    target: Length | FeatureTarget = Field(description="a coordinate value, or {body, point}: a point fixed in a body")
+    kp: Gain = Field(description="the well's stiffness, N/m")
+    kd: Gain = Field(description="damping, N s/m")
+    max_speed: _bounded(Positive, "speed") | None = Field(None, description="limit of the desired speed, m/s (none: unlimited)")
+
+
+class Policy(Strict):
+    """What sweeps and `simulate` run: open loop (`constant_speed`: a commanded speed per actuated
+    DOF) or closed loop (`feedback`: a `Law` per drive in `laws`; the others keep `speeds`)."""
+
+    type: Literal["constant_speed", "feedback"]
+    speeds: dict[str, Speed] = Field(default_factory=dict, description="actuated coordinate name -> commanded speed")
+    laws: dict[str, Law] = Field(default_factory=dict, description="actuated coordinate name -> feedback law (type feedback)")
     duration: Time = Field(description="how long the policy runs, s")
 
 
@@ -430,6 +452,9 @@ class TaskSpec(Strict):
         description="commanded speed interval per actuated coordinate (default: +-max_speed)",
     )
     policy: Policy | None = None
+    policies: dict[Name, Policy] = Field(
+        default_factory=dict, description="other policies by name, run instead of [task.policy] with --policy NAME"
+    )
 
 
 # ----------------------------------------------------------------------------- ladder

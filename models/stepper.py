@@ -168,6 +168,15 @@ class Drives(NamedTuple):
     upper: np.ndarray
     gravity: np.ndarray  # (3,)
     max_force: np.ndarray  # force limit per drive, N (inf: unlimited)
+    law: np.ndarray  # (n_actuated, LAW_COLUMNS): each drive's feedback law (`models.rollout.law_speeds`; LAW_ACTIVE 0: none)
+
+
+#: Columns of Drives.law: active (1: the drive follows its law, its commanded speed is the
+#: law's desired speed each step), the target's body (-1: a fixed coordinate value), the world
+#: axis the drive moves along (0, 1, 2), the gain kp / kd (1/s), the desired speed's limit
+#: (inf: none), then the target: a coordinate value, or a point (3) in the body's frame.
+LAW_ACTIVE, LAW_BODY, LAW_AXIS, LAW_RATE, LAW_MAX_SPEED, LAW_TARGET = 0, 1, 2, 3, 4, 5
+LAW_COLUMNS = 8
 
 
 SOLVER_LEMKE = 0

@@ -12,6 +12,7 @@ import json
 import os
 import sys
 import tempfile
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -81,8 +82,8 @@ def _add_simulate_parser(sub: argparse._SubParsersAction) -> None:
     """Add the `simulate` subcommand: run the policy (or a plan) under one rung."""
     simulate = sub.add_parser(
         "simulate",
-        help="run the scenario's open-loop policy under one rung",
-        description="Run the scenario's [task.policy] (constant commanded speeds) under one rung of "
+        help="run the scenario's policy under one rung",
+        description="Run the scenario's [task.policy] (constant commanded speeds, or feedback laws) under one rung of "
         "the model family and report the outcome (goal, unsafe or none), the final state and the "
         "solver counters. Exit 0 when the run completed, 1 when a numerical failure stopped it.",
     )
@@ -90,6 +91,7 @@ def _add_simulate_parser(sub: argparse._SubParsersAction) -> None:
     simulate.add_argument("--model", required=True, metavar="RUNG", help="rung: " + ", ".join(PROPAGATING_RUNGS))
     _add_param_option(simulate)
     simulate.add_argument("--duration", type=float, help="seconds to run (default: the policy's duration)")
+    _add_policy_option(simulate)
     simulate.add_argument("--step", type=float, help="time step h (default: the rung's h in the ladder, else the rung's default)")
     simulate.add_argument("--json", action="store_true", help="print one JSON object")
     simulate.add_argument("--plot", type=Path, help="write a trajectory plot (.png or .svg) here; its folder must exist")
@@ -100,6 +102,10 @@ def _add_simulate_parser(sub: argparse._SubParsersAction) -> None:
         "(the plan must be of this scene: same scenario, contents after parameters, and driven coordinates)",
     )
     simulate.set_defaults(handler=cmd_simulate)
+
+
+def _add_policy_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--policy", metavar="NAME", help="run [task.policies] NAME instead of [task.policy]")
 
 
 def _add_plan_parser(sub: argparse._SubParsersAction) -> None:
@@ -175,6 +181,7 @@ def _add_sweep_parser(sub: argparse._SubParsersAction) -> None:
     sweep.add_argument("--refine", action="store_true", help="bisect class boundaries along grid lines")
     sweep.add_argument("--tolerance", type=float, default=1e-3, help="refinement bracket (relative on log axes; default 1e-3)")
     sweep.add_argument("--duration", type=float, help="seconds per run (default: the policy's duration)")
+    _add_policy_option(sweep)
     sweep.add_argument("--step", type=float, help="time step h (default: each rung's h in the ladder, else the rung's default)")
     sweep.add_argument("--out", type=Path, default=Path("out/sweep"), help="output folder, created if missing (default out/sweep)")
     sweep.add_argument("--json", action="store_true", help="print the result as one JSON object")
@@ -312,8 +319,8 @@ def main(argv: list[str] | None = None) -> int:
 def load_from_args(args: argparse.Namespace, problems: list[Problem] | None = None) -> Scenario:
     """The scenario of the command line; when it does not load, its problems and `problems`
     (the other arguments' checked so far) are reported together."""
-    try:
-        return load_scenario(args.file, parse_overrides(args.param))
+    try:  # --policy (simulate, sweep): run one of [task.policies] instead of [task.policy]
+        return load_scenario(args.file, parse_overrides(args.param)).with_policy(getattr(args, "policy", None))
     except ScenarioError as exc:
         if not problems:
             raise
@@ -446,17 +453,13 @@ def _check_simulate_args(args: argparse.Namespace):
 
 def _run_simulation(args: argparse.Namespace, scenario: Scenario, plan_controls, h: float, duration: float, total: int):
     """Run the policy's (or the plan's) controls under the rung; None when Ctrl-C stopped it (said on stderr)."""
-    from models.rungs import rung_for
+    from models.rungs import policy_controls, rung_for
     from planner import interrupt
 
-    policy = scenario.spec.task.policy
     rung = rung_for(scenario, args.model)
     state = rung.initial_state(scenario)
-    if plan_controls is not None:
-        controls, durations = plan_controls
-    else:
-        controls = np.array([[policy.speeds.get(name, 0.0) for name in scenario.actuated]])
-        durations = np.array([duration])
+    laws = plan_controls is None  # the policy's feedback laws (a plan's controls are open loop)
+    controls, durations = plan_controls if plan_controls is not None else policy_controls(scenario, duration)
     live = sys.stderr.isatty() and not args.json
     with interrupt.deferred():
         announce_compile()
@@ -465,7 +468,7 @@ def _run_simulation(args: argparse.Namespace, scenario: Scenario, plan_controls,
             print(f"simulating {total:,} steps of {args.model} (h = {h:g}, {duration:g} s; Ctrl-C stops)", file=sys.stderr, flush=True)
         try:
             interrupt.check()
-            return run_with_progress(rung, scenario, state, controls, durations, h, live=live)
+            return run_with_progress(rung, scenario, state, controls, durations, h, live=live, laws=laws)
         except KeyboardInterrupt as stop:
             done = getattr(stop, "steps_done", 0)
             print(f"interrupted after {done:,} of {total:,} steps; nothing written", file=sys.stderr, flush=True)
@@ -698,10 +701,10 @@ def _print_plan(args: argparse.Namespace, scenario: Scenario, result, report: di
 PROGRESS_STEPS = 200_000
 
 
-def run_with_progress(rung, scenario, state, controls, durations, h, *, live: bool):
+def run_with_progress(rung, scenario, state, controls, durations, h, *, live: bool, laws: bool = False):
     """The rollout in chunks of bounded wall time (`Rung.rollout_chunked`, the same result as
-    one call): Ctrl-C stops it between chunks (KeyboardInterrupt, with `steps_done`), and on a
-    terminal a long one shows steps done / total, the rate and the time left."""
+    one call; laws: as there): Ctrl-C stops it between chunks (KeyboardInterrupt, with
+    `steps_done`), and on a terminal a long one shows steps done / total, the rate and the time left."""
     from planner import interrupt
 
     total = sum(round(d / h) for d in np.atleast_1d(durations))
@@ -730,7 +733,7 @@ def run_with_progress(rung, scenario, state, controls, durations, h, *, live: bo
             raise stop
 
     try:
-        return rung.rollout_chunked(scenario, state, controls, durations, h, progress=progress)
+        return rung.rollout_chunked(scenario, state, controls, durations, h, progress=progress, laws=laws)
     finally:
         if bar is not None:
             bar.stop()
@@ -810,7 +813,7 @@ def sweep_point_problems(scenario: Scenario, texts: list[str], axes, models, fix
             seen.add(signature)
             where = ", ".join(f"{k}={v:g}" for k, v in point.items())
             try:
-                variant = load_scenario(scenario.path, params)
+                variant = load_scenario(scenario.path, params).with_policy(model.policy)
             except ScenarioError as exc:
                 reasons = "; ".join(f"{p.key}: {p.reason}" if p.key else p.reason for p in exc.problems)
                 blamed = [t for t, a in zip(texts, axes) if f"from '{a.name}'" in reasons and a.name not in dict(model.overrides)]
@@ -871,8 +874,8 @@ def _check_sweep_args(args: argparse.Namespace):
             sw.parse_axis(text)
         except ScenarioError as exc:
             problems += exc.problems
-    try:
-        models = sw.parse_models(args.model)
+    try:  # --policy: the policy of the models that name none of their own
+        models = [m if m.policy else replace(m, policy=args.policy) for m in sw.parse_models(args.model)]
     except ScenarioError as exc:
         problems += exc.problems
         models = []
@@ -890,6 +893,9 @@ def _check_sweep_args(args: argparse.Namespace):
         for name, _ in model.overrides:
             if name not in scenario.parameters:
                 problems.append(Problem(f"--model {model.label}", f"{name!r} is not a design parameter of this file"))
+        if model.policy is not None and model.policy not in scenario.spec.task.policies:
+            known = ", ".join(scenario.spec.task.policies) or "none"
+            problems.append(Problem(f"--model {model.label}", f"no policy named {model.policy!r} in [task.policies] ({known})"))
     if scenario.spec.task.policy is None:
         problems.append(Problem("task.policy", "a sweep runs the scenario's policy, and this file has none"))
     runs = sw.grid_size(axes) * len(models)

@@ -66,17 +66,16 @@ class PolicyItem(pytest.Item):
         self.scenario, self.rung, self.outcome = scenario, rung, outcome
 
     def runtest(self):
-        import numpy as np
 
-        from models.rungs import rung_for
+        from models.rungs import policy_controls, rung_for
 
         spec = self.scenario.spec
         if spec.task.policy is None:
             raise ScenarioExpectationFailed("[expect.policy] needs a [task.policy]")
         rung = rung_for(self.scenario, self.rung)
         step = self.scenario.rung_settings(self.rung).h
-        controls = np.array([[spec.task.policy.speeds.get(n, 0.0) for n in self.scenario.actuated]])
-        result = rung.rollout(self.scenario, rung.initial_state(self.scenario), controls, [spec.task.policy.duration], step)
+        controls, durations = policy_controls(self.scenario)
+        result = rung.rollout(self.scenario, rung.initial_state(self.scenario), controls, durations, step, laws=True)
         if not result.ok:
             raise ScenarioExpectationFailed(f"{self.rung}: the run failed: {result.message}")
         if result.outcome != self.outcome:

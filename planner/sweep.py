@@ -48,19 +48,22 @@ class Axis:
 
 @dataclass(frozen=True)
 class ModelSpec:
-    """A rung and the parameter overrides that make a model variant of it."""
+    """A rung, the parameter overrides that make a model variant of it, and the policy it runs
+    (one of the scenario's [task.policies]; None: [task.policy])."""
 
     rung: str
     overrides: tuple[tuple[str, float], ...] = ()
     name: str = ""  # a label of the user's (NAME=RUNG[...])
+    policy: str | None = None
 
     @property
     def label(self) -> str:
         if self.name:
             return self.name
-        if not self.overrides:
+        if not self.overrides and self.policy is None:
             return self.rung
-        return f"{self.rung}[{','.join(f'{k}={v:g}' for k, v in self.overrides)}]"
+        parts = [f"{k}={v:g}" for k, v in self.overrides] + ([f"policy={self.policy}"] if self.policy else [])
+        return f"{self.rung}[{','.join(parts)}]"
 
 
 @dataclass(frozen=True)
@@ -139,7 +142,8 @@ _MODEL = re.compile(r"^\s*(?:([A-Za-z0-9_.-]+)\s*=\s*)?([a-z-]+)\s*(?:\[(.*)\])?
 
 def parse_models(text: str) -> list[ModelSpec]:
     """``quasistatic-rigid,elastic=dynamic-compliant[C=0;finger_mass=1e3]``: rungs, each with
-    optional overrides (separated by ';' or ',' inside the brackets) and an optional label."""
+    optional overrides (separated by ';' or ',' inside the brackets; ``policy=NAME`` runs one of
+    the scenario's [task.policies]) and an optional label."""
     from models.family import PROPAGATING_RUNGS
 
     syntax = "[LABEL=]RUNG[NAME=VALUE,...], e.g. elastic=dynamic-compliant[C=0,finger_mass=1e3]"
@@ -169,11 +173,14 @@ def parse_models(text: str) -> list[ModelSpec]:
                 Path("--model"),
                 [Problem(f"--model {item}", f"expected [LABEL=]RUNG[NAME=VALUE;...], RUNG one of {', '.join(PROPAGATING_RUNGS)}")],
             )
-        overrides = []
+        overrides, policy = [], None
         for part in re.split(r"[;,]", m.group(3) or ""):
             if not part.strip():
                 continue
             name, sep, value = part.partition("=")
+            if name.strip() == "policy" and value.strip():
+                policy = value.strip()
+                continue
             try:
                 number = float(value)
                 if not sep or not math.isfinite(number):
@@ -185,7 +192,7 @@ def parse_models(text: str) -> list[ModelSpec]:
         twice = sorted({n for n in names if names.count(n) > 1})
         if twice:
             raise ScenarioError(Path("--model"), [Problem(f"--model {item}", f"{', '.join(twice)} overridden twice")])
-        specs.append(ModelSpec(m.group(2), tuple(overrides), m.group(1) or ""))
+        specs.append(ModelSpec(m.group(2), tuple(overrides), m.group(1) or "", policy))
     labels = [spec.label for spec in specs]
     twice = sorted({label for label in labels if labels.count(label) > 1})
     if twice:
@@ -215,18 +222,16 @@ def grid_size(axes: list[Axis]) -> int:
 
 def run_task(task: Task) -> Point:
     """One run of the policy (in a worker process, or here)."""
-    from models.rungs import rung_for
+    from models.rungs import policy_controls, rung_for
     from models.scenario import load_scenario
 
     params = dict(task.parameters)
     params.update(dict(task.model.overrides))
-    scenario = load_scenario(task.file, params)
-    policy = scenario.spec.task.policy
+    scenario = load_scenario(task.file, params).with_policy(task.model.policy)
     rung = rung_for(scenario, task.model.rung)
     h = task.h or scenario.rung_settings(task.model.rung).h
-    duration = task.duration or policy.duration
-    controls = np.array([[policy.speeds.get(name, 0.0) for name in scenario.actuated]])
-    out = rung.rollout(scenario, rung.initial_state(scenario), controls, [duration], h, max_records=2)
+    controls, durations = policy_controls(scenario, task.duration)
+    out = rung.rollout(scenario, rung.initial_state(scenario), controls, durations, h, max_records=2, laws=True)
     return Point(task.model.label, dict(task.parameters), out.outcome, out.t, out.status, out.state.named(scenario), out.steps, out.wall_s)
 
 
