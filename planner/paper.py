@@ -324,6 +324,8 @@ def _report_intro(total, runs: int) -> list[str]:
         "Models (the paper's Fig. 4 (a)-(d)): " + "; ".join(f"**{k}** = {v}" for k, v in TITLES.items()) + ".",
         "Plastic and elastic runs use heavy (1000 kg), stiffly position-controlled fingers (kp = 1e9, kd = 2e6),",
         "since the paper's (b) and (c) ignore finger dynamics; (d) uses the scene's 0.1 kg fingers (kp = 1e5, kd = 2e2).",
+        f"**well** = {WELL_TITLE}: the same model under the scene's `potential` policy (`[task.policies.potential]`), "
+        "the paper's (d) controller, with finger speed limits v1 = rho, v2 = 1.",
         "",
         "## Bands of successful speed ratios rho = v1 / v2",
         "",
@@ -434,9 +436,10 @@ def _fingers_statement(bands, gains: dict) -> str:
         + "; ".join(well)
         + f". Broader than quasistatic at {broader} of {len(MUS)} friction values"
         + (
-            ", as the paper says: the finger that lands first presses with the well's force, at most kd v, instead of "
-            "being driven on by its reference, so it pushes the triangle aside less and the other finger has longer "
-            "to land. The gains are ours (the paper gives none); at mu = 0.5 other gains give "
+            ", as the paper says. The mechanism we expect, not separated here: the finger that lands first presses "
+            "with the well's force, about kd v, instead of being driven on by its reference, so it pushes the "
+            "triangle aside less and the other finger has longer to land. The gains are ours (the paper gives "
+            "none); at mu = 0.5 other gains give "
             + "; ".join(f"kp = {kp:g}, kd = {kd:g}: {_fmt(edges)}" for (kp, kd), edges in gains.items())
             + "."
             if broader

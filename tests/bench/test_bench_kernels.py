@@ -13,6 +13,7 @@ import pytest
 
 from models.contact import ContactSet, contact_frames, detect_planar, jacobian_packed, tangents_packed
 from models.contact3d import collide_pair_3d
+from models.contact_pgs import body_blocks
 from models.lcp import lemke_kernel, pgs_kernel
 from models.rungs import RUNGS, compiled
 from models.scenario import load_scenario
@@ -80,12 +81,15 @@ def paper_scene_lcp():
         np.zeros_like(frames.W_n),
         np.zeros((len(slots), 3)),
     )
+    dofs, count, inv, ok = body_blocks(S.bi, A, np.linalg.inv(A))
+    assert ok
     M, qv, *_ = contact_lcp(
         RUNGS["dynamic-compliant"].model,
         False,
         h,
-        A,
-        np.linalg.inv(A),
+        dofs,
+        count,
+        inv,
         nu_free,
         fingers.astype(np.int64),
         S.pf,
