@@ -424,7 +424,9 @@ class Law(Strict):
     target: Length | FeatureTarget = Field(description="a coordinate value, or {body, point}: a point fixed in a body")
     kp: Gain = Field(description="the well's stiffness, N/m")
     kd: Gain = Field(description="damping, N s/m")
-    max_speed: _bounded(Positive, "speed") | None = Field(None, description="limit of the desired speed, m/s (none: unlimited)")
+    max_speed: _bounded(NonNegative, "speed") | None = Field(
+        None, description="limit of the desired speed, m/s (0: the drive holds still; none: unlimited)"
+    )
 
 
 class Policy(Strict):
