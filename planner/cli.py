@@ -875,7 +875,7 @@ def _check_sweep_args(args: argparse.Namespace):
         except ScenarioError as exc:
             problems += exc.problems
     try:  # --policy: the policy of the models that name none of their own
-        models = [m if m.policy else replace(m, policy=args.policy) for m in sw.parse_models(args.model)]
+        models = [m if m.policy else replace(m, policy=getattr(args, "policy", None)) for m in sw.parse_models(args.model)]
     except ScenarioError as exc:
         problems += exc.problems
         models = []

@@ -304,7 +304,16 @@ def plan_control(
 class _ControlLayout:
     """Where the rung's flattened state sits in an OMPL compound state: the steered
     coordinates of q in the first part (what the metric sees), then the unsteered ones and
-    the rest of the state (nu, q_ref, deformations) with the flag last in the auxiliary part."""
+    the rest of the state (nu, q_ref, deformations) with the flag last in the auxiliary part.
+
+    States are written in one call through the space (`copyFromReals`) and read through the
+    components' typed wrappers, or through the space where a component comes back as another
+    type: the bindings hand out a live wrapper registered at the same address, which can be
+    one of a state freed since (seen once in the suite as a CompoundState in place of a
+    RealVectorStateType); the space's accessors take the state by address, whatever its
+    wrapper. `attach` makes such a space, a twin of the planner's (the same subspaces), before
+    any state is read or written: the planner's own would close a reference cycle through
+    C++ (its projection's closure holds this layout), which Python cannot collect."""
 
     def __init__(self, scenario: Scenario, start: State):
         self.sizes = _layout(scenario, start)
@@ -316,27 +325,42 @@ class _ControlLayout:
         # where each entry of the auxiliary part comes from in the flattened state
         self.aux_at = np.concatenate([self.unsteered, np.arange(self.nq, self.n_flat)]).astype(int)
         self.n_aux = len(self.aux_at)
+        self.order = np.concatenate([self.steered, self.aux_at])  # the flattened index of each OMPL value, in order
+        self.value = self.from_reals = self.typed = None
+
+    def attach(self, ob) -> None:
+        """Make the space the states are read and written through (see the class docstring)."""
+        twin = ob.CompoundStateSpace()
+        twin.addSubspace(ob.RealVectorStateSpace(self.ns), 1.0)
+        twin.addSubspace(ob.RealVectorStateSpace(self.n_aux), AUXILIARY_WEIGHT)
+        twin.lock()
+        twin.computeLocations()
+        self.value, self.from_reals, self.typed = twin.getValueAddressAtIndex, twin.copyFromReals, ob.RealVectorStateType
 
     def read(self, s) -> np.ndarray:
         """The flattened rung state held by an OMPL state."""
         q, a = s[0], s[1]
+        if type(q) is not self.typed or type(a) is not self.typed:  # another type at the address (see the class docstring)
+            return self.read_by_address(s)
         x = np.empty(self.n_flat)
         x[self.steered] = [q[k] for k in range(self.ns)]
         x[self.aux_at] = [a[k] for k in range(self.n_aux)]
         return x
 
+    def read_by_address(self, s) -> np.ndarray:
+        """`read` through the space, whatever the components' wrappers."""
+        x = np.empty(self.n_flat)
+        x[self.order] = [self.value(s, i) for i in range(self.n_flat)]
+        return x
+
     def write(self, s, x: np.ndarray) -> None:
-        q, a = s[0], s[1]
-        for k, v in enumerate(x[self.steered].tolist()):
-            q[k] = v
-        for k, v in enumerate(x[self.aux_at].tolist()):
-            a[k] = v
+        self.from_reals(s, x[self.order].tolist())
 
     def q_of(self, s) -> np.ndarray:
         return self.read(s)[: self.nq]
 
     def flag(self, s) -> float:
-        return s[1][self.n_aux - 1]
+        return self.value(s, self.n_flat - 1)
 
 
 def _control_state_space(ob, layout: _ControlLayout, scenario: Scenario, start: State):
@@ -355,6 +379,7 @@ def _control_state_space(ob, layout: _ControlLayout, scenario: Scenario, start: 
     space.addSubspace(qspace, 1.0)
     space.addSubspace(aux, AUXILIARY_WEIGHT)
     space.lock()
+    layout.attach(ob)
     projected = _projection_coordinates(scenario)
 
     class Projection(ob.ProjectionEvaluator):
@@ -373,7 +398,7 @@ def _control_state_space(ob, layout: _ControlLayout, scenario: Scenario, start: 
 
         def project(self, state, out):
             for k, i in enumerate(projected):
-                out[k] = state[0][i]
+                out[k] = layout.value(state, i)  # the steered part comes first
 
     projection = Projection(space)
     space.registerDefaultProjection(projection)
@@ -445,10 +470,10 @@ class _Propagator:
 def _valid_checker(layout: _ControlLayout):
     """OMPL's validity checker: the flag is running or goal (not unsafe, a failure, or outside
     the limits: `_Limits`)."""
-    at = layout.n_aux - 1
+    flag_of = layout.flag
 
     def valid(s) -> bool:
-        flag = s[1][at]
+        flag = flag_of(s)
         return flag == FLAG_RUNNING or flag == FLAG_GOAL
 
     return valid

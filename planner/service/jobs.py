@@ -39,9 +39,9 @@ PLAN_OPTIONS = {
     "seed_roots": bool,
     "guide": bool,
 }
-SIMULATE_OPTIONS = {"model": str, "duration": float, "step": float}
+SIMULATE_OPTIONS = {"model": str, "duration": float, "step": float, "policy": str}
 #: A sweep's grid is a list of `ladder sweep --grid` texts; its model the `--model` text.
-SWEEP_OPTIONS = {"grid": list, "model": str, "refine": bool, "tolerance": float, "duration": float, "step": float}
+SWEEP_OPTIONS = {"grid": list, "model": str, "refine": bool, "tolerance": float, "duration": float, "step": float, "policy": str}
 OPTIONS = {"plan": PLAN_OPTIONS, "simulate": SIMULATE_OPTIONS, "sweep": SWEEP_OPTIONS}
 REQUIRED = {"plan": (), "simulate": ("model",), "sweep": ("grid", "model")}
 #: The most runs (grid points x models) one sweep job may do: the service checks every run's
@@ -229,6 +229,7 @@ def cli_args(kind: str, path: Path, parameters: dict, options: dict, out: Path) 
             tolerance=options.get("tolerance", 1e-3),
             duration=options.get("duration"),
             step=options.get("step"),
+            policy=options.get("policy"),
             out=out,
             json=True,
         )
@@ -238,6 +239,7 @@ def cli_args(kind: str, path: Path, parameters: dict, options: dict, out: Path) 
         model=options.get("model"),
         duration=options.get("duration"),
         step=options.get("step"),
+        policy=options.get("policy"),
         plot=None,
         plan=None,
         json=True,
