@@ -270,11 +270,33 @@ def report(bands, derived, timings, total, doc_dir: Path, out: Path, fig4: Path,
     lines.append(_plastic_statement(bands))
     lines.append(_elastic_statement(bands))
     lines.append(_fingers_statement(bands, gains))
+    lines += ["", *_mlcp_section()]
     lines += ["", "## Speed", "", "| model | grid runs (s) | refinement (s) |", "|---|---|---|"]
     for model, t in timings.items():
         lines.append(f"| {model} | {t['grid_s']:.2f} | {t['refine_s']:.2f} |")
     lines += ["", f"Raw results: `{rel(out / 'paper-sweep.json')}`, `{rel(out / 'paper-sweep.csv')}`.", ""]
     return "\n".join(lines)
+
+
+def _mlcp_section() -> list[str]:
+    """Section 4's own MLCP: what tests/test_paper_mlcp.py (in `make test`) checks, stated here
+    (its numbers are that test's tolerances, not this run's)."""
+    return [
+        "## The paper's MLCP (Section 4)",
+        "",
+        "Section 4 writes the dynamic model (3) of its scene, with finger 1 above the left edge and finger 2 above the "
+        "right, as an MLCP with given W_n and W_t (q = (x3), M = 1, h = 1e-4, mu = 0.5, K = 1e6, C = 1e4 or 0). "
+        "`tests/test_paper_mlcp.py` builds exactly that problem for four configurations (plastic and elastic, first "
+        "touch and deformed contacts, one finger slow) and asserts, on our stepper's own contact problem for the same "
+        "state (fingers as scripted obstacles, so our q is (x3) alone, as the paper's): W_n equals the paper's to "
+        "1e-12; the x3 row of W_t equals it up to each tangent's sign (a convention); the LCP our stepper assembles "
+        "equals the paper's MLCP to 1e-10 once its conventions are undone (impulses h lambda for forces, normal rows "
+        "divided by h, the sliding-speed column's scale, the order of the unknowns); and one real step of the rung "
+        "gives the velocity, the contact forces and the new deformations of the paper's MLCP, solved independently "
+        "by enumerating each contact's mode, to 1e-9. The printed W_t's second row does not follow from the "
+        "geometry: its first column's y entry (+sqrt 2 / 2) is the left face's normal, not a tangent (the tangent's "
+        "is -sqrt 2 / 2, which our stepper has and the test uses); read as printed, the test fails.",
+    ]
 
 
 def _fig5_caption() -> list[str]:
