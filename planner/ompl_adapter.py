@@ -72,18 +72,6 @@ def flatten(state: State, flag: float = FLAG_RUNNING) -> np.ndarray:
     return np.concatenate([state.q, state.nu, state.q_ref, state.delta_n, state.delta_t.ravel(), [flag]])
 
 
-def unflatten(x: np.ndarray, sizes) -> tuple[State, float]:
-    """The State held by a flattened one (its arrays are views into x: the rollouts copy what
-    they step) and its flag."""
-    nq, nv, na, nd, _ = sizes
-    i = 0
-    parts = []
-    for n in (nq, nv, na, nd, 2 * nd):
-        parts.append(x[i : i + n])
-        i += n
-    return State(parts[0], parts[1], parts[2], parts[3], parts[4].reshape(nd, 2)), float(x[i])
-
-
 def control_bounds(scenario: Scenario) -> tuple[np.ndarray, np.ndarray]:
     """Commanded speed bounds per actuated coordinate: `[task] control_bounds`, else +-max_speed."""
     lo, hi = [], []
