@@ -59,6 +59,7 @@ from models.scenario import Problem, Scenario, ScenarioError
 from models.task import Outcome, classify, goal_distance
 from planner.ompl_adapter import plan_control, plan_geometric, steered_coordinates
 from planner.plan_status import PlanStatus
+from planner.pushing import push_reference
 from planner.tracking import TRACK_TOLERANCE, PoseError, Reference, Tracked, track
 
 #: Words of a rung's outcome and its solver status in a report.
@@ -366,6 +367,18 @@ def _climb(
             return None
     if carried and replay.outcome == GOAL and replay.status == OK:
         return [_replayed(step, previous, replay)]
+    if carried and previous.rung == "geometric":  # the object's path, pushed (planner.pushing)
+        pushed = _push(step, previous)
+        if step.stopped():
+            return None
+        if pushed is not None:
+            pushed_replay = _Replay.of(pushed)
+            if pushed_replay.outcome == GOAL and pushed_replay.status == OK:
+                return [_tracked(step, pushed, pushed_replay, pushed=True)]
+            # where the push is lost, the search is the one without it: seeded with the geometric
+            # plan's replay (seeded with the pushed states instead, 2 of 20 box_rotate_3d seeds failed)
+            report = _search(step, previous, replay, None, planner, seeded, guided, progress, pushed=pushed)
+            return None if report is None else [report]
     if carried and previous.rung != "geometric":
         if coarse and previous.ended.holds:  # not from a failed rung's partial plan (strike.toml: 3 of 5 seeds hold so, 5 of 5 not)
             found = _coarser_step(step, previous, replay)
@@ -517,12 +530,14 @@ def _skipped(step: _Step, previous: RungReport, reason: str) -> RungReport:
     )
 
 
-def _tracked(step: _Step, tracked: Tracked, replay: _Replay) -> RungReport:
-    ended = PlanStatus.REPAIRED if tracked.repaired else PlanStatus.TRACKED if tracked.corrected else PlanStatus.REPLAYED
+def _tracked(step: _Step, tracked: Tracked, replay: _Replay, pushed: bool = False) -> RungReport:
+    """The rung's report of a plan tracking made; `pushed`: tracking a pushing reference along the
+    geometric rung's object path (`_push`), which is tracked, never replayed."""
+    ended = PlanStatus.REPAIRED if tracked.repaired else PlanStatus.TRACKED if tracked.corrected or pushed else PlanStatus.REPLAYED
     return RungReport(
         step.name,
         ended,
-        _tracking_reason(ended, tracked),
+        _tracking_reason(ended, tracked, pushed),
         wall_s=time.perf_counter() - step.t0,
         propagations=tracked.repair_propagations,
         iterations=tracked.repair_iterations,
@@ -555,10 +570,11 @@ def _replayed(step: _Step, previous: RungReport, replay: _Replay) -> RungReport:
     )
 
 
-def _search(step: _Step, previous, replay, tracked, planner, seeded: bool, guided: bool, progress) -> RungReport | None:
+def _search(step: _Step, previous, replay, tracked, planner, seeded: bool, guided: bool, progress, pushed=None) -> RungReport | None:
     """Plan at the rung with OMPL, rooted also at the replayed (or tracked) states that still
     agree with the previous plan and guided by its configurations; the plan's prefix from the
-    root it starts at is spliced in front."""
+    root it starts at is spliced in front. `pushed`: a push along the geometric plan's object
+    path tracked first (`_push`) and lost: its costs count in the rung's."""
     scenario, start = step.scenario, step.start()
     seeds, prefix_controls, prefix_durations = [], [], np.zeros(0)
     if replay is not None and seeded:
@@ -569,7 +585,8 @@ def _search(step: _Step, previous, replay, tracked, planner, seeded: bool, guide
     # (after tracking failed the previous plan still guides: docs/measurements.md, "No guide")
     usable = previous is not None and previous.states and previous.rung != "geometric"
     guide = np.array(previous.states) if usable and guided else None
-    budget = step.iterations - (tracked.repair_iterations if tracked else 0)
+    spent = tracked or pushed
+    budget = step.iterations - (spent.repair_iterations if spent else 0)
     plan = _plan_with_restarts(
         scenario,
         step.rung,
@@ -612,6 +629,8 @@ def _search(step: _Step, previous, replay, tracked, planner, seeded: bool, guide
     else:
         ended = PlanStatus.FAILED
         reason = f"{ended.message} ({fields['outcome']}, {fields['status']})"
+    if pushed is not None:
+        reason = f"{reason or ended.message}; before the search, {_tracking_words(pushed, True)}"
     # an accepted plan's states are its replay's under this rung, from the start (the tree's
     # path begins at its root, which may be a seed part-way along the prefix)
     return RungReport(
@@ -619,16 +638,16 @@ def _search(step: _Step, previous, replay, tracked, planner, seeded: bool, guide
         ended,
         reason,
         wall_s=time.perf_counter() - step.t0,
-        propagations=plan.propagations + (tracked.repair_propagations if tracked else 0),
-        iterations=plan.iterations + (tracked.repair_iterations if tracked else 0),
+        propagations=plan.propagations + (spent.repair_propagations if spent else 0),
+        iterations=plan.iterations + (spent.repair_iterations if spent else 0),
         solver_failures=plan.failures,
         controls=plan.controls.tolist(),
         durations=plan.durations.tolist(),
         states=tail.configurations(start) if accepted else plan.states.tolist(),
-        tracked=None if tracked is None else tracked.fraction,
-        diverged_at=None if tracked is None else tracked.diverged_at,
-        repairs=0 if tracked is None else tracked.repairs,
-        rollouts=0 if tracked is None else tracked.rollouts,
+        tracked=None if spent is None else spent.fraction,
+        diverged_at=None if spent is None else spent.diverged_at,
+        repairs=0 if spent is None else spent.repairs,
+        rollouts=0 if spent is None else spent.rollouts,
         **fields,
     )
 
@@ -914,16 +933,42 @@ def _track(step: _Step, previous: RungReport) -> Tracked:
     )
 
 
-def _tracking_reason(ended: PlanStatus, tracked: Tracked) -> str:
+def _push(step: _Step, previous: RungReport) -> Tracked | None:
+    """The geometric plan's object path pushed (`planner.pushing.push_reference`) and tracked
+    under the step's rung, repaired locally within the iterations the rung may spend; None in a
+    scene that is no pushing scene."""
+    reference = push_reference(step.scenario, previous.states, step.start().q, step.period)
+    if reference is None:
+        return None
+    return track(
+        step.scenario,
+        step.rung,
+        step.start(),
+        reference,
+        step.h,
+        step.period,
+        step.seed,
+        iterations=step.iterations,
+        time_limit=step.budget.seconds(),
+        stop=step.stop,
+    )
+
+
+def _tracking_reason(ended: PlanStatus, tracked: Tracked, pushed: bool = False) -> str:
     """How tracking went, in words: corrections, repairs, where it was lost."""
-    words = [f"tracked {tracked.fraction:.0%} of the previous plan's duration"]
+    return f"{ended.message}: " + _tracking_words(tracked, pushed)
+
+
+def _tracking_words(tracked: Tracked, pushed: bool = False) -> str:
+    what = "a push along the geometric plan's object path" if pushed else "the previous plan"
+    words = [f"tracked {tracked.fraction:.0%} of {what}'s duration"]
     if tracked.corrected:
         words.append(f"{tracked.corrected} of {len(tracked.controls)} controls corrected")
     if tracked.repairs:
         words.append(f"{tracked.repaired} of {tracked.repairs} local repair(s) succeeded ({tracked.repair_propagations} propagations)")
     if tracked.lost:
         words.append(f"lost at {tracked.diverged_at:.1f} s ({tracked.lost})")
-    return f"{ended.message}: " + ", ".join(words)
+    return ", ".join(words)
 
 
 def _replay(scenario, rung, start, previous, h, period: float | None = None) -> _Replay:

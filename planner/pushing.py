@@ -1,0 +1,207 @@
+"""Object paths carry upward: the geometric rung's path of a pushed object, turned into a
+pushing reference that the first physics rung tracks (`planner.tracking`).
+
+The geometric rung plans where the object goes (its position and its turn about the vertical)
+and moves the robot on its own, so its robot path is no pushing plan. Here the robot's path is
+made from the object's: the pusher rides at the object's boundary behind its direction of
+travel, off the object's centre line by the offset that turns it at the path's rate, after an
+approach around the object to the first push point. The object moves along its path at a
+fraction of the pusher's speed limit. Tracking then corrects the pushes per control period
+against the object's path (the pose error counts only the passive bodies) and repairs locally
+where it is lost.
+
+The offset for a turn is the quasistatic pushing rule of a sticking point push on a body with
+a circular limit surface of radius c (Lynch and Mason, "Stable pushing", 1996): a push at
+offset o from the centre line turns the body at o / (c^2 + o^2) rad per metre travelled, at
+most 1 / (2 c), at o = c; c is the mean distance from the centre of a disc with the body's
+footprint area under uniform pressure, 2/3 of its radius.
+
+A scene is a pushing scene when it has one object whose x and y are coordinates and one robot
+whose x and y are both actuated; elsewhere `push_reference` returns None and the ladder plans
+as before.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from models.rungs import compiled
+from models.scenario import Scenario
+from planner.tracking import Reference
+
+#: The object's speed along its path, as a fraction of the pusher's smaller speed limit: slow
+#: enough that the pusher can correct sideways within its limit (box_rotate_3d, 10 seeds:
+#: 0.1, 0.2 and 0.3 of 0.5 m/s reached the goal by tracking in 7, 7 and 8; docs/measurements.md).
+PUSH_SPEED = 0.3
+#: The pusher's speed on its approach to the first push point, as a fraction of its speed limit.
+APPROACH_SPEED = 0.8
+#: Clearance from the object's bounding circle on the approach around it, m.
+APPROACH_CLEARANCE = 0.02
+#: An approach whose bearing from the object's centre turns by more than this goes around the
+#: object on a circle, rad; a smaller one goes straight.
+AROUND = 0.5
+#: The largest push offset, as a fraction of the object's half-width across the push.
+OFFSET_REACH = 0.8
+
+
+class _Footprint:
+    """What pushing needs of a body's shape, from the compiled scene: its support distance along
+    a direction of its own plane, and its limit-surface radius."""
+
+    def __init__(self, scenario: Scenario, name: str):
+        scene = compiled(scenario).scene
+        i = [b.name for b in scenario.spec.bodies].index(name)
+        start, count = int(scene.vstart[i]), int(scene.vcount[i])
+        self.points = np.asarray(scene.verts[start : start + count], float)[:, :2].reshape(-1, 2)
+        self.radius = float(scene.radius[i])
+        self.limit_radius = 2.0 / 3.0 * np.sqrt(self._area() / np.pi)
+
+    def _area(self) -> float:
+        """Footprint area: the hull of the vertices in the plane swept by the radius."""
+        p, r = self.points, self.radius
+        if len(p) >= 3:
+            centre = p.mean(axis=0)
+            order = np.argsort(np.arctan2(p[:, 1] - centre[1], p[:, 0] - centre[0]))
+            hull = p[order]
+            x, y = hull[:, 0], hull[:, 1]
+            area = 0.5 * abs(float(x @ np.roll(y, -1) - y @ np.roll(x, -1)))
+            perimeter = float(np.sum(np.hypot(*(np.roll(hull, -1, axis=0) - hull).T)))
+        else:
+            area, perimeter = 0.0, 2.0 * float(np.ptp(p, axis=0).max(initial=0.0)) if len(p) else 0.0
+        return area + perimeter * r + np.pi * r * r
+
+    def support(self, direction: np.ndarray) -> float:
+        """How far the body reaches from its centre along `direction` (unit, body frame)."""
+        return float(np.max(self.points @ direction, initial=0.0)) + self.radius
+
+
+def _yaw(scenario: Scenario, q: np.ndarray, body: str) -> float | None:
+    """The body's turn about the vertical at q: its yaw or theta coordinate, or the yaw of its
+    orientation quaternion; None when it has none."""
+    names = scenario.coordinates
+    for c in ("yaw", "theta"):
+        if f"{body}.{c}" in names:
+            return float(q[names.index(f"{body}.{c}")])
+    if f"{body}.qw" in names:
+        w, x, y, z = (float(q[names.index(f"{body}.{c}")]) for c in ("qw", "qx", "qy", "qz"))
+        return float(np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
+    return None
+
+
+def pushing_pair(scenario: Scenario) -> tuple[str, str] | None:
+    """(object, robot) of a pushing scene (see the module docstring), else None."""
+    names, actuated = scenario.coordinates, set(scenario.actuated)
+    objects = [b.name for b in scenario.spec.bodies if b.role == "object" and f"{b.name}.x" in names and f"{b.name}.y" in names]
+    robots = [b.name for b in scenario.spec.bodies if b.role == "robot"]
+    if len(objects) != 1 or len(robots) != 1 or not {f"{robots[0]}.x", f"{robots[0]}.y"} <= actuated:
+        return None
+    return objects[0], robots[0]
+
+
+def push_reference(scenario: Scenario, path, q0: np.ndarray, period: float) -> Reference | None:
+    """The pushing reference along the geometric rung's path (configurations `path`) from the
+    rung's start configuration q0, per control period; None when the scene is no pushing scene
+    or the path does not move the object."""
+    pair = pushing_pair(scenario)
+    if pair is None:
+        return None
+    obj, robot = pair
+    names = scenario.coordinates
+    ox, oy = names.index(f"{obj}.x"), names.index(f"{obj}.y")
+    rx, ry = names.index(f"{robot}.x"), names.index(f"{robot}.y")
+    turn = next((names.index(f"{obj}.{c}") for c in ("yaw", "theta") if f"{obj}.{c}" in names), None)
+    shape, pusher = _Footprint(scenario, obj), _Footprint(scenario, robot)
+    c = shape.limit_radius
+    path = np.asarray(path, float)
+    xy = path[:, [ox, oy]]
+    yaw = path[:, turn] if turn is not None else np.full(len(path), _yaw(scenario, q0, obj) or 0.0)
+    # arc length: the object's travel, or its turn times c where it turns more than it moves
+    arc = np.concatenate([[0.0], np.cumsum(np.maximum(np.hypot(*np.diff(xy, axis=0).T), c * np.abs(np.diff(yaw))))])
+    if arc[-1] <= 1e-9:
+        return None
+    speeds = np.array([scenario.drive(n).max_speed for n in (f"{robot}.x", f"{robot}.y")])
+    n = int(np.ceil(arc[-1] / (PUSH_SPEED * speeds.min() * period))) + 1
+    s = np.linspace(0.0, arc[-1], n)
+    xy = np.column_stack([np.interp(s, arc, xy[:, 0]), np.interp(s, arc, xy[:, 1])])
+    yaw = np.interp(s, arc, yaw)
+    push = _push_points(shape, pusher.radius, xy, yaw, c)
+    drives = [list(scenario.actuated).index(f"{robot}.{c}") for c in ("x", "y")]
+    reference = _Builder(q0, (ox, oy), turn, (rx, ry), drives, len(scenario.actuated), period)
+    for p in _approach(q0[[rx, ry]], push[0], xy[0], shape, pusher.radius):
+        reference.move(p, xy[0], yaw[0], APPROACH_SPEED * speeds.min())
+    for k in range(1, n):
+        reference.move(push[k], xy[k], yaw[k], np.inf)
+    return reference.done()
+
+
+def _push_points(shape: _Footprint, r: float, xy: np.ndarray, yaw: np.ndarray, c: float) -> np.ndarray:
+    """Where the pusher's centre is at each of the object's poses: at the object's boundary
+    behind its direction of travel, off the centre line by the offset that turns it at the
+    path's rate (the module docstring)."""
+    points, heading = [], np.array([1.0, 0.0])
+    for k in range(len(xy)):
+        j = min(k, len(xy) - 2)
+        step = xy[j + 1] - xy[j]
+        length = float(np.hypot(*step))
+        if length > 1e-9:
+            heading = step / length
+        rate = (yaw[j + 1] - yaw[j]) / max(length, 1e-9)
+        cos, sin = np.cos(yaw[k]), np.sin(yaw[k])
+        local = np.array([cos * heading[0] + sin * heading[1], -sin * heading[0] + cos * heading[1]])  # in the body frame
+        across = np.array([-local[1], local[0]])
+        width = OFFSET_REACH * min(shape.support(across), shape.support(-across))
+        bend = min(abs(rate), (1.0 - 1e-9) / (2.0 * c))
+        offset = (1.0 - np.sqrt(1.0 - 4.0 * bend * bend * c * c)) / (2.0 * bend) if bend > 1e-9 else 0.0
+        # a push at +offset (to the left of the travel) turns the object clockwise
+        offset = -np.sign(rate) * min(offset, width)
+        side = np.array([-heading[1], heading[0]])
+        points.append(xy[k] - (shape.support(-local) + r) * heading + offset * side)
+    return np.array(points)
+
+
+def _approach(start: np.ndarray, first: np.ndarray, centre: np.ndarray, shape: _Footprint, r: float) -> list[np.ndarray]:
+    """Waypoints from the pusher's start to the first push point: straight when the bearing
+    from the object's centre changes little (AROUND), else around the object on a circle clear
+    of it first."""
+    bearing = lambda p: float(np.arctan2(p[1] - centre[1], p[0] - centre[0]))  # noqa: E731
+    a0 = bearing(start)
+    turn = (bearing(first) - a0 + np.pi) % (2.0 * np.pi) - np.pi
+    points = []
+    if abs(turn) > AROUND:
+        clear = float(np.max(np.hypot(*shape.points.T), initial=0.0)) + shape.radius + r + APPROACH_CLEARANCE
+        reach = max(clear, float(np.hypot(*(start - centre))))
+        for t in np.linspace(0.0, 1.0, int(np.ceil(abs(turn) / 0.2)) + 1)[1:]:
+            points.append(centre + reach * np.array([np.cos(a0 + t * turn), np.sin(a0 + t * turn)]))
+    points.append(first)
+    return points
+
+
+class _Builder:
+    """The reference, one control period at a time: configurations at the period boundaries
+    (the object where the path has it, the pusher where it is commanded) and the pusher's
+    commanded speeds between them."""
+
+    def __init__(self, q0: np.ndarray, obj, turn: int | None, robot, drives: list[int], na: int, period: float):
+        self.q = [np.array(q0, float)]
+        self.controls: list[np.ndarray] = []
+        self.obj, self.turn, self.robot, self.drives, self.na, self.period = list(obj), turn, list(robot), drives, na, period
+        self.at = self.q[0][self.robot].copy()
+
+    def move(self, point: np.ndarray, xy: np.ndarray, yaw: float, speed: float) -> None:
+        """The pusher to `point` at most at `speed` (in whole periods, at least one), the
+        object at (xy, yaw) at the end."""
+        periods = max(1, int(np.ceil(np.hypot(*(point - self.at)) / (speed * self.period) - 1e-9))) if np.isfinite(speed) else 1
+        for k in range(1, periods + 1):
+            q = self.q[-1].copy()
+            q[self.robot] = self.at + (point - self.at) * (k / periods)
+            q[self.obj] = xy
+            if self.turn is not None:
+                q[self.turn] = yaw
+            self.q.append(q)
+            u = np.zeros(self.na)
+            u[self.drives] = (point - self.at) / (periods * self.period)
+            self.controls.append(u)
+        self.at = np.array(point, float)
+
+    def done(self) -> Reference:
+        return Reference(np.arange(len(self.q)) * self.period, np.array(self.q), np.array(self.controls))
