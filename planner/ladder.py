@@ -673,9 +673,11 @@ def _plan_with_restarts(scenario, rung, start, *, seed: int, iterations: int, ti
     """plan_control in up to RESTARTS searches when unguided (see RESTARTS); the first exact
     plan, else the last search's, ending TIMEOUT (or STOPPED) when no time (or a stop) was
     left for the searches to come; counts summed over the searches."""
-    searches = RESTARTS if kwargs.get("guide") is None else 1
+    iterations = max(int(iterations), 0)
+    # no more searches than iterations (and one with none left: it ends at once, BUDGET_EXHAUSTED)
+    searches = max(1, min(RESTARTS if kwargs.get("guide") is None else 1, iterations))
     # equal shares that sum to the budget (a ceiling each would overspend it by up to searches - 1)
-    shares = [max(1, iterations // searches + (k < iterations % searches)) for k in range(searches)]
+    shares = [iterations // searches + (k < iterations % searches) for k in range(searches)]
     t0, used = time.perf_counter(), {"propagations": 0, "iterations": 0, "failures": 0}
     plan = None
     for attempt in range(searches):
@@ -919,8 +921,14 @@ def _track(step: _Step, previous: RungReport) -> Tracked:
         previous.h,
         step.period,
     )
+    return _follow(step, reference)
+
+
+def _follow(step: _Step, reference: Reference) -> Tracked:
+    """`reference` tracked under the step's rung from its start, repaired locally within the
+    iterations and the time the rung may spend."""
     return track(
-        scenario,
+        step.scenario,
         step.rung,
         step.start(),
         reference,
@@ -938,20 +946,7 @@ def _push(step: _Step, previous: RungReport) -> Tracked | None:
     under the step's rung, repaired locally within the iterations the rung may spend; None in a
     scene that is no pushing scene."""
     reference = push_reference(step.scenario, previous.states, step.start().q, step.period)
-    if reference is None:
-        return None
-    return track(
-        step.scenario,
-        step.rung,
-        step.start(),
-        reference,
-        step.h,
-        step.period,
-        step.seed,
-        iterations=step.iterations,
-        time_limit=step.budget.seconds(),
-        stop=step.stop,
-    )
+    return None if reference is None else _follow(step, reference)
 
 
 def _tracking_reason(ended: PlanStatus, tracked: Tracked, pushed: bool = False) -> str:
