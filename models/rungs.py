@@ -596,6 +596,7 @@ def rung_for(scenario: Scenario, name: str) -> Rung:
         friction_directions=settings.friction_directions,
         warm_period=settings.control_period,
         exact_cone=settings.friction_cone == "exact",
+        regularization=settings.regularization,
     )
     if settings.inertia is not None and model.eps == 0.0:
         model = model._replace(quasistatic_inertia=settings.inertia)

@@ -97,7 +97,8 @@ class RungSettings:
     iterations; time_limit: wall-clock cap on its planning, s; contact_solver: lemke, pgs or
     auto; friction_directions: sides of the spatial friction cone (None for geometric);
     friction_cone: polygon (those sides) or exact (the circular cone, by PGS); theta:
-    theta-rule weight; inertia: a quasistatic rung's inertia scale (None: the default)."""
+    theta-rule weight; inertia: a quasistatic rung's inertia scale (None: the default);
+    regularization: rigid contact's shared load (`models.stepper.Model.regularization`)."""
 
     name: str
     h: float | None
@@ -110,6 +111,7 @@ class RungSettings:
     theta: float
     inertia: float | None = None  # quasistatic rungs' inertia scale (None: the stepper's default)
     friction_cone: str = "polygon"
+    regularization: float = 0.0
 
 
 def resolve_rung_settings(ladder: LadderSpec, name: str) -> RungSettings:
@@ -133,6 +135,7 @@ def resolve_rung_settings(ladder: LadderSpec, name: str) -> RungSettings:
         theta=1.0 if entry is None else entry.theta,
         inertia=given("inertia"),
         friction_cone=given("friction_cone") or "polygon",
+        regularization=0.0 if entry is None else float(entry.regularization),
     )
 
 

@@ -487,6 +487,13 @@ class RungSpec(Strict):
         "eps -> 0; 1: a quasi-dynamic step with the bodies' full inertia, which resolves a statically "
         "indeterminate support and allows large steps)",
     )
+    regularization: Annotated[Num, Field(ge=0, le=1e-3)] = Field(
+        0.0,
+        description="rigid rungs: this fraction of the largest normal Delassus diagonal added to every normal "
+        "diagonal of the contact LCP, so that a statically indeterminate support (a box on a plane that turns "
+        "about the vertical only) shares its load as equally stiff contacts would (the rigid limit) instead of "
+        "at a vertex solution that loads some contacts only (default 0: exact rigid contact; Lemke's LCP)",
+    )
     contact_solver: Literal[CONTACT_SOLVERS] | None = Field(  # type: ignore[valid-type]
         None,
         description="how the contact problems are solved: lemke (default, exact), pgs (projected Gauss-Seidel, "

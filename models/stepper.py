@@ -155,6 +155,15 @@ class Model(NamedTuple):
     # sliding) instead of the polygon of friction_directions sides: PGS solves it
     # (`models.contact_pgs.disk_minimiser`); Lemke's LCP is the polygon's
     exact_cone: bool = False
+    # rigid contact's normal impulses are statically indeterminate where more contacts support a
+    # body than its DOFs pin (a box on a plane that turns about the vertical only: four corners,
+    # one equation), and Lemke's vertex solution may load them unevenly, whose friction turns a
+    # box pushed through its centre. This fraction of the largest normal Delassus diagonal added
+    # to every normal diagonal makes the normal block positive definite: the load is shared as
+    # equally stiff contacts share it (the rigid limit of compliance, least squares of the
+    # impulses), at the cost of a penetration speed of that much times the diagonal times the
+    # impulse. 0: the LCP as it is (exact rigid contact)
+    regularization: float = 0.0
 
 
 class Drives(NamedTuple):
@@ -790,7 +799,7 @@ def contact_lcp(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, co
     Jt_nu = np.empty(m)
     for r in range(m):
         Jt_nu[r] = c0[r] * _sparse_dot(Bl, ldof, nloc, gen0[r], nu_free) + c1[r] * _sparse_dot(Bl, ldof, nloc, gen1[r], nu_free)
-    _normal_rows(Mlcp, qlcp, compliant, h, active, pf, c_pair, c_psi, c_slot, c_bias, Jt_nu, delta_n)
+    _normal_rows(Mlcp, qlcp, compliant, h, active, pf, c_pair, c_psi, c_slot, c_bias, Jt_nu, delta_n, model.regularization)
     _friction_rows(Mlcp, qlcp, compliant, h, d, m, active, fric, nf, coef, pf, c_pair, c_slot, c_bias, Jt_nu, delta_t)
     _scale_gamma(Mlcp, d, m, nc, nf)
     _drive_rows(Mlcp, qlcp, h, nc + nd, m + nf, lim, nl, kp, kd, max_force, drive_a, Jt_nu)
@@ -1000,17 +1009,25 @@ def _combinations(spatial, d, nc, fric, nf, nl):
 
 
 @numba.njit(cache=True)
-def _normal_rows(Mlcp, qlcp, compliant, h, active, pf, c_pair, c_psi, c_slot, c_bias, Jt_nu, delta_n):
+def _normal_rows(Mlcp, qlcp, compliant, h, active, pf, c_pair, c_psi, c_slot, c_bias, Jt_nu, delta_n, regularization):
     """Normal rows of the contact LCP, in place: q = psi / h + W_n^T nu_free + bias, and for
-    compliant contact 1 / (h (h K + C)) on the diagonal and the previous deformation in q."""
+    compliant contact 1 / (h (h K + C)) on the diagonal and the previous deformation in q; for
+    rigid contact `regularization` of the largest normal diagonal on each (`Model.regularization`)."""
+    reg = 0.0
+    if not compliant:
+        for k in range(active.shape[0]):
+            reg = max(reg, regularization * Mlcp[k, k])
     for k in range(active.shape[0]):
         i = active[k]
         qlcp[k] = c_psi[i] / h + Jt_nu[k] + c_bias[i, 0]
+        Mlcp[k, k] += reg
         if compliant:
             K, C = pf[c_pair[i], PF_K], pf[c_pair[i], PF_C]
             comp = 1.0 / (h * (h * K + C))
             Mlcp[k, k] += comp
             qlcp[k] += comp * C * delta_n[c_slot[i]]
+
+
 
 
 @numba.njit(cache=True)

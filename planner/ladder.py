@@ -399,7 +399,7 @@ def _climb(
 #: then tracks that plan at its own step: a coarser step costs proportionally less per
 #: propagation, and where its trajectories agree with the rung's own (COARSE_AGREEMENT), what it
 #: plans the rung tracks closely. Measured: docs/measurements.md, "A coarser step first".
-COARSE_FACTORS = (10, 5, 2)
+COARSE_FACTORS = (5, 2)
 #: The coarser step's replay of the previous plan agrees with the rung's own replay: every
 #: state at a control switch within this distance (tracking's `PoseError`, m): half of what
 #: tracking tolerates, which leaves it room to correct (at TRACK_TOLERANCE box_push_3d takes

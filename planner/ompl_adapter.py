@@ -96,6 +96,13 @@ def configuration_limits(scenario: Scenario, q0: np.ndarray) -> tuple[np.ndarray
     return low, high
 
 
+def goal_coordinates(scenario: Scenario) -> set[str]:
+    """The coordinates the goal names an interval of, anywhere in its predicate."""
+    intervals: dict = {}
+    _goal_intervals(scenario.spec.task.goal, intervals)
+    return set(intervals)
+
+
 def _goal_intervals(node, out: dict) -> None:
     """Every coordinate interval named anywhere in a predicate (all branches of `any`)."""
     kind = type(node).__name__

@@ -13,8 +13,13 @@ where it is lost.
 The offset for a turn is the quasistatic pushing rule of a sticking point push on a body with
 a circular limit surface of radius c (Lynch and Mason, "Stable pushing", 1996): a push at
 offset o from the centre line turns the body at o / (c^2 + o^2) rad per metre travelled, at
-most 1 / (2 c), at o = c; c is the mean distance from the centre of a disc with the body's
-footprint area under uniform pressure, 2/3 of its radius.
+most 1 / (2 c), at o = c. For c the reference takes the mean distance from the centre of a
+disc of the body's footprint area under uniform pressure (2/3 of its radius): a gain more
+than a measurement, since a box on a plane rests on its four corners (c = their distance,
+0.14 m for box_rotate_3d's box, against 0.075 m) and turns as that predicts when pushed open
+loop along the reference; tracked, the smaller c reaches the goal far more often (the
+geometric path turns faster than a push can, and the larger offsets of the smaller c catch
+up). Measured: docs/measurements.md, "Object paths".
 
 A scene is a pushing scene when it has one object whose x and y are coordinates and one robot
 whose x and y are both actuated; elsewhere `push_reference` returns None and the ladder plans
@@ -27,6 +32,7 @@ import numpy as np
 
 from models.rungs import compiled
 from models.scenario import Scenario
+from planner.ompl_adapter import goal_coordinates
 from planner.tracking import Reference
 
 #: The object's speed along its path, as a fraction of the pusher's smaller speed limit: slow
@@ -40,6 +46,9 @@ APPROACH_CLEARANCE = 0.02
 #: An approach whose bearing from the object's centre turns by more than this goes around the
 #: object on a circle, rad; a smaller one goes straight.
 AROUND = 0.5
+#: Where the push point moves by more than this many times the object's advance in a control
+#: period (a corner of the path), the pusher leaves the object and goes to it as on its approach.
+REPOSITION = 2.0
 #: The largest push offset, as a fraction of the object's half-width across the push.
 OFFSET_REACH = 0.8
 
@@ -52,7 +61,7 @@ class _Footprint:
         scene = compiled(scenario).scene
         i = [b.name for b in scenario.spec.bodies].index(name)
         start, count = int(scene.vstart[i]), int(scene.vcount[i])
-        self.points = np.asarray(scene.verts[start : start + count], float)[:, :2].reshape(-1, 2)
+        self.points = np.asarray(scene.verts[start : start + count], float).reshape(count, -1)[:, :2]
         self.radius = float(scene.radius[i])
         self.limit_radius = 2.0 / 3.0 * np.sqrt(self._area() / np.pi)
 
@@ -114,33 +123,47 @@ def push_reference(scenario: Scenario, path, q0: np.ndarray, period: float) -> R
     c = shape.limit_radius
     path = np.asarray(path, float)
     xy = path[:, [ox, oy]]
-    yaw = path[:, turn] if turn is not None else np.full(len(path), _yaw(scenario, q0, obj) or 0.0)
+    # a turn the goal does not ask for is one the geometric path takes at random: pushed straight
+    free = turn is None or names[turn] not in goal_coordinates(scenario)
+    yaw = np.full(len(path), _yaw(scenario, q0, obj) or 0.0) if free else path[:, turn]
     # arc length: the object's travel, or its turn times c where it turns more than it moves
     arc = np.concatenate([[0.0], np.cumsum(np.maximum(np.hypot(*np.diff(xy, axis=0).T), c * np.abs(np.diff(yaw))))])
     if arc[-1] <= 1e-9:
         return None
     speeds = np.array([scenario.drive(n).max_speed for n in (f"{robot}.x", f"{robot}.y")])
-    n = int(np.ceil(arc[-1] / (PUSH_SPEED * speeds.min() * period))) + 1
-    s = np.linspace(0.0, arc[-1], n)
+    # evenly along the path, and through its vertices (a corner is where the push turns)
+    s = np.unique(np.concatenate([np.linspace(0.0, arc[-1], int(np.ceil(arc[-1] / (PUSH_SPEED * speeds.min() * period))) + 1), arc]))
+    n = len(s)
     xy = np.column_stack([np.interp(s, arc, xy[:, 0]), np.interp(s, arc, xy[:, 1])])
     yaw = np.interp(s, arc, yaw)
-    push = _push_points(shape, pusher.radius, xy, yaw, c)
+    # where the pusher is at each pose: leading into the push that follows it (measured: box_push_3d,
+    # seeds 1-20, 0.56 s median against 1.15 s behind the push that brought the object there),
+    # and at a corner (the two far apart) first behind the push into it, then round to the next
+    ahead = _push_points(shape, pusher.radius, xy, yaw, c, lead=True)
+    behind = _push_points(shape, pusher.radius, xy, yaw, c, lead=False)
     drives = [list(scenario.actuated).index(f"{robot}.{c}") for c in ("x", "y")]
     reference = _Builder(q0, (ox, oy), turn, (rx, ry), drives, len(scenario.actuated), period)
-    for p in _approach(q0[[rx, ry]], push[0], xy[0], shape, pusher.radius):
-        reference.move(p, xy[0], yaw[0], APPROACH_SPEED * speeds.min())
+    approach = APPROACH_SPEED * speeds.min()
+    for p in _approach(q0[[rx, ry]], ahead[0], xy[0], shape, pusher.radius):
+        reference.move(p, xy[0], yaw[0], approach)
+    advance = PUSH_SPEED * speeds.min() * period
     for k in range(1, n):
-        reference.move(push[k], xy[k], yaw[k], np.inf)
+        if np.hypot(*(ahead[k] - behind[k])) > REPOSITION * advance:  # a corner: round the object
+            reference.move(behind[k], xy[k], yaw[k], np.inf)
+            for p in _approach(reference.at, ahead[k], xy[k], shape, pusher.radius):
+                reference.move(p, xy[k], yaw[k], approach)
+        else:
+            reference.move(ahead[k], xy[k], yaw[k], np.inf)
     return reference.done()
 
 
-def _push_points(shape: _Footprint, r: float, xy: np.ndarray, yaw: np.ndarray, c: float) -> np.ndarray:
+def _push_points(shape: _Footprint, r: float, xy: np.ndarray, yaw: np.ndarray, c: float, lead: bool) -> np.ndarray:
     """Where the pusher's centre is at each of the object's poses: at the object's boundary
-    behind its direction of travel, off the centre line by the offset that turns it at the
-    path's rate (the module docstring)."""
+    behind the push from that pose to the next (`lead`; else the push that brought it there),
+    off the centre line by the offset that turns it at that push's rate (the module docstring)."""
     points, heading = [], np.array([1.0, 0.0])
     for k in range(len(xy)):
-        j = min(k, len(xy) - 2)
+        j = min(k, len(xy) - 2) if lead else max(k - 1, 0)
         step = xy[j + 1] - xy[j]
         length = float(np.hypot(*step))
         if length > 1e-9:

@@ -17,7 +17,7 @@ from planner.pushing import APPROACH_CLEARANCE, APPROACH_SPEED, PUSH_SPEED, push
 ROOT = Path(__file__).resolve().parents[1]
 ROTATE = ROOT / "scenarios" / "box_rotate_3d.toml"
 HALF, RADIUS = 0.1, 0.03  # box_rotate_3d's box half-width and pusher radius
-#: The limit-surface radius of its 0.2 m square footprint: 2/3 of the radius of the disc of equal area.
+#: The turn gain c of its 0.2 m square footprint: 2/3 of the radius of the disc of equal area.
 C = 2.0 / 3.0 * np.sqrt(0.2 * 0.2 / np.pi)
 
 
@@ -108,3 +108,75 @@ def test_the_first_physics_rung_pushes_the_object_along_the_geometric_path():
     assert quasi.ended in (PlanStatus.TRACKED, PlanStatus.REPAIRED)
     assert "a push along the geometric plan's object path" in quasi.reason
     assert quasi.tracked > 0.5 and quasi.rollouts > 0
+
+
+def test_a_turn_the_goal_does_not_ask_for_is_not_pushed(tmp_path):
+    """The geometric path's turn of an object whose goal leaves its turn free is taken at
+    random: the reference pushes the object straight, its yaw held at the start's."""
+    text = ROTATE.read_text().replace(', "box.yaw" = [1.309, 1.833]', "")
+    assert text != ROTATE.read_text()
+    (tmp_path / "free.toml").write_text(text)
+    scenario = load_scenario(tmp_path / "free.toml")
+    q0 = _start(scenario)
+    reference = push_reference(scenario, [q0, _moved(scenario, q0, x=0.3, yaw=0.8)], q0, 0.1)
+    q = reference.configurations
+    names = scenario.coordinates
+    assert np.all(q[:, names.index("box.yaw")] == 0.0)
+    np.testing.assert_allclose(q[:, names.index("pusher.y")], 0.0, atol=1e-12)
+
+
+def test_at_a_corner_of_the_path_the_pusher_goes_round_to_the_new_side():
+    """The path turns by 90 degrees: the pusher leaves the face it pushed, goes round the
+    object clear of it, and pushes on the face behind the new direction."""
+    scenario = load_scenario(ROTATE)
+    q0 = _start(scenario)
+    path = [q0, _moved(scenario, q0, x=0.2), _moved(scenario, q0, x=0.2, y=0.2)]
+    reference = push_reference(scenario, path, q0, 0.1)
+    names = scenario.coordinates
+    q = reference.configurations
+    box = q[:, [names.index("box.x"), names.index("box.y")]]
+    pusher = q[:, [names.index("pusher.x"), names.index("pusher.y")]]
+    at_corner = np.flatnonzero(np.all(np.abs(box - [0.2, 0.0]) < 1e-9, axis=1))
+    assert len(at_corner) > 3  # the object waits while the pusher goes round
+    # round the box's footprint (its corners 0.1414 m out), on chords of a circle clear of it
+    clear = np.sqrt(2) * HALF + RADIUS + APPROACH_CLEARANCE
+    around = np.hypot(*(pusher[at_corner[2:-2]] - [0.2, 0.0]).T)
+    assert around.min() >= clear * np.cos(0.1) - 1e-9 and around.max() <= clear + 1e-9
+    assert pusher[at_corner[-1]] == pytest.approx([0.2, -(HALF + RADIUS)], abs=0.02)
+    pushing_up = box[:, 1] > 1e-9
+    np.testing.assert_allclose(box[pushing_up, 1] - pusher[pushing_up, 1], HALF + RADIUS, atol=1e-12)
+
+
+def _pushed_yaw(scenario, rung_name: str, turn: float) -> tuple[float, float]:
+    """The box's yaw and y after the reference for a 0.25 m push turning it by `turn`, run open loop."""
+    rung = rung_for(scenario, rung_name)
+    start = rung.initial_state(scenario)
+    reference = push_reference(scenario, [start.q, _moved(scenario, start.q, x=0.25, yaw=turn)], start.q, 0.1)
+    h = scenario.rung_settings(rung_name).h
+    out = rung.rollout(scenario, start, reference.controls, [0.1] * len(reference.controls), h)
+    assert out.status == "ok"
+    names = scenario.coordinates
+    return float(out.state.q[names.index("box.yaw")]), float(out.state.q[names.index("box.y")])
+
+
+def test_a_shared_load_keeps_a_central_push_straight_and_turns_symmetric(tmp_path):
+    """box_rotate_3d's box rests on four corners and turns about the vertical only: its normal
+    impulses are statically indeterminate. Its quasistatic rung shares the load
+    (`regularization = 1e-6`): pushed through its centre the box goes straight, and pushes
+    off the centre line turn it by the same angle either way, the way the path turns, by less
+    than it (the reference's turn gain c is a gain: `planner.pushing`). Without the setting
+    Lemke's vertex solution loads some corners only and the central push turns the box by half
+    a radian."""
+    text = ROTATE.read_text().replace("pose = { x = 0.3, y = -0.2, z = 0.1 }", "pose = { x = 0.3, y = -2.0, z = 0.1 }")
+    assert text != ROTATE.read_text()  # the post out of the way: the table alone is symmetric
+    (tmp_path / "open.toml").write_text(text)
+    scenario = load_scenario(tmp_path / "open.toml")
+    yaw, y = _pushed_yaw(scenario, "quasistatic-rigid", 0.0)
+    assert abs(yaw) < 1e-6 and abs(y) < 1e-6
+    for turn in (0.4, 0.8):
+        left, right = _pushed_yaw(scenario, "quasistatic-rigid", turn)[0], _pushed_yaw(scenario, "quasistatic-rigid", -turn)[0]
+        assert left == pytest.approx(-right, rel=1e-3)
+        assert 0.3 * turn < left < 1.25 * turn  # the way the path turns; tracking makes up the rest
+    text = text.replace("regularization = 1e-6", "regularization = 0.0")
+    (tmp_path / "vertex.toml").write_text(text)
+    assert abs(_pushed_yaw(load_scenario(tmp_path / "vertex.toml"), "quasistatic-rigid", 0.0)[0]) > 0.3
