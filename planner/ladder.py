@@ -59,7 +59,7 @@ from models.scenario import Problem, Scenario, ScenarioError
 from models.task import Outcome, classify, goal_distance
 from planner.ompl_adapter import plan_control, plan_geometric, steered_coordinates
 from planner.plan_status import PlanStatus
-from planner.pushing import push_reference
+from planner.pushing import free_turn, push_reference
 from planner.tracking import TRACK_TOLERANCE, PoseError, Reference, Tracked, track
 
 #: Words of a rung's outcome and its solver status in a report.
@@ -924,9 +924,9 @@ def _track(step: _Step, previous: RungReport) -> Tracked:
     return _follow(step, reference)
 
 
-def _follow(step: _Step, reference: Reference) -> Tracked:
+def _follow(step: _Step, reference: Reference, free: tuple[str, ...] = ()) -> Tracked:
     """`reference` tracked under the step's rung from its start, repaired locally within the
-    iterations and the time the rung may spend."""
+    iterations and the time the rung may spend; `free`: coordinates tracking leaves out."""
     return track(
         step.scenario,
         step.rung,
@@ -938,6 +938,7 @@ def _follow(step: _Step, reference: Reference) -> Tracked:
         iterations=step.iterations,
         time_limit=step.budget.seconds(),
         stop=step.stop,
+        free=free,
     )
 
 
@@ -946,7 +947,7 @@ def _push(step: _Step, previous: RungReport) -> Tracked | None:
     under the step's rung, repaired locally within the iterations the rung may spend; None in a
     scene that is no pushing scene."""
     reference = push_reference(step.scenario, previous.states, step.start().q, step.period)
-    return None if reference is None else _follow(step, reference)
+    return None if reference is None else _follow(step, reference, free_turn(step.scenario))
 
 
 def _tracking_reason(ended: PlanStatus, tracked: Tracked, pushed: bool = False) -> str:

@@ -107,6 +107,16 @@ def pushing_pair(scenario: Scenario) -> tuple[str, str] | None:
     return objects[0], robots[0]
 
 
+def free_turn(scenario: Scenario) -> tuple[str, ...]:
+    """The pushed object's turn coordinate (yaw, theta) when the goal leaves it free, which the
+    reference does not plan (it pushes straight) and tracking does not measure; else ()."""
+    pair = pushing_pair(scenario)
+    if pair is None:
+        return ()
+    names, goal = scenario.coordinates, goal_coordinates(scenario)
+    return tuple(n for n in (f"{pair[0]}.yaw", f"{pair[0]}.theta") if n in names and n not in goal)
+
+
 def push_reference(scenario: Scenario, path, q0: np.ndarray, period: float) -> Reference | None:
     """The pushing reference along the geometric rung's path (configurations `path`) from the
     rung's start configuration q0, per control period; None when the scene is no pushing scene
@@ -124,7 +134,7 @@ def push_reference(scenario: Scenario, path, q0: np.ndarray, period: float) -> R
     path = np.asarray(path, float)
     xy = path[:, [ox, oy]]
     # a turn the goal does not ask for is one the geometric path takes at random: pushed straight
-    free = turn is None or names[turn] not in goal_coordinates(scenario)
+    free = turn is None or names[turn] in free_turn(scenario)
     yaw = np.full(len(path), _yaw(scenario, q0, obj) or 0.0) if free else path[:, turn]
     # arc length: the object's travel, or its turn times c where it turns more than it moves
     arc = np.concatenate([[0.0], np.cumsum(np.maximum(np.hypot(*np.diff(xy, axis=0).T), c * np.abs(np.diff(yaw))))])

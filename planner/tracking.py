@@ -173,14 +173,15 @@ class PoseError:
     """Distance of a configuration from a reference configuration in what the task is about,
     in m: the passive bodies' steered coordinates, an angle (planar theta, yaw; the angle
     between two orientations) times the body's bounding radius (how far its farthest point
-    moves); with no passive body, the actuated coordinates."""
+    moves); with no passive body, the actuated coordinates. `free`: coordinates left out (a
+    turn the task leaves free, which a pushing reference does not plan: `planner.pushing`)."""
 
-    def __init__(self, scenario: Scenario):
+    def __init__(self, scenario: Scenario, free: tuple[str, ...] = ()):
         names = scenario.coordinates
         steered = steered_coordinates(scenario)
         bound = compiled(scenario).scene.bound_radius
         radius = {b.name: float(bound[i]) for i, b in enumerate(scenario.spec.bodies)}
-        passive = [i for i in steered if names[i] not in scenario.actuated]
+        passive = [i for i in steered if names[i] not in scenario.actuated and names[i] not in free]
         self.coordinates = np.array(passive or [i for i in steered if names[i] in scenario.actuated], dtype=int)
         self.weights = np.array(
             [radius[names[i].split(".")[0]] if names[i].split(".")[1] in ("theta", "yaw") else 1.0 for i in self.coordinates]
@@ -213,14 +214,16 @@ def track(
     repairs: int = MAX_REPAIRS,
     time_limit: float | None = None,
     stop=None,
+    free: tuple[str, ...] = (),
 ) -> Tracked:
     """Follow `reference` under `rung` from `start` until the goal is reached or the
     reference (and TRACK_SETTLE periods toward its last configuration) runs out. Where
     tracking is lost, repair locally (`_repair`: a short search to the reference further
     along, REPAIR_HORIZONS) and track on from there: at most `repairs` repairs and
-    `iterations` search iterations in all."""
+    `iterations` search iterations in all. `free`: coordinates the distance to the reference
+    leaves out (`PoseError`)."""
     rng = np.random.default_rng(seed)
-    follower = _Follower(scenario, rung, reference, h, period, rng)
+    follower = _Follower(scenario, rung, reference, h, period, rng, free)
     run = Tracked(start)
     follower.follow(run, 0.0)
     deadline = None if time_limit is None else time.perf_counter() + time_limit
@@ -247,11 +250,11 @@ def track(
 class _Follower:
     """Tracking proper: one control period at a time from reference time t."""
 
-    def __init__(self, scenario, rung, reference, h, period, rng):
+    def __init__(self, scenario, rung, reference, h, period, rng, free: tuple[str, ...] = ()):
         self.scenario, self.rung, self.reference, self.h, self.period, self.rng = scenario, rung, reference, h, period, rng
         self.low, self.high = control_bounds(scenario)
         self.spread = TRACK_SPREAD * (self.high - self.low) / 2.0
-        self.error = PoseError(scenario)
+        self.error = PoseError(scenario, free)
         self.periods = int(np.ceil(reference.duration / period - 1e-9))
 
     def follow(self, run: Tracked, t: float) -> float:

@@ -180,3 +180,18 @@ def test_a_shared_load_keeps_a_central_push_straight_and_turns_symmetric(tmp_pat
     text = text.replace("regularization = 1e-6", "regularization = 0.0")
     (tmp_path / "vertex.toml").write_text(text)
     assert abs(_pushed_yaw(load_scenario(tmp_path / "vertex.toml"), "quasistatic-rigid", 0.0)[0]) > 0.3
+
+
+def test_tracking_a_push_leaves_out_a_turn_the_goal_leaves_free(tmp_path):
+    from planner.pushing import free_turn
+    from planner.tracking import PoseError
+
+    assert free_turn(load_scenario(ROTATE)) == ()
+    (tmp_path / "free.toml").write_text(ROTATE.read_text().replace(', "box.yaw" = [1.309, 1.833]', ""))
+    scenario = load_scenario(tmp_path / "free.toml")
+    assert free_turn(scenario) == ("box.yaw",)
+    q0 = _start(scenario)
+    turned = _moved(scenario, q0, yaw=0.5)
+    assert PoseError(scenario)(turned, q0) > 0.05
+    assert PoseError(scenario, free_turn(scenario))(turned, q0) == 0.0
+    assert PoseError(scenario, free_turn(scenario))(_moved(scenario, q0, x=0.03), q0) == pytest.approx(0.03)
