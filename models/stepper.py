@@ -1028,8 +1028,6 @@ def _normal_rows(Mlcp, qlcp, compliant, h, active, pf, c_pair, c_psi, c_slot, c_
             qlcp[k] += comp * C * delta_n[c_slot[i]]
 
 
-
-
 @numba.njit(cache=True)
 def _friction_rows(Mlcp, qlcp, compliant, h, d, m, active, fric, nf, coef, pf, c_pair, c_slot, c_bias, Jt_nu, delta_t):
     """Friction rows of the contact LCP, in place: each friction contact's d direction rows
