@@ -45,8 +45,10 @@ from models.stepper import (
     LAW_MAX_SPEED,
     LAW_RATE,
     LAW_TARGET,
+    SOLVER_AUTO,
     SOLVER_LEMKE,
     SceneTables,
+    Solver,
     StepStatus,
     System,
     any_limited,
@@ -385,6 +387,10 @@ def rollout_kernel(
     c_pair, c_psi, c_slot, W_n, W_t, W_o, c_bias = contacts
     c_n, c_t, c_o, c_pa, c_pb, warm_n, warm_t, warm_slots = _contact_frames(c_psi.shape[0])
     n_warm, keep_warm = 0, solver.method != SOLVER_LEMKE  # PGS warm start: by slot
+    # auto: once PGS does not converge on a step (a stack: coupled contacts) the rest of the
+    # call solves with Lemke, instead of paying PGS's sweeps before Lemke every step
+    lemke = Solver(SOLVER_LEMKE, solver.tolerance, solver.max_sweeps, solver.auto_contacts)
+    step_solver = solver
     unsupported, pair_psi, pair_force, pair_wrench, scratch = _pair_buffers(pi.shape[0], bi.shape[0])
     g_op, g_index, g_lo, g_hi = goal  # hoisted: reading a tuple's array in the loop costs a reference count
     u_op, u_index, u_lo, u_hi = unsafe
@@ -458,9 +464,11 @@ def rollout_kernel(
                     A = system_matrix(bi, bf, q, nv, eps_eff, h, v_index, kp, kd, max_force)
                     system = System(A, Ainv, M_const, rhs_const)
                 r = dynamics_step(
-                    model, solver, D, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis
+                    model, step_solver, D, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis
                 )
                 q2, nu2, q_ref2, dn2, dt2, st, piv, res, size, p_n, p_t, sw, basis = r
+                if step_solver.method == SOLVER_AUTO and sw >= solver.max_sweeps:
+                    step_solver = lemke
                 if keep_warm and st == StepStatus.OK:
                     n_warm = _keep_warm(nc, c_slot, p_n, p_t, warm_n, warm_t, warm_slots, n_warm)
             sweeps, lcp_solves, max_size, pivots, max_residual = _tally(

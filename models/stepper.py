@@ -200,8 +200,8 @@ PGS_MAX_SWEEPS = 1000
 #: auto: PGS from this many detected contacts on. Measured by `ladder bench` (scaling): the
 #: smallest count from which PGS is cheaper per step than Lemke on rigid boxes resting on a
 #: plane (2 contacts: 6.1 us Lemke, 7.2 us PGS; 4: 9.4 against 5.7; 64: 1361 against 57).
-#: On a rigid stack Lemke is cheaper again from 8 contacts: auto then pays PGS's sweeps and,
-#: where PGS does not converge, Lemke's step too.
+#: On a rigid stack Lemke is cheaper again from 8 contacts: where PGS does not converge there,
+#: auto pays its sweeps and Lemke's step once, and the rest of the rollout solves with Lemke.
 AUTO_PGS_CONTACTS = 4
 
 
@@ -212,7 +212,8 @@ class Solver(NamedTuple):
     default). pgs: projected Gauss-Seidel on the contact impulses (`models.contact_pgs`),
     O(contacts) per sweep; a step that does not converge within max_sweeps ends with
     StepStatus.CONTACT_NOT_CONVERGED. auto: pgs on steps with at least auto_contacts detected
-    contacts, lemke on the others and on any step where PGS does not converge.
+    contacts, lemke on the others and on any step where PGS does not converge (and, in a
+    rollout, on every step after one where PGS did not converge: `models.rollout`).
     The kinematic rung's projection LCP always uses Lemke. Build with `contact_solver`.
     """
 
