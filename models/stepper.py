@@ -1015,7 +1015,7 @@ def _normal_rows(Mlcp, qlcp, compliant, h, active, pf, c_pair, c_psi, c_slot, c_
     compliant contact 1 / (h (h K + C)) on the diagonal and the previous deformation in q; for
     rigid contact `regularization` of the largest normal diagonal on each (`Model.regularization`)."""
     reg = 0.0
-    if not compliant:
+    if not compliant and regularization > 0.0:
         for k in range(active.shape[0]):
             reg = max(reg, regularization * Mlcp[k, k])
     for k in range(active.shape[0]):

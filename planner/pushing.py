@@ -66,16 +66,14 @@ class _Footprint:
         self.limit_radius = 2.0 / 3.0 * np.sqrt(self._area() / np.pi)
 
     def _area(self) -> float:
-        """Footprint area: the hull of the vertices in the plane swept by the radius."""
+        """Footprint area: the convex hull of the vertices in the plane, swept by the radius."""
+        from scipy.spatial import ConvexHull, QhullError
+
         p, r = self.points, self.radius
-        if len(p) >= 3:
-            centre = p.mean(axis=0)
-            order = np.argsort(np.arctan2(p[:, 1] - centre[1], p[:, 0] - centre[0]))
-            hull = p[order]
-            x, y = hull[:, 0], hull[:, 1]
-            area = 0.5 * abs(float(x @ np.roll(y, -1) - y @ np.roll(x, -1)))
-            perimeter = float(np.sum(np.hypot(*(np.roll(hull, -1, axis=0) - hull).T)))
-        else:
+        try:
+            hull = ConvexHull(p)
+            area, perimeter = float(hull.volume), float(hull.area)  # in the plane: area, perimeter
+        except (QhullError, ValueError):  # a point or a segment (fewer than 3 points, or collinear)
             area, perimeter = 0.0, 2.0 * float(np.ptp(p, axis=0).max(initial=0.0)) if len(p) else 0.0
         return area + perimeter * r + np.pi * r * r
 
@@ -84,13 +82,18 @@ class _Footprint:
         return float(np.max(self.points @ direction, initial=0.0)) + self.radius
 
 
+def _turn_coordinate(scenario: Scenario, body: str) -> str | None:
+    """The body's coordinate of turn about the vertical (yaw in space, theta in the plane), or None."""
+    return next((f"{body}.{c}" for c in ("yaw", "theta") if f"{body}.{c}" in scenario.coordinates), None)
+
+
 def _yaw(scenario: Scenario, q: np.ndarray, body: str) -> float | None:
     """The body's turn about the vertical at q: its yaw or theta coordinate, or the yaw of its
     orientation quaternion; None when it has none."""
     names = scenario.coordinates
-    for c in ("yaw", "theta"):
-        if f"{body}.{c}" in names:
-            return float(q[names.index(f"{body}.{c}")])
+    turn = _turn_coordinate(scenario, body)
+    if turn is not None:
+        return float(q[names.index(turn)])
     if f"{body}.qw" in names:
         w, x, y, z = (float(q[names.index(f"{body}.{c}")]) for c in ("qw", "qx", "qy", "qz"))
         return float(np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
@@ -113,8 +116,8 @@ def free_turn(scenario: Scenario) -> tuple[str, ...]:
     pair = pushing_pair(scenario)
     if pair is None:
         return ()
-    names, goal = scenario.coordinates, goal_coordinates(scenario)
-    return tuple(n for n in (f"{pair[0]}.yaw", f"{pair[0]}.theta") if n in names and n not in goal)
+    turn = _turn_coordinate(scenario, pair[0])
+    return () if turn is None or turn in goal_coordinates(scenario) else (turn,)
 
 
 def push_reference(scenario: Scenario, path, q0: np.ndarray, period: float) -> Reference | None:
@@ -128,7 +131,8 @@ def push_reference(scenario: Scenario, path, q0: np.ndarray, period: float) -> R
     names = scenario.coordinates
     ox, oy = names.index(f"{obj}.x"), names.index(f"{obj}.y")
     rx, ry = names.index(f"{robot}.x"), names.index(f"{robot}.y")
-    turn = next((names.index(f"{obj}.{c}") for c in ("yaw", "theta") if f"{obj}.{c}" in names), None)
+    turn = _turn_coordinate(scenario, obj)
+    turn = None if turn is None else names.index(turn)
     shape, pusher = _Footprint(scenario, obj), _Footprint(scenario, robot)
     c = shape.limit_radius
     path = np.asarray(path, float)
