@@ -35,6 +35,10 @@ from models.kinematics import (
 
 #: Below this core distance two cores count as touching (their witness direction is unreliable).
 TINY = 1e-14
+#: Below this core distance (m) the witness points' direction is dominated by their round-off
+#: (about 1e-16 m here, so a direction error of 1e-6 at 1e-10 m): the normal is then the
+#: separating axis of the cores' faces (`_penetration`), as for touching ones.
+NEAR_TOUCH = 1e-10
 #: A face is the reference face when its normal is this aligned with the witness direction.
 FACE_ALIGNMENT = 1.0 - 1e-9
 #: Relative preference for A's face over B's when both are aligned (keeps manifolds stable).
@@ -194,11 +198,15 @@ def _penetration(P, Q):
 def core_distance(P, Q):
     """Signed distance of two cores, unit direction n (P to Q) and witness points.
 
-    Returns (psi_core, nx, ny, cpx, cpy, cqx, cqy) with cq - cp = psi_core * n.
+    Returns (psi_core, nx, ny, cpx, cpy, cqx, cqy) with cq - cp = psi_core * n (to round-off
+    below NEAR_TOUCH, where n is the separating face axis).
     """
     dist, cpx, cpy, cqx, cqy = _closest_features(P, Q)
     if not _overlap(P, Q, dist):
-        return dist, (cqx - cpx) / dist, (cqy - cpy) / dist, cpx, cpy, cqx, cqy
+        if dist > NEAR_TOUCH:
+            return dist, (cqx - cpx) / dist, (cqy - cpy) / dist, cpx, cpy, cqx, cqy
+        _, nx, ny = _penetration(P, Q)  # all but touching: the faces' separating axis
+        return dist, nx, ny, cpx, cpy, cqx, cqy
     depth, nx, ny = _penetration(P, Q)
     # witness points: the deepest point of the core that is a single point, else the
     # support points along n (refined by the manifold for polygon pairs)

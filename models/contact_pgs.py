@@ -198,7 +198,7 @@ def _add(Y, k, cdof, m, scale, v):
         v[cdof[k, j]] += scale * Y[k, j]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _apply_inverse(inv, a, b, ca, cb, J, Y, k):
     """Y[k] = A^-1 J[k] on contact k's DOFs (body a's first ca entries, then body b's cb)."""
     for r in range(ca):
@@ -213,7 +213,7 @@ def _apply_inverse(inv, a, b, ca, cb, J, Y, k):
         Y[k, ca + r] = s
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _inside(f0, f1, radius, cosines, sines):
     """Whether (f0, f1) lies in the polygon of `polygon_minimiser` (no vertices: the disk of
     the exact cone)."""
@@ -231,7 +231,7 @@ def _inside(f0, f1, radius, cosines, sines):
     return True
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def polygon_minimiser(f0, f1, u0, u1, g00, g01, g11, radius, cosines, sines):
     """argmin over f in P(radius) of u.(f - f_old) + 1/2 (f - f_old)^T G (f - f_old).
 
@@ -303,8 +303,11 @@ def disk_minimiser(f0, f1, u0, u1, g00, g01, g11, radius):
     half = 0.5 * (g00 - g11)
     root = np.sqrt(half * half + g01 * g01)
     a, b = max(0.5 * trace + root, 0.0), max(0.5 * trace - root, 0.0)
-    phi = 0.5 * np.arctan2(2.0 * g01, g00 - g11)
-    ea0, ea1 = np.cos(phi), np.sin(phi)
+    # e_a at half the angle of (g00 - g11, 2 g01), without trigonometry: (root + half, g01) has
+    # that angle, and (g01, root - half) the same up to sign where the first one cancels
+    ea0, ea1 = (root + half, g01) if half >= 0.0 else (g01, root - half)
+    size_e = np.sqrt(ea0 * ea0 + ea1 * ea1)
+    ea0, ea1 = (ea0 / size_e, ea1 / size_e) if size_e > 0.0 else (1.0, 0.0)
     eb0, eb1 = -ea1, ea0
     ca, cb = c0 * ea0 + c1 * ea1, c0 * eb0 + c1 * eb1
     size_c = np.sqrt(c0 * c0 + c1 * c1)
@@ -345,7 +348,7 @@ def disk_minimiser(f0, f1, u0, u1, g00, g01, g11, radius):
     return xa * ea0 + xb * eb0, xa * ea1 + xb * eb1
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _tangential_update(k, spatial, f, u0, u1, g00, g01, g11, mu, p_n, cosines, sines):
     """The minimiser of contact k's tangential block with the rest held."""
     if spatial:
@@ -479,7 +482,7 @@ def contact_pgs(
     return PgsResult(v, p_out, t_out, active[:n], status, sweeps, residual, unknowns)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _gather_contacts(compliant, spatial, h, pi, pf, contacts, nc, delta_n, delta_t, dofs, count, inv, zero_column):
     """Gather the active contacts into rows 0..n-1 of per-contact arrays: their DOFs cdof (cm
     of them), Jacobian rows jn, jt (jo), y = A^-1 J^T rows, the Delassus blocks gnn, g00, g01,
@@ -581,7 +584,7 @@ def _impulse_scale(n, cdof, cm, jn, gnn, bn, nu_free):
     return scale
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _warm_start(n, spatial, d, active, c_slot, warm_n, warm_t, cdof, cm, yn, yt, yo, fric, mu, p_n, f, v, cosines, sines):
     """Warm start, in place: p_n, f from the previous step's impulses by contact slot, clipped
     into their cones (in space, onto the polygon's inscribed circle), and v = nu_free plus
@@ -618,7 +621,7 @@ def _largest_impulse(n, scale, p_n, f):
     return big
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _sweeps(
     n,
     spatial,
@@ -687,7 +690,7 @@ def _sweeps(
     return status, sweeps, residual
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _residual(n, spatial, cdof, cm, jn, jt, jo, gnn, g00, g01, g11, comp, bn, bt, mu, fric, p_n, f, v, cosines, sines):
     """Natural-map residual in impulse units (see the module docstring), not yet scaled."""
     r = 0.0

@@ -484,6 +484,17 @@ def _finite_and_bounded(x):
     return ok
 
 
+@numba.njit(cache=True, inline="always")
+def add_product(out, A, x, scale):
+    """out += scale A x, in place, with plain loops: the per-step products are a few entries,
+    where a BLAS call costs more than the arithmetic."""
+    for i in range(A.shape[0]):
+        acc = 0.0
+        for j in range(A.shape[1]):
+            acc += A[i, j] * x[j]
+        out[i] += scale * acc
+
+
 @numba.njit(cache=True)
 def free_step(eps, theta, h, bi, Ainv, M_const, rhs_const, q, nu, q_ref, u, q_index, v_index, kp, kd, lower, upper):
     """dynamics_step without contacts and with a constant system matrix: the cheap path.
@@ -497,12 +508,13 @@ def free_step(eps, theta, h, bi, Ainv, M_const, rhs_const, q, nu, q_ref, u, q_in
     quasistatic = eps == 0.0
     rhs = rhs_const.copy()
     if not quasistatic:
-        rhs += eps * (M_const @ nu)
+        add_product(rhs, M_const, nu, eps)
     q_ref_new = q_ref.copy()
     for j in range(v_index.shape[0]):
         q_ref_new[j], ff = drive_reference(h, q_ref, u, lower, upper, j)
         rhs[v_index[j]] += h * (kp[j] * (q_ref_new[j] - q[q_index[j]]) + kd[j] * ff)
-    nu_new = Ainv @ rhs
+    nu_new = np.zeros(rhs.shape[0])
+    add_product(nu_new, Ainv, rhs, 1.0)
     if theta == 1.0:
         q_new = integrate_positions(bi, q, nu_new, h)
     else:
@@ -539,7 +551,10 @@ def dynamics_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_
     return _dynamics_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis)
 
 
-@numba.njit(cache=True)
+# The step's once-a-step links (_dynamics_step, _lemke_step, _pgs_step, _free_velocity,
+# _contact_solve, contact_lcp) are inlined: a call reference-counts each of the ~30 arrays it
+# is passed, which was a fifth to a third of a contact step (docs/measurements.md, profiled).
+@numba.njit(cache=True, inline="always")
 def _dynamics_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis):
     use_pgs = model.exact_cone or solver.method == SOLVER_PGS or (solver.method == SOLVER_AUTO and nc >= solver.auto_contacts)
     if nc > 0 and use_pgs and not any_limited(drives.max_force):
@@ -602,7 +617,7 @@ def _integrate_checked(bi, theta, h, q, nu, nu_new):
     return q_new, StepStatus.OK.value
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _free_velocity(model, drives, tables, system, h, q, nu, q_ref, u, dofs, count, inv):
     """Stage assemble, without contacts: (nu_free = A^-1 rhs, q_ref+, a: the force-limited
     drives' PD impulses at nu = 0, see `_drives`); A^-1 from system.Ainv when A is constant,
@@ -614,14 +629,15 @@ def _free_velocity(model, drives, tables, system, h, q, nu, q_ref, u, dofs, coun
     eps = model.quasistatic_inertia if quasistatic else model.eps
     if not quasistatic:
         if system.M_const.shape[0] == nv:
-            rhs += eps * (system.M_const @ nu)
+            add_product(rhs, system.M_const, nu, eps)
         else:
             rhs += eps * mass_times(bi, bf, q, nu)
         if tables.spatial:
             rhs += h * eps * gyroscopic_force(bi, bf, q, nu, nv)
     q_ref_new, drive_a = _drives(h, q, q_ref, u, drives, rhs)
     if system.Ainv.shape[0] == nv:
-        nu_free = system.Ainv @ rhs
+        nu_free = np.zeros(nv)
+        add_product(nu_free, system.Ainv, rhs, 1.0)
     else:
         nu_free = block_solve(dofs, count, inv, rhs)
     return nu_free, q_ref_new, drive_a
@@ -639,7 +655,7 @@ def _active_contacts(W_n, nc):
     return active[:n_act]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _lemke_step(model, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, basis):
     """dynamics_step with the dense LCP solved by Lemke (see `_contact_solve`)."""
     # A is block diagonal by body: its blocks' inverses serve the free velocity (when A changes
@@ -697,7 +713,7 @@ def _lemke_step(model, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t
     return StepResult(q_new, nu_new, q_ref_new, delta_n_new, delta_t_new, status, pivots, residual, size, impulses, frictions, 0, basis_new)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _pgs_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis):
     """dynamics_step with PGS on the contact impulses; every product body by body, so the
     step costs O(bodies + contacts) beyond what the caller built (`models.contact_pgs`)."""
@@ -759,7 +775,7 @@ def _pgs_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, d
     )
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def contact_lcp(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, drives, drive_a):
     """Assemble the contact LCP of the active contacts and the force-limited drives.
 
@@ -1097,7 +1113,7 @@ def _drive_rows(Mlcp, qlcp, h, first_row, first_slack, lim, nl, kp, kd, max_forc
         qlcp[sx] = 2.0 * P * scale
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _contact_solve(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, drives, drive_a, basis):
     """Build and solve the contact LCP, first on the previous step's basis (`basis_table`).
     Returns (nu+, p_n, p_t, status, pivots, residual, size, basis+)."""
@@ -1113,8 +1129,9 @@ def _contact_solve(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf,
     # tolerances (quasistatic rungs make M ~ 1 / QUASISTATIC_INERTIA)
     scale = _largest_entry(Mlcp, m)
     if scale > 0.0:
-        Mlcp /= scale
-        qlcp /= scale
+        inverse = 1.0 / scale  # a product per entry: a division each cost as much as the assembly
+        Mlcp *= inverse
+        qlcp *= inverse
     slot = contacts.slot
     guess = _basis_guess(basis, active, slot, fric, nf, d, lim, m, n)
     z, w, status, pivots, basic_z, _ = lemke_warm_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1), guess, WARM_TOLERANCE)

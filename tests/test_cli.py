@@ -247,9 +247,10 @@ def test_ctrl_c_during_simulate_is_exit_130_with_one_line(tmp_path):
 
 def test_ctrl_c_during_plan_keeps_the_rungs_done_marked_incomplete(tmp_path):
     out = tmp_path / "plan"
-    # box_push_3d seed 6: the dynamic rung's coarse stage repairs its tracking for about 5 s
-    # after three rungs are done
-    proc = popen("plan", str(SCENARIOS / "box_push_3d.toml"), "--seed", "6", "--out", str(out))
+    # box_push_3d seed 14: the dynamic rung's coarse stage repairs its tracking for about 5.6 s
+    # after three rungs are done (which seed does is round-off's choice: seed 6 did until the
+    # contact step's kernels were inlined)
+    proc = popen("plan", str(SCENARIOS / "box_push_3d.toml"), "--seed", "14", "--out", str(out))
     wait_for_line(proc, "planning: dynamic-rigid", limit=10)
     time.sleep(2.0)
     proc.send_signal(signal.SIGINT)
@@ -263,8 +264,8 @@ def test_ctrl_c_during_plan_keeps_the_rungs_done_marked_incomplete(tmp_path):
     assert plan["complete"] is False and plan["top_holds"] is False
     assert [r["rung"] for r in plan["rungs"]] == ["geometric", "kinematic", "quasistatic-rigid"]
     # the kinematic rung is left out (10 steps per control period against the quasistatic rung's one)
-    # the quasistatic rung pushed the box along the geometric path (planner.pushing)
-    assert [r["ended"] for r in plan["rungs"]] == ["planned", "omitted", "tracked"]
+    # the quasistatic rung's replay of the geometric plan reached the goal
+    assert [r["ended"] for r in plan["rungs"]] == ["planned", "omitted", "replayed"]
     assert plan["rungs"][0]["outcome"] == plan["rungs"][2]["outcome"] == "goal"
     assert json.loads((out / "report.json").read_text())["complete"] is False
 

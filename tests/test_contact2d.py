@@ -131,6 +131,22 @@ def test_face_to_face_boxes_give_the_overlap_interval(tmp_path):
     assert sorted(np.round(pb[:, 0], 12)) == [-0.1, 0.4]
 
 
+def test_boxes_all_but_touching_keep_their_face_normal_and_two_contacts(tmp_path):
+    # a box resting on a box, apart by round-off with round-off rotations (a rigid stack's
+    # state): the witness points' direction is noise there (it once tipped a 1e4 kg box onto
+    # one corner); the face normal and both corners must come back
+    _, S = pair_scene(tmp_path, "box", "box")
+    rng = np.random.default_rng(51)
+    for gap in (1e-15, 1e-14, 1e-13, 1e-12, 1e-11):
+        for _ in range(20):
+            x, theta = rng.uniform(-1e-14, 1e-14, 2), rng.uniform(-2e-13, 2e-13, 2)
+            q = np.array([x[0], 0.0, theta[0], x[1], 0.4 + gap, theta[1]])
+            psi, nn, pa, pb = kernel(S, q, 2)
+            assert len(psi) == 2, (gap, q)
+            np.testing.assert_allclose(nn[:, :2], [[0, 1], [0, 1]], atol=1e-9)
+            np.testing.assert_allclose(psi, gap, atol=1e-12)  # the rotations tilt the faces by 2e-13
+
+
 def test_paper_scene_contacts(triangle_file):
     from models.kinematics import compile_scene
     from models.scenario import load_scenario
