@@ -33,7 +33,7 @@ from models.kinematics import (
     planar_poses,
 )
 
-#: Below this core distance two cores count as touching (their witness direction is unreliable).
+#: Below this core distance two cores count as touching (and overlapping: `_overlap`).
 TINY = 1e-14
 #: Below this core distance (m) the witness points' direction is dominated by their round-off
 #: (about 1e-16 m here, so a direction error of 1e-6 at 1e-10 m): the normal is then the
