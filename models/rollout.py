@@ -54,10 +54,12 @@ from models.stepper import (
     any_limited,
     basis_table,
     dynamics_step,
+    dynamics_step_inline,
     free_step,
     gravity_force,
     has_rotations,
     kinematic_step,
+    make_system,
     mass_matrix,
     system_matrix,
 )
@@ -237,7 +239,7 @@ def _start_system(S, D, model, h, q):
     if not has_rotations(bi):
         Ainv = _inverse_or_empty(A)
         M_const = mass_matrix(bi, bf, q, nv)
-    return System(A, Ainv, M_const, h * gravity_force(bi, bf, D.gravity, nv))
+    return make_system(bi, A, Ainv, M_const, h * gravity_force(bi, bf, D.gravity, nv))
 
 
 @numba.njit(cache=True)
@@ -405,7 +407,7 @@ def rollout_kernel(
     # the warm start is dropped at the steps that start a period of model.warm_period (Model)
     warm_every = int(np.round(model.warm_period / h)) if model.warm_period > 0.0 else 0
     system = _start_system(S, D, model, h, q)
-    A, Ainv, M_const, rhs_const = system
+    A, Ainv, M_const, rhs_const = system.A, system.Ainv, system.M_const, system.rhs_const
     constant_A, limited = not has_rotations(bi), any_limited(max_force)
     kinematic, eps, compliant, theta = model.kinematic, model.eps, model.compliant, model.theta
     eps_eff = model.quasistatic_inertia if eps == 0.0 else eps
@@ -462,8 +464,8 @@ def rollout_kernel(
             else:
                 if not constant_A:
                     A = system_matrix(bi, bf, q, nv, eps_eff, h, v_index, kp, kd, max_force)
-                    system = System(A, Ainv, M_const, rhs_const)
-                r = dynamics_step(
+                    system = System(A, Ainv, M_const, rhs_const, system.dofs, system.count, system.inv)  # (no blocks: A changes)
+                r = dynamics_step_inline(
                     model, step_solver, D, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis
                 )
                 q2, nu2, q_ref2, dn2, dt2, st, piv, res, size, p_n, p_t, sw, basis = r
@@ -635,7 +637,7 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
         if k == 0 or stage == STAGE_SOLVE:
             if rotating:  # as rollout_kernel: A depends on q
                 A = system_matrix(bi, bf, q, nv, eps_eff, h, D.v_index, D.kp, D.kd, D.max_force)
-                system = System(A, system.Ainv, system.M_const, system.rhs_const)
+                system = System(A, system.Ainv, system.M_const, system.rhs_const, system.dofs, system.count, system.inv)
             r = dynamics_step(model, solver, D, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis)
             if k == 0:  # the warm starts (Lemke's basis, PGS's impulses) of a steady push
                 basis = r.basis
