@@ -409,22 +409,20 @@ def _entering_column(M, Binv, var, n, d, mag, col, idx):
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _gauss_solve(A, b):
-    """Solve A x = b by Gaussian elimination with partial pivoting (A, b are overwritten).
-
-    Returns (x, ok); ok is False if A is numerically singular or the result is non-finite.
-    """
-    m = b.shape[0]
-    x = np.zeros(m)
+def _gauss_solve(A, m):
+    """Solve A[:m] x = A[m] (the right-hand side in row m) by Gaussian elimination with
+    partial pivoting, in place: x ends in row m (one array, no allocation: this runs every
+    step on the warm-started basis). Returns ok: False if A[:m] is numerically singular or x
+    is non-finite."""
     amax = 0.0
+    if m == 0:
+        return True
     for i in range(m):
         for j in range(m):
             if abs(A[i, j]) > amax:
                 amax = abs(A[i, j])
-    if m == 0:
-        return x, True
     if not (amax > 0.0) or not np.isfinite(amax):
-        return x, False
+        return False
     for k in range(m):
         p = k
         best = abs(A[k, k])
@@ -433,29 +431,29 @@ def _gauss_solve(A, b):
                 best = abs(A[i, k])
                 p = i
         if best <= 1e-14 * amax:
-            return x, False
+            return False
         if p != k:
             for j in range(m):
                 t = A[k, j]
                 A[k, j] = A[p, j]
                 A[p, j] = t
-            t = b[k]
-            b[k] = b[p]
-            b[p] = t
+            t = A[m, k]
+            A[m, k] = A[m, p]
+            A[m, p] = t
         for i in range(k + 1, m):
             f = A[i, k] / A[k, k]
             if f != 0.0:
                 for j in range(k, m):
                     A[i, j] -= f * A[k, j]
-                b[i] -= f * b[k]
+                A[m, i] -= f * A[m, k]
     for k in range(m - 1, -1, -1):
-        s = b[k]
+        s = A[m, k]
         for j in range(k + 1, m):
-            s -= A[k, j] * x[j]
-        x[k] = s / A[k, k]
-        if not np.isfinite(x[k]):
-            return x, False
-    return x, True
+            s -= A[k, j] * A[m, j]  # (A[m, j > k] already hold x)
+        A[m, k] = s / A[k, k]
+        if not np.isfinite(A[m, k]):
+            return False
+    return True
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -565,7 +563,7 @@ def lemke_warm_kernel(M, q, max_pivots, guess, tol):
         if ok:
             w = _matvec_on(M, z, q, work, nj)
             if _natural_map_residual(z, w, q) <= tol:
-                return z, w, STATUS_SOLVED, 0, guess.copy(), True
+                return z, w, STATUS_SOLVED, 0, guess, True
     z, w, status, pivots, basic_z = _lemke(M, q, max_pivots)
     return z, w, status, pivots, basic_z, False
 
@@ -695,17 +693,16 @@ def _solve_on(M, q, J, nj):
     """(z, ok): z_J = -M[J, J]^-1 q_J on the nj indices J[:nj], z = 0 elsewhere; ok is False
     when M[J, J] is numerically singular (then z = 0)."""
     n = q.shape[0]
-    A = np.empty((nj, nj))
-    b = np.empty(nj)
+    A = np.empty((nj + 1, nj))  # M[J, J] and, in its last row, -q_J (`_gauss_solve`)
     for a in range(nj):
-        b[a] = -q[J[a]]
+        A[nj, a] = -q[J[a]]
         for c in range(nj):
             A[a, c] = M[J[a], J[c]]
-    x, ok = _gauss_solve(A, b)
+    ok = _gauss_solve(A, nj)
     z2 = np.zeros(n)
     if ok:
         for a in range(nj):
-            z2[J[a]] = x[a]
+            z2[J[a]] = A[nj, a]
     return z2, ok
 
 

@@ -413,6 +413,7 @@ def rollout_kernel(
     eps_eff = model.quasistatic_inertia if eps == 0.0 else eps
     max_records, rec_t, rec_q, rec_nu, n_rec = _start_records(max_records, q, nu)
     t, steps, lcp_solves, pivots, max_residual, max_size, min_psi, force_steps, sweeps = 0.0, 0, 0, 0, 0.0, 0, np.inf, 0, 0
+    no_impulse, no_friction = np.zeros(0), np.zeros((0, 2))  # a step without contact problem (no allocation a step)
     outcome = Outcome.NONE.value
     status = StepStatus.SINGULAR.value if (not kinematic and constant_A and Ainv.shape[0] != nv) else StepStatus.OK.value
     for k in range(controls.shape[0]):
@@ -448,7 +449,7 @@ def rollout_kernel(
                 law_speeds(S, law, q, q_index, controls[k], u)
             # stages solve and integrate: the rung's step kernel (in line: arguments of an inlined
             # stage are reference-counted each step, which slowed the cheap rungs by about 10%)
-            p_t, dn2, dt2, sw = np.zeros((0, 2)), delta_n, delta_t, 0
+            p_t, dn2, dt2, sw = no_friction, delta_n, delta_t, 0
             if kinematic:
                 q2, nu2, q_ref2, st, piv, res = kinematic_step(
                     bi, bf, h, q, q_ref, u, q_index, v_index, lower, upper, nc, c_psi, c_bias, W_n, nv
@@ -460,7 +461,7 @@ def rollout_kernel(
                 )
                 if compliant and (delta_n.any() or delta_t.any()):
                     dn2, dt2 = np.zeros_like(delta_n), np.zeros_like(delta_t)
-                piv, res, size, p_n = 0, 0.0, 0, np.zeros(0)
+                piv, res, size, p_n = 0, 0.0, 0, no_impulse
             else:
                 if not constant_A:
                     A = system_matrix(bi, bf, q, nv, eps_eff, h, v_index, kp, kd, max_force)
