@@ -448,7 +448,9 @@ def rollout_kernel(
             if has_law:
                 law_speeds(S, law, q, q_index, controls[k], u)
             # stages solve and integrate: the rung's step kernel (in line: arguments of an inlined
-            # stage are reference-counted each step, which slowed the cheap rungs by about 10%)
+            # stage are reference-counted each step, which slowed the cheap rungs by about 10%);
+            # the contact step is numba-inlined (`dynamics_step_inline`): a call of it counted
+            # its ~30 arrays in and out every step
             p_t, dn2, dt2, sw = no_friction, delta_n, delta_t, 0
             if kinematic:
                 q2, nu2, q_ref2, st, piv, res = kinematic_step(
