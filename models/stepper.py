@@ -454,7 +454,7 @@ def any_limited(max_force):
     return False
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def drive_reference(h, q_ref, u, lower, upper, j):
     """(q_ref+, feed-forward speed) of drive j: the reference advances by h u, stopped at the
     position limits; its speed is u, or the reference's own speed where a limit stopped it
@@ -599,7 +599,7 @@ def dynamics_step_inline(model, solver, drives, tables, system, h, q, nu, q_ref,
     return _lemke_step(model, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, basis)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _drives(h, q, q_ref, u, drives, rhs):
     """Advance the drive references (stopped at their limits) and add the PD terms of the
     unlimited drives to rhs. A force-limited drive j instead gets -h max_force[j] (its impulse
@@ -619,7 +619,7 @@ def _drives(h, q, q_ref, u, drives, rhs):
     return q_ref_new, a
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _deformations(h, pf, c_pair, c_slot, active, p_n, p_t, delta_n, delta_t):
     """Compliant contact: delta+ = (p + C delta) / (h K + C) per active contact k (p_n[k], p_t[k])."""
     delta_n_new = np.zeros_like(delta_n)
@@ -634,7 +634,7 @@ def _deformations(h, pf, c_pair, c_slot, active, p_n, p_t, delta_n, delta_t):
     return delta_n_new, delta_t_new
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _integrate_checked(bi, theta, h, q, nu, nu_new):
     """(q+, status): the position update, DIVERGED / NON_FINITE if it left the finite range."""
     if theta == 1.0:
@@ -674,7 +674,7 @@ def _free_velocity(model, drives, tables, system, h, q, nu, q_ref, u, dofs, coun
     return nu_free, q_ref_new, drive_a
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _active_contacts(W_n, nc):
     """The contacts that couple to a free DOF (W_n column above ZERO_COLUMN)."""
     active = np.empty(nc, np.int64)
@@ -854,7 +854,7 @@ def contact_lcp(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, co
     return Mlcp, qlcp, Y, gen0, c0, gen1, c1, fric, nf, lim[:nl]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _limited_drives(max_force):
     """The force-limited drives (finite max_force): (indices in a buffer of all drives, count)."""
     nl = 0
@@ -866,7 +866,7 @@ def _limited_drives(max_force):
     return lim, nl
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _friction_contacts(spatial, active, c_pair, pf, W_t, W_o):
     """The active contacts (positions k in active) with friction rows: mu > 0 and a tangent
     Jacobian column that couples to a free DOF. Returns (fric, nf)."""
@@ -888,7 +888,7 @@ def _friction_contacts(spatial, active, c_pair, pf, W_t, W_o):
 LOCAL_DOFS = 2 * BODY_DOFS
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _generators(spatial, active, fric, nf, lim, nl, v_index, pi, c_pair, W_n, W_t, W_o, dofs, count):
     """The columns B that the LCP's J = B C combines, gathered on the DOFs they touch: each
     active contact's normal (generator k), each friction contact's t (nc + f) and, in space, o
@@ -958,7 +958,7 @@ def _sparse_dot(Bl, ldof, nloc, g, x):
     return acc
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _delassus(body, ldof, nloc, Bl, dofs, count, inv, nv):
     """(Y = A^-1 B (nv, ng), G = B^T A^-1 B (ng, ng)) over the DOFs of the bodies each generator
     touches: A is block diagonal by body (inv: its blocks' inverses), so Y[:, g] lives on g's
@@ -993,7 +993,7 @@ def _delassus(body, ldof, nloc, Bl, dofs, count, inv, nv):
     return Y, G
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _fill_jacobian_block(Mlcp, G, gen0, c0, gen1, c1, cs, spatial, nc, nf, nl):
     """M[:m, :m] = C^T G C, row by row: the row p = (C^T G)[r] (ng), then each column group
     from it (a normal's generator, a friction contact's d directions cs from its t and o
@@ -1020,7 +1020,7 @@ def _fill_jacobian_block(Mlcp, G, gen0, c0, gen1, c1, cs, spatial, nc, nf, nl):
             Mlcp[r, nc + nd + e] = p[nc + nt * nf + e]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _combinations(spatial, d, nc, fric, nf, nl):
     """C of J = B C: LCP column r < m is c0[r] B[:, gen0[r]] + c1[r] B[:, gen1[r]] (c1 = 0 for a
     single generator); coef (max(nf d, 1), 2): each friction row's direction in the (t, o)
@@ -1056,7 +1056,7 @@ def _combinations(spatial, d, nc, fric, nf, nl):
     return gen0, c0, gen1, c1, coef, cs
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _normal_rows(Mlcp, qlcp, compliant, h, active, pf, c_pair, c_psi, c_slot, c_bias, Jt_nu, delta_n, regularization):
     """Normal rows of the contact LCP, in place: q = psi / h + W_n^T nu_free + bias, and for
     compliant contact 1 / (h (h K + C)) on the diagonal and the previous deformation in q; for
@@ -1076,7 +1076,7 @@ def _normal_rows(Mlcp, qlcp, compliant, h, active, pf, c_pair, c_psi, c_slot, c_
             qlcp[k] += comp * C * delta_n[c_slot[i]]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _friction_rows(Mlcp, qlcp, compliant, h, d, m, active, fric, nf, coef, pf, c_pair, c_slot, c_bias, Jt_nu, delta_t):
     """Friction rows of the contact LCP, in place: each friction contact's d direction rows
     (q from nu_free and the bias; compliant: the friction block's 1 / (h (h K + C)) and the
@@ -1103,7 +1103,7 @@ def _friction_rows(Mlcp, qlcp, compliant, h, d, m, active, fric, nf, coef, pf, c
                 qlcp[r] -= K / (h * K + C) * (coef[r - nc, 0] * delta_t[slot, 0] + coef[r - nc, 1] * delta_t[slot, 1])
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _scale_gamma(Mlcp, d, m, nc, nf):
     """Scale each friction contact's gamma row and column, in place, to the largest diagonal
     entry of its friction block.
@@ -1125,7 +1125,7 @@ def _scale_gamma(Mlcp, d, m, nc, nf):
                 Mlcp[g, r] *= scale
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _drive_rows(Mlcp, qlcp, h, first_row, first_slack, lim, nl, kp, kd, max_force, drive_a, Jt_nu):
     """Box rows of the force-limited drives, in place (see `contact_lcp`): row first_row + e
     of drive lim[e] gets 1 / b on the diagonal and q = J^T nu_free - (P + a) / b; its slack s
@@ -1198,7 +1198,7 @@ def _contact_solve(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf,
     return nu_new, p_n, p_t, StepStatus.OK.value, pivots, residual, n, basis_new
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _largest_entry(Mlcp, m):
     """max |M| of a contact LCP without scanning it all: its top-left m x m block J^T A^-1 J
     (plus compliance and drive terms) is positive semidefinite, so no entry there exceeds the
@@ -1214,7 +1214,7 @@ def _largest_entry(Mlcp, m):
     return scale
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _basis_guess(basis, active, slot, fric, nf, d, lim, m, n):
     """The LCP's first guess of a complementary basis (True: z_i basic) from the previous
     step's table (`basis_table`; rows: the contact slots, slot.shape[0] of them, then the
@@ -1245,7 +1245,7 @@ def _basis_guess(basis, active, slot, fric, nf, d, lim, m, n):
     return guess
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _basis_kept(basis, basic_z, active, slot, fric, nf, d, lim, m):
     """The table (`basis_table`, shaped as the given one) of this step's final basis basic_z:
     the rows of its contacts and force-limited drives present, all others absent. A table of
