@@ -177,7 +177,9 @@ def detect_planar_into(bi, bf, verts, pi, q, nu, h, margin, c_pair, c_psi, c_n, 
     planar_poses(bi, bf, q, poses)
     for b in range(nb):
         scratch[b, 7] = MARGIN_SAFETY * h * _speed_bound(bi, bf, nu, b)
-    nc = 0
+    # np.int64: a counter started at a literal 0 and passed to a compiled function compiles
+    # that function twice, for Literal[int](0) (numba's first typing pass) and for int64
+    nc = np.int64(0)
     for p in range(pi.shape[0]):
         if pi[p, PI_INERT]:
             continue
@@ -221,7 +223,7 @@ def detect_spatial(S, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsuppor
     bi, bf, pi = S.bi, S.bf, S.pi
     pos = np.empty((bi.shape[0], 3))
     positions(bi, bf, q, pos)
-    nc = 0
+    nc = np.int64(0)
     n_unsupported = 0
     for p in range(pi.shape[0]):
         if pi[p, PI_INERT]:
@@ -375,8 +377,9 @@ def capacity(S: SceneData) -> int:
 
 def contact_frames(S: SceneData, q: np.ndarray, nu: np.ndarray | None = None, h: float = 0.0, margin: float = CONTACT_MARGIN) -> Contacts:
     """Detect contacts at q (velocities nu over a step h widen the margin) and assemble W."""
-    q = np.ascontiguousarray(q, dtype=np.float64)
-    nu = np.zeros(S.nv) if nu is None else np.ascontiguousarray(nu, dtype=np.float64)
+    # writeable too (a scenario's start is read-only): a read-only array compiles the kernels again
+    q = np.require(q, np.float64, "CW")
+    nu = np.zeros(S.nv) if nu is None else np.require(nu, np.float64, "CW")
     cap = max(capacity(S), 1)
     c_pair = np.zeros(cap, np.int64)
     c_psi = np.zeros(cap)

@@ -259,7 +259,7 @@ def _halfspace_vs_core(bi, bf, verts, poses, h, b, h_is_a, margin, c_psi, c_n, c
     off = bf[h, BF_HSO] + mx * px + my * py
     V = _world_core(bi, verts, poses, b)
     r = bf[b, BF_RADIUS]
-    count = 0
+    count = np.int64(0)
     for i in range(V.shape[0]):
         sep = V[i, 0] * mx + V[i, 1] * my - off - r
         if sep > margin:
@@ -314,7 +314,7 @@ def _core_vs_core(bi, bf, verts, poses, a, b, margin, c_psi, c_n, c_pa, c_pb, st
     # clip the incident segment to the reference face's extent [0, L] along u
     t0 = (i0x - r0x) * ux + (i0y - r0y) * uy
     t1 = (i1x - r0x) * ux + (i1y - r0y) * uy
-    count = 0
+    count = np.int64(0)
     for end in range(2):
         bound = 0.0 if end == 0 else L
         # point of the incident segment at u-coordinate clamp
@@ -377,12 +377,12 @@ def collide_2d(bi, bf, verts, poses, a, b, margin, c_psi, c_n, c_pa, c_pb, start
 
     poses: (nb, 4) rows (x, y, cos theta, sin theta) from `models.kinematics.planar_poses`.
     """
-    count = 0
+    count = np.int64(0)
     ka, kb = bi[a, BI_KIND], bi[b, BI_KIND]
     if ka == SHAPE_HALFSPACE and kb != SHAPE_HALFSPACE:
-        count = _halfspace_vs_core(bi, bf, verts, poses, a, b, True, margin, c_psi, c_n, c_pa, c_pb, start)
+        count = _halfspace_vs_core(bi, bf, verts, poses, a, b, np.bool_(True), margin, c_psi, c_n, c_pa, c_pb, start)
     elif kb == SHAPE_HALFSPACE and ka != SHAPE_HALFSPACE:
-        count = _halfspace_vs_core(bi, bf, verts, poses, b, a, False, margin, c_psi, c_n, c_pa, c_pb, start)
+        count = _halfspace_vs_core(bi, bf, verts, poses, b, a, np.bool_(False), margin, c_psi, c_n, c_pa, c_pb, start)
     elif ka != SHAPE_HALFSPACE:
         count = _core_vs_core(bi, bf, verts, poses, a, b, margin, c_psi, c_n, c_pa, c_pb, start)
     return count

@@ -143,7 +143,7 @@ def body_blocks(bi, A, Ainv):
     block = np.zeros((BODY_DOFS, BODY_DOFS))
     have_inverse = Ainv.shape[0] == A.shape[0]
     for b in range(nb):
-        m = 0
+        m = np.int64(0)
         for s in range(BODY_DOFS):
             v = bi[b, BI_VMAP + s]
             if v >= 0:

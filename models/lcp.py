@@ -554,7 +554,7 @@ def lemke_warm_kernel(M, q, max_pivots, guess, tol):
     n = q.shape[0]
     if n > 0:
         work = np.empty(n, np.int64)
-        nj = 0
+        nj = np.int64(0)
         for i in range(n):
             if guess[i]:
                 work[nj] = i
@@ -600,7 +600,7 @@ def _lemke_first_pivot(Binv, qbar, basis, d, cand, idx, hist, qscale):
     for i in range(n):
         d[i] = -1.0
         cand[i] = i
-    r = _lex_select(qbar, Binv, ones, cand, n, LEMKE_TIE_TOL, -1, qscale, hist)
+    r = _lex_select(qbar, Binv, ones, cand, n, LEMKE_TIE_TOL, np.int64(-1), qscale, hist)
     leaving = basis[r]
     _pivot(Binv, qbar, d, r, idx, hist)
     basis[r] = 2 * n
@@ -628,7 +628,7 @@ def _lemke_path(M, Binv, qbar, basis, d, mag, hist, col, cand, idx, entering, zr
         if not np.isfinite(dmax):
             status = STATUS_NON_FINITE_OUTPUT
             break
-        ncand = 0
+        ncand = np.int64(0)
         for i in range(n):
             if d[i] > LEMKE_PIVOT_TOL * max(mag[i], hist[i] * amax):
                 cand[ncand] = i
@@ -680,7 +680,7 @@ def _lemke_polish(M, q, basis, work, z, w, status):
 @numba.njit(cache=True, error_model="numpy")
 def _basis_point(M, q, basis, n, work):
     """Solve M[J, J] z_J = -q_J for the basic z variables J of ``basis``; z = 0 elsewhere."""
-    nj = 0
+    nj = np.int64(0)
     for i in range(n):
         if n <= basis[i] < 2 * n:
             work[nj] = basis[i] - n

@@ -571,7 +571,7 @@ def pair_signed_distances(scenario: Scenario, q: np.ndarray) -> np.ndarray:
     `scenario.pairs` order: the compiled kernels, the reference geometry (`models.geometry`,
     python-fcl) only for the pairs they cannot measure (inert pairs read inf)."""
     out = np.empty(max(len(scenario.pairs), 1))
-    pair_min_distances(compiled(scenario).scene, np.asarray(q, float), 1e9, out)
+    pair_min_distances(compiled(scenario).scene, np.require(q, np.float64, "CW"), 1e9, out)  # (see contact_frames)
     missing = np.flatnonzero(np.isnan(out[: len(scenario.pairs)]))
     if len(missing):
         placements = scenario.placements(q)
