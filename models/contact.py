@@ -93,7 +93,7 @@ def contact_buffers(pi, nv):
     return contacts, first_slot
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _speed_bound(bi, bf, nu, b):
     """Upper bound of the speed of any point of body b (0 for fixed bodies; a scripted
     obstacle's from its script)."""
@@ -112,7 +112,7 @@ def _speed_bound(bi, bf, nu, b):
     return bound
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _halfspace_normal(bi, bf, q, h, pos):
     """World normal (nx, ny, nz) and offset of half-space body h."""
     lx, ly, lz = bf[h, BF_HSN], bf[h, BF_HSN + 1], bf[h, BF_HSN + 2]
@@ -129,7 +129,7 @@ def _halfspace_normal(bi, bf, q, h, pos):
     return nx, ny, nz, off
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _keep(bi, bf, q, pos, a, b, reach):
     keep = False
     ka, kb = bi[a, BI_KIND], bi[b, BI_KIND]

@@ -86,7 +86,7 @@ def evaluate(P, q, pair_psi):
     return evaluate_with(P.op, P.index, P.lo, P.hi, q, pair_psi, np.zeros(P.op.shape[0] + 1, np.bool_))
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def evaluate_with(op_codes, index, lo, hi, q, pair_psi, stack):
     """evaluate() on the program's arrays with a caller-owned stack (len(op_codes) + 1)."""
     top = 0

@@ -129,7 +129,7 @@ def _classify(goal, unsafe, q, pair_psi):
     return outcome
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _classify_with(g_op, g_index, g_lo, g_hi, u_op, u_index, u_lo, u_hi, q, pair_psi, stack):
     """Stage classify on the rollout's stack: unsafe first, then goal."""
     outcome = Outcome.NONE.value

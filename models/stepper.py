@@ -501,7 +501,7 @@ def _column_norm(W, i):
     return np.sqrt(s)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _finite_and_bounded(x):
     ok = True
     for v in x.ravel():
@@ -555,7 +555,7 @@ def free_step(eps, theta, h, bi, Ainv, M_const, rhs_const, q, nu, q_ref, u, q_in
 
 
 @numba.njit(cache=True)
-def dynamics_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis=None):
+def dynamics_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis):
     """One step of eq. (3) given the contacts at q. Pure: returns a new StepResult.
 
     model, solver, drives: `Model`, `Solver`, `Drives`; tables: `SceneTables`; system: the
@@ -564,16 +564,12 @@ def dynamics_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_
     2): PGS warm start by contact slot (the previous step's p_n, p_t; zeros for a cold start;
     Lemke ignores them); basis: Lemke's warm start, the previous step's `StepResult.basis`
     (a `basis_table` of the contact buffers' slots, the drives and the friction directions;
-    None or an empty table: Lemke starts cold). The result's basis is this step's (the input's
-    where no LCP was solved). A force-limited drive's impulse is solved with the contacts, by
+    all zeros, as `basis_table` makes it: Lemke starts cold; required, since a default of None
+    would compile this whole step a second time). The result's basis is this step's (the
+    input's where no LCP was solved). A force-limited drive's impulse is solved with the contacts, by
     Lemke. On the PGS path residual is `models.contact_pgs`'s and lcp_size the number of
     scalar impulses; where auto falls back to Lemke, sweeps still counts PGS's.
     """
-    if basis is None:
-        cold = basis_table(contacts.psi.shape[0], drives.v_index.shape[0], model.friction_directions if tables.spatial else 2)
-        return dynamics_step_inline(
-            model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, cold
-        )
     return dynamics_step_inline(
         model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis
     )

@@ -402,6 +402,7 @@ def test_cheap_free_step_equals_the_full_step_without_contacts(eps):
         LEMKE,
         QUASISTATIC_INERTIA,
         SceneTables,
+        basis_table,
         dynamics_step,
         free_step,
         gravity_force,
@@ -441,6 +442,7 @@ def test_cheap_free_step_equals_the_full_step_without_contacts(eps):
         0,
         np.zeros(1),
         np.zeros((1, 2)),
+        basis_table(len(contacts.psi), len(D.v_index), 2),
     )
     for a, b in zip(fast[:3], full[:3]):
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-15)

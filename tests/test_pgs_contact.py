@@ -28,6 +28,7 @@ from models.stepper import (
     SOLVER_METHODS,
     SceneTables,
     StepStatus,
+    basis_table,
     contact_solver,
     dynamics_step,
     gravity_force,
@@ -88,6 +89,7 @@ def step(scenario, rung_name: str, solver: str, q, nu, h: float = H, **settings)
         nc,
         np.zeros(nc),
         np.zeros((nc, 2)),
+        basis_table(nc, len(D.v_index), model.friction_directions if spatial else 2),
     )
     return frames, Ainv, out
 
