@@ -744,7 +744,7 @@ def announce_compile() -> None:
     (numba's cache is cold): otherwise the first run sits silent for minutes."""
     if kernels_cached():
         return
-    print("compiling the physics kernels (first run only, about 2 minutes)", file=sys.stderr, flush=True)
+    print("compiling the physics kernels (first run only, about 3.5 minutes)", file=sys.stderr, flush=True)
 
 
 def kernels_cached() -> bool:

@@ -480,4 +480,4 @@ def test_a_cold_kernel_cache_is_announced(monkeypatch, capsys):
     assert capsys.readouterr().err == ""
     monkeypatch.setattr(cli, "kernels_cached", lambda: False)
     cli.announce_compile()
-    assert capsys.readouterr().err == "compiling the physics kernels (first run only, about 2 minutes)\n"
+    assert capsys.readouterr().err == "compiling the physics kernels (first run only, about 3.5 minutes)\n"
