@@ -570,27 +570,9 @@ def propagate_kernel(bound, x, u, duration, h, y):
     durations[0] = duration
     # np.int64 / np.bool_: literal constants would type as Literal[...] and compile a second
     # rollout_kernel (minutes of a fresh clone's first run) beside the one Python calls
-    record_every, max_records, stop_at_outcome = np.int64(1 << 30), np.int64(2), np.bool_(True)
+    every, records, stop = np.int64(1 << 30), np.int64(2), np.bool_(True)
     out = rollout_kernel(
-        S,
-        D,
-        model,
-        solver,
-        goal,
-        unsafe,
-        q,
-        nu,
-        q_ref,
-        delta_n,
-        delta_t,
-        basis,
-        u.reshape(1, -1),
-        durations,
-        h,
-        record_every,
-        max_records,
-        stop_at_outcome,
-        0.0,
+        S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, delta_t, basis, u.reshape(1, -1), durations, h, every, records, stop, 0.0
     )
     flag = FLAG_RUNNING
     if out.status != StepStatus.OK:
