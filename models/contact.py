@@ -163,20 +163,27 @@ def detect_contacts(S, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsuppo
 @numba.njit(cache=True)
 def detect_planar(bi, bf, verts, pi, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb):
     """detect_contacts for planar scenes on the packed tables."""
-    nb = bi.shape[0]
-    return detect_planar_into(bi, bf, verts, pi, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, np.empty((nb, 8)))
+    pos, poses, speed = planar_scratch(bi.shape[0])
+    return detect_planar_into(bi, bf, verts, pi, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, pos, poses, speed)
+
+
+@numba.njit(cache=True, inline="always")
+def planar_scratch(nb):
+    """The planar detection's scratch (`detect_planar_into`): per body its position (nb, 3),
+    pose (nb, 4) and speed margin (nb,). Three C-contiguous arrays, not views of one table: a
+    strided view compiled the narrowphase kernels a second time, beside the C-contiguous arrays
+    Python passes them."""
+    return np.empty((nb, 3)), np.empty((nb, 4)), np.empty(nb)
 
 
 @numba.njit(cache=True)
-def detect_planar_into(bi, bf, verts, pi, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, scratch):
-    """detect_planar with a caller-owned scratch (nb, 8) array: the rollout's hot path."""
+def detect_planar_into(bi, bf, verts, pi, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, pos, poses, speed):
+    """detect_planar with the caller's scratch (`planar_scratch`): the rollout's hot path."""
     nb = bi.shape[0]
-    pos = scratch[:, 0:3]
-    poses = scratch[:, 3:7]
     positions(bi, bf, q, pos)
     planar_poses(bi, bf, q, poses)
     for b in range(nb):
-        scratch[b, 7] = MARGIN_SAFETY * h * _speed_bound(bi, bf, nu, b)
+        speed[b] = MARGIN_SAFETY * h * _speed_bound(bi, bf, nu, b)
     # np.int64: a counter started at a literal 0 and passed to a compiled function compiles
     # that function twice, for Literal[int](0) (numba's first typing pass) and for int64
     nc = np.int64(0)
@@ -184,7 +191,7 @@ def detect_planar_into(bi, bf, verts, pi, q, nu, h, margin, c_pair, c_psi, c_n, 
         if pi[p, PI_INERT]:
             continue
         a, b = pi[p, PI_A], pi[p, PI_B]
-        reach = margin + scratch[a, 7] + scratch[b, 7]
+        reach = margin + speed[a] + speed[b]
         if _keep(bi, bf, q, pos, a, b, reach):
             k = collide_2d(bi, bf, verts, poses, a, b, reach, c_psi, c_n, c_pa, c_pb, nc)
             for i in range(nc, nc + k):
