@@ -447,3 +447,27 @@ def test_cheap_free_step_equals_the_full_step_without_contacts(eps):
     for a, b in zip(fast[:3], full[:3]):
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-15)
     assert fast[3] == full.status == 0
+
+
+def test_a_rollout_and_the_planners_propagation_run_one_compiled_rollout():
+    """The planners' propagation (`propagate_kernel`) calls `rollout_kernel` with the argument
+    types a Python rollout passes, so both run one compile of it, and the same physics. (It once
+    passed literal constants, which numba types Literal[...]: a second compile of the whole
+    rollout, minutes of a fresh clone's first run; docs/measurements.md.)"""
+    from models.rollout import rollout_kernel
+    from models.stepper import StepStatus
+    from planner.ompl_adapter import _layout, configuration_limits, flatten
+
+    scenario = load_scenario(TRIANGLE)
+    rung = rung_for(scenario, "dynamic-rigid")
+    state = rung.initial_state(scenario)
+    u = np.array([-1.0, -1.0])
+    run = rung.rollout(scenario, state, u.reshape(1, -1), [0.01], 1e-4)
+    low, high = configuration_limits(scenario, state.q)
+    drive_q = np.array([scenario.coordinates.index(n) for n in scenario.actuated], dtype=np.int64)
+    step = rung.propagator(scenario, 1e-4, _layout(scenario, state)[:4], low, high, drive_q, np.ones(len(drive_q)))
+    x = flatten(state)
+    y = np.empty_like(x)
+    assert step(x, u, 0.01, y) == StepStatus.OK
+    np.testing.assert_array_equal(y[: len(state.q)], run.state.q)
+    assert len(rollout_kernel.signatures) == 1, rollout_kernel.signatures
