@@ -44,6 +44,7 @@ from models.kinematics import (
     V_ANGLE,
     V_WX,
     SceneData,
+    kernel_array,
     planar_poses,
     positions,
 )
@@ -384,9 +385,8 @@ def capacity(S: SceneData) -> int:
 
 def contact_frames(S: SceneData, q: np.ndarray, nu: np.ndarray | None = None, h: float = 0.0, margin: float = CONTACT_MARGIN) -> Contacts:
     """Detect contacts at q (velocities nu over a step h widen the margin) and assemble W."""
-    # writeable too (a scenario's start is read-only): a read-only array compiles the kernels again
-    q = np.require(q, np.float64, "CW")
-    nu = np.zeros(S.nv) if nu is None else np.require(nu, np.float64, "CW")
+    q = kernel_array(q)
+    nu = np.zeros(S.nv) if nu is None else kernel_array(nu)
     cap = max(capacity(S), 1)
     c_pair = np.zeros(cap, np.int64)
     c_psi = np.zeros(cap)

@@ -320,6 +320,13 @@ def _pair_tables(scenario: Scenario, kind, vcount):
     return pair_a, pair_b, max_contacts, pf
 
 
+def kernel_array(a) -> np.ndarray:
+    """a as the compiled kernels take an array from Python: float64, C-contiguous and writeable
+    (copied only when it is not). A scenario's start is read-only, and numba compiles a kernel
+    once more for every read-only argument type it meets."""
+    return np.require(a, np.float64, "CW")
+
+
 def compile_scene(scenario: Scenario) -> SceneData:
     """Pack a validated scenario into arrays for the compiled kernels."""
     dim = scenario.dimension

@@ -25,7 +25,7 @@ import numpy as np
 from models import geometry as geo
 from models.contact import has_script, pair_min_distances
 from models.family import FAMILY
-from models.kinematics import PI_INERT, SceneData, compile_scene
+from models.kinematics import PI_INERT, SceneData, compile_scene, kernel_array
 from models.predicates import OP_TOUCH, Program, compile_predicate, evaluate_with
 from models.rollout import propagate_kernel, rollout_kernel
 from models.scenario import Scenario
@@ -571,7 +571,7 @@ def pair_signed_distances(scenario: Scenario, q: np.ndarray) -> np.ndarray:
     `scenario.pairs` order: the compiled kernels, the reference geometry (`models.geometry`,
     python-fcl) only for the pairs they cannot measure (inert pairs read inf)."""
     out = np.empty(max(len(scenario.pairs), 1))
-    pair_min_distances(compiled(scenario).scene, np.require(q, np.float64, "CW"), 1e9, out)  # (see contact_frames)
+    pair_min_distances(compiled(scenario).scene, kernel_array(q), 1e9, out)
     missing = np.flatnonzero(np.isnan(out[: len(scenario.pairs)]))
     if len(missing):
         placements = scenario.placements(q)

@@ -46,13 +46,14 @@ def classify(scenario, q, pair_psi=None) -> Outcome:
     it is in the unsafe set (checked first), else GOAL if in the goal set, else NONE. q must
     be finite (a state that diverged has no class: that is a run's status). pair_psi: as in
     `goal_distance`."""
+    from models.kinematics import kernel_array
     from models.predicates import evaluate
     from models.rungs import compiled
 
     c = compiled(scenario)
     if pair_psi is None:
         pair_psi = _pair_distances(scenario, q)
-    q = np.asarray(q, float)
+    q = kernel_array(q)
     if evaluate(c.unsafe, q, pair_psi):
         return Outcome.UNSAFE
     return Outcome.GOAL if evaluate(c.goal, q, pair_psi) else Outcome.NONE
