@@ -95,22 +95,24 @@ def contact_buffers(pi, nv):
 
 
 @numba.njit(cache=True, inline="always")
-def _speed_bound(bi, bf, nu, b):
-    """Upper bound of the speed of any point of body b (0 for fixed bodies; a scripted
-    obstacle's from its script)."""
-    v2 = 0.0
-    w2 = 0.0
-    for k in range(3):
-        if bi[b, BI_VMAP + k] >= 0:
-            v2 += nu[bi[b, BI_VMAP + k]] ** 2
-        if bi[b, BI_VMAP + V_WX + k] >= 0:
-            w2 += nu[bi[b, BI_VMAP + V_WX + k]] ** 2
-    if bi[b, BI_VMAP + V_ANGLE] >= 0:
-        w2 += nu[bi[b, BI_VMAP + V_ANGLE]] ** 2
-    bound = np.sqrt(v2) + bf[b, BF_SPEED]
-    if w2 > 0.0:
-        bound += np.sqrt(w2) * bf[b, BF_BOUND]
-    return bound
+def _speed_margins(bi, bf, nu, scale, out):
+    """out[b] = scale times an upper bound of the speed of any point of body b (0 for fixed
+    bodies; a scripted obstacle's from its script), for every body: one loop here, since a
+    per-body helper's array arguments are reference-counted on every pass of the caller's loop."""
+    for b in range(bi.shape[0]):
+        v2 = 0.0
+        w2 = 0.0
+        for k in range(3):
+            if bi[b, BI_VMAP + k] >= 0:
+                v2 += nu[bi[b, BI_VMAP + k]] ** 2
+            if bi[b, BI_VMAP + V_WX + k] >= 0:
+                w2 += nu[bi[b, BI_VMAP + V_WX + k]] ** 2
+        if bi[b, BI_VMAP + V_ANGLE] >= 0:
+            w2 += nu[bi[b, BI_VMAP + V_ANGLE]] ** 2
+        bound = np.sqrt(v2) + bf[b, BF_SPEED]
+        if w2 > 0.0:
+            bound += np.sqrt(w2) * bf[b, BF_BOUND]
+        out[b] = scale * bound
 
 
 @numba.njit(cache=True, inline="always")
@@ -131,20 +133,31 @@ def _halfspace_normal(bi, bf, q, h, pos):
 
 
 @numba.njit(cache=True, inline="always")
-def _keep(bi, bf, q, pos, a, b, reach):
-    keep = False
-    ka, kb = bi[a, BI_KIND], bi[b, BI_KIND]
-    if ka == SHAPE_HALFSPACE or kb == SHAPE_HALFSPACE:
-        h, o = a, b
-        if ka != SHAPE_HALFSPACE:
-            h, o = b, a
-        if bi[o, BI_KIND] != SHAPE_HALFSPACE:
-            nx, ny, nz, off = _halfspace_normal(bi, bf, q, h, pos)
-            keep = nx * pos[o, 0] + ny * pos[o, 1] + nz * pos[o, 2] - off - bf[o, BF_BOUND] <= reach
-    else:
-        d = np.sqrt((pos[a, 0] - pos[b, 0]) ** 2 + (pos[a, 1] - pos[b, 1]) ** 2 + (pos[a, 2] - pos[b, 2]) ** 2)
-        keep = d - bf[a, BF_BOUND] - bf[b, BF_BOUND] <= reach
-    return keep
+def _broadphase(bi, bf, q, pi, pos, speed, margin, reach):
+    """First broadphase stage, for every pair: reach[p] = margin + both bodies' speed margins
+    (speed, `_speed_margins`) where the pair's bounding spheres (against a half-space: the
+    sphere against the plane) are within it, -1 where they are not or the pair is inert.
+    One loop here, as `_speed_margins`."""
+    for p in range(pi.shape[0]):
+        reach[p] = -1.0
+        if pi[p, PI_INERT]:
+            continue
+        a, b = pi[p, PI_A], pi[p, PI_B]
+        r = margin + speed[a] + speed[b]
+        keep = False
+        ka, kb = bi[a, BI_KIND], bi[b, BI_KIND]
+        if ka == SHAPE_HALFSPACE or kb == SHAPE_HALFSPACE:
+            h, o = a, b
+            if ka != SHAPE_HALFSPACE:
+                h, o = b, a
+            if bi[o, BI_KIND] != SHAPE_HALFSPACE:
+                nx, ny, nz, off = _halfspace_normal(bi, bf, q, h, pos)
+                keep = nx * pos[o, 0] + ny * pos[o, 1] + nz * pos[o, 2] - off - bf[o, BF_BOUND] <= r
+        else:
+            d = np.sqrt((pos[a, 0] - pos[b, 0]) ** 2 + (pos[a, 1] - pos[b, 1]) ** 2 + (pos[a, 2] - pos[b, 2]) ** 2)
+            keep = d - bf[a, BF_BOUND] - bf[b, BF_BOUND] <= r
+        if keep:
+            reach[p] = r
 
 
 @numba.njit(cache=True)
@@ -164,37 +177,32 @@ def detect_contacts(S, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsuppo
 @numba.njit(cache=True)
 def detect_planar(bi, bf, verts, pi, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb):
     """detect_contacts for planar scenes on the packed tables."""
-    pos, poses, speed = planar_scratch(bi.shape[0])
-    return detect_planar_into(bi, bf, verts, pi, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, pos, poses, speed)
+    pos, poses, speed, reach = planar_scratch(bi.shape[0], pi.shape[0])
+    return detect_planar_into(bi, bf, verts, pi, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, pos, poses, speed, reach)
 
 
 @numba.njit(cache=True, inline="always")
-def planar_scratch(nb):
+def planar_scratch(nb, n_pairs):
     """The planar detection's scratch (`detect_planar_into`): per body its position (nb, 3),
-    pose (nb, 4) and speed margin (nb,). Three C-contiguous arrays, not views of one table: a
-    strided view compiled the narrowphase kernels a second time, beside the C-contiguous arrays
-    Python passes them."""
-    return np.empty((nb, 3)), np.empty((nb, 4)), np.empty(nb)
+    pose (nb, 4) and speed margin (nb,), per pair its reach (n_pairs,). C-contiguous arrays,
+    not views of one table: a strided view compiled the narrowphase kernels a second time,
+    beside the C-contiguous arrays Python passes them."""
+    return np.empty((nb, 3)), np.empty((nb, 4)), np.empty(nb), np.empty(n_pairs)
 
 
 @numba.njit(cache=True)
-def detect_planar_into(bi, bf, verts, pi, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, pos, poses, speed):
+def detect_planar_into(bi, bf, verts, pi, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, pos, poses, speed, reach):
     """detect_planar with the caller's scratch (`planar_scratch`): the rollout's hot path."""
-    nb = bi.shape[0]
     positions(bi, bf, q, pos)
     planar_poses(bi, bf, q, poses)
-    for b in range(nb):
-        speed[b] = MARGIN_SAFETY * h * _speed_bound(bi, bf, nu, b)
+    _speed_margins(bi, bf, nu, MARGIN_SAFETY * h, speed)
+    _broadphase(bi, bf, q, pi, pos, speed, margin, reach)
     # np.int64: a counter started at a literal 0 and passed to a compiled function compiles
     # that function twice, for Literal[int](0) (numba's first typing pass) and for int64
     nc = np.int64(0)
     for p in range(pi.shape[0]):
-        if pi[p, PI_INERT]:
-            continue
-        a, b = pi[p, PI_A], pi[p, PI_B]
-        reach = margin + speed[a] + speed[b]
-        if _keep(bi, bf, q, pos, a, b, reach):
-            k = collide_2d(bi, bf, verts, poses, a, b, reach, c_psi, c_n, c_pa, c_pb, nc)
+        if reach[p] >= 0.0:
+            k = collide_2d(bi, bf, verts, poses, pi[p, PI_A], pi[p, PI_B], reach[p], c_psi, c_n, c_pa, c_pb, nc)
             for i in range(nc, nc + k):
                 c_pair[i] = p
             nc += k
@@ -231,18 +239,20 @@ def detect_spatial(S, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsuppor
     bi, bf, pi = S.bi, S.bf, S.pi
     pos = np.empty((bi.shape[0], 3))
     positions(bi, bf, q, pos)
+    speed = np.empty(bi.shape[0])
+    _speed_margins(bi, bf, nu, MARGIN_SAFETY * h, speed)
+    reach = np.empty(pi.shape[0])
+    _broadphase(bi, bf, q, pi, pos, speed, margin, reach)
     nc = np.int64(0)
     n_unsupported = 0
     for p in range(pi.shape[0]):
-        if pi[p, PI_INERT]:
+        r = reach[p]
+        if r < 0.0:
             continue
         a, b = pi[p, PI_A], pi[p, PI_B]
-        reach = margin + MARGIN_SAFETY * h * (_speed_bound(bi, bf, nu, a) + _speed_bound(bi, bf, nu, b))
-        if not _keep(bi, bf, q, pos, a, b, reach):
+        if bi[a, BI_KIND] != SHAPE_HALFSPACE and bi[b, BI_KIND] != SHAPE_HALFSPACE and _aabbs_apart(S, q, a, b, r):
             continue
-        if bi[a, BI_KIND] != SHAPE_HALFSPACE and bi[b, BI_KIND] != SHAPE_HALFSPACE and _aabbs_apart(S, q, a, b, reach):
-            continue
-        k = collide_pair_3d(S, q, p, reach, c_psi, c_n, c_pa, c_pb, nc)
+        k = collide_pair_3d(S, q, p, r, c_psi, c_n, c_pa, c_pb, nc)
         if k < 0:
             unsupported[n_unsupported] = p
             n_unsupported += 1
@@ -280,18 +290,25 @@ def contact_jacobian(S, q, nc, c_pair, dirs, c_pa, c_pb, W):
 def jacobian_packed(bi, bf, pi, q, nc, c_pair, dirs, c_pa, c_pb, W):
     pos = np.empty((bi.shape[0], 3))
     positions(bi, bf, q, pos)
-    W[:, :nc] = 0.0
+    # rows and columns indexed, not sliced: a view (c_pb[i], W[:, :nc]) is an array object of
+    # its own, reference-counted as it is made and dropped, per contact
+    for v in range(W.shape[0]):
+        for i in range(nc):
+            W[v, i] = 0.0
     for i in range(nc):
         p = c_pair[i]
+        dx, dy, dz = dirs[i, 0], dirs[i, 1], dirs[i, 2]
         for side in range(2):
             b = pi[p, PI_B] if side == 0 else pi[p, PI_A]
             sign = 1.0 if side == 0 else -1.0
-            pt = c_pb[i] if side == 0 else c_pa[i]
-            dx, dy, dz = dirs[i, 0], dirs[i, 1], dirs[i, 2]
+            if side == 0:
+                px, py, pz = c_pb[i, 0], c_pb[i, 1], c_pb[i, 2]
+            else:
+                px, py, pz = c_pa[i, 0], c_pa[i, 1], c_pa[i, 2]
             for k in range(3):
                 if bi[b, BI_VMAP + k] >= 0:
                     W[bi[b, BI_VMAP + k], i] += sign * dirs[i, k]
-            rx, ry, rz = pt[0] - pos[b, 0], pt[1] - pos[b, 1], pt[2] - pos[b, 2]
+            rx, ry, rz = px - pos[b, 0], py - pos[b, 1], pz - pos[b, 2]
             cx = ry * dz - rz * dy
             cy = rz * dx - rx * dz
             cz = rx * dy - ry * dx

@@ -321,7 +321,10 @@ def disk_minimiser(f0, f1, u0, u1, g00, g01, g11, radius):
             reach = np.sqrt(radius * radius - xa * xa)
             t = min(max(f0 * eb0 + f1 * eb1, -reach), reach)
             return xa * ea0 + t * eb0, xa * ea1 + t * eb1
-    lo, hi = 0.0, size_c / radius  # |x(hi)| <= |c| / (b + hi) <= radius
+    # |c| / (a + lam) <= |x(lam)| <= |c| / (b + lam): the root lies in [|c| / radius - a,
+    # |c| / radius - b] (an interval no wider than a - b: a point where G is isotropic), and
+    # Newton starts at its lower end
+    lo, hi = max(size_c / radius - a, 0.0), max(size_c / radius - b, 0.0)
     lam = lo
     for _ in range(DISK_ITERATIONS):
         da, db = a + lam, b + lam
@@ -349,43 +352,15 @@ def disk_minimiser(f0, f1, u0, u1, g00, g01, g11, radius):
 
 
 @numba.njit(cache=True, inline="always")
-def _tangential_update(k, spatial, f, u0, u1, g00, g01, g11, mu, p_n, cosines, sines):
-    """The minimiser of contact k's tangential block with the rest held."""
-    if spatial:
-        return polygon_minimiser(f[k, 0], f[k, 1], u0, u1, g00, g01, g11, mu * p_n, cosines, sines)
-    bound = mu * p_n
-    return min(max(f[k, 0] - u0 / g00, -bound), bound), 0.0
-
-
-@numba.njit(cache=True, inline="always")
-def _normal_update(k, cdof, cm, jn, yn, gnn, comp, bn, p_n, v):
-    """Set contact k's normal impulse to its exact minimiser (clamped at 0); returns |change|."""
-    m = cm[k]
-    w = bn[k] + comp[k] * p_n[k] + _dot(jn, k, cdof, m, v)
-    new = max(p_n[k] - w / gnn[k], 0.0)
-    dp = new - p_n[k]
-    if dp != 0.0:
-        _add(yn, k, cdof, m, dp, v)
-        p_n[k] = new
-    return abs(dp)
-
-
-@numba.njit(cache=True, inline="always")
-def _friction_update(k, spatial, cdof, cm, jt, jo, yt, yo, g00, g01, g11, comp, bt, mu, p_n, f, v, cosines, sines):
-    """Set contact k's friction impulse to its block minimiser over the cone; returns |change|."""
-    m = cm[k]
-    u0 = bt[k, 0] + comp[k] * f[k, 0] + _dot(jt, k, cdof, m, v)
-    u1 = 0.0
-    if spatial:
-        u1 = bt[k, 1] + comp[k] * f[k, 1] + _dot(jo, k, cdof, m, v)
-    n0, n1 = _tangential_update(k, spatial, f, u0, u1, g00[k], g01[k], g11[k], mu[k], p_n[k], cosines, sines)
-    d0, d1 = n0 - f[k, 0], n1 - f[k, 1]
-    if d0 != 0.0 or d1 != 0.0:
-        _add(yt, k, cdof, m, d0, v)
-        if spatial:
-            _add(yo, k, cdof, m, d1, v)
-        f[k, 0], f[k, 1] = n0, n1
-    return np.sqrt(d0 * d0 + d1 * d1)
+def _tangential_update(spatial, f0, f1, u0, u1, g00, g01, g11, bound, cosines, sines):
+    """The minimiser of a contact's tangential block with the rest held: f_old = (f0, f1), u
+    its tangential velocity, G its block, bound = mu p_n (in space over the cone's polygon, or
+    the exact cone's disk; in the plane the clamp to [-bound, bound])."""
+    if not spatial:
+        return min(max(f0 - u0 / g00, -bound), bound), 0.0
+    if cosines.shape[0] == 0:
+        return disk_minimiser(f0, f1, u0, u1, g00, g01, g11, bound)
+    return polygon_minimiser(f0, f1, u0, u1, g00, g01, g11, bound, cosines, sines)
 
 
 # ----------------------------------------------------------------------------- the solver
@@ -663,14 +638,46 @@ def _sweeps(
         change = 0.0
         # all normal impulses, then all friction impulses: interleaving them per contact lets
         # the two corners of a box on a plane creep along their (workless) squeeze for
-        # thousands of sweeps after an impact
-        for k in range(n):
-            change = max(change, _normal_update(k, cdof, cm, jn, yn, gnn, comp, bn, p_n, v))
-        for k in range(n):
-            if fric[k]:
-                change = max(
-                    change, _friction_update(k, spatial, cdof, cm, jt, jo, yt, yo, g00, g01, g11, comp, bt, mu, p_n, f, v, cosines, sines)
-                )
+        # thousands of sweeps after an impact. The updates index the arrays here, in the
+        # loop: an inlined helper's array arguments are reference-counted on every call
+        # (docs/measurements.md), which was a third of an exact-cone step
+        for k in range(n):  # the normal impulse to its exact minimiser, clamped at 0
+            m = cm[k]
+            s = 0.0
+            for j in range(m):
+                s += jn[k, j] * v[cdof[k, j]]
+            w = bn[k] + comp[k] * p_n[k] + s
+            new = max(p_n[k] - w / gnn[k], 0.0)
+            dp = new - p_n[k]
+            if dp != 0.0:
+                for j in range(m):
+                    v[cdof[k, j]] += dp * yn[k, j]
+                p_n[k] = new
+            change = max(change, abs(dp))
+        for k in range(n):  # the friction impulse to its block minimiser over the cone
+            if not fric[k]:
+                continue
+            m = cm[k]
+            f0, f1 = f[k, 0], f[k, 1]
+            s0 = 0.0
+            s1 = 0.0
+            for j in range(m):
+                x = v[cdof[k, j]]
+                s0 += jt[k, j] * x
+                if spatial:
+                    s1 += jo[k, j] * x
+            u0 = bt[k, 0] + comp[k] * f0 + s0
+            u1 = bt[k, 1] + comp[k] * f1 + s1 if spatial else 0.0
+            n0, n1 = _tangential_update(spatial, f0, f1, u0, u1, g00[k], g01[k], g11[k], mu[k] * p_n[k], cosines, sines)
+            d0, d1 = n0 - f0, n1 - f1
+            if d0 != 0.0 or d1 != 0.0:
+                for j in range(m):
+                    v[cdof[k, j]] += d0 * yt[k, j]
+                if spatial:
+                    for j in range(m):
+                        v[cdof[k, j]] += d1 * yo[k, j]
+                f[k, 0], f[k, 1] = n0, n1
+            change = max(change, np.sqrt(d0 * d0 + d1 * d1))
         if not np.isfinite(change):
             status = PgsStatus.NON_FINITE.value
             break
@@ -694,15 +701,23 @@ def _sweeps(
 def _residual(n, spatial, cdof, cm, jn, jt, jo, gnn, g00, g01, g11, comp, bn, bt, mu, fric, p_n, f, v, cosines, sines):
     """Natural-map residual in impulse units (see the module docstring), not yet scaled."""
     r = 0.0
-    for k in range(n):
+    for k in range(n):  # (arrays indexed here, as in `_sweeps`)
         m = cm[k]
-        w = bn[k] + comp[k] * p_n[k] + _dot(jn, k, cdof, m, v)
+        s = 0.0
+        s0 = 0.0
+        s1 = 0.0
+        for j in range(m):
+            x = v[cdof[k, j]]
+            s += jn[k, j] * x
+            s0 += jt[k, j] * x
+            if spatial:
+                s1 += jo[k, j] * x
+        w = bn[k] + comp[k] * p_n[k] + s
+        u0 = bt[k, 0] + comp[k] * f[k, 0] + s0
+        u1 = bt[k, 1] + comp[k] * f[k, 1] + s1 if spatial else 0.0
         r = max(r, abs(min(p_n[k], w / gnn[k])))
         if fric[k]:
-            u0 = bt[k, 0] + comp[k] * f[k, 0] + _dot(jt, k, cdof, m, v)
-            u1 = 0.0
-            if spatial:
-                u1 = bt[k, 1] + comp[k] * f[k, 1] + _dot(jo, k, cdof, m, v)
-            n0, n1 = _tangential_update(k, spatial, f, u0, u1, g00[k], g01[k], g11[k], mu[k], p_n[k], cosines, sines)
-            r = max(r, np.sqrt((n0 - f[k, 0]) ** 2 + (n1 - f[k, 1]) ** 2))
+            f0, f1 = f[k, 0], f[k, 1]
+            n0, n1 = _tangential_update(spatial, f0, f1, u0, u1, g00[k], g01[k], g11[k], mu[k] * p_n[k], cosines, sines)
+            r = max(r, np.sqrt((n0 - f0) ** 2 + (n1 - f1) ** 2))
     return r

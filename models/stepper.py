@@ -423,11 +423,13 @@ def gyroscopic_force(bi, bf, q, nu, nv):
         w = np.empty(3)
         for k in range(3):
             w[k] = nu[bi[b, BI_VMAP + V_WX + k]]
-        wb = R.T @ w
+        # L = R diag(I) R^T w, written out: numba's @ calls BLAS, whose overhead dwarfs a 3 x 3
         Lb = np.empty(3)
         for k in range(3):
-            Lb[k] = bf[b, BF_INERTIA + k] * wb[k]
-        L = R @ Lb
+            Lb[k] = bf[b, BF_INERTIA + k] * (R[0, k] * w[0] + R[1, k] * w[1] + R[2, k] * w[2])
+        L = np.empty(3)
+        for k in range(3):
+            L[k] = R[k, 0] * Lb[0] + R[k, 1] * Lb[1] + R[k, 2] * Lb[2]
         f[bi[b, BI_VMAP + V_WX]] -= w[1] * L[2] - w[2] * L[1]
         f[bi[b, BI_VMAP + V_WX + 1]] -= w[2] * L[0] - w[0] * L[2]
         f[bi[b, BI_VMAP + V_WX + 2]] -= w[0] * L[1] - w[1] * L[0]
@@ -841,8 +843,15 @@ def contact_lcp(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, co
     qlcp = np.zeros(n)
     _fill_jacobian_block(Mlcp, G, gen0, c0, gen1, c1, cs, spatial, nc, nf, nl)
     Jt_nu = np.empty(m)
-    for r in range(m):
-        Jt_nu[r] = c0[r] * _sparse_dot(Bl, ldof, nloc, gen0[r], nu_free) + c1[r] * _sparse_dot(Bl, ldof, nloc, gen1[r], nu_free)
+    for r in range(m):  # J^T nu_free = C^T (B^T nu_free), over each generator's local DOFs
+        a0, a1 = gen0[r], gen1[r]
+        s0 = 0.0
+        for a in range(nloc[a0]):
+            s0 += Bl[a0, a] * nu_free[ldof[a0, a]]
+        s1 = 0.0
+        for a in range(nloc[a1]):
+            s1 += Bl[a1, a] * nu_free[ldof[a1, a]]
+        Jt_nu[r] = c0[r] * s0 + c1[r] * s1
     _normal_rows(Mlcp, qlcp, compliant, h, active, pf, c_pair, c_psi, c_slot, c_bias, Jt_nu, delta_n, model.regularization)
     _friction_rows(Mlcp, qlcp, compliant, h, d, m, active, fric, nf, coef, pf, c_pair, c_slot, c_bias, Jt_nu, delta_t)
     _scale_gamma(Mlcp, d, m, nc, nf)
@@ -898,21 +907,33 @@ def _generators(spatial, active, fric, nf, lim, nl, v_index, pi, c_pair, W_n, W_
     ldof = np.zeros((ng, LOCAL_DOFS), np.int64)
     nloc = np.zeros(ng, np.int64)
     Bl = np.zeros((ng, LOCAL_DOFS))
-    for k in range(nc):
-        i = active[k]
-        s = 0
-        for side in range(2):
-            b = pi[c_pair[i], side]
-            if count[b] > 0:
-                body[k, s] = b
-                s += 1
-        _gather(body, ldof, nloc, Bl, dofs, count, W_n, i, k)
-    for f in range(nf):
-        k = fric[f]
-        for a in range(nt):
-            g = nc + a * nf + f
+    # each contact's normal (g < nc), then its friction generators t and o (the gather written
+    # out here: a helper's array arguments would be reference-counted per generator)
+    for g in range(nc + nt * nf):
+        if g < nc:
+            k, which = g, 0
+            s = 0
+            for side in range(2):
+                b = pi[c_pair[active[k]], side]
+                if count[b] > 0:
+                    body[k, s] = b
+                    s += 1
+        else:
+            which, f = 1 + (g - nc) // nf, (g - nc) % nf
+            k = fric[f]
             body[g, 0], body[g, 1] = body[k, 0], body[k, 1]
-            _gather(body, ldof, nloc, Bl, dofs, count, W_t if a == 0 else W_o, active[k], g)
+        i = active[k]
+        a = 0
+        for s in range(2):
+            b = body[g, s]
+            if b < 0:
+                continue
+            for r in range(count[b]):
+                v = dofs[b, r]
+                ldof[g, a] = v
+                Bl[g, a] = W_n[v, i] if which == 0 else (W_t[v, i] if which == 1 else W_o[v, i])
+                a += 1
+        nloc[g] = a
     for e in range(nl):
         g = nc + nt * nf + e
         v = v_index[lim[e]]
@@ -927,31 +948,6 @@ def _generators(spatial, active, fric, nf, lim, nl, v_index, pi, c_pair, W_n, W_
                 ldof[g, r] = dofs[b, r]
                 Bl[g, r] = 1.0 if dofs[b, r] == v else 0.0
     return body, ldof, nloc, Bl
-
-
-@numba.njit(cache=True, inline="always")
-def _gather(body, ldof, nloc, Bl, dofs, count, W, i, g):
-    """Generator g is column i of W: its entries on its bodies' DOFs."""
-    a = 0
-    for s in range(2):
-        b = body[g, s]
-        if b < 0:
-            continue
-        for r in range(count[b]):
-            v = dofs[b, r]
-            ldof[g, a] = v
-            Bl[g, a] = W[v, i]
-            a += 1
-    nloc[g] = a
-
-
-@numba.njit(cache=True, inline="always")
-def _sparse_dot(Bl, ldof, nloc, g, x):
-    """B[:, g] . x over generator g's local DOFs."""
-    acc = 0.0
-    for a in range(nloc[g]):
-        acc += Bl[g, a] * x[ldof[g, a]]
-    return acc
 
 
 @numba.njit(cache=True, inline="always")
@@ -1189,7 +1185,10 @@ def _contact_solve(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf,
         p_t[fric[f], 0] = t[nc + f]
         if spatial:
             p_t[fric[f], 1] = t[nc + nf + f]
-    nu_new = nu_free + Y @ t
+    nu_new = nu_free.copy()  # + Y t, as a loop: numba's @ calls BLAS, whose overhead dwarfs a few DOFs
+    for v in range(Y.shape[0]):
+        for g in range(Y.shape[1]):
+            nu_new[v] += Y[v, g] * t[g]
     basis_new = _basis_kept(basis, basic_z, active, slot, fric, nf, d, lim, m)
     return nu_new, p_n, p_t, StepStatus.OK.value, pivots, residual, n, basis_new
 
