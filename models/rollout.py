@@ -108,7 +108,8 @@ def _distances(nc, c_pair, c_psi, c_slot, first_slot, pair_psi):
     slot, each pair's smallest psi. Returns the
     smallest psi of any contact (inf without contacts)."""
     smallest = np.inf
-    pair_psi[:] = np.inf
+    for p in range(pair_psi.shape[0]):  # (indexed: a slice is an array object, counted each step)
+        pair_psi[p] = np.inf
     for i in range(nc):
         p = c_pair[i]
         if c_psi[i] < smallest:
@@ -176,8 +177,9 @@ def _keep_warm(nc, c_slot, p_n, p_t, warm_n, warm_t, warm_slots, n_warm):
 def _record_forces(c_pair, c_n, c_t, c_o, p_n, p_t, h, pair_force, pair_wrench):
     """Stage record: each pair's normal force and world-frame force on its body B over the
     step. Returns whether some contact carried a positive normal impulse."""
-    pair_force[:] = 0.0
-    pair_wrench[:] = 0.0
+    for p in range(pair_force.shape[0]):  # (indexed, as in `_distances`)
+        pair_force[p] = 0.0
+        pair_wrench[p, 0], pair_wrench[p, 1], pair_wrench[p, 2] = 0.0, 0.0, 0.0
     pushed = False
     for i in range(p_n.shape[0]):
         pair_force[c_pair[i]] += p_n[i] / h

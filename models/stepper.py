@@ -457,15 +457,17 @@ def any_limited(max_force):
 
 
 @numba.njit(cache=True, inline="always")
-def drive_reference(h, q_ref, u, lower, upper, j):
-    """(q_ref+, feed-forward speed) of drive j: the reference advances by h u, stopped at the
-    position limits; its speed is u, or the reference's own speed where a limit stopped it
-    (so a drive held at its limit rests at the limit, not kd u / kp past it)."""
-    target = q_ref[j] + h * u[j]
-    new = min(max(target, lower[j]), upper[j])
+def drive_reference(h, q_ref, u, lower, upper):
+    """(q_ref+, feed-forward speed) of a drive at reference q_ref, commanded speed u and
+    position limits [lower, upper]: the reference advances by h u, stopped at the limits; its
+    speed is u, or the reference's own speed where a limit stopped it (so a drive held at its
+    limit rests at the limit, not kd u / kp past it). Scalars: the callers loop over the
+    drives, and an inlined helper's array arguments are reference-counted on every pass."""
+    target = q_ref + h * u
+    new = min(max(target, lower), upper)
     if new == target:
-        return new, u[j]
-    return new, (new - q_ref[j]) / h
+        return new, u
+    return new, (new - q_ref) / h
 
 
 @numba.njit(cache=True)
@@ -505,9 +507,11 @@ def _column_norm(W, i):
 
 @numba.njit(cache=True, inline="always")
 def _finite_and_bounded(x):
+    """Every entry of the 1-D x finite and within DIVERGENCE_LIMIT (indexed: x.ravel() made a
+    new array each step)."""
     ok = True
-    for v in x.ravel():
-        if not (abs(v) <= DIVERGENCE_LIMIT):
+    for i in range(x.shape[0]):
+        if not (abs(x[i]) <= DIVERGENCE_LIMIT):
             ok = False
     return ok
 
@@ -539,7 +543,7 @@ def free_step(eps, theta, h, bi, Ainv, M_const, rhs_const, q, nu, q_ref, u, q_in
         add_product(rhs, M_const, nu, eps)
     q_ref_new = q_ref.copy()
     for j in range(v_index.shape[0]):
-        q_ref_new[j], ff = drive_reference(h, q_ref, u, lower, upper, j)
+        q_ref_new[j], ff = drive_reference(h, q_ref[j], u[j], lower[j], upper[j])
         rhs[v_index[j]] += h * (kp[j] * (q_ref_new[j] - q[q_index[j]]) + kd[j] * ff)
     nu_new = np.zeros(rhs.shape[0])
     add_product(nu_new, Ainv, rhs, 1.0)
@@ -604,10 +608,11 @@ def _drives(h, q, q_ref, u, drives, rhs):
     enters the contact problem shifted to be >= 0) and its PD impulse at nu = 0 in a[j].
     Returns (q_ref+, a)."""
     q_index, v_index, kp, kd, max_force = drives.q_index, drives.v_index, drives.kp, drives.kd, drives.max_force
+    lower, upper = drives.lower, drives.upper  # hoisted: a tuple's array read in the loop is counted per pass
     q_ref_new = q_ref.copy()
     a = np.zeros(v_index.shape[0])
     for j in range(v_index.shape[0]):
-        q_ref_new[j], ff = drive_reference(h, q_ref, u, drives.lower, drives.upper, j)
+        q_ref_new[j], ff = drive_reference(h, q_ref[j], u[j], lower[j], upper[j])
         pd = h * (kp[j] * (q_ref_new[j] - q[q_index[j]]) + kd[j] * ff)
         if np.isfinite(max_force[j]):
             a[j] = pd
@@ -1185,10 +1190,7 @@ def _contact_solve(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf,
         p_t[fric[f], 0] = t[nc + f]
         if spatial:
             p_t[fric[f], 1] = t[nc + nf + f]
-    nu_new = nu_free.copy()  # + Y t, as a loop: numba's @ calls BLAS, whose overhead dwarfs a few DOFs
-    for v in range(Y.shape[0]):
-        for g in range(Y.shape[1]):
-            nu_new[v] += Y[v, g] * t[g]
+    nu_new = nu_free + Y @ t  # (BLAS: a loop moves the round-off, docs/measurements.md)
     basis_new = _basis_kept(basis, basic_z, active, slot, fric, nf, d, lim, m)
     return nu_new, p_n, p_t, StepStatus.OK.value, pivots, residual, n, basis_new
 
