@@ -136,10 +136,10 @@ def _halfspace_normal(bi, bf, q, h, pos):
 def _broadphase(bi, bf, q, pi, pos, speed, margin, reach):
     """First broadphase stage, for every pair: reach[p] = margin + both bodies' speed margins
     (speed, `_speed_margins`) where the pair's bounding spheres (against a half-space: the
-    sphere against the plane) are within it, -1 where they are not or the pair is inert.
+    sphere against the plane) are within it, -inf where they are not or the pair is inert.
     One loop here, as `_speed_margins`."""
     for p in range(pi.shape[0]):
-        reach[p] = -1.0
+        reach[p] = -np.inf
         if pi[p, PI_INERT]:
             continue
         a, b = pi[p, PI_A], pi[p, PI_B]
@@ -201,7 +201,7 @@ def detect_planar_into(bi, bf, verts, pi, q, nu, h, margin, c_pair, c_psi, c_n, 
     # that function twice, for Literal[int](0) (numba's first typing pass) and for int64
     nc = np.int64(0)
     for p in range(pi.shape[0]):
-        if reach[p] >= 0.0:
+        if reach[p] > -np.inf:
             k = collide_2d(bi, bf, verts, poses, pi[p, PI_A], pi[p, PI_B], reach[p], c_psi, c_n, c_pa, c_pb, nc)
             for i in range(nc, nc + k):
                 c_pair[i] = p
@@ -247,7 +247,7 @@ def detect_spatial(S, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsuppor
     n_unsupported = 0
     for p in range(pi.shape[0]):
         r = reach[p]
-        if r < 0.0:
+        if r == -np.inf:
             continue
         a, b = pi[p, PI_A], pi[p, PI_B]
         if bi[a, BI_KIND] != SHAPE_HALFSPACE and bi[b, BI_KIND] != SHAPE_HALFSPACE and _aabbs_apart(S, q, a, b, r):
