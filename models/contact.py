@@ -23,7 +23,7 @@ import numba
 import numpy as np
 
 from models.contact2d import collide_2d
-from models.contact3d import _pose, collide_pair_3d, tangent_basis
+from models.contact3d import collide_pair_3d, pose_of, tangent_basis
 from models.kinematics import (
     BF_BOUND,
     BF_HSN,
@@ -210,27 +210,28 @@ def detect_planar_into(bi, bf, verts, pi, q, nu, h, margin, c_pair, c_psi, c_n, 
 
 
 @numba.njit(cache=True, inline="always")
-def _world_aabb(S, q, b):
-    """Body b's world bounding box at q, (lo x, y, z, hi x, y, z): without allocating, and
-    inlined (the broadphase runs every step; a call would reference-count all of S's arrays)."""
-    (px, py, pz), R = _pose(S, q, b)
+def _world_aabb(qmap, base_pos, base_quat, vstart, vcount, verts, radius, q, b):
+    """Body b's world bounding box at q, (lo x, y, z, hi x, y, z): without allocating, and on
+    the arrays of `SceneData` it reads, not the scene (the broadphase runs per pair each step,
+    and the scene's ~30 arrays would be reference-counted on every pass)."""
+    (px, py, pz), R = pose_of(qmap, base_pos, base_quat, q, b)
     lx, ly, lz, hx, hy, hz = np.inf, np.inf, np.inf, -np.inf, -np.inf, -np.inf
-    for i in range(S.vstart[b], S.vstart[b] + S.vcount[b]):
-        vx, vy, vz = S.verts[i, 0], S.verts[i, 1], S.verts[i, 2]
+    for i in range(vstart[b], vstart[b] + vcount[b]):
+        vx, vy, vz = verts[i, 0], verts[i, 1], verts[i, 2]
         x = px + R[0][0] * vx + R[0][1] * vy + R[0][2] * vz
         y = py + R[1][0] * vx + R[1][1] * vy + R[1][2] * vz
         z = pz + R[2][0] * vx + R[2][1] * vy + R[2][2] * vz
         lx, ly, lz = min(lx, x), min(ly, y), min(lz, z)
         hx, hy, hz = max(hx, x), max(hy, y), max(hz, z)
-    r = S.radius[b]
+    r = radius[b]
     return lx - r, ly - r, lz - r, hx + r, hy + r, hz + r
 
 
 @numba.njit(cache=True, inline="always")
-def _aabbs_apart(S, q, a, b, reach):
+def _aabbs_apart(qmap, base_pos, base_quat, vstart, vcount, verts, radius, q, a, b, reach):
     """Second broadphase stage in space: world bounding boxes farther apart than reach."""
-    a0, a1, a2, a3, a4, a5 = _world_aabb(S, q, a)
-    b0, b1, b2, b3, b4, b5 = _world_aabb(S, q, b)
+    a0, a1, a2, a3, a4, a5 = _world_aabb(qmap, base_pos, base_quat, vstart, vcount, verts, radius, q, a)
+    b0, b1, b2, b3, b4, b5 = _world_aabb(qmap, base_pos, base_quat, vstart, vcount, verts, radius, q, b)
     return b0 - a3 > reach or a0 - b3 > reach or b1 - a4 > reach or a1 - b4 > reach or b2 - a5 > reach or a2 - b5 > reach
 
 
@@ -243,6 +244,7 @@ def detect_spatial(S, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsuppor
     _speed_margins(bi, bf, nu, MARGIN_SAFETY * h, speed)
     reach = np.empty(pi.shape[0])
     _broadphase(bi, bf, q, pi, pos, speed, margin, reach)
+    qmap, base_pos, base_quat, vstart, vcount, verts, radius = S.qmap, S.base_pos, S.base_quat, S.vstart, S.vcount, S.verts, S.radius
     nc = np.int64(0)
     n_unsupported = 0
     for p in range(pi.shape[0]):
@@ -250,8 +252,9 @@ def detect_spatial(S, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsuppor
         if r == -np.inf:
             continue
         a, b = pi[p, PI_A], pi[p, PI_B]
-        if bi[a, BI_KIND] != SHAPE_HALFSPACE and bi[b, BI_KIND] != SHAPE_HALFSPACE and _aabbs_apart(S, q, a, b, r):
-            continue
+        if bi[a, BI_KIND] != SHAPE_HALFSPACE and bi[b, BI_KIND] != SHAPE_HALFSPACE:
+            if _aabbs_apart(qmap, base_pos, base_quat, vstart, vcount, verts, radius, q, a, b, r):
+                continue
         k = collide_pair_3d(S, q, p, r, c_psi, c_n, c_pa, c_pb, nc)
         if k < 0:
             unsupported[n_unsupported] = p

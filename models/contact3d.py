@@ -174,10 +174,17 @@ def _mat_t_mul(A, B):
 def _pose(S, q, b):
     """(position, rotation as a tuple of rows) of spatial body b at q, without allocating:
     the same pose as models.kinematics.body_pose_3d."""
-    qm = S.qmap
-    px = S.base_pos[b, 0] if qm[b, Q_X] < 0 else q[qm[b, Q_X]]
-    py = S.base_pos[b, 1] if qm[b, Q_Y] < 0 else q[qm[b, Q_Y]]
-    pz = S.base_pos[b, 2] if qm[b, Q_Z] < 0 else q[qm[b, Q_Z]]
+    return pose_of(S.qmap, S.base_pos, S.base_quat, q, b)
+
+
+@numba.njit(cache=True, inline="always")
+def pose_of(qm, base_pos, base_quat, q, b):
+    """`_pose` on the three arrays it reads (qmap, base_pos, base_quat of `SceneData`): for
+    callers in a per-pair loop, where passing the whole scene would reference-count its ~30
+    arrays on every pass."""
+    px = base_pos[b, 0] if qm[b, Q_X] < 0 else q[qm[b, Q_X]]
+    py = base_pos[b, 1] if qm[b, Q_Y] < 0 else q[qm[b, Q_Y]]
+    pz = base_pos[b, 2] if qm[b, Q_Z] < 0 else q[qm[b, Q_Z]]
     if qm[b, Q_QW] >= 0:
         w, x, y, z = q[qm[b, Q_QW]], q[qm[b, Q_QW + 1]], q[qm[b, Q_QW + 2]], q[qm[b, Q_QW + 3]]
         inv = 1.0 / math.sqrt(w * w + x * x + y * y + z * z)
@@ -186,7 +193,7 @@ def _pose(S, q, b):
         yaw = q[qm[b, Q_ANGLE]]
         w, x, y, z = math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)
     else:
-        w, x, y, z = S.base_quat[b, 0], S.base_quat[b, 1], S.base_quat[b, 2], S.base_quat[b, 3]
+        w, x, y, z = base_quat[b, 0], base_quat[b, 1], base_quat[b, 2], base_quat[b, 3]
     R = (
         (1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)),
         (2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)),
