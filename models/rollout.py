@@ -46,6 +46,8 @@ from models.stepper import (
     LAW_MAX_SPEED,
     LAW_RATE,
     LAW_TARGET,
+    PART_ASSEMBLY,
+    PART_CONTACT_SOLVE,
     SOLVER_AUTO,
     SOLVER_LEMKE,
     SceneTables,
@@ -54,6 +56,7 @@ from models.stepper import (
     System,
     any_limited,
     basis_table,
+    contact_stage,
     dynamics_step,
     dynamics_step_inline,
     free_step,
@@ -604,7 +607,8 @@ def propagate_kernel(bound, x, u, duration, h, y):
 # ----------------------------------------------------------------------------- the cost split
 
 #: Stages `stage_loop` repeats (`ladder bench`'s cost split of a contact step); SETUP repeats none.
-STAGE_SETUP, STAGE_DETECT, STAGE_CLASSIFY, STAGE_JACOBIANS, STAGE_SOLVE = -1, 0, 1, 2, 3
+#: ASSEMBLY and CONTACT_SOLVE are the first parts of SOLVE (`models.stepper.contact_stage`).
+STAGE_SETUP, STAGE_DETECT, STAGE_CLASSIFY, STAGE_JACOBIANS, STAGE_SOLVE, STAGE_ASSEMBLY, STAGE_CONTACT_SOLVE = -1, 0, 1, 2, 3, 4, 5
 
 
 @numba.njit(cache=True)
@@ -614,7 +618,9 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
     STAGE_CLASSIFY the pair distances and the task's goal and unsafe predicates, STAGE_JACOBIANS
     the contact frames' Jacobian columns, STAGE_SOLVE the rung's dynamics step (A where it
     depends on q, the contact problem's assembly, its solve warm-started from the state's own
-    first solve as in a steady push (Lemke's basis, PGS's impulses), the integration). Every
+    first solve as in a steady push (Lemke's basis, PGS's impulses), the integration), and its
+    first parts: STAGE_ASSEMBLY (A, the free velocity and the LCP's assembly) and
+    STAGE_CONTACT_SOLVE (that and the contact solve). Every
     stage runs once first (STAGE_SETUP: only that), so a
     stage's cost per call is (time(stage) - time(STAGE_SETUP)) / repeats. For `ladder bench`
     (planar scenes without scripted obstacles, or spatial ones). Returns the contacts found."""
@@ -646,10 +652,14 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
             _classify_with(g_op, g_index, g_lo, g_hi, u_op, u_index, u_lo, u_hi, q, pair_psi, stack)
         if k == 0 or stage == STAGE_JACOBIANS:
             _assemble(bi, bf, pi, dimension, q, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, W_n, W_t, W_o, c_bias, False, True)
-        if k == 0 or stage == STAGE_SOLVE:
+        if k == 0 or stage >= STAGE_SOLVE:
             if rotating:  # as rollout_kernel: A depends on q
                 A = system_matrix(bi, bf, q, nv, eps_eff, h, D.v_index, D.kp, D.kd, D.max_force)
                 system = System(A, system.Ainv, system.M_const, system.rhs_const, system.dofs, system.count, system.inv)
+        if k > 0 and stage > STAGE_SOLVE:
+            part = PART_ASSEMBLY if stage == STAGE_ASSEMBLY else PART_CONTACT_SOLVE
+            contact_stage(part, model, solver, D, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis)
+        if k == 0 or stage == STAGE_SOLVE:
             r = dynamics_step(model, solver, D, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis)
             if k == 0:  # the warm starts (Lemke's basis, PGS's impulses) of a steady push
                 basis = r.basis

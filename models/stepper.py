@@ -90,10 +90,14 @@ LCP_REGULARIZATION = 1e-9
 LCP_REGULARIZATION_STEPS = 3
 #: A step's LCP is first tried on the previous step's complementary basis (`basis_table`); that
 #: point is accepted when its recomputed natural-map residual (on the LCP scaled to max |M| = 1)
-#: is at most this (1e5 below LCP_TOLERANCE, what the step accepts of a cold solve); else Lemke
+#: is at most this (1e3 below LCP_TOLERANCE, what the step accepts of a cold solve); else Lemke
 #: pivots from scratch. Not tighter: degenerate solutions carry round-off above 1e-14 whichever
-#: way they are found (a jammed grasp whose friction sits exactly on the cone's edge: 1e-13, cold).
-WARM_TOLERANCE = 1e-12
+#: way they are found. A contact whose friction sits exactly on the cone's edge (gamma = 0 and
+#: mu p_n - sum beta = 0, round-off in its scaled gamma row) left 1e-13 in a jammed grasp and
+#: 1.07e-12 in the paper scene's compliant squeeze, where at 1e-12 every step fell back to
+#: Lemke, which pivoted to the guessed basis and the same residual (89,160 pivots in 25,224
+#: LCPs; docs/measurements.md).
+WARM_TOLERANCE = 1e-10
 #: A state entry above this in magnitude counts as diverged.
 DIVERGENCE_LIMIT = 1e10
 
@@ -581,6 +585,72 @@ def dynamics_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_
     )
 
 
+@numba.njit(cache=True, inline="always")
+def _uses_pgs(model, solver, nc, limited):
+    """Whether a step with nc contacts (limited: force-limited drives, whose box rows only the
+    LCP has) solves them by PGS (`contact_pgs`), not the LCP by Lemke."""
+    use_pgs = model.exact_cone or solver.method == SOLVER_PGS or (solver.method == SOLVER_AUTO and nc >= solver.auto_contacts)
+    return nc > 0 and use_pgs and not limited
+
+
+#: Parts of a dynamics step `contact_stage` runs (`ladder bench`'s cost split).
+PART_ASSEMBLY, PART_CONTACT_SOLVE = 0, 1
+
+
+@numba.njit(cache=True)
+def contact_stage(part, model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis):
+    """The first part of `dynamics_step`, for the cost split: PART_ASSEMBLY the free velocity
+    (A's blocks, nu_free) and, on the Lemke path, the contact LCP built, scaled and its warm
+    start guessed (PGS assembles its blocks in its solve); PART_CONTACT_SOLVE that and the
+    contact problem solved (Lemke from the guess, or PGS from warm_n, warm_t). What is left of
+    the step is the impulses' velocity update, the deformations and the integration. Returns
+    the contact problem's size (0 where PART_CONTACT_SOLVE failed)."""
+    dofs, count, inv, ok = _blocks(tables.bi, system)
+    if not ok:
+        return 0
+    nu_free, q_ref_new, drive_a = _free_velocity(model, drives, tables, system, h, q, nu, q_ref, u, dofs, count, inv)
+    if _uses_pgs(model, solver, nc, any_limited(drives.max_force)):
+        if part == PART_ASSEMBLY:
+            return nc
+        eps = model.quasistatic_inertia if model.eps == 0.0 else model.eps
+        tolerance = solver.tolerance * min(eps, 1.0)  # (as `_pgs_step`)
+        r = contact_pgs(
+            model,
+            tables.spatial,
+            h,
+            tables.pi,
+            tables.pf,
+            contacts,
+            nc,
+            delta_n,
+            delta_t,
+            dofs,
+            count,
+            inv,
+            nu_free,
+            warm_n,
+            warm_t,
+            ZERO_COLUMN,
+            tolerance,
+            solver.max_sweeps,
+        )
+        return r.unknowns if r.status == PgsStatus.CONVERGED else 0
+    active = _active_contacts(contacts.W_n, nc)
+    spatial = tables.spatial
+    Mlcp, qlcp, Y, gen0, c0, gen1, c1, fric, nf, lim = contact_lcp(
+        model, spatial, h, dofs, count, inv, nu_free, active, tables.pi, tables.pf, contacts, delta_n, delta_t, drives, drive_a
+    )
+    d = model.friction_directions if spatial else 2
+    m = active.shape[0] + nf * d + lim.shape[0]
+    n = qlcp.shape[0]
+    _scale_lcp(Mlcp, qlcp, m)
+    guess = _basis_guess(basis, active, contacts.slot, fric, nf, d, lim, m, n)
+    if part == PART_ASSEMBLY:
+        return n
+    z, w, status, pivots, basic_z, _ = lemke_warm_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1), guess, WARM_TOLERANCE)
+    return n if status == STATUS_SOLVED or status == STATUS_SOLVED_INACCURATE else 0
+
+
 # The step's once-a-step links (dynamics_step_inline, _lemke_step, _pgs_step, _free_velocity,
 # _contact_solve, contact_lcp) are inlined: a call reference-counts each of the ~30 arrays it
 # is passed, which was a fifth to a third of a contact step (docs/measurements.md, profiled).
@@ -589,8 +659,7 @@ def dynamics_step_inline(model, solver, drives, tables, system, h, q, nu, q_ref,
     """`dynamics_step` with a basis table (never None), inlined into its caller: the rollout
     calls it so, since a call reference-counts every array of the ~30 it is passed (the
     step's per-step once-a-step helpers below are inlined for the same reason)."""
-    use_pgs = model.exact_cone or solver.method == SOLVER_PGS or (solver.method == SOLVER_AUTO and nc >= solver.auto_contacts)
-    if nc > 0 and use_pgs and not any_limited(drives.max_force):
+    if _uses_pgs(model, solver, nc, any_limited(drives.max_force)):
         out = _pgs_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis)
         if out.status == StepStatus.OK or solver.method == SOLVER_PGS or model.exact_cone:
             return out  # (no LCP of the exact cone to fall back on)
@@ -1153,13 +1222,7 @@ def _contact_solve(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf,
     nd = nf * d
     m = nc + nd + lim.shape[0]
     n = qlcp.shape[0]
-    # LCP(s M, s q) has the solutions of LCP(M, q): scale to unit size for Lemke's pivot
-    # tolerances (quasistatic rungs make M ~ 1 / QUASISTATIC_INERTIA)
-    scale = _largest_entry(Mlcp, m)
-    if scale > 0.0:
-        inverse = 1.0 / scale  # a product per entry: divisions cost 0.5 us of box_push's 9.5 us solve
-        Mlcp *= inverse
-        qlcp *= inverse
+    _scale_lcp(Mlcp, qlcp, m)
     slot = contacts.slot
     guess = _basis_guess(basis, active, slot, fric, nf, d, lim, m, n)
     z, w, status, pivots, basic_z, _ = lemke_warm_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1), guess, WARM_TOLERANCE)
@@ -1193,6 +1256,17 @@ def _contact_solve(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf,
     nu_new = nu_free + Y @ t  # (BLAS: a loop moves the round-off, docs/measurements.md)
     basis_new = _basis_kept(basis, basic_z, active, slot, fric, nf, d, lim, m)
     return nu_new, p_n, p_t, StepStatus.OK.value, pivots, residual, n, basis_new
+
+
+@numba.njit(cache=True, inline="always")
+def _scale_lcp(Mlcp, qlcp, m):
+    """LCP(s M, s q) has the solutions of LCP(M, q): scale both, in place, to max |M| = 1 for
+    Lemke's pivot tolerances (quasistatic rungs make M ~ 1 / QUASISTATIC_INERTIA)."""
+    scale = _largest_entry(Mlcp, m)
+    if scale > 0.0:
+        inverse = 1.0 / scale  # a product per entry: divisions cost 0.5 us of box_push's 9.5 us solve
+        Mlcp *= inverse
+        qlcp *= inverse
 
 
 @numba.njit(cache=True, inline="always")

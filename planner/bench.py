@@ -355,9 +355,11 @@ SPLIT_REPEATS = 20_000
 
 def _cost_split(scene: str, scenario, rung, state, u: np.ndarray, h: float, quick: bool) -> dict:
     """Where a contact step's time goes, at one state (`models.rollout.stage_loop`): detection,
-    the pair distances and the task's predicates, the contact Jacobians, and the dynamics step
-    (the contact problem's assembly and warm-started solve, the integration), in us per call
-    (best of 3 runs of SPLIT_REPEATS calls, less the setup's time)."""
+    the pair distances and the task's predicates, the contact Jacobians, and the dynamics step in
+    its three parts (`models.stepper.contact_stage`): the free velocity and the LCP's assembly, the
+    warm-started contact solve, and the rest (the impulses' velocity update, the integration), in
+    us per call (best of 3 runs of SPLIT_REPEATS calls, less the setup's time; the parts are
+    differences of runs that stop after each, floored at 0)."""
     from models import rollout as R
     from models.rungs import compiled
 
@@ -375,9 +377,16 @@ def _cost_split(scene: str, scenario, rung, state, u: np.ndarray, h: float, quic
 
     setup, contacts = run(R.STAGE_SETUP, repeats)
     stages = {"detection": R.STAGE_DETECT, "distances and predicates": R.STAGE_CLASSIFY, "Jacobians": R.STAGE_JACOBIANS}
-    stages["contact problem and integration"] = R.STAGE_SOLVE
     us = {name: max(run(stage, repeats)[0] - setup, 0.0) / repeats * 1e6 for name, stage in stages.items()}
+    # the step's parts: runs that stop after the assembly, after the contact solve, and the whole step
+    upto = [max(run(stage, repeats)[0] - setup, 0.0) / repeats * 1e6 for stage in (R.STAGE_ASSEMBLY, R.STAGE_CONTACT_SOLVE, R.STAGE_SOLVE)]
+    for name, low, high in zip(SPLIT_STEP_PARTS, [0.0, *upto[:2]], upto):
+        us[name] = max(high - low, 0.0)
     return {"scene": scene, "contacts": contacts, "us": us, "repeats": repeats}
+
+
+#: The dynamics step's parts in the cost split (`_cost_split`).
+SPLIT_STEP_PARTS = ("free velocity and assembly", "contact solve", "impulses and integration")
 
 
 def in_turns(ours, theirs: list, repeat: int):
@@ -1006,8 +1015,11 @@ def contact_markdown(contact: dict | None) -> list[str]:
         lines += [
             "",
             "Where a contact step's time goes, at one state of each run (`models.rollout.stage_loop`: each stage "
-            f"repeated {contact['split'][0]['repeats']:,} times at the state, best of 3, us per call; the rest of a "
-            "step in the table above is the rollout's bookkeeping: records, forces, the warm start's table):",
+            f"repeated {contact['split'][0]['repeats']:,} times at the state, best of 3, us per call; the dynamics step "
+            "in its three parts (`models.stepper.contact_stage`): the free velocity and the LCP's assembly (PGS "
+            "assembles its blocks in its solve), the warm-started contact solve, the impulses' velocity update and the "
+            "integration; the rest of a step in the table above is the rollout's bookkeeping: records, forces, the warm "
+            "start's table):",
             "",
             "| state | contacts | " + " | ".join(names) + " | sum |",
             "|---|---|" + "---|" * (len(names) + 1),
