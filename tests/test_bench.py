@@ -51,13 +51,13 @@ def test_throughput_and_scaling_report_every_rung(quick):
     contact = r["throughput"]["contact"]["rows"]
     assert len(contact) == 5 and all(row["contact_steps"] > 0.5 * row["steps"] and row["us_per_step"] > 0 for row in contact)
     # the cost split of a contact step, at a squeezing and two pushing states: every stage timed, the dynamics
-    # step in its three parts, which together cost more than detection; the contact solve takes time everywhere
+    # step in its three parts (differences of timed runs, floored at 0), which together cost the most
     split = r["throughput"]["contact"]["split"]
     assert [s["contacts"] for s in split] == [2, 5, 5]
     for s in split:
         assert list(s["us"]) == ["detection", "distances and predicates", "Jacobians", *SPLIT_STEP_PARTS]
-        assert sum(s["us"][name] for name in SPLIT_STEP_PARTS) > s["us"]["detection"] > 0
-        assert s["us"]["contact solve"] > 0
+        step = sum(s["us"][name] for name in SPLIT_STEP_PARTS)
+        assert step > max(s["us"]["detection"], s["us"]["distances and predicates"], s["us"]["Jacobians"]) and min(s["us"].values()) >= 0
     peer = r["throughput"]["peer"]
     assert "skipped" in peer or "steps_per_s" in peer
     if "skipped" not in peer:  # the contact rows are timed against MuJoCo too
