@@ -1016,7 +1016,7 @@ def contact_markdown(contact: dict | None) -> list[str]:
             "",
             "Where a contact step's time goes, at one state of each run (`models.rollout.stage_loop`: each stage "
             f"repeated {contact['split'][0]['repeats']:,} times at the state, best of 3, us per call; the dynamics step "
-            "in its three parts (`models.stepper.contact_stage`): the free velocity and the LCP's assembly (PGS "
+            "in its three parts (`models.stepper.contact_stage`): A where it depends on q, the free velocity and the LCP's assembly (PGS "
             "assembles its blocks in its solve), the warm-started contact solve, the impulses' velocity update and the "
             "integration; the rest of a step in the table above is the rollout's bookkeeping: records, forces, the warm "
             "start's table):",
