@@ -358,33 +358,37 @@ def _cost_split(scene: str, scenario, rung, state, u: np.ndarray, h: float, quic
     the pair distances and the task's predicates, the contact Jacobians, and the dynamics step in
     its three parts (`models.stepper.contact_stage`): the free velocity and the LCP's assembly, the
     warm-started contact solve, and the rest (the impulses' velocity update, the integration), in
-    us per call (best of 3 runs of SPLIT_REPEATS calls, less the setup's time; the parts are
-    differences of runs that stop after each, floored at 0)."""
+    us per call (each stage's best of SPLIT_ROUNDS runs of SPLIT_REPEATS calls, the stages in
+    turns within a round so that a busy spell of the machine does not fall on one stage alone,
+    less the setup's time; the parts are differences of runs that stop after each, floored at 0)."""
     from models import rollout as R
     from models.rungs import compiled
 
     c = compiled(scenario)
     repeats = SPLIT_REPEATS // (10 if quick else 1)
     args = (c.scene, c.drives, rung.model, rung.solver, c.goal, c.unsafe, state.q, state.nu, state.q_ref, state.delta_n, state.delta_t)
-
-    def run(stage: int, n: int) -> tuple[float, int]:
-        best, contacts = np.inf, 0
-        for _ in range(3):
+    order = (R.STAGE_SETUP, R.STAGE_DETECT, R.STAGE_CLASSIFY, R.STAGE_JACOBIANS, R.STAGE_ASSEMBLY, R.STAGE_CONTACT_SOLVE, R.STAGE_SOLVE)
+    best, contacts = dict.fromkeys(order, np.inf), 0
+    for _ in range(SPLIT_ROUNDS):
+        for stage in order:
             t0 = time.perf_counter()
-            contacts = R.stage_loop(stage, *args, np.asarray(u, float), float(h), n)
-            best = min(best, time.perf_counter() - t0)
-        return best, contacts
-
-    setup, contacts = run(R.STAGE_SETUP, repeats)
-    stages = {"detection": R.STAGE_DETECT, "distances and predicates": R.STAGE_CLASSIFY, "Jacobians": R.STAGE_JACOBIANS}
-    us = {name: max(run(stage, repeats)[0] - setup, 0.0) / repeats * 1e6 for name, stage in stages.items()}
+            contacts = R.stage_loop(stage, *args, np.asarray(u, float), float(h), repeats)
+            best[stage] = min(best[stage], time.perf_counter() - t0)
+    per_call = {stage: max(best[stage] - best[R.STAGE_SETUP], 0.0) / repeats * 1e6 for stage in order}
+    us = {
+        "detection": per_call[R.STAGE_DETECT],
+        "distances and predicates": per_call[R.STAGE_CLASSIFY],
+        "Jacobians": per_call[R.STAGE_JACOBIANS],
+    }
     # the step's parts: runs that stop after the assembly, after the contact solve, and the whole step
-    upto = [max(run(stage, repeats)[0] - setup, 0.0) / repeats * 1e6 for stage in (R.STAGE_ASSEMBLY, R.STAGE_CONTACT_SOLVE, R.STAGE_SOLVE)]
+    upto = [per_call[stage] for stage in (R.STAGE_ASSEMBLY, R.STAGE_CONTACT_SOLVE, R.STAGE_SOLVE)]
     for name, low, high in zip(SPLIT_STEP_PARTS, [0.0, *upto[:2]], upto):
         us[name] = max(high - low, 0.0)
-    return {"scene": scene, "contacts": contacts, "us": us, "repeats": repeats}
+    return {"scene": scene, "contacts": contacts, "us": us, "repeats": repeats, "rounds": SPLIT_ROUNDS}
 
 
+#: Rounds of the cost split: each stage's time is its best over them (`_cost_split`).
+SPLIT_ROUNDS = 5
 #: The dynamics step's parts in the cost split (`_cost_split`).
 SPLIT_STEP_PARTS = ("free velocity and assembly", "contact solve", "impulses and integration")
 
@@ -1015,7 +1019,8 @@ def contact_markdown(contact: dict | None) -> list[str]:
         lines += [
             "",
             "Where a contact step's time goes, at one state of each run (`models.rollout.stage_loop`: each stage "
-            f"repeated {contact['split'][0]['repeats']:,} times at the state, best of 3, us per call; the dynamics step "
+            f"repeated {contact['split'][0]['repeats']:,} times at the state, the best of {contact['split'][0]['rounds']} rounds "
+            "that run the stages in turns, us per call; the dynamics step "
             "in its three parts (`models.stepper.contact_stage`): A where it depends on q, the free velocity and the LCP's assembly (PGS "
             "assembles its blocks in its solve), the warm-started contact solve, the impulses' velocity update and the "
             "integration; the rest of a step in the table above is the rollout's bookkeeping: records, forces, the warm "
