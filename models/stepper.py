@@ -586,6 +586,15 @@ def dynamics_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_
 
 
 @numba.njit(cache=True, inline="always")
+def _pgs_tolerance(model, solver):
+    """PGS's relative tolerance in a step: a passive body's velocity error is its impulse error
+    over eps m, so the solver's tolerance is tightened by eps, and quasistatic rungs (eps -> 0)
+    get velocities as accurate as dynamic ones."""
+    eps = model.quasistatic_inertia if model.eps == 0.0 else model.eps
+    return solver.tolerance * min(eps, 1.0)
+
+
+@numba.njit(cache=True, inline="always")
 def _uses_pgs(model, solver, nc, limited):
     """Whether a step with nc contacts (limited: force-limited drives, whose box rows only the
     LCP has) solves them by PGS (`contact_pgs`), not the LCP by Lemke."""
@@ -612,8 +621,7 @@ def contact_stage(part, model, solver, drives, tables, system, h, q, nu, q_ref, 
     if _uses_pgs(model, solver, nc, any_limited(drives.max_force)):
         if part == PART_ASSEMBLY:
             return nc
-        eps = model.quasistatic_inertia if model.eps == 0.0 else model.eps
-        tolerance = solver.tolerance * min(eps, 1.0)  # (as `_pgs_step`)
+        tolerance = _pgs_tolerance(model, solver)
         r = contact_pgs(
             model,
             tables.spatial,
@@ -834,9 +842,7 @@ def _pgs_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, d
             rhs += h * eps * gyroscopic_force(bi, bf, q, nu, nv)
     q_ref_new, _ = _drives(h, q, q_ref, u, drives, rhs)
     nu_free = block_solve(dofs, count, inv, rhs)
-    # a passive body's velocity error is its impulse error over eps m: tighten by eps so that
-    # quasistatic rungs (eps -> 0) get velocities as accurate as dynamic ones
-    tolerance = solver.tolerance * min(eps, 1.0)
+    tolerance = _pgs_tolerance(model, solver)
     r = contact_pgs(
         model,
         tables.spatial,
