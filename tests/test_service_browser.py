@@ -86,6 +86,8 @@ def test_the_viewer_submits_the_paper_scene_follows_it_and_animates_the_plan(bro
         assert "rung_ended: dynamic-compliant" in log  # the top rung, followed live through the events
         ids = [int(line.split()[0]) for line in log.splitlines() if line.strip()]
         assert ids == sorted(ids) and len(set(ids)) == len(ids)
+        # the jobs table redraws after the job's end arrives (its refresh is asynchronous)
+        page.wait_for_function("document.querySelector('#jobs tr.job td.succeeded') !== null", timeout=timeout_ms)
         assert page.locator("#jobs tr.job").count() == 1 and "succeeded" in page.inner_text("#jobs tr.job")
 
         page.wait_for_function("document.querySelectorAll('#rung option').length === 4", timeout=timeout_ms)
