@@ -22,7 +22,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from models.contact2d import collide_2d
+from models.contact2d import APART_SLACK, apart_along, collide_2d
 from models.contact3d import collide_pair_3d, pose_of, tangent_basis
 from models.kinematics import (
     BF_BOUND,
@@ -177,22 +177,28 @@ def detect_contacts(S, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsuppo
 @numba.njit(cache=True)
 def detect_planar(bi, bf, verts, pi, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb):
     """detect_contacts for planar scenes on the packed tables."""
-    pos, poses, speed, reach = planar_scratch(bi.shape[0], pi.shape[0])
-    return detect_planar_into(bi, bf, verts, pi, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, pos, poses, speed, reach)
+    pos, poses, speed, reach, axis = planar_scratch(bi.shape[0], pi.shape[0])
+    return detect_planar_into(bi, bf, verts, pi, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, pos, poses, speed, reach, axis)
 
 
 @numba.njit(cache=True, inline="always")
 def planar_scratch(nb, n_pairs):
     """The planar detection's scratch (`detect_planar_into`): per body its position (nb, 3),
-    pose (nb, 4) and speed margin (nb,), per pair its reach (n_pairs,). C-contiguous arrays,
+    pose (nb, 4) and speed margin (nb,), per pair its reach (n_pairs,) and last separating axis
+    (n_pairs, 2; zero: none yet), which carries over from step to step. C-contiguous arrays,
     not views of one table: a strided view compiled the narrowphase kernels a second time,
     beside the C-contiguous arrays Python passes them."""
-    return np.empty((nb, 3)), np.empty((nb, 4)), np.empty(nb), np.empty(n_pairs)
+    return np.empty((nb, 3)), np.empty((nb, 4)), np.empty(nb), np.empty(n_pairs), np.zeros((n_pairs, 2))
 
 
 @numba.njit(cache=True)
-def detect_planar_into(bi, bf, verts, pi, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, pos, poses, speed, reach):
-    """detect_planar with the caller's scratch (`planar_scratch`): the rollout's hot path."""
+def detect_planar_into(bi, bf, verts, pi, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, pos, poses, speed, reach, axis):
+    """detect_planar with the caller's scratch (`planar_scratch`): the rollout's hot path.
+
+    Between the broadphase and the narrowphase, a pair of two cores is skipped when its gap
+    along its last separating axis (`apart_along`, the axis kept in the scratch from the step
+    that last ran its narrowphase) exceeds its reach by APART_SLACK: the narrowphase would find
+    it apart too, so the contacts are the same, without its allocations and distance search."""
     positions(bi, bf, q, pos)
     planar_poses(bi, bf, q, poses)
     _speed_margins(bi, bf, nu, MARGIN_SAFETY * h, speed)
@@ -201,8 +207,16 @@ def detect_planar_into(bi, bf, verts, pi, q, nu, h, margin, c_pair, c_psi, c_n, 
     # that function twice, for Literal[int](0) (numba's first typing pass) and for int64
     nc = np.int64(0)
     for p in range(pi.shape[0]):
-        if reach[p] > -np.inf:
-            k = collide_2d(bi, bf, verts, poses, pi[p, PI_A], pi[p, PI_B], reach[p], c_psi, c_n, c_pa, c_pb, nc)
+        r = reach[p]
+        if r > -np.inf:
+            a, b = pi[p, PI_A], pi[p, PI_B]
+            if (
+                bi[a, BI_KIND] != SHAPE_HALFSPACE
+                and bi[b, BI_KIND] != SHAPE_HALFSPACE
+                and apart_along(bi, bf, verts, poses, a, b, axis[p, 0], axis[p, 1]) > r + APART_SLACK
+            ):
+                continue
+            k = collide_2d(bi, bf, verts, poses, a, b, r, c_psi, c_n, c_pa, c_pb, nc, axis[p])
             for i in range(nc, nc + k):
                 c_pair[i] = p
             nc += k

@@ -398,7 +398,7 @@ def rollout_kernel(
     # call solves with Lemke, instead of paying PGS's sweeps before Lemke every step
     lemke = Solver(SOLVER_LEMKE, solver.tolerance, solver.max_sweeps, solver.auto_contacts)
     step_solver = solver
-    unsupported, pair_psi, pair_force, pair_wrench, (pos, poses, speed, reach) = _pair_buffers(pi.shape[0], bi.shape[0])
+    unsupported, pair_psi, pair_force, pair_wrench, (pos, poses, speed, reach, axis) = _pair_buffers(pi.shape[0], bi.shape[0])
     g_op, g_index, g_lo, g_hi = goal  # hoisted: reading a tuple's array in the loop costs a reference count
     u_op, u_index, u_lo, u_hi = unsafe
     q_index, v_index, kp, kd, lower, upper, _, max_force, law = D
@@ -438,7 +438,7 @@ def rollout_kernel(
                 nc, n_unsupported = detect_spatial(S, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported)
             else:
                 nc = detect_planar_into(
-                    bi, bf, verts, pi, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, pos, poses, speed, reach
+                    bi, bf, verts, pi, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, pos, poses, speed, reach, axis
                 )
             smallest = _distances(nc, c_pair, c_psi, c_slot, first_slot, pair_psi)
             if smallest < min_psi:
@@ -629,7 +629,7 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
     contacts, first_slot = contact_buffers(pi, nv)
     c_pair, c_psi, c_slot, W_n, W_t, W_o, c_bias = contacts
     c_n, c_t, c_o, c_pa, c_pb, warm_n, warm_t, warm_slots = _contact_frames(c_psi.shape[0])
-    unsupported, pair_psi, _, _, (pos, poses, speed, reach) = _pair_buffers(pi.shape[0], bi.shape[0])
+    unsupported, pair_psi, _, _, (pos, poses, speed, reach, axis) = _pair_buffers(pi.shape[0], bi.shape[0])
     g_op, g_index, g_lo, g_hi = goal
     u_op, u_index, u_lo, u_hi = unsafe
     stack = np.zeros(max(g_op.shape[0], u_op.shape[0]) + 1, np.bool_)
@@ -645,7 +645,7 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
                 nc, _ = detect_spatial(S, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported)
             else:
                 nc = detect_planar_into(
-                    bi, bf, verts, pi, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, pos, poses, speed, reach
+                    bi, bf, verts, pi, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, pos, poses, speed, reach, axis
                 )
         if k == 0 or stage == STAGE_CLASSIFY:
             _distances(nc, c_pair, c_psi, c_slot, first_slot, pair_psi)

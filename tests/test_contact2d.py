@@ -172,3 +172,69 @@ def test_broadphase_keeps_far_pairs_out_and_widens_with_speed(tmp_path):
     assert not np.any(contact_frames(S, q).pair == 2)
     nu = np.array([0.0, 0.0, 0.0, -50.0, 0.0, 0.0])  # closing at 50 m/s: 0.5 m in one 10 ms step
     assert np.any(contact_frames(S, q, nu=nu, h=1e-2).pair == 2)
+
+
+@pytest.mark.parametrize("a, b", PAIRS, ids=lambda x: x)
+def test_gap_along_any_axis_bounds_the_distance_and_the_last_axis_meets_it(tmp_path, a, b):
+    from models.contact2d import apart_along, collide_2d
+    from models.kinematics import planar_poses
+
+    scenario, S = pair_scene(tmp_path, a, b)
+    ia, ib = int(S.pi[2, 0]), int(S.pi[2, 1])  # pair 2 = (a, b)
+    rng = np.random.default_rng(zlib.crc32(f"axis-{a}-{b}".encode()))
+    poses = np.zeros((S.bi.shape[0], 4))
+    tight = 0
+    for _ in range(100):
+        q = random_q(rng) * np.array([2.0, 2.0, 1.0, 2.0, 2.0, 1.0])  # apart as often as not
+        planar_poses(S.bi, S.bf, q, poses)
+        exact = reference_psi(scenario, q, 2, S)
+        for angle in rng.uniform(-np.pi, np.pi, 5):  # any unit axis: a lower bound
+            assert apart_along(S.bi, S.bf, S.verts, poses, ia, ib, np.cos(angle), np.sin(angle)) <= exact + 1e-12
+        cap = int(S.pair_max_contacts[2])
+        axis = np.zeros(2)  # set by the narrowphase: its direction from a to b
+        collide_2d(S.bi, S.bf, S.verts, poses, ia, ib, 1e9, np.zeros(cap), *(np.zeros((cap, 3)) for _ in range(3)), 0, axis)
+        bound = apart_along(S.bi, S.bf, S.verts, poses, ia, ib, axis[0], axis[1])
+        assert bound <= exact + 1e-12
+        if exact > 1e-6:  # apart: the narrowphase's own direction gives the distance itself
+            assert bound == pytest.approx(exact, abs=1e-9)
+            tight += 1
+    assert tight >= 20
+
+
+def test_detection_skips_pairs_apart_along_their_last_axis_and_finds_the_same_contacts(triangle_file):
+    """The rollout's detection carries each pair's last separating axis from step to step and
+    skips the narrowphase of a pair whose gap along it exceeds its reach: along the fingers'
+    descent onto the triangle (apart, then touching, then pressed in) the contacts are bitwise
+    those of a detection that starts afresh every step, and the skip happens."""
+    from models.contact import detect_planar, detect_planar_into, planar_scratch
+    from models.contact2d import APART_SLACK, apart_along
+    from models.kinematics import BI_KIND, SHAPE_HALFSPACE, compile_scene, planar_poses
+    from models.scenario import load_scenario
+
+    S = compile_scene(load_scenario(triangle_file))
+    bi, bf, verts, pi = S.bi, S.bf, S.verts, S.pi
+    cap = int(S.pair_max_contacts.sum())
+    carried, fresh = ([np.zeros(cap, np.int64), np.zeros(cap), *(np.zeros((cap, 3)) for _ in range(3))] for _ in range(2))
+    pos, poses, speed, reach, axis = planar_scratch(bi.shape[0], pi.shape[0])
+    cores = [p for p in range(pi.shape[0]) if SHAPE_HALFSPACE not in (bi[pi[p, 0], BI_KIND], bi[pi[p, 1], BI_KIND])]
+    h, nu, here = 1e-3, np.array([0.3, -1.0, -1.2]), np.zeros_like(poses)
+    skipped, narrowphase, touching = 0, 0, 0
+    for k in range(1700):  # the fingers from y = 2.05 to 0.5 and below, the triangle sliding
+        q = np.array([0.3 * k * h - 0.2, 2.05 - 1.0 * k * h, 2.05 - 1.2 * k * h])
+        before = axis.copy()
+        n_c = detect_planar_into(bi, bf, verts, pi, q, nu, h, 1e-3, *carried, pos, poses, speed, reach, axis)
+        n_f = detect_planar(bi, bf, verts, pi, q, nu, h, 1e-3, *fresh)
+        assert n_c == n_f
+        for x, y in zip(carried, fresh):
+            np.testing.assert_array_equal(x[:n_c], y[:n_f])
+        touching += n_c > 0
+        planar_poses(bi, bf, q, here)
+        for p in cores:
+            if reach[p] > -np.inf:
+                gap = apart_along(bi, bf, verts, here, pi[p, 0], pi[p, 1], before[p, 0], before[p, 1])
+                skip = gap > reach[p] + APART_SLACK
+                skipped += skip
+                narrowphase += not skip
+                if skip:  # the narrowphase did not run: the pair keeps its axis
+                    assert np.array_equal(axis[p], before[p])
+    assert skipped > 200 and narrowphase > 200 and touching > 100
