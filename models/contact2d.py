@@ -44,8 +44,9 @@ FACE_ALIGNMENT = 1.0 - 1e-9
 #: Relative preference for A's face over B's when both are aligned (keeps manifolds stable).
 REFERENCE_BIAS = 1e-9
 #: How far (m) a pair's gap along its last separating axis must exceed its reach before the
-#: narrowphase is skipped (`apart_along`): far above the round-off of the exact distance
-#: (about 1e-16 m), so a skipped pair is one the narrowphase would also have found apart.
+#: narrowphase is skipped (`apart_along`): far above the round-off of the exact distance and of
+#: the axis's unit length (about 1e-16 m), so a skipped pair is one the narrowphase would also
+#: have found apart.
 APART_SLACK = 1e-12
 
 
@@ -63,7 +64,7 @@ def _world_core(bi, verts, poses, b):
     return out
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _closest_on_segment(px, py, ax, ay, bx, by):
     dx, dy = bx - ax, by - ay
     den = dx * dx + dy * dy
@@ -300,14 +301,81 @@ def apart_along(bi, bf, verts, poses, a, b, nx, ny):
     return lo_b - hi_a - bf[a, BF_RADIUS] - bf[b, BF_RADIUS]
 
 
+@numba.njit(cache=True, inline="always")
+def _world_vertex(verts, px, py, c, s, i):
+    """Vertex i at the pose (px, py, cos, sin): as `_world_core` computes it."""
+    vx = verts[i, 0]
+    vy = verts[i, 1]
+    return px + c * vx - s * vy, py + s * vx + c * vy
+
+
+@numba.njit(cache=True)
+def _point_vs_polygon(bi, bf, verts, poses, a, b, margin, c_psi, c_n, c_pa, c_pb, start, axis):
+    """`_core_vs_core` for a single-point core (a disc's) against a polygon's (three or more
+    vertices) while the point lies outside the polygon by more than NEAR_TOUCH: the operations of
+    the general path (`_closest_features`, `_overlap`, `core_distance` and the single contact) in
+    the same order, so the same contact bit for bit, without building the world cores (two
+    allocations) and at one call. Returns -1 where the general path must decide (the point
+    inside the polygon or all but touching it)."""
+    point_is_a = bi[a, BI_VCOUNT] == 1
+    pt, pg = (a, b) if point_is_a else (b, a)
+    X, Y = _world_vertex(verts, poses[pt, 0], poses[pt, 1], poses[pt, 2], poses[pt, 3], bi[pt, BI_VSTART])
+    gx, gy, gc, gs = poses[pg, 0], poses[pg, 1], poses[pg, 2], poses[pg, 3]
+    g0, k = bi[pg, BI_VSTART], bi[pg, BI_VCOUNT]
+    best = np.inf
+    cpx = cpy = cqx = cqy = 0.0
+    for swap in range(2):  # _closest_features(P, Q): first P's vertices against Q, then Q's against P
+        if (swap == 0) != point_is_a:  # the polygon's vertices against the point (a zero-length segment)
+            for i in range(k):
+                ax, ay = _world_vertex(verts, gx, gy, gc, gs, g0 + i)
+                cx, cy = _closest_on_segment(ax, ay, X, Y, X, Y)
+                d = np.hypot(ax - cx, ay - cy)
+                if d < best:
+                    best = d
+                    if point_is_a:  # swap 1: A = the polygon (Q), B = the point (P)
+                        cpx, cpy, cqx, cqy = cx, cy, ax, ay
+                    else:
+                        cpx, cpy, cqx, cqy = ax, ay, cx, cy
+        else:  # the point against the polygon's edges
+            for e in range(k):
+                e0x, e0y = _world_vertex(verts, gx, gy, gc, gs, g0 + e)
+                e1x, e1y = _world_vertex(verts, gx, gy, gc, gs, g0 + (e + 1) % k)
+                cx, cy = _closest_on_segment(X, Y, e0x, e0y, e1x, e1y)
+                d = np.hypot(X - cx, Y - cy)
+                if d < best:
+                    best = d
+                    if point_is_a:
+                        cpx, cpy, cqx, cqy = X, Y, cx, cy
+                    else:
+                        cpx, cpy, cqx, cqy = cx, cy, X, Y
+    if best <= NEAR_TOUCH:  # (also _overlap's dist <= TINY)
+        return -1
+    inside = True  # _inside(point, polygon)
+    for i in range(k):
+        ix, iy = _world_vertex(verts, gx, gy, gc, gs, g0 + i)
+        jx, jy = _world_vertex(verts, gx, gy, gc, gs, g0 + (i + 1) % k)
+        ex, ey = jx - ix, jy - iy
+        if ex * (Y - iy) - ey * (X - ix) < 0.0:
+            inside = False
+            break
+    if inside:
+        return -1
+    psi_core, nx, ny = best, (cqx - cpx) / best, (cqy - cpy) / best
+    ra, rb = bf[a, BF_RADIUS], bf[b, BF_RADIUS]
+    axis[0], axis[1] = nx, ny  # as `_core_vs_core` keeps it
+    if psi_core - ra - rb > margin:
+        return 0
+    _write(c_psi, c_n, c_pa, c_pb, start, psi_core - ra - rb, nx, ny, cpx + ra * nx, cpy + ra * ny, cqx - rb * nx, cqy - rb * ny)
+    return 1
+
+
 @numba.njit(cache=True)
 def _core_vs_core(bi, bf, verts, poses, a, b, margin, c_psi, c_n, c_pa, c_pb, start, axis):
     P = _world_core(bi, verts, poses, a)
     Q = _world_core(bi, verts, poses, b)
     ra, rb = bf[a, BF_RADIUS], bf[b, BF_RADIUS]
     psi_core, nx, ny, cpx, cpy, cqx, cqy = core_distance(P, Q)
-    length = np.hypot(nx, ny)  # the direction (a to b) kept for `apart_along`, as a unit vector
-    axis[0], axis[1] = (nx / length, ny / length) if length > 0.0 else (0.0, 0.0)
+    axis[0], axis[1] = nx, ny  # the direction from a to b, kept for `apart_along`
     if psi_core - ra - rb > margin:
         return 0
     single = P.shape[0] == 1 or Q.shape[0] == 1
@@ -399,7 +467,7 @@ def _core_vs_core(bi, bf, verts, poses, a, b, margin, c_psi, c_n, c_pa, c_pb, st
     return count
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def collide_2d(bi, bf, verts, poses, a, b, margin, c_psi, c_n, c_pa, c_pb, start, axis):
     """Contacts between bodies a and b with psi <= margin, written from index start; returns how many.
 
@@ -413,7 +481,12 @@ def collide_2d(bi, bf, verts, poses, a, b, margin, c_psi, c_n, c_pa, c_pb, start
     elif kb == SHAPE_HALFSPACE and ka != SHAPE_HALFSPACE:
         count = _halfspace_vs_core(bi, bf, verts, poses, b, a, np.bool_(False), margin, c_psi, c_n, c_pa, c_pb, start)
     elif ka != SHAPE_HALFSPACE:
-        count = _core_vs_core(bi, bf, verts, poses, a, b, margin, c_psi, c_n, c_pa, c_pb, start, axis)
+        count = -1
+        na, nb = bi[a, BI_VCOUNT], bi[b, BI_VCOUNT]
+        if (na == 1 and nb >= 3) or (nb == 1 and na >= 3):  # a disc and a polygon: one call
+            count = _point_vs_polygon(bi, bf, verts, poses, a, b, margin, c_psi, c_n, c_pa, c_pb, start, axis)
+        if count < 0:
+            count = _core_vs_core(bi, bf, verts, poses, a, b, margin, c_psi, c_n, c_pa, c_pb, start, axis)
     return count
 
 

@@ -238,3 +238,38 @@ def test_detection_skips_pairs_apart_along_their_last_axis_and_finds_the_same_co
                 if skip:  # the narrowphase did not run: the pair keeps its axis
                     assert np.array_equal(axis[p], before[p])
     assert skipped > 200 and narrowphase > 200 and touching > 100
+
+
+@pytest.mark.parametrize("polygon", ["triangle", "box", "hexagon"])
+@pytest.mark.parametrize("disc_first", [True, False], ids=["disc-polygon", "polygon-disc"])
+def test_the_disc_polygon_path_gives_the_general_paths_contact_bit_for_bit(tmp_path, polygon, disc_first):
+    """`_point_vs_polygon` (a disc against a polygon in one call, no world cores built) against
+    `_core_vs_core` (the general path) on random poses: apart, touching and pressed in, and
+    with the disc's centre inside the polygon (where it hands over to the general path)."""
+    from models.contact2d import _core_vs_core, _point_vs_polygon, collide_2d
+    from models.kinematics import planar_poses
+
+    scenario, S = pair_scene(tmp_path, "disc", polygon) if disc_first else pair_scene(tmp_path, polygon, "disc")
+    ia, ib = int(S.pi[2, 0]), int(S.pi[2, 1])
+    rng = np.random.default_rng(zlib.crc32(f"fast-{polygon}-{disc_first}".encode()))
+    poses = np.zeros((S.bi.shape[0], 4))
+    handed_over, fast = 0, 0
+    for _ in range(300):
+        q = random_q(rng) * np.array([1.5, 1.5, 1.0, 1.5, 1.5, 1.0])
+        planar_poses(S.bi, S.bf, q, poses)
+        out = []
+        for kernel_ in (collide_2d, _core_vs_core):
+            buffers, axis = [np.zeros(4), *(np.zeros((4, 3)) for _ in range(3))], np.zeros(2)
+            k = kernel_(S.bi, S.bf, S.verts, poses, ia, ib, 0.2, *buffers, 0, axis)
+            out.append((k, [b[:k] for b in buffers], axis))
+        (k1, b1, a1), (k2, b2, a2) = out
+        assert k1 == k2
+        for x, y in zip(b1, b2):
+            np.testing.assert_array_equal(x, y)
+        np.testing.assert_array_equal(a1, a2)
+        direct = _point_vs_polygon(
+            S.bi, S.bf, S.verts, poses, ia, ib, 0.2, np.zeros(4), *(np.zeros((4, 3)) for _ in range(3)), 0, np.zeros(2)
+        )
+        handed_over += direct < 0
+        fast += direct >= 0
+    assert handed_over >= 5 and fast >= 200
