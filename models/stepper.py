@@ -778,9 +778,6 @@ def _lemke_step(model, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t
     nu_new = nu_free
     delta_n_new = delta_n  # rigid models keep them zero; compliant ones get new arrays below
     delta_t_new = delta_t
-    if model.compliant:
-        delta_n_new = np.zeros_like(delta_n)
-        delta_t_new = np.zeros_like(delta_t)
     status = StepStatus.OK.value
     pivots = 0
     residual = 0.0
@@ -816,6 +813,9 @@ def _lemke_step(model, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t
             frictions[active[k], 1] = p_t[k, 1]
         if status == StepStatus.OK and model.compliant:
             delta_n_new, delta_t_new = _deformations(h, tables.pf, contacts.pair, contacts.slot, active, p_n, p_t, delta_n, delta_t)
+    elif model.compliant:  # no contact problem: every deformation relaxes to zero
+        delta_n_new = np.zeros_like(delta_n)
+        delta_t_new = np.zeros_like(delta_t)
     if status != StepStatus.OK:
         return StepResult(q, nu, q_ref, delta_n, delta_t, status, pivots, residual, size, impulses, frictions, 0, basis)
     q_new, bad = _integrate_checked(tables.bi, model.theta, h, q, nu, nu_new)
