@@ -285,9 +285,11 @@ def _tally(sweeps, lcp_solves, max_size, pivots, max_residual, sw, size, piv, re
 @numba.njit(cache=True)
 def _start_records(max_records, q, nu):
     """The record buffers (at least two records: start and end) with the start state at t = 0
-    as record 0. Returns (max_records, rec_t, rec_q, rec_nu, next record's index)."""
+    as record 0. Returns (max_records, rec_t, rec_q, rec_nu, next record's index). Not zeroed:
+    a record is written before it is read, and the run returns only those written (zeroing
+    the default 2,000 records was most of a short rollout's own cost, measured)."""
     max_records = max(max_records, 2)
-    rec_t, rec_q, rec_nu = np.zeros(max_records), np.zeros((max_records, q.shape[0])), np.zeros((max_records, nu.shape[0]))
+    rec_t, rec_q, rec_nu = np.empty(max_records), np.empty((max_records, q.shape[0])), np.empty((max_records, nu.shape[0]))
     n_rec = _record_state(rec_t, rec_q, rec_nu, 0, 0.0, q, nu)
     return max_records, rec_t, rec_q, rec_nu, n_rec
 
@@ -532,15 +534,46 @@ def rollout_kernel(
         pivots,
         max_residual,
         max_size,
-        rec_t[:n_rec],
-        rec_q[:n_rec],
-        rec_nu[:n_rec],
+        rec_t[:n_rec].copy(),  # copies: a short run's result does not hold the whole buffers
+        rec_q[:n_rec].copy(),
+        rec_nu[:n_rec].copy(),
         pair_force,
         min_psi,
         force_steps,
         sweeps,
         pair_wrench,
         basis,
+    )
+
+
+@numba.njit(cache=True)
+def rollout_bound(bound, q, nu, q_ref, delta_n, delta_t, basis, controls, durations, h, record_every, max_records, stop_at_outcome, t0):
+    """`rollout_kernel` with what stays the same from call to call in one typed List holding
+    one tuple (S, D, model, solver, goal, unsafe): it crosses into the kernel as one pointer,
+    where the scene's 30-odd arrays would be unboxed one by one on every call (a rollout of one
+    control period, as tracking and the benchmarks call it, paid about 40 us for that and the
+    call's Python side, measured; `models.rungs.Rung.rollout` binds it once per scenario and rung)."""
+    S, D, model, solver, goal, unsafe = bound[0]
+    return rollout_kernel(
+        S,
+        D,
+        model,
+        solver,
+        goal,
+        unsafe,
+        q,
+        nu,
+        q_ref,
+        delta_n,
+        delta_t,
+        basis,
+        controls,
+        durations,
+        h,
+        record_every,
+        max_records,
+        stop_at_outcome,
+        t0,
     )
 
 
