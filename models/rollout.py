@@ -549,31 +549,12 @@ def rollout_kernel(
 @numba.njit(cache=True)
 def rollout_bound(bound, q, nu, q_ref, delta_n, delta_t, basis, controls, durations, h, record_every, max_records, stop_at_outcome, t0):
     """`rollout_kernel` with what stays the same from call to call in one typed List holding
-    one tuple (S, D, model, solver, goal, unsafe): it crosses into the kernel as one pointer,
-    where the scene's 30-odd arrays would be unboxed one by one on every call (a rollout of one
-    control period, as tracking and the benchmarks call it, paid about 40 us for that and the
-    call's Python side, measured; `models.rungs.Rung.rollout` binds it once per scenario and rung)."""
-    S, D, model, solver, goal, unsafe = bound[0]
+    one tuple (S, D, model, solver, goal, unsafe), its first arguments: the List crosses into
+    the kernel as one pointer, where the scene's 30-odd arrays would be unboxed one by one on
+    every call (about 10 us of a rollout of one control period, as tracking and the benchmarks
+    call it; docs/measurements.md). `models.rungs.Rung.rollout` binds it once per scenario and rung."""
     return rollout_kernel(
-        S,
-        D,
-        model,
-        solver,
-        goal,
-        unsafe,
-        q,
-        nu,
-        q_ref,
-        delta_n,
-        delta_t,
-        basis,
-        controls,
-        durations,
-        h,
-        record_every,
-        max_records,
-        stop_at_outcome,
-        t0,
+        *bound[0], q, nu, q_ref, delta_n, delta_t, basis, controls, durations, h, record_every, max_records, stop_at_outcome, t0
     )
 
 
