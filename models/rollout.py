@@ -286,8 +286,8 @@ def _tally(sweeps, lcp_solves, max_size, pivots, max_residual, sw, size, piv, re
 def _start_records(max_records, q, nu):
     """The record buffers (at least two records: start and end) with the start state at t = 0
     as record 0. Returns (max_records, rec_t, rec_q, rec_nu, next record's index). Not zeroed:
-    a record is written before it is read, and the run returns only those written (zeroing
-    the default 2,000 records was most of a short rollout's own cost, measured)."""
+    a record is written before it is read, and the run returns copies of those written
+    (zeroing the default 2,000 records cost about 3 us a call, docs/measurements.md)."""
     max_records = max(max_records, 2)
     rec_t, rec_q, rec_nu = np.empty(max_records), np.empty((max_records, q.shape[0])), np.empty((max_records, nu.shape[0]))
     n_rec = _record_state(rec_t, rec_q, rec_nu, 0, 0.0, q, nu)
@@ -543,18 +543,6 @@ def rollout_kernel(
         sweeps,
         pair_wrench,
         basis,
-    )
-
-
-@numba.njit(cache=True)
-def rollout_bound(bound, q, nu, q_ref, delta_n, delta_t, basis, controls, durations, h, record_every, max_records, stop_at_outcome, t0):
-    """`rollout_kernel` with what stays the same from call to call in one typed List holding
-    one tuple (S, D, model, solver, goal, unsafe), its first arguments: the List crosses into
-    the kernel as one pointer, where the scene's 30-odd arrays would be unboxed one by one on
-    every call (about 10 us of a rollout of one control period, as tracking and the benchmarks
-    call it; docs/measurements.md). `models.rungs.Rung.rollout` binds it once per scenario and rung."""
-    return rollout_kernel(
-        *bound[0], q, nu, q_ref, delta_n, delta_t, basis, controls, durations, h, record_every, max_records, stop_at_outcome, t0
     )
 
 

@@ -27,7 +27,7 @@ from models.contact import has_script, pair_min_distances
 from models.family import FAMILY
 from models.kinematics import PI_INERT, SceneData, compile_scene, kernel_array
 from models.predicates import OP_TOUCH, Program, compile_predicate, evaluate_with
-from models.rollout import propagate_kernel, rollout_bound
+from models.rollout import propagate_kernel, rollout_kernel
 from models.scenario import Scenario
 from models.stepper import (
     LAW_ACTIVE,
@@ -182,8 +182,6 @@ class Compiled:
     unsafe: Program
     capacity: int
     scripted: bool  # some obstacle moves on a script (rollouts then work on a copy of the scene's pose tables)
-    # the rollouts' bound arguments (`models.rollout.rollout_bound`) by (model, solver, laws), made at first use
-    bound: dict = field(default_factory=dict)
 
 
 #: Scenarios whose compiled data `compiled` keeps (the most recently used). A sweep worker
@@ -372,24 +370,20 @@ class Rung:
 
     def _run(self, scenario, state, controls, durations, h, record_every, max_records, stop_at_outcome, t0, laws=False):
         """The compiled rollout on contiguous float arrays (the kernel works on copies of the
-        state's arrays); its raw `models.rollout.RolloutOutput`. What stays the same from call
-        to call (the scene, drives, model, solver, goal, unsafe) crosses as one typed List,
-        bound once per scenario and rung (`models.rollout.rollout_bound`)."""
+        state's arrays); its raw `models.rollout.RolloutOutput`."""
         if self.model is None:
             raise ValueError("the geometric rung has no dynamics to roll out; use valid()")
         c = compiled(scenario)
-        key = (self.model, self.solver, laws)
-        bound = c.bound.get(key)
-        if bound is None or c.scripted:
-            scene = c.scene
-            if c.scripted:  # the kernel moves scripted obstacles in the pose tables: its own copy
-                scene = scene._replace(bf=scene.bf.copy(), base_pos=scene.base_pos.copy(), base_quat=scene.base_quat.copy())
-            drives = c.policy_drives if laws else c.drives
-            bound = numba.typed.List([(scene, drives, self.model, self.solver, c.goal, c.unsafe)])
-            if not c.scripted:
-                c.bound[key] = bound
-        return rollout_bound(
-            bound,
+        scene = c.scene
+        if c.scripted:  # the kernel moves scripted obstacles in the pose tables: its own copy
+            scene = scene._replace(bf=scene.bf.copy(), base_pos=scene.base_pos.copy(), base_quat=scene.base_quat.copy())
+        return rollout_kernel(
+            scene,
+            c.policy_drives if laws else c.drives,
+            self.model,
+            self.solver,
+            c.goal,
+            c.unsafe,
             state.q.copy(),
             state.nu.copy(),
             state.q_ref.copy(),

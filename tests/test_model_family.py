@@ -451,11 +451,9 @@ def test_cheap_free_step_equals_the_full_step_without_contacts(eps):
 
 def test_a_rollout_and_the_planners_propagation_run_one_compiled_rollout():
     """The planners' propagation (`propagate_kernel`) calls `rollout_kernel` with the argument
-    types a Python rollout passes (through `rollout_bound`), so both run one compile of it, and
-    the same physics. (It once passed literal constants, which numba types Literal[...]: a second
-    compile of the whole rollout, minutes of a fresh clone's first run; docs/measurements.md.)
-    Both call it from compiled code, which numba does not list in the dispatcher's signatures:
-    its on-disk cache holds one entry per compiled signature."""
+    types a Python rollout passes, so both run one compile of it, and the same physics. (It once
+    passed literal constants, which numba types Literal[...]: a second compile of the whole
+    rollout, minutes of a fresh clone's first run; docs/measurements.md.)"""
     from models.rollout import rollout_kernel
     from models.stepper import StepStatus
     from planner.ompl_adapter import _layout, configuration_limits, flatten
@@ -472,8 +470,7 @@ def test_a_rollout_and_the_planners_propagation_run_one_compiled_rollout():
     y = np.empty_like(x)
     assert step(x, u, 0.01, y) == StepStatus.OK
     np.testing.assert_array_equal(y[: len(state.q)], run.state.q)
-    compiled_signatures = rollout_kernel._cache._cache_file._load_index()  # numba internals, as `ladder`'s kernels_cached
-    assert len(compiled_signatures) == 1, [signature for signature, _ in compiled_signatures]
+    assert len(rollout_kernel.signatures) == 1, rollout_kernel.signatures
 
 
 @pytest.mark.parametrize("rung_name", ["dynamic-rigid", "dynamic-compliant"])
