@@ -23,7 +23,7 @@ import numba
 import numpy as np
 
 from models.contact2d import APART_SLACK, apart_along, collide_2d
-from models.contact3d import collide_pair_3d, pose_of, tangent_basis
+from models.contact3d import collide_pair_3d_inline, pose_of, tangent_basis
 from models.kinematics import (
     BF_BOUND,
     BF_HSN,
@@ -269,7 +269,7 @@ def detect_spatial(S, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsuppor
         if bi[a, BI_KIND] != SHAPE_HALFSPACE and bi[b, BI_KIND] != SHAPE_HALFSPACE:
             if _aabbs_apart(qmap, base_pos, base_quat, vstart, vcount, verts, radius, q, a, b, r):
                 continue
-        k = collide_pair_3d(S, q, p, r, c_psi, c_n, c_pa, c_pb, nc)
+        k = collide_pair_3d_inline(S, q, p, r, c_psi, c_n, c_pa, c_pb, nc)
         if k < 0:
             unsupported[n_unsupported] = p
             n_unsupported += 1

@@ -1580,8 +1580,17 @@ def collide_pair_3d(S, q, p, margin, c_psi, c_n, c_pa, c_pb, start):
     A thin entry: it reads the pair's data from S and hands scalars, tuples and only the
     arrays the test needs to `_collide` (a compiled call increments and decrements the
     reference count of every array in its arguments: passing the whole scene on costs more
-    than most tests; docs/measurements.md). `collide_all_3d` pays that once for all pairs.
+    than most tests; docs/measurements.md). `collide_all_3d` pays that once for all pairs;
+    a compiled caller's per-pair loop calls `collide_pair_3d_inline`.
     """
+    return collide_pair_3d_inline(S, q, p, margin, c_psi, c_n, c_pa, c_pb, start)
+
+
+@numba.njit(cache=True, inline="always")
+def collide_pair_3d_inline(S, q, p, margin, c_psi, c_n, c_pa, c_pb, start):
+    """`collide_pair_3d`, inlined into its compiled caller (`models.contact.detect_spatial`'s
+    loop over the pairs): a call would reference-count the scene's ~30 arrays twice per pair
+    (about 50 counts a pair, 147 of a box_push_3d step's 1,170; docs/measurements.md)."""
     if S.dimension != 3:
         return -1
     A = S.pair_a[p]
