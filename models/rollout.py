@@ -625,7 +625,9 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
     STAGE_CONTACT_SOLVE (that and the contact solve). Every
     stage runs once first (STAGE_SETUP: only that), so a
     stage's cost per call is (time(stage) - time(STAGE_SETUP)) / repeats. For `ladder bench`
-    (planar scenes without scripted obstacles, or spatial ones). Returns the contacts found."""
+    (planar scenes without scripted obstacles, or spatial ones). Returns (the contacts found,
+    and the warm-started solve's work at the state: the Lemke pivots and PGS sweeps of a
+    STAGE_SOLVE step, zeros for the other stages)."""
     bi, bf, pi, verts, nv, dimension = S.bi, S.bf, S.pi, S.verts, S.nv, S.dimension
     tables = SceneTables(bi, bf, pi, S.pf, dimension == 3)
     contacts, first_slot = contact_buffers(pi, nv)
@@ -640,7 +642,7 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
     system = _start_system(S, D, model, h, q)
     rotating = has_rotations(bi)
     eps_eff = model.quasistatic_inertia if model.eps == 0.0 else model.eps
-    nc = 0
+    nc, pivots, sweeps = 0, 0, 0
     for k in range(repeats + 1):
         if k == 0 or stage == STAGE_DETECT:
             if dimension == 3:
@@ -666,6 +668,8 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
             if k == 0:  # the warm starts (Lemke's basis, PGS's impulses) of a steady push
                 basis = r.basis
                 _keep_warm(nc, c_slot, r.p_n, r.p_t, warm_n, warm_t, warm_slots, 0)
+            else:
+                pivots, sweeps = r.pivots, r.sweeps
         if stage == STAGE_SETUP:
             break
-    return nc
+    return nc, pivots, sweeps

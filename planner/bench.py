@@ -311,7 +311,14 @@ def contact_steps(quick: bool = False) -> dict:
         theirs = [] if peer is None else [lambda: peers.timed_run(peer, squeeze[0], steps)]
         walls, out, _ = in_turns(ours, theirs, repeat)
         row = _contact_row(
-            "two_finger_triangle, v1 = v2 = 1 through the squeeze", rung, 1e-4, out.steps, out.force_steps, float(np.median(walls[:, 0]))
+            "two_finger_triangle, v1 = v2 = 1 through the squeeze",
+            rung,
+            1e-4,
+            out.steps,
+            out.force_steps,
+            float(np.median(walls[:, 0])),
+            out.pivots,
+            out.sweeps,
         )
         rows.append(row | _peer_columns(walls, out.steps))
     box = load_scenario(SCENARIOS / "box_push_3d.toml")
@@ -324,11 +331,12 @@ def contact_steps(quick: bool = False) -> dict:
     calls = int(round(span / period)) // (5 if quick else 1)
 
     def push(stepper):
-        state, taken, pushed = start, 0, 0
+        state, taken, pushed, pivots, sweeps = start, 0, 0, 0, 0
         for _ in range(calls):
             out = stepper.rollout(box, state, u, [period], h)
             state, taken, pushed = out.state, taken + out.steps, pushed + out.force_steps
-        return taken, pushed
+            pivots, sweeps = pivots + out.pivots, sweeps + out.sweeps
+        return taken, pushed, pivots, sweeps
 
     per_call = int(round(period / h))
     spatial = None if peers is None else peers.build_spatial(box, h)
@@ -337,8 +345,10 @@ def contact_steps(quick: bool = False) -> dict:
     polygon = f"dynamic-rigid ({settings.friction_directions}-sided cone, {settings.contact_solver})"
     exact = replace(rung, solver=contact_solver("pgs"), model=rung.model._replace(exact_cone=True))
     for label, stepper in ((polygon, rung), ("dynamic-rigid (exact cone, pgs)", exact)):
-        walls, (taken, pushed), _ = in_turns(lambda stepper=stepper: push(stepper), theirs, repeat)
-        row = _contact_row(f"box_push_3d, pushing (calls of {period:g} s)", label, h, taken, pushed, float(np.median(walls[:, 0])))
+        walls, (taken, pushed, pivots, sweeps), _ = in_turns(lambda stepper=stepper: push(stepper), theirs, repeat)
+        row = _contact_row(
+            f"box_push_3d, pushing (calls of {period:g} s)", label, h, taken, pushed, float(np.median(walls[:, 0])), pivots, sweeps
+        )
         rows.append(row | _peer_columns(walls, calls * per_call))
     squeezed = _rollout(tri, "dynamic-rigid", 1e-4, 2.0, squeeze, records=2).state  # 0.5 s into the squeeze
     split = [
@@ -368,12 +378,14 @@ def _cost_split(scene: str, scenario, rung, state, u: np.ndarray, h: float, quic
     repeats = SPLIT_REPEATS // (10 if quick else 1)
     args = (c.scene, c.drives, rung.model, rung.solver, c.goal, c.unsafe, state.q, state.nu, state.q_ref, state.delta_n, state.delta_t)
     order = (R.STAGE_SETUP, R.STAGE_DETECT, R.STAGE_CLASSIFY, R.STAGE_JACOBIANS, R.STAGE_ASSEMBLY, R.STAGE_CONTACT_SOLVE, R.STAGE_SOLVE)
-    best, contacts = dict.fromkeys(order, np.inf), 0
+    best, contacts, work = dict.fromkeys(order, np.inf), 0, (0, 0)
     for _ in range(SPLIT_ROUNDS):
         for stage in order:
             t0 = time.perf_counter()
-            contacts = R.stage_loop(stage, *args, np.asarray(u, float), float(h), repeats)
+            contacts, *done = R.stage_loop(stage, *args, np.asarray(u, float), float(h), repeats)
             best[stage] = min(best[stage], time.perf_counter() - t0)
+            if stage == R.STAGE_SOLVE:
+                work = done
     per_call = {stage: max(best[stage] - best[R.STAGE_SETUP], 0.0) / repeats * 1e6 for stage in order}
     us = {
         "detection": per_call[R.STAGE_DETECT],
@@ -384,7 +396,8 @@ def _cost_split(scene: str, scenario, rung, state, u: np.ndarray, h: float, quic
     upto = [per_call[stage] for stage in (R.STAGE_ASSEMBLY, R.STAGE_CONTACT_SOLVE, R.STAGE_SOLVE)]
     for name, low, high in zip(SPLIT_STEP_PARTS, [0.0, *upto[:2]], upto):
         us[name] = max(high - low, 0.0)
-    return {"scene": scene, "contacts": contacts, "us": us, "repeats": repeats, "rounds": SPLIT_ROUNDS}
+    split = {"scene": scene, "contacts": contacts, "us": us, "repeats": repeats, "rounds": SPLIT_ROUNDS}
+    return split | {"pivots": work[0], "sweeps": work[1]}
 
 
 #: Rounds of the cost split: each stage's time is its best over them (`_cost_split`).
@@ -424,7 +437,9 @@ def _peer_columns(walls: np.ndarray, steps: int) -> dict:
     }
 
 
-def _contact_row(scene: str, rung: str, h: float, steps: int, contact: int, wall: float) -> dict:
+def _contact_row(scene: str, rung: str, h: float, steps: int, contact: int, wall: float, pivots: int, sweeps: int) -> dict:
+    """A contact row of `contact_steps`; pivots and sweeps: the run's Lemke pivots and PGS sweeps
+    in all (the contact solves' work, per step in the row)."""
     return {
         "scene": scene,
         "rung": rung,
@@ -433,6 +448,8 @@ def _contact_row(scene: str, rung: str, h: float, steps: int, contact: int, wall
         "contact_steps": contact,
         "median_wall_s": wall,
         "us_per_step": wall / max(steps, 1) * 1e6,
+        "pivots_per_step": pivots / max(steps, 1),
+        "sweeps_per_step": sweeps / max(steps, 1),
     }
 
 
@@ -1004,14 +1021,15 @@ def contact_markdown(contact: dict | None) -> list[str]:
         "stepped in the same calls from the same first contact). Speed: ours / MuJoCo in steps per second, "
         "the median of the rounds' ratios.",
         "",
-        "| scene | rung | h | steps | with contact force | median wall (s) | us/step | MuJoCo us/step | speed vs MuJoCo |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| scene | rung | h | steps | with contact force | contact solve per step | median wall (s) | us/step | MuJoCo us/step "
+        "| speed vs MuJoCo |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for row in contact["rows"]:
         mj = row.get("mujoco_us_per_step")
         theirs = "- | -" if mj is None else f"{mj:.2f} | {row['speed_vs_mujoco']:.2f}x"
         lines.append(
-            f"| {row['scene']} | {row['rung']} | {row['h']:g} | {row['steps']} | {row['contact_steps']} "
+            f"| {row['scene']} | {row['rung']} | {row['h']:g} | {row['steps']} | {row['contact_steps']} | {_solve_work(row)} "
             f"| {row['median_wall_s']:.4f} | {row['us_per_step']:.2f} | {theirs} |"
         )
     if contact.get("split"):
@@ -1023,16 +1041,26 @@ def contact_markdown(contact: dict | None) -> list[str]:
             "that run the stages in turns, us per call; the dynamics step "
             "in its three parts (`models.stepper.contact_stage`): A where it depends on q, the free velocity and the LCP's assembly (PGS "
             "assembles its blocks in its solve), the warm-started contact solve, the impulses' velocity update and the "
-            "integration; the rest of a step in the table above is the rollout's bookkeeping: records, forces, the warm "
-            "start's table):",
+            "integration). The solve is warm-started from the state's own solution, so it does less work there than a "
+            "step of the runs above does on average (the two `contact solve` columns: Lemke pivots, PGS sweeps); the "
+            "rest of the difference is the rollout's bookkeeping (records, forces, the warm start's table), and each "
+            "stage timed here also pays a compiled call's argument handling:",
             "",
-            "| state | contacts | " + " | ".join(names) + " | sum |",
-            "|---|---|" + "---|" * (len(names) + 1),
+            "| state | contacts | contact solve at the state | " + " | ".join(names) + " | sum |",
+            "|---|---|---|" + "---|" * (len(names) + 1),
         ]
         for split in contact["split"]:
             cells = " | ".join(f"{split['us'][name]:.2f}" for name in names)
-            lines.append(f"| {split['scene']} | {split['contacts']} | {cells} | {sum(split['us'].values()):.2f} |")
+            at_state = f"{split['sweeps']} sweeps" if split.get("sweeps") else f"{split.get('pivots', 0)} pivots"
+            lines.append(f"| {split['scene']} | {split['contacts']} | {at_state} | {cells} | {sum(split['us'].values()):.2f} |")
     return lines
+
+
+def _solve_work(row: dict) -> str:
+    """A contact row's contact-solve work per step: PGS sweeps where the run swept, else Lemke pivots."""
+    if row.get("sweeps_per_step"):
+        return f"{row['sweeps_per_step']:.2f} sweeps"
+    return f"{row.get('pivots_per_step', 0.0):.2f} pivots"
 
 
 def peer_markdown(peer: dict) -> list[str]:

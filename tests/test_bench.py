@@ -50,10 +50,17 @@ def test_throughput_and_scaling_report_every_rung(quick):
     assert all(row["contact_steps"] == 0 for row in r["throughput"]["rows"] if row["rung"].startswith("dynamic"))
     contact = r["throughput"]["contact"]["rows"]
     assert len(contact) == 5 and all(row["contact_steps"] > 0.5 * row["steps"] and row["us_per_step"] > 0 for row in contact)
+    # each row's contact-solve work: Lemke's rows pivot (the warm start holds on most steps) and do not sweep;
+    # the exact cone's PGS sweeps at least once on every step with contact, and has no pivots
+    *lemke, exact = contact
+    assert all(row["sweeps_per_step"] == 0 and 0 < row["pivots_per_step"] < 1 for row in lemke)
+    assert exact["rung"].endswith("(exact cone, pgs)") and exact["pivots_per_step"] == 0 and exact["sweeps_per_step"] >= 1
     # the cost split of a contact step, at a squeezing and two pushing states: every stage timed, the dynamics
     # step in its three parts (differences of timed runs, floored at 0), which together cost the most
     split = r["throughput"]["contact"]["split"]
     assert [s["contacts"] for s in split] == [2, 5, 5]
+    # the solve's work at the state, warm-started from its own solution: Lemke needs no pivot, PGS sweeps
+    assert [(s["pivots"], s["sweeps"] > 0) for s in split] == [(0, False), (0, False), (0, True)]
     for s in split:
         assert list(s["us"]) == ["detection", "distances and predicates", "Jacobians", *SPLIT_STEP_PARTS]
         step = sum(s["us"][name] for name in SPLIT_STEP_PARTS)
