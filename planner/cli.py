@@ -7,6 +7,7 @@ Exit codes: 0 ok, 1 the task failed (no plan), 2 bad input (message names file, 
 from __future__ import annotations
 
 import argparse
+import atexit
 import importlib.util
 import json
 import os
@@ -18,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from models import perfmap
 from models.family import PROPAGATING_RUNGS, RUNG_NAMES
 from models.scenario import Problem, Scenario, ScenarioError, load_scenario, parse_overrides
 from models.schema import CONTROL_PLANNERS
@@ -293,6 +295,8 @@ def main(argv: list[str] | None = None) -> int:
     from planner import interrupt
 
     interrupt.install()
+    if os.environ.get(perfmap.ENV):  # name the compiled kernels for `perf report` (models.perfmap)
+        atexit.register(_write_perf_map)
     try:
         return args.handler(args)
     except ScenarioError as exc:
@@ -311,6 +315,10 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:  # the reader went away (e.g. `| head`): nothing more to say
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return EXIT_OK
+
+
+def _write_perf_map() -> None:
+    print(f"perf map: {perfmap.write_perf_map()}", file=sys.stderr)
 
 
 # ----------------------------------------------------------------------------- commands

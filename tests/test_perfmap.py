@@ -1,0 +1,68 @@
+"""The perf map of the compiled kernels (`models.perfmap`): names, ranges, and `ladder`'s switch."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from models import perfmap
+from models.rungs import rung_for
+from models.scenario import load_scenario
+from tests.conftest import ROOT, SCENARIOS
+
+
+def _entries(path: Path) -> list[tuple[int, int, str]]:
+    rows = []
+    for line in path.read_text().splitlines():
+        start, size, name = line.split(" ", 2)
+        rows.append((int(start, 16), int(size, 16), name))
+    return rows
+
+
+def test_demangle_numba_names():
+    name = "_ZN6models7rollout14rollout_kernelB2v2B56c8tJTC_2fWwGaMLSgd6CjA4xXKR0tsqKIYSQtVGpi44MFbBJHTBAA_3dE1186SceneData"
+    assert perfmap.demangle(name) == "models.rollout.rollout_kernel"
+    assert perfmap.demangle("cpython." + name) == "cpython.models.rollout.rollout_kernel"
+    assert perfmap.demangle("_ZN5numba2np8arrayobj11ol_np_zerosB3v81") == "numba.np.arrayobj.ol_np_zeros"
+    assert perfmap.demangle("NRT_incref") == "NRT_incref"
+
+
+def test_the_map_names_the_kernels_a_rollout_ran(tmp_path):
+    scenario = load_scenario(SCENARIOS / "two_finger_triangle.toml")
+    rung = rung_for(scenario, "dynamic-rigid")
+    out = rung.rollout(scenario, rung.initial_state(scenario), np.array([[-1.0, -1.0]]), [0.01], 1e-4)
+    assert out.steps == 100
+    rows = _entries(perfmap.write_perf_map(tmp_path / "kernels.map"))
+    names = {name for _, _, name in rows}
+    # the rollout and the stages it calls (the step's helpers are inlined into it: no code of their own)
+    assert {"models.rollout.rollout_kernel", "models.contact.detect_planar_into", "NRT_incref"} <= names
+    starts = [start for start, _, _ in rows]
+    assert starts == sorted(set(starts))
+    # each function ends where the next one loaded after it starts, or within MAX_SIZE
+    for (start, size, _), (following, _, _) in zip(rows, rows[1:]):
+        assert 0 < size <= perfmap.MAX_SIZE and start + size <= following
+
+
+def test_ladder_writes_the_map_when_asked(tmp_path):
+    env = dict(os.environ, PYTHONPATH=str(ROOT), **{perfmap.ENV: "1"})
+    scenario = str(SCENARIOS / "two_finger_triangle.toml")
+    result = subprocess.run(
+        [sys.executable, "-m", "planner", "simulate", scenario, "--model", "kinematic", "--json"],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        env=env,
+        timeout=300,
+    )
+    assert result.returncode == 0, result.stderr
+    line = next(line for line in result.stderr.splitlines() if line.startswith("perf map: "))
+    path = Path(line.removeprefix("perf map: "))
+    try:
+        assert path.name == f"perf-{path.stem.split('-')[1]}.map" and path.parent == Path("/tmp")
+        assert "models.rollout.rollout_kernel" in {name for _, _, name in _entries(path)}
+    finally:
+        path.unlink(missing_ok=True)
