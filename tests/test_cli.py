@@ -8,15 +8,17 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+from models import perfmap
 from tests.conftest import DATA, ROOT, SCENARIOS
 
 
-def ladder(*args: str, cwd=ROOT) -> subprocess.CompletedProcess:
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
+def ladder(*args: str, cwd=ROOT, env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
+    env = dict(os.environ, PYTHONPATH=str(ROOT), **(env or {}))
     return subprocess.run([sys.executable, "-m", "planner", *args], capture_output=True, text=True, cwd=cwd, env=env, timeout=120)
 
 
@@ -164,6 +166,23 @@ def test_simulate_json_on_the_paper_scene(tmp_path):
     assert summary["outcome"] == "goal" and summary["status"] == "ok"
     assert set(summary["state"]) == {"triangle.x", "finger1.y", "finger2.y"}
     assert plot.stat().st_size > 10_000
+
+
+def test_ladder_writes_a_perf_map_when_asked(tmp_path):
+    """LADDER_PERF_MAP=1: as it exits, `ladder` writes /tmp/perf-<pid>.map, naming the kernels it ran
+    (`models.perfmap`), and says where on stderr."""
+    result = ladder(
+        "simulate", str(SCENARIOS / "two_finger_triangle.toml"), "--model", "kinematic", "--json", cwd=tmp_path, env={perfmap.ENV: "1"}
+    )
+    assert result.returncode == 0, result.stderr
+    line = next(line for line in result.stderr.splitlines() if line.startswith("perf map: "))
+    path = Path(line.removeprefix("perf map: "))
+    try:
+        assert path.parent == Path("/tmp") and path.name.startswith("perf-") and path.suffix == ".map"
+        names = {row.split(" ", 2)[2] for row in path.read_text().splitlines()}
+        assert "models.rollout.rollout_kernel" in names
+    finally:
+        path.unlink(missing_ok=True)
 
 
 def test_simulate_runs_a_rung_the_ladder_does_not_list_at_the_rungs_default_step():

@@ -1,10 +1,7 @@
-"""The perf map of the compiled kernels (`models.perfmap`): names, ranges, and `ladder`'s switch."""
+"""The perf map of the compiled kernels (`models.perfmap`): names and ranges (`ladder`'s switch: tests/test_cli.py)."""
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -12,7 +9,7 @@ import numpy as np
 from models import perfmap
 from models.rungs import rung_for
 from models.scenario import load_scenario
-from tests.conftest import ROOT, SCENARIOS
+from tests.conftest import SCENARIOS
 
 
 def _entries(path: Path) -> list[tuple[int, int, str]]:
@@ -45,24 +42,3 @@ def test_the_map_names_the_kernels_a_rollout_ran(tmp_path):
     # each function ends where the next one loaded after it starts, or within MAX_SIZE
     for (start, size, _), (following, _, _) in zip(rows, rows[1:]):
         assert 0 < size <= perfmap.MAX_SIZE and start + size <= following
-
-
-def test_ladder_writes_the_map_when_asked(tmp_path):
-    env = dict(os.environ, PYTHONPATH=str(ROOT), **{perfmap.ENV: "1"})
-    scenario = str(SCENARIOS / "two_finger_triangle.toml")
-    result = subprocess.run(
-        [sys.executable, "-m", "planner", "simulate", scenario, "--model", "kinematic", "--json"],
-        capture_output=True,
-        text=True,
-        cwd=tmp_path,
-        env=env,
-        timeout=300,
-    )
-    assert result.returncode == 0, result.stderr
-    line = next(line for line in result.stderr.splitlines() if line.startswith("perf map: "))
-    path = Path(line.removeprefix("perf map: "))
-    try:
-        assert path.name == f"perf-{path.stem.split('-')[1]}.map" and path.parent == Path("/tmp")
-        assert "models.rollout.rollout_kernel" in {name for _, _, name in _entries(path)}
-    finally:
-        path.unlink(missing_ok=True)
