@@ -1745,87 +1745,20 @@ def collide_all_3d(S, q, margin, c_psi, c_n, c_pa, c_pb, c_pair, fallback):
     c_pair[k] receives the pair of contact k; fallback[p] is set True for the pairs with no
     compiled test (they get no contacts here: use `fcl_pair_contacts`), False for the others.
     Returns the number of contacts written (stops adding pairs when the buffers are full).
-    Faster than calling `collide_pair_3d` per pair: the scene's arrays are passed once.
+    Faster than calling `collide_pair_3d` per pair: the scene's arrays are passed once (the
+    pair test is `collide_pair_3d_inline`, inlined here).
     """
     count = np.int64(0)
     if S.dimension != 3:
         for p in range(S.pair_a.shape[0]):
             fallback[p] = True
         return 0
-    cap = c_psi.shape[0]
     for p in range(S.pair_a.shape[0]):
-        A = S.pair_a[p]
-        B = S.pair_b[p]
-        ka = S.kind[A]
-        kb = S.kind[B]
-        fallback[p] = not _compiled(ka, kb, S.hull[A, 1], S.hull[B, 1])
-        limit = min(S.pair_max_contacts[p], cap - count)
-        if fallback[p] or limit <= 0:
-            continue
-        pA, RA = _pose(S, q, A)
-        pB, RB = _pose(S, q, B)
-        if (ka == SHAPE_MESH or kb == SHAPE_MESH) and ka != SHAPE_HALFSPACE and kb != SHAPE_HALFSPACE:
-            k = _collide_hull(
-                ka,
-                pA,
-                RA,
-                S.radius[A],
-                (S.hull[A, 0], S.hull[A, 1], S.hull[A, 2], S.hull[A, 3], S.hull[A, 4], S.hull[A, 5], S.vstart[A], S.vcount[A]),
-                S.bound_radius[A],
-                kb,
-                pB,
-                RB,
-                S.radius[B],
-                (S.hull[B, 0], S.hull[B, 1], S.hull[B, 2], S.hull[B, 3], S.hull[B, 4], S.hull[B, 5], S.vstart[B], S.vcount[B]),
-                S.bound_radius[B],
-                S.verts,
-                S.planes,
-                S.face_verts,
-                S.edges,
-                S.edge_dirs,
-                margin,
-                limit,
-                c_psi,
-                c_n,
-                c_pa,
-                c_pb,
-                count,
-            )
-            for i in range(count, count + k):
-                c_pair[i] = p
-            count += k
-            continue
-        k = _collide(
-            S.kind[A],
-            pA,
-            RA,
-            S.radius[A],
-            (S.half_extents[A, 0], S.half_extents[A, 1], S.half_extents[A, 2]),
-            (S.hs_normal[A, 0], S.hs_normal[A, 1], S.hs_normal[A, 2]),
-            S.hs_offset[A],
-            S.vstart[A],
-            S.vcount[A],
-            S.kind[B],
-            pB,
-            RB,
-            S.radius[B],
-            (S.half_extents[B, 0], S.half_extents[B, 1], S.half_extents[B, 2]),
-            (S.hs_normal[B, 0], S.hs_normal[B, 1], S.hs_normal[B, 2]),
-            S.hs_offset[B],
-            S.vstart[B],
-            S.vcount[B],
-            S.verts,
-            margin,
-            limit,
-            c_psi,
-            c_n,
-            c_pa,
-            c_pb,
-            count,
-        )
-        for i in range(count, count + k):
+        k = collide_pair_3d_inline(S, q, p, margin, c_psi, c_n, c_pa, c_pb, count)
+        fallback[p] = k < 0
+        for i in range(count, count + max(k, 0)):
             c_pair[i] = p
-        count += k
+        count += max(k, 0)
     return count
 
 

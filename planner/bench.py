@@ -378,14 +378,14 @@ def _cost_split(scene: str, scenario, rung, state, u: np.ndarray, h: float, quic
     repeats = SPLIT_REPEATS // (10 if quick else 1)
     args = (c.scene, c.drives, rung.model, rung.solver, c.goal, c.unsafe, state.q, state.nu, state.q_ref, state.delta_n, state.delta_t)
     order = (R.STAGE_SETUP, R.STAGE_DETECT, R.STAGE_CLASSIFY, R.STAGE_JACOBIANS, R.STAGE_ASSEMBLY, R.STAGE_CONTACT_SOLVE, R.STAGE_SOLVE)
-    best, contacts, work = dict.fromkeys(order, np.inf), 0, (0, 0)
+    best, contacts, pivots, sweeps = dict.fromkeys(order, np.inf), 0, 0, 0
     for _ in range(SPLIT_ROUNDS):
         for stage in order:
             t0 = time.perf_counter()
-            contacts, *done = R.stage_loop(stage, *args, np.asarray(u, float), float(h), repeats)
+            contacts, piv, sw = R.stage_loop(stage, *args, np.asarray(u, float), float(h), repeats)
             best[stage] = min(best[stage], time.perf_counter() - t0)
             if stage == R.STAGE_SOLVE:
-                work = done
+                pivots, sweeps = piv, sw
     per_call = {stage: max(best[stage] - best[R.STAGE_SETUP], 0.0) / repeats * 1e6 for stage in order}
     us = {
         "detection": per_call[R.STAGE_DETECT],
@@ -396,8 +396,7 @@ def _cost_split(scene: str, scenario, rung, state, u: np.ndarray, h: float, quic
     upto = [per_call[stage] for stage in (R.STAGE_ASSEMBLY, R.STAGE_CONTACT_SOLVE, R.STAGE_SOLVE)]
     for name, low, high in zip(SPLIT_STEP_PARTS, [0.0, *upto[:2]], upto):
         us[name] = max(high - low, 0.0)
-    split = {"scene": scene, "contacts": contacts, "us": us, "repeats": repeats, "rounds": SPLIT_ROUNDS}
-    return split | {"pivots": work[0], "sweeps": work[1]}
+    return {"scene": scene, "contacts": contacts, "us": us, "repeats": repeats, "rounds": SPLIT_ROUNDS, "pivots": pivots, "sweeps": sweeps}
 
 
 #: Rounds of the cost split: each stage's time is its best over them (`_cost_split`).
@@ -1029,7 +1028,8 @@ def contact_markdown(contact: dict | None) -> list[str]:
         mj = row.get("mujoco_us_per_step")
         theirs = "- | -" if mj is None else f"{mj:.2f} | {row['speed_vs_mujoco']:.2f}x"
         lines.append(
-            f"| {row['scene']} | {row['rung']} | {row['h']:g} | {row['steps']} | {row['contact_steps']} | {_solve_work(row)} "
+            f"| {row['scene']} | {row['rung']} | {row['h']:g} | {row['steps']} | {row['contact_steps']} "
+            f"| {_solve_work(row['pivots_per_step'], row['sweeps_per_step'])} "
             f"| {row['median_wall_s']:.4f} | {row['us_per_step']:.2f} | {theirs} |"
         )
     if contact.get("split"):
@@ -1051,16 +1051,15 @@ def contact_markdown(contact: dict | None) -> list[str]:
         ]
         for split in contact["split"]:
             cells = " | ".join(f"{split['us'][name]:.2f}" for name in names)
-            at_state = f"{split['sweeps']} sweeps" if split.get("sweeps") else f"{split.get('pivots', 0)} pivots"
+            at_state = _solve_work(split["pivots"], split["sweeps"])
             lines.append(f"| {split['scene']} | {split['contacts']} | {at_state} | {cells} | {sum(split['us'].values()):.2f} |")
     return lines
 
 
-def _solve_work(row: dict) -> str:
-    """A contact row's contact-solve work per step: PGS sweeps where the run swept, else Lemke pivots."""
-    if row.get("sweeps_per_step"):
-        return f"{row['sweeps_per_step']:.2f} sweeps"
-    return f"{row.get('pivots_per_step', 0.0):.2f} pivots"
+def _solve_work(pivots: float, sweeps: float) -> str:
+    """The contact solves' work (a run's per step, or one solve's): PGS sweeps where it swept, else
+    Lemke pivots."""
+    return f"{sweeps:.2f} sweeps" if sweeps else f"{pivots:.2f} pivots"
 
 
 def peer_markdown(peer: dict) -> list[str]:
