@@ -1756,9 +1756,11 @@ def collide_all_3d(S, q, margin, c_psi, c_n, c_pa, c_pb, c_pair, fallback):
     for p in range(S.pair_a.shape[0]):
         k = collide_pair_3d_inline(S, q, p, margin, c_psi, c_n, c_pa, c_pb, count)
         fallback[p] = k < 0
-        for i in range(count, count + max(k, 0)):
+        if k <= 0:
+            continue
+        for i in range(count, count + k):
             c_pair[i] = p
-        count += max(k, 0)
+        count += k
     return count
 
 

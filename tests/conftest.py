@@ -7,6 +7,15 @@ SCENARIOS = ROOT / "scenarios"
 DATA = Path(__file__).resolve().parent / "data"
 
 
+def perf_map_entries(path: Path) -> list[tuple[int, int, str]]:
+    """The rows (start, size, name) of a perf map file (`models.perfmap`: "start size name", hex)."""
+    rows = []
+    for line in path.read_text().splitlines():
+        start, size, name = line.split(" ", 2)
+        rows.append((int(start, 16), int(size, 16), name))
+    return rows
+
+
 @pytest.fixture
 def triangle_file() -> Path:
     return SCENARIOS / "two_finger_triangle.toml"

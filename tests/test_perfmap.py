@@ -2,22 +2,12 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 
 from models import perfmap
 from models.rungs import rung_for
 from models.scenario import load_scenario
-from tests.conftest import SCENARIOS
-
-
-def _entries(path: Path) -> list[tuple[int, int, str]]:
-    rows = []
-    for line in path.read_text().splitlines():
-        start, size, name = line.split(" ", 2)
-        rows.append((int(start, 16), int(size, 16), name))
-    return rows
+from tests.conftest import SCENARIOS, perf_map_entries
 
 
 def test_demangle_numba_names():
@@ -33,7 +23,7 @@ def test_the_map_names_the_kernels_a_rollout_ran(tmp_path):
     rung = rung_for(scenario, "dynamic-rigid")
     out = rung.rollout(scenario, rung.initial_state(scenario), np.array([[-1.0, -1.0]]), [0.01], 1e-4)
     assert out.steps == 100
-    rows = _entries(perfmap.write_perf_map(tmp_path / "kernels.map"))
+    rows = perf_map_entries(perfmap.write_perf_map(tmp_path / "kernels.map"))
     names = {name for _, _, name in rows}
     # the rollout and the stages it calls (the step's helpers are inlined into it: no code of their own)
     assert {"models.rollout.rollout_kernel", "models.contact.detect_planar_into", "NRT_incref"} <= names
