@@ -562,6 +562,7 @@ def _check_plan_args(args: argparse.Namespace) -> tuple[Scenario, list[str]]:
             names = [n for n in names if n in RUNG_NAMES and RUNG_NAMES.index(n) <= RUNG_NAMES.index(args.top)]
             if not names:
                 problems.append(Problem("--top", f"no rung of the ladder is at or below {args.top}"))
+    problems = problems or make_out_dir("--out", args.out)
     if problems:
         raise ScenarioError(scenario.path, problems)
     return scenario, names
@@ -606,7 +607,6 @@ def _write_plan_outputs(args: argparse.Namespace, scenario: Scenario, result) ->
     from planner.plots import plot_rollouts
 
     report = result.to_json()
-    make_out_dir(args.out)
     # plan.json is reproducible (no timings): the same seed gives the same bytes
     write_atomic(args.out / "plan.json", plan_json_text(result))
     write_atomic(args.out / "report.json", json.dumps(report, indent=1) + "\n")
@@ -920,6 +920,7 @@ def _check_sweep_args(args: argparse.Namespace):
     if runs > 10_000 and not args.json:
         print(f"checking the scenario at {runs:,} runs' parameters", file=sys.stderr, flush=True)
     problems = sweep_point_problems(scenario, list(args.grid), axes, models, fixed, args.step, args.duration)
+    problems = problems or make_out_dir("--out", args.out)
     if problems:
         raise ScenarioError(scenario.path, problems)
     return scenario, fixed, axes, models, runs
@@ -997,7 +998,6 @@ def _write_sweep_outputs(args: argparse.Namespace, result, axes) -> tuple[dict, 
     data = result.to_json()
     if args.refine and result.boundaries:
         data["bands"] = {a.name: sw.bands(result, a.name) for a in axes}
-    make_out_dir(args.out)
     write_atomic(args.out / "sweep.json", json.dumps(data, indent=1) + "\n")
     write_atomic(args.out / "sweep.csv", result.to_csv())
     from planner.plots import plot_feasible_sets
@@ -1042,6 +1042,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
         )
     if args.seeds is not None and args.seeds < 1:
         problems.append(Problem("--seeds", f"must be at least 1, got {args.seeds}"))
+    problems = problems or make_out_dir("--out", args.out)
     if problems:
         raise ScenarioError("ladder bench", problems)
     announce_compile()
@@ -1194,18 +1195,24 @@ def cmd_reserved(args: argparse.Namespace) -> int:
 # ----------------------------------------------------------------------------- output
 
 
-def write_atomic(path: Path, text: str) -> None:
+def write_atomic(path: Path, text: str, key: str = "--out") -> None:
     """Write via a temporary file and a rename, so a failure never leaves half a file. The
     folder must exist (the commands check it up front); the file gets the mode any new file
-    gets (0666 less the umask), not mkstemp's 0600."""
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    gets (0666 less the umask), not mkstemp's 0600. A folder that passed the checks but takes
+    no file (root under /proc, a full disk) is bad input for `key`: a ScenarioError."""
+    try:
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    except OSError as exc:
+        raise ScenarioError(path, [Problem(key, f"cannot write the file: {exc.strerror or exc}")]) from None
     try:
         os.fchmod(fd, 0o666 & ~_umask())
         with os.fdopen(fd, "w", encoding="utf-8") as handle:
             handle.write(text)
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         Path(tmp).unlink(missing_ok=True)
+        if isinstance(exc, OSError):
+            raise ScenarioError(path, [Problem(key, f"cannot write the file: {exc.strerror or exc}")]) from None
         raise
 
 
@@ -1253,8 +1260,16 @@ def check_out_dir(key: str, path: Path) -> list[Problem]:
     return []
 
 
-def make_out_dir(path: Path) -> None:
-    path.mkdir(parents=True, exist_ok=True)
+def make_out_dir(key: str, path: Path) -> list[Problem]:
+    """Create the output folder `path` (and missing parents): a problem when that fails although
+    `check_out_dir` passed (e.g. root under /proc, whose folders are writable but take no
+    new entries). Called once the other arguments are known good, before the work, so a bad
+    folder costs no run and a bad argument leaves no folder."""
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        return [Problem(key, f"{path}: cannot create the folder: {exc.strerror or exc}")]
+    return []
 
 
 def positive(key: str, value, *, integer: bool = False, allow_zero: bool = False) -> list[Problem]:

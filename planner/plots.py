@@ -50,14 +50,22 @@ def _wrap(text: str, width: int) -> str:
 
 
 def _save(fig, path: Path, svg: bool = False) -> Path:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110, bbox_inches="tight")
-    if svg and path.suffix == ".png":
-        fig.savefig(path.with_suffix(".svg"), bbox_inches="tight")
+    """Save and close the figure. A folder that passed the commands' checks but takes no file
+    (root under /proc, a full disk) is bad input: a ScenarioError naming the file."""
     import matplotlib.pyplot as plt
 
-    plt.close(fig)
+    from models.scenario import Problem, ScenarioError
+
+    path = Path(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(path, dpi=110, bbox_inches="tight")
+        if svg and path.suffix == ".png":
+            fig.savefig(path.with_suffix(".svg"), bbox_inches="tight")
+    except OSError as exc:
+        raise ScenarioError(path, [Problem("", f"cannot write the plot: {exc.strerror or exc}")]) from None
+    finally:
+        plt.close(fig)
     return path
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import signal
@@ -381,6 +382,57 @@ def test_every_argument_is_checked_before_any_work(tmp_path, args, message):
     assert message in result.stderr and result.stderr.startswith("error: ") and len(result.stderr.splitlines()) == 1, result.stderr
     assert "Traceback" not in result.stderr and result.stdout == ""
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a_file"]  # nothing written, no folder made
+
+
+def _refused(*_, **__):
+    raise OSError(errno.EROFS, "Read-only file system")
+
+
+def _no_work(*_, **__):
+    raise AssertionError("the command ran its work after bad input")
+
+
+@pytest.mark.parametrize(
+    ("args", "work", "file"),
+    [
+        (["plan", TRIANGLE, "--out", "{tmp}/out"], "planner.cli._run_plan", TRIANGLE),
+        (["sweep", TRIANGLE, "--grid", "v1=0.5:1:2", "--model", "kinematic", "--out", "{tmp}/out"], "planner.cli._run_sweep", TRIANGLE),
+        (["bench", "--quick", "--out", "{tmp}/out"], "planner.bench.run_all", "ladder bench"),
+    ],
+)
+def test_an_out_folder_that_cannot_be_made_is_bad_input_before_any_work(tmp_path, monkeypatch, capsys, args, work, file):
+    """A folder that passes the access check but takes no new entry (root under /proc, a
+    read-only mount) is found when the folder is made, before the work, not in a traceback after it."""
+    from planner.cli import main
+
+    monkeypatch.setattr(Path, "mkdir", _refused)
+    monkeypatch.setattr(work, _no_work)
+    assert main([a.replace("{tmp}", str(tmp_path)) for a in args]) == 2
+    err = capsys.readouterr().err
+    assert err == f"error: {file}: --out: {tmp_path / 'out'}: cannot create the folder: Read-only file system\n"
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_an_out_file_that_cannot_be_written_is_bad_input(tmp_path, monkeypatch, capsys):
+    from planner.cli import main
+
+    monkeypatch.setattr("tempfile.mkstemp", _refused)
+    out = tmp_path / "summary.json"
+    assert main(["check", TRIANGLE, "--out", str(out)]) == 2
+    assert capsys.readouterr().err == f"error: {out}: --out: cannot write the file: Read-only file system\n"
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_plot_that_cannot_be_written_is_bad_input(tmp_path, monkeypatch, capsys):
+    from matplotlib.figure import Figure
+
+    from planner.cli import main
+
+    monkeypatch.setattr(Figure, "savefig", _refused)
+    plot = tmp_path / "x.png"
+    assert main(["simulate", TRIANGLE, "--model", "kinematic", "--duration", "0.02", "--plot", str(plot)]) == 2
+    assert capsys.readouterr().err.endswith(f"error: {plot}: cannot write the plot: Read-only file system\n")
+    assert list(tmp_path.iterdir()) == []
 
 
 @pytest.mark.parametrize("out", ["a_file", "a_file/sub"])
