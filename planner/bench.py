@@ -880,10 +880,11 @@ def run_all(out: Path, doc: Path | None, quick: bool = False, progress=print, sc
     results["planning"] = planning(quick, out, scenes, seeds, progress)
     progress(f"bench: planning done in {time.perf_counter() - t0:.1f} s")
     results["plots"] = plot_work_precision(results["work_precision"], out)
-    (out / "bench.json").write_text(json.dumps(results, indent=1) + "\n")
+    from planner.cli import write_atomic  # a failed write leaves the old file, and is bad input, not a traceback
+
+    write_atomic(out / "bench.json", json.dumps(results, indent=1) + "\n")
     if doc is not None:
-        doc.parent.mkdir(parents=True, exist_ok=True)
-        doc.write_text(markdown(results, doc.parent, out))
+        write_atomic(doc, markdown(results, doc.parent, out), key="--doc")
     return results
 
 
