@@ -562,7 +562,6 @@ def _check_plan_args(args: argparse.Namespace) -> tuple[Scenario, list[str]]:
             names = [n for n in names if n in RUNG_NAMES and RUNG_NAMES.index(n) <= RUNG_NAMES.index(args.top)]
             if not names:
                 problems.append(Problem("--top", f"no rung of the ladder is at or below {args.top}"))
-    problems = problems or make_out_dir("--out", args.out)
     if problems:
         raise ScenarioError(scenario.path, problems)
     return scenario, names
@@ -591,9 +590,14 @@ def _run_plan(args: argparse.Namespace, scenario: Scenario, names: list[str]):
             print(f"planning: {name} ...", file=sys.stderr, flush=True)
 
     from planner import interrupt
+    from planner.ladder import check_start
 
     with interrupt.deferred():  # Ctrl-C ends the rung under way; the rungs done are kept
         announce_compile()
+        check_start(scenario)  # the start's checks (the ladder repeats them), before the folder is made
+        problems = make_out_dir("--out", args.out)
+        if problems:
+            raise ScenarioError(scenario.path, problems)
         result = ladder_for(scenario, names, args, progress=progress, stop=interrupt.asked)
     if live:
         print("\r" + " " * 78 + "\r", end="", file=sys.stderr, flush=True)

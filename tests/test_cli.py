@@ -395,7 +395,7 @@ def _no_work(*_, **__):
 @pytest.mark.parametrize(
     ("args", "work", "file"),
     [
-        (["plan", TRIANGLE, "--out", "{tmp}/out"], "planner.cli._run_plan", TRIANGLE),
+        (["plan", TRIANGLE, "--out", "{tmp}/out"], "planner.cli.ladder_for", TRIANGLE),
         (["sweep", TRIANGLE, "--grid", "v1=0.5:1:2", "--model", "kinematic", "--out", "{tmp}/out"], "planner.cli._run_sweep", TRIANGLE),
         (["bench", "--quick", "--out", "{tmp}/out"], "planner.bench.run_all", "ladder bench"),
     ],
