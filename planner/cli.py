@@ -1204,17 +1204,16 @@ def write_atomic(path: Path, text: str, key: str = "--out") -> None:
     folder must exist (the commands check it up front); the file gets the mode any new file
     gets (0666 less the umask), not mkstemp's 0600. A folder that passed the checks but takes
     no file (root under /proc, a full disk) is bad input for `key`: a ScenarioError."""
+    tmp = None
     try:
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    except OSError as exc:
-        raise ScenarioError(path, [Problem(key, f"cannot write the file: {exc.strerror or exc}")]) from None
-    try:
         os.fchmod(fd, 0o666 & ~_umask())
         with os.fdopen(fd, "w", encoding="utf-8") as handle:
             handle.write(text)
         os.replace(tmp, path)
     except BaseException as exc:
-        Path(tmp).unlink(missing_ok=True)
+        if tmp is not None:
+            Path(tmp).unlink(missing_ok=True)
         if isinstance(exc, OSError):
             raise ScenarioError(path, [Problem(key, f"cannot write the file: {exc.strerror or exc}")]) from None
         raise
