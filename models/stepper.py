@@ -645,7 +645,7 @@ def contact_stage(part, model, solver, drives, tables, system, h, q, nu, q_ref, 
         return r.unknowns if r.status == PgsStatus.CONVERGED else 0
     active = _active_contacts(contacts.W_n, nc)
     spatial = tables.spatial
-    Mlcp, qlcp, Y, gen0, c0, gen1, c1, fric, nf, lim = contact_lcp(
+    Mlcp, qlcp, Y, gen, cf, fric, nf, lim = contact_lcp(
         model, spatial, h, dofs, count, inv, nu_free, active, tables.pi, tables.pf, contacts, delta_n, delta_t, drives, drive_a
     )
     d = model.friction_directions if spatial else 2
@@ -895,8 +895,9 @@ def contact_lcp(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, co
     and the Delassus matrix G = B^T A^-1 B from A's body blocks (dofs, count, inv:
     `models.contact_pgs.body_blocks`), so M = C^T G C costs O(contacts^2), not O(nv contacts^2).
 
-    Returns (M, q, Y = A^-1 B, gen0, c0, gen1, c1: LCP column r < m is c0[r] B[:, gen0[r]] +
-    c1[r] B[:, gen1[r]], fric, nf, lim: the indices of the nl force-limited drives).
+    Returns (M, q, Y = A^-1 B, gen, cf: LCP column r < m is cf[0, r] B[:, gen[0, r]] +
+    cf[1, r] B[:, gen[1, r]] (`_combinations`), fric, nf, lim: the indices of the nl
+    force-limited drives).
 
     A force-limited drive j (limit F, P = h F) is a bounded impulse p = x - P, x in [0, 2P]:
     unbounded it would be a - b v (a: its PD impulse at v = 0, `_drives`; b = h (h kp + kd); v
@@ -917,26 +918,25 @@ def contact_lcp(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, co
     m = nc + nd + nl
     body, ldof, nloc, Bl = _generators(spatial, active, fric, nf, lim, nl, v_index, pi, c_pair, W_n, W_t, W_o, dofs, count)
     Y, G = _delassus(body, ldof, nloc, Bl, dofs, count, inv, nv)
-    gen0, c0, gen1, c1, coef, cs = _combinations(spatial, d, nc, fric, nf, nl)
+    gen, cf = _combinations(spatial, d, nc, fric, nf, nl)
     n = m + nf + nl
     Mlcp = np.zeros((n, n))
     qlcp = np.zeros(n)
-    _fill_jacobian_block(Mlcp, G, gen0, c0, gen1, c1, cs, spatial, nc, nf, nl)
-    Jt_nu = np.empty(m)
-    for r in range(m):  # J^T nu_free = C^T (B^T nu_free), over each generator's local DOFs
-        a0, a1 = gen0[r], gen1[r]
+    _fill_jacobian_block(Mlcp, G, gen, cf, spatial, d, nc, nf, nl)
+    Bt_nu = np.empty(nloc.shape[0])
+    for g in range(nloc.shape[0]):  # B^T nu_free, over each generator's local DOFs
         s0 = 0.0
-        for a in range(nloc[a0]):
-            s0 += Bl[a0, a] * nu_free[ldof[a0, a]]
-        s1 = 0.0
-        for a in range(nloc[a1]):
-            s1 += Bl[a1, a] * nu_free[ldof[a1, a]]
-        Jt_nu[r] = c0[r] * s0 + c1[r] * s1
+        for a in range(nloc[g]):
+            s0 += Bl[g, a] * nu_free[ldof[g, a]]
+        Bt_nu[g] = s0
+    Jt_nu = np.empty(m)
+    for r in range(m):  # J^T nu_free = C^T (B^T nu_free)
+        Jt_nu[r] = cf[0, r] * Bt_nu[gen[0, r]] + cf[1, r] * Bt_nu[gen[1, r]]
     _normal_rows(Mlcp, qlcp, compliant, h, active, pf, c_pair, c_psi, c_slot, c_bias, Jt_nu, delta_n, model.regularization)
-    _friction_rows(Mlcp, qlcp, compliant, h, d, m, active, fric, nf, coef, pf, c_pair, c_slot, c_bias, Jt_nu, delta_t)
+    _friction_rows(Mlcp, qlcp, compliant, h, d, m, active, fric, nf, cf, pf, c_pair, c_slot, c_bias, Jt_nu, delta_t)
     _scale_gamma(Mlcp, d, m, nc, nf)
     _drive_rows(Mlcp, qlcp, h, nc + nd, m + nf, lim, nl, kp, kd, max_force, drive_a, Jt_nu)
-    return Mlcp, qlcp, Y, gen0, c0, gen1, c1, fric, nf, lim[:nl]
+    return Mlcp, qlcp, Y, gen, cf, fric, nf, lim[:nl]
 
 
 @numba.njit(cache=True, inline="always")
@@ -1066,18 +1066,17 @@ def _delassus(body, ldof, nloc, Bl, dofs, count, inv, nv):
 
 
 @numba.njit(cache=True, inline="always")
-def _fill_jacobian_block(Mlcp, G, gen0, c0, gen1, c1, cs, spatial, nc, nf, nl):
+def _fill_jacobian_block(Mlcp, G, gen, cf, spatial, d, nc, nf, nl):
     """M[:m, :m] = C^T G C, row by row: the row p = (C^T G)[r] (ng), then each column group
-    from it (a normal's generator, a friction contact's d directions cs from its t and o
+    from it (a normal's generator, a friction contact's d directions from its t and o
     generators, a drive's DOF), so the inner loops are contiguous."""
     ng = G.shape[0]
-    d = cs.shape[0]
     nt = 2 if spatial else 1
     nd = nf * d
     m = nc + nd + nl
     p = np.empty(ng)
     for r in range(m):
-        a0, a1, x0, x1 = gen0[r], gen1[r], c0[r], c1[r]
+        a0, a1, x0, x1 = gen[0, r], gen[1, r], cf[0, r], cf[1, r]
         for g in range(ng):
             p[g] = x0 * G[a0, g] + x1 * G[a1, g]
         for k in range(nc):
@@ -1087,45 +1086,43 @@ def _fill_jacobian_block(Mlcp, G, gen0, c0, gen1, c1, cs, spatial, nc, nf, nl):
             po = p[nc + nf + f] if spatial else 0.0
             first = nc + f * d
             for j in range(d):
-                Mlcp[r, first + j] = pt * cs[j, 0] + po * cs[j, 1]
+                Mlcp[r, first + j] = pt * cf[0, nc + j] + po * cf[1, nc + j]  # (direction j)
         for e in range(nl):
             Mlcp[r, nc + nd + e] = p[nc + nt * nf + e]
 
 
 @numba.njit(cache=True, inline="always")
 def _combinations(spatial, d, nc, fric, nf, nl):
-    """C of J = B C: LCP column r < m is c0[r] B[:, gen0[r]] + c1[r] B[:, gen1[r]] (c1 = 0 for a
-    single generator); coef (max(nf d, 1), 2): each friction row's direction in the (t, o)
-    basis; cs (d, 2): the d directions (space: around the cone; the plane: +t and -t)."""
+    """C of J = B C, as (gen (2, m), cf (2, m)): LCP column r < m is cf[0, r] B[:, gen[0, r]] +
+    cf[1, r] B[:, gen[1, r]] (cf[1, r] = 0 for a single generator). A friction row's
+    (cf[0, r], cf[1, r]) is its direction in the (t, o) basis: the d directions around the cone
+    in space, +t and -t in the plane, the same for every friction contact (the first one's rows
+    hold them for all)."""
     nt = 2 if spatial else 1
     nd = nf * d
     m = nc + nd + nl
-    gen0 = np.empty(m, np.int64)
-    gen1 = np.empty(m, np.int64)
-    c0 = np.ones(m)
-    c1 = np.zeros(m)
-    coef = np.zeros((max(nd, 1), 2))
-    cs = np.empty((d, 2))
+    gen = np.empty((2, m), np.int64)
+    cf = np.empty((2, max(m, nc + d)))
+    for k in range(nc):
+        gen[0, k] = gen[1, k] = k
+        cf[0, k], cf[1, k] = 1.0, 0.0
     for j in range(d):
         if spatial:
             ang = 2.0 * np.pi * j / d
-            cs[j, 0], cs[j, 1] = np.cos(ang), np.sin(ang)
+            cf[0, nc + j], cf[1, nc + j] = np.cos(ang), np.sin(ang)
         else:
-            cs[j, 0], cs[j, 1] = (1.0 if j == 0 else -1.0), 0.0
-    for k in range(nc):
-        gen0[k] = gen1[k] = k
+            cf[0, nc + j], cf[1, nc + j] = (1.0 if j == 0 else -1.0), 0.0
     for f in range(nf):
         for j in range(d):
             r = nc + f * d + j
-            coef[r - nc, 0], coef[r - nc, 1] = cs[j, 0], cs[j, 1]
-            gen0[r] = nc + f
-            c0[r] = cs[j, 0]
-            gen1[r] = nc + nf + f if spatial else nc + f
-            c1[r] = cs[j, 1]
+            cf[0, r], cf[1, r] = cf[0, nc + j], cf[1, nc + j]
+            gen[0, r] = nc + f
+            gen[1, r] = nc + nf + f if spatial else nc + f
     for e in range(nl):
         r = nc + nd + e
-        gen0[r] = gen1[r] = nc + nt * nf + e
-    return gen0, c0, gen1, c1, coef, cs
+        gen[0, r] = gen[1, r] = nc + nt * nf + e
+        cf[0, r], cf[1, r] = 1.0, 0.0
+    return gen, cf
 
 
 @numba.njit(cache=True, inline="always")
@@ -1149,7 +1146,7 @@ def _normal_rows(Mlcp, qlcp, compliant, h, active, pf, c_pair, c_psi, c_slot, c_
 
 
 @numba.njit(cache=True, inline="always")
-def _friction_rows(Mlcp, qlcp, compliant, h, d, m, active, fric, nf, coef, pf, c_pair, c_slot, c_bias, Jt_nu, delta_t):
+def _friction_rows(Mlcp, qlcp, compliant, h, d, m, active, fric, nf, cf, pf, c_pair, c_slot, c_bias, Jt_nu, delta_t):
     """Friction rows of the contact LCP, in place: each friction contact's d direction rows
     (q from nu_free and the bias; compliant: the friction block's 1 / (h (h K + C)) and the
     previous tangential deformation) and its gamma row and column (mu, +-1), unscaled."""
@@ -1164,15 +1161,15 @@ def _friction_rows(Mlcp, qlcp, compliant, h, d, m, active, fric, nf, coef, pf, c
         slot = c_slot[i]
         for j in range(d):
             r = nc + f * d + j
-            qlcp[r] = Jt_nu[r] + coef[r - nc, 0] * c_bias[i, 1] + coef[r - nc, 1] * c_bias[i, 2]
+            qlcp[r] = Jt_nu[r] + cf[0, r] * c_bias[i, 1] + cf[1, r] * c_bias[i, 2]
             Mlcp[r, g] = 1.0
             Mlcp[g, r] = -1.0
             if compliant:
                 comp = 1.0 / (h * (h * K + C))
                 for j2 in range(d):
                     r2 = nc + f * d + j2
-                    Mlcp[r, r2] += comp * (coef[r - nc, 0] * coef[r2 - nc, 0] + coef[r - nc, 1] * coef[r2 - nc, 1])
-                qlcp[r] -= K / (h * K + C) * (coef[r - nc, 0] * delta_t[slot, 0] + coef[r - nc, 1] * delta_t[slot, 1])
+                    Mlcp[r, r2] += comp * (cf[0, r] * cf[0, r2] + cf[1, r] * cf[1, r2])
+                qlcp[r] -= K / (h * K + C) * (cf[0, r] * delta_t[slot, 0] + cf[1, r] * delta_t[slot, 1])
 
 
 @numba.njit(cache=True, inline="always")
@@ -1220,7 +1217,7 @@ def _drive_rows(Mlcp, qlcp, h, first_row, first_slack, lim, nl, kp, kd, max_forc
 def _contact_solve(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, drives, drive_a, basis):
     """Build and solve the contact LCP, first on the previous step's basis (`basis_table`).
     Returns (nu+, p_n, p_t, status, pivots, residual, size, basis+)."""
-    Mlcp, qlcp, Y, gen0, c0, gen1, c1, fric, nf, lim = contact_lcp(
+    Mlcp, qlcp, Y, gen, cf, fric, nf, lim = contact_lcp(
         model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, drives, drive_a
     )
     nc = active.shape[0]
@@ -1246,20 +1243,22 @@ def _contact_solve(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf,
         z, w, status, more, basic_z, _ = lemke_warm_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1), guess, WARM_TOLERANCE)
         pivots += more
         residual = natural_map_residual(z, w, qlcp)
-    p_n = z[:nc].copy()
+    p_n = z[:nc]  # (a view: z is not written again)
     p_t = np.zeros((nc, 2))
     if (status != STATUS_SOLVED and status != STATUS_SOLVED_INACCURATE) or not (residual <= LCP_TOLERANCE):
         return nu_free, p_n, p_t, StepStatus.LCP_FAILED.value, pivots, residual, n, basis
     # the generators' impulses t = C z: p_n, then each friction contact's impulse along t and o
     t = np.zeros(Y.shape[1])
     for r in range(m):
-        t[gen0[r]] += c0[r] * z[r]
-        t[gen1[r]] += c1[r] * z[r]
+        t[gen[0, r]] += cf[0, r] * z[r]
+        t[gen[1, r]] += cf[1, r] * z[r]
     for f in range(nf):
         p_t[fric[f], 0] = t[nc + f]
         if spatial:
             p_t[fric[f], 1] = t[nc + nf + f]
-    nu_new = nu_free + Y @ t  # (BLAS: a loop moves the round-off, docs/measurements.md)
+    nu_new = Y @ t  # (BLAS: a loop moves the round-off, docs/measurements.md)
+    for i in range(nu_new.shape[0]):
+        nu_new[i] += nu_free[i]  # (nu_free + Y t, no second array: the sum commutes exactly)
     basis_new = _basis_kept(basis, basic_z, active, slot, fric, nf, d, lim, m)
     return nu_new, p_n, p_t, StepStatus.OK.value, pivots, residual, n, basis_new
 
@@ -1271,8 +1270,10 @@ def _scale_lcp(Mlcp, qlcp, m):
     scale = _largest_entry(Mlcp, m)
     if scale > 0.0:
         inverse = 1.0 / scale  # a product per entry: divisions cost 0.5 us of box_push's 9.5 us solve
-        Mlcp *= inverse
-        qlcp *= inverse
+        for r in range(qlcp.shape[0]):  # (loops: the array expressions cost more instructions)
+            for c in range(Mlcp.shape[1]):
+                Mlcp[r, c] *= inverse
+            qlcp[r] *= inverse
 
 
 @numba.njit(cache=True, inline="always")
