@@ -1086,7 +1086,7 @@ def _fill_jacobian_block(Mlcp, G, gen, cf, spatial, d, nc, nf, nl):
             po = p[nc + nf + f] if spatial else 0.0
             first = nc + f * d
             for j in range(d):
-                Mlcp[r, first + j] = pt * cf[0, nc + j] + po * cf[1, nc + j]  # (direction j)
+                Mlcp[r, first + j] = pt * cf[0, first + j] + po * cf[1, first + j]
         for e in range(nl):
             Mlcp[r, nc + nd + e] = p[nc + nt * nf + e]
 
@@ -1096,26 +1096,26 @@ def _combinations(spatial, d, nc, fric, nf, nl):
     """C of J = B C, as (gen (2, m), cf (2, m)): LCP column r < m is cf[0, r] B[:, gen[0, r]] +
     cf[1, r] B[:, gen[1, r]] (cf[1, r] = 0 for a single generator). A friction row's
     (cf[0, r], cf[1, r]) is its direction in the (t, o) basis: the d directions around the cone
-    in space, +t and -t in the plane, the same for every friction contact (the first one's rows
-    hold them for all)."""
+    in space, +t and -t in the plane, the same for every friction contact (computed for the
+    first, copied for the others)."""
     nt = 2 if spatial else 1
     nd = nf * d
     m = nc + nd + nl
     gen = np.empty((2, m), np.int64)
-    cf = np.empty((2, max(m, nc + d)))
+    cf = np.empty((2, m))
     for k in range(nc):
         gen[0, k] = gen[1, k] = k
         cf[0, k], cf[1, k] = 1.0, 0.0
-    for j in range(d):
-        if spatial:
-            ang = 2.0 * np.pi * j / d
-            cf[0, nc + j], cf[1, nc + j] = np.cos(ang), np.sin(ang)
-        else:
-            cf[0, nc + j], cf[1, nc + j] = (1.0 if j == 0 else -1.0), 0.0
     for f in range(nf):
         for j in range(d):
             r = nc + f * d + j
-            cf[0, r], cf[1, r] = cf[0, nc + j], cf[1, nc + j]
+            if f > 0:
+                cf[0, r], cf[1, r] = cf[0, nc + j], cf[1, nc + j]
+            elif spatial:
+                ang = 2.0 * np.pi * j / d
+                cf[0, r], cf[1, r] = np.cos(ang), np.sin(ang)
+            else:
+                cf[0, r], cf[1, r] = (1.0 if j == 0 else -1.0), 0.0
             gen[0, r] = nc + f
             gen[1, r] = nc + nf + f if spatial else nc + f
     for e in range(nl):
