@@ -645,9 +645,14 @@ def contact_stage(part, model, solver, drives, tables, system, h, q, nu, q_ref, 
         return r.unknowns if r.status == PgsStatus.CONVERGED else 0
     active = _active_contacts(contacts.W_n, nc)
     spatial = tables.spatial
-    Mlcp, qlcp, Y, gen, cf, fric, nf, lim = contact_lcp(
-        model, spatial, h, dofs, count, inv, nu_free, active, tables.pi, tables.pf, contacts, delta_n, delta_t, drives, drive_a
-    )
+    if _planar_case(spatial, drives.max_force, active, contacts.pair, tables.pf, contacts.W_t):  # (as _contact_solve)
+        Mlcp, qlcp, Y, gen, cf, fric, nf, lim = _planar_lcp(
+            model, h, dofs, count, inv, nu_free, active, tables.pi, tables.pf, contacts, delta_n, delta_t
+        )
+    else:
+        Mlcp, qlcp, Y, gen, cf, fric, nf, lim = contact_lcp(
+            model, spatial, h, dofs, count, inv, nu_free, active, tables.pi, tables.pf, contacts, delta_n, delta_t, drives, drive_a
+        )
     d = model.friction_directions if spatial else 2
     m = active.shape[0] + nf * d + lim.shape[0]
     n = qlcp.shape[0]
@@ -1214,12 +1219,214 @@ def _drive_rows(Mlcp, qlcp, h, first_row, first_slack, lim, nl, kp, kd, max_forc
 
 
 @numba.njit(cache=True, inline="always")
+def _planar_lcp(model, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t):
+    """`contact_lcp` for the planar case (`_planar_case`): every active contact with friction
+    rows (its normal generator k, its tangent nc + k, the directions +t and -t), no force-limited
+    drive. The same LCP bit for bit (tests/test_planar_lcp.py): `_generators`, `_delassus`,
+    `_fill_jacobian_block`, the rows, `_scale_gamma` and `_combinations` written out with their
+    operations in their order, a zero coefficient's products included (they decide a zero's sign
+    as there), on two flat buffers (I: ints, F: floats) instead of a dozen arrays, each of which
+    costs about as much as a contact's share of the build (docs/measurements.md). Returns what
+    contact_lcp returns; M, q, Y, gen and cf are views of F and I."""
+    c_pair, c_psi, c_slot, c_bias, W_n, W_t = contacts.pair, contacts.psi, contacts.slot, contacts.bias, contacts.W_n, contacts.W_t
+    compliant = model.compliant
+    nc = active.shape[0]
+    nv = nu_free.shape[0]
+    d = 2
+    nf = nc
+    ng = 2 * nc
+    m = 3 * nc
+    n = 4 * nc
+    LD = LOCAL_DOFS
+    oB = 0
+    oL = oB + 2 * ng
+    oN = oL + ng * LD
+    oG = oN + ng
+    oF = oG + 2 * m
+    I = np.empty(oF + nc, np.int64)
+    fB = 0
+    fY = fB + ng * LD
+    fG = fY + nv * ng
+    fM = fG + ng * ng
+    fq = fM + n * n
+    fp = fq + n
+    fS = fp + ng
+    fC = fS + ng
+    F = np.empty(fC + 2 * m)
+    # I: each generator's bodies (oB, 2 each), its local DOFs (oL, LD each) and their count
+    # (oN), gen (oG, 2 x m), fric (oF); F: the generators' entries (fB), Y (fY, nv x ng), G (fG),
+    # M (fM), q (fq), a row of C^T G (fp), B^T nu_free (fS), cf (fC, 2 x m)
+    # generators (_generators): normal k, then its tangent nc + k
+    for g in range(ng):
+        k = g if g < nc else g - nc
+        i = active[k]
+        if g < nc:
+            I[oB + 2 * g] = -1
+            I[oB + 2 * g + 1] = -1
+            s = 0
+            for side in range(2):
+                b = pi[c_pair[i], side]
+                if count[b] > 0:
+                    I[oB + 2 * g + s] = b
+                    s += 1
+        else:
+            I[oB + 2 * g] = I[oB + 2 * k]
+            I[oB + 2 * g + 1] = I[oB + 2 * k + 1]
+        a = 0
+        for s in range(2):
+            b = I[oB + 2 * g + s]
+            if b < 0:
+                continue
+            for r in range(count[b]):
+                v = dofs[b, r]
+                I[oL + g * LD + a] = v
+                F[fB + g * LD + a] = W_n[v, i] if g < nc else W_t[v, i]
+                a += 1
+        I[oN + g] = a
+    # Delassus matrix (_delassus)
+    for x in range(nv * ng):
+        F[fY + x] = 0.0
+    for g in range(ng):
+        a0 = 0
+        for s in range(2):
+            b = I[oB + 2 * g + s]
+            if b < 0:
+                continue
+            mm = count[b]
+            for r in range(mm):
+                acc = 0.0
+                for c in range(mm):
+                    acc += inv[b, r, c] * F[fB + g * LD + a0 + c]
+                F[fY + dofs[b, r] * ng + g] = acc
+            a0 += mm
+    for x in range(ng * ng):
+        F[fG + x] = 0.0
+    for g1 in range(ng):
+        p_, r_ = I[oB + 2 * g1], I[oB + 2 * g1 + 1]
+        for g2 in range(g1, ng):
+            b0, b1 = I[oB + 2 * g2], I[oB + 2 * g2 + 1]
+            if p_ != b0 and p_ != b1 and (r_ < 0 or (r_ != b0 and r_ != b1)):
+                continue
+            acc = 0.0
+            for a in range(I[oN + g1]):
+                acc += F[fB + g1 * LD + a] * F[fY + I[oL + g1 * LD + a] * ng + g2]
+            F[fG + g1 * ng + g2] = acc
+            F[fG + g2 * ng + g1] = acc
+    # M = C^T G C (_fill_jacobian_block; row r's generator a0 and sign x0: c1 = 0 in the plane)
+    for x in range(n * n):
+        F[fM + x] = 0.0
+    for x in range(n):
+        F[fq + x] = 0.0
+    for r in range(m):
+        a0 = r if r < nc else nc + (r - nc) // d
+        x0 = 1.0 if (r < nc or (r - nc) % d == 0) else -1.0
+        for g in range(ng):
+            F[fp + g] = x0 * F[fG + a0 * ng + g] + 0.0 * F[fG + a0 * ng + g]
+        for k in range(nc):
+            F[fM + r * n + k] = F[fp + k]
+        for f in range(nf):
+            pt = F[fp + nc + f]
+            F[fM + r * n + nc + f * d] = pt * 1.0 + 0.0 * 0.0
+            F[fM + r * n + nc + f * d + 1] = pt * -1.0 + 0.0 * 0.0
+    # B^T nu_free, the rows (_normal_rows, _friction_rows), gamma (_scale_gamma)
+    for g in range(ng):
+        s0 = 0.0
+        for a in range(I[oN + g]):
+            s0 += F[fB + g * LD + a] * nu_free[I[oL + g * LD + a]]
+        F[fS + g] = s0
+    reg = 0.0
+    if not compliant and model.regularization > 0.0:
+        for k in range(nc):
+            reg = max(reg, model.regularization * F[fM + k * n + k])
+    for k in range(nc):
+        i = active[k]
+        F[fq + k] = c_psi[i] / h + (1.0 * F[fS + k] + 0.0 * F[fS + k]) + c_bias[i, 0]
+        F[fM + k * n + k] += reg
+        if compliant:
+            K, C = pf[c_pair[i], PF_K], pf[c_pair[i], PF_C]
+            comp = 1.0 / (h * (h * K + C))
+            F[fM + k * n + k] += comp
+            F[fq + k] += comp * C * delta_n[c_slot[i]]
+    for f in range(nf):
+        k = f
+        i = active[k]
+        pr = c_pair[i]
+        g = m + f
+        F[fM + g * n + k] = pf[pr, PF_MU]
+        K, C = pf[pr, PF_K], pf[pr, PF_C]
+        slot = c_slot[i]
+        for j in range(d):
+            r = nc + f * d + j
+            x0 = 1.0 if j == 0 else -1.0
+            jt = x0 * F[fS + nc + f] + 0.0 * F[fS + nc + f]
+            F[fq + r] = jt + x0 * c_bias[i, 1] + 0.0 * c_bias[i, 2]
+            F[fM + r * n + g] = 1.0
+            F[fM + g * n + r] = -1.0
+            if compliant:
+                comp = 1.0 / (h * (h * K + C))
+                for j2 in range(d):
+                    r2 = nc + f * d + j2
+                    y0 = 1.0 if j2 == 0 else -1.0
+                    F[fM + r * n + r2] += comp * (x0 * y0 + 0.0 * 0.0)
+                F[fq + r] -= K / (h * K + C) * (x0 * delta_t[slot, 0] + 0.0 * delta_t[slot, 1])
+    for f in range(nf):
+        g = m + f
+        sc = 0.0
+        for j in range(d):
+            r = nc + f * d + j
+            sc = max(sc, abs(F[fM + r * n + r]))
+        if sc > 0.0:
+            for r in range(n):
+                F[fM + r * n + g] *= sc
+                F[fM + g * n + r] *= sc
+    # C (_combinations) and fric: every active contact
+    for r in range(m):
+        a0 = r if r < nc else nc + (r - nc) // d
+        I[oG + r] = a0
+        I[oG + m + r] = a0
+        F[fC + r] = 1.0 if (r < nc or (r - nc) % d == 0) else -1.0
+        F[fC + m + r] = 0.0
+    for k in range(nc):
+        I[oF + k] = k
+    return (
+        F[fM : fM + n * n].reshape(n, n),
+        F[fq : fq + n],
+        F[fY : fY + nv * ng].reshape(nv, ng),
+        I[oG : oG + 2 * m].reshape(2, m),
+        F[fC : fC + 2 * m].reshape(2, m),
+        I[oF : oF + nc],
+        nf,
+        I[oF:oF],
+    )
+
+
+@numba.njit(cache=True, inline="always")
+def _planar_case(spatial, max_force, active, c_pair, pf, W_t):
+    """Whether `_planar_lcp` builds this step's LCP: a planar scene without force-limited
+    drives whose active contacts (at least one) all have friction rows (`_friction_contacts`).
+    (It takes arrays, not the contact set and the drives: an inlined helper reference-counts
+    every array of the tuples it is passed, about 2% of a squeeze's step here.)"""
+    if spatial or active.shape[0] == 0 or any_limited(max_force):
+        return False
+    for k in range(active.shape[0]):
+        i = active[k]
+        if not (pf[c_pair[i], PF_MU] > 0.0 and _column_norm(W_t, i) > ZERO_COLUMN):
+            return False
+    return True
+
+
+@numba.njit(cache=True, inline="always")
 def _contact_solve(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, drives, drive_a, basis):
     """Build and solve the contact LCP, first on the previous step's basis (`basis_table`).
     Returns (nu+, p_n, p_t, status, pivots, residual, size, basis+)."""
-    Mlcp, qlcp, Y, gen, cf, fric, nf, lim = contact_lcp(
-        model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, drives, drive_a
-    )
+    # the builder chosen here, not in a helper: one that took the build's arguments would count
+    # their references each step, 2-3% of the squeeze's (docs/measurements.md)
+    if _planar_case(spatial, drives.max_force, active, contacts.pair, pf, contacts.W_t):
+        Mlcp, qlcp, Y, gen, cf, fric, nf, lim = _planar_lcp(model, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t)
+    else:
+        Mlcp, qlcp, Y, gen, cf, fric, nf, lim = contact_lcp(
+            model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, drives, drive_a
+        )
     nc = active.shape[0]
     d = model.friction_directions if spatial else 2
     nd = nf * d
