@@ -55,7 +55,6 @@ __all__ = [
     "default_max_iterations",
     "fc2d_coulomb_error",
     "fc2d_reactions_from_lcp",
-    "lemke_guess",
     "lemke_kernel",
     "lemke_warm_kernel",
     "natural_map_residual",
@@ -560,25 +559,13 @@ def lemke_warm_kernel(M, q, max_pivots, guess, tol):
             if guess[i]:
                 work[nj] = i
                 nj += 1
-        z, w, accepted, _ = lemke_guess(M, q, work, nj, tol)
-        if accepted:
-            return z, w, STATUS_SOLVED, 0, guess, True
+        z, ok = _solve_on(M, q, work, nj)
+        if ok:
+            w = _matvec_on(M, z, q, work, nj)
+            if _natural_map_residual(z, w, q) <= tol:
+                return z, w, STATUS_SOLVED, 0, guess, True
     z, w, status, pivots, basic_z = _lemke(M, q, max_pivots)
     return z, w, status, pivots, basic_z, False
-
-
-@numba.njit(cache=True, error_model="numpy")
-def lemke_guess(M, q, J, nj, tol):
-    """`lemke_warm_kernel`'s guess on the nj indices J[:nj] (z_J basic): z_J = -M[J, J]^-1 q_J,
-    z = 0 elsewhere, w = M z + q recomputed. Returns (z, w, accepted, residual): accepted when
-    M[J, J] is regular and the natural-map residual of (z, w) is at most tol (then z solves the
-    LCP to tol, exactly on that basis); residual is inf when M[J, J] is singular."""
-    z, ok = _solve_on(M, q, J, nj)
-    if not ok:
-        return z, z, False, np.inf
-    w = _matvec_on(M, z, q, J, nj)
-    residual = _natural_map_residual(z, w, q)
-    return z, w, residual <= tol, residual
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
