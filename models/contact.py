@@ -305,8 +305,17 @@ def contact_jacobian(S, q, nc, c_pair, dirs, c_pa, c_pb, W):
 
 @numba.njit(cache=True)
 def jacobian_packed(bi, bf, pi, q, nc, c_pair, dirs, c_pa, c_pb, W):
+    """`jacobian_at` with the bodies' origins at q."""
     pos = np.empty((bi.shape[0], 3))
     positions(bi, bf, q, pos)
+    jacobian_at(bi, pi, pos, nc, c_pair, dirs, c_pa, c_pb, W)
+
+
+@numba.njit(cache=True)
+def jacobian_at(bi, pi, pos, nc, c_pair, dirs, c_pa, c_pb, W):
+    """Fill W[:, :nc] with the Jacobian columns of directions dirs[i] at each contact, the
+    bodies' origins at pos (`models.kinematics.positions`): the rollout computes them once a
+    step for all its Jacobians, into its scratch."""
     # rows and columns indexed, not sliced: a view (c_pb[i], W[:, :nc]) is an array object of
     # its own, reference-counted as it is made and dropped, per contact
     for v in range(W.shape[0]):

@@ -113,10 +113,30 @@ def _segments_cross(P, i0, i1, Q, j0, j1):
     return o1 * o2 <= 0.0 and o3 * o4 <= 0.0
 
 
+#: `_closer`'s slack on squared distances: far above their round-off (a few units of 1e-16).
+DIST_FILTER = 1.0 + 1e-9
+
+
+@numba.njit(cache=True, inline="always")
+def _closer(dx, dy, best, best2):
+    """(hypot(dx, dy), True) when that is below best, else (best, False), in a distance search
+    whose best so far is best and best2 = best * best * DIST_FILTER. hypot is a libm call
+    (about 6 ns here, against 1 for the sum of squares) and most candidates are farther than
+    the best by far more than the squares' round-off, so it runs only where the squares do
+    not rule the candidate out: the same results as hypot on every candidate, bit for bit."""
+    d2 = dx * dx + dy * dy
+    if d2 > best2:
+        return best, False
+    d = np.hypot(dx, dy)
+    if d < best:
+        return d, True
+    return best, False
+
+
 @numba.njit(cache=True)
 def _closest_features(P, Q):
     """Distance between two convex cores and witness points (cp on P, cq on Q)."""
-    best = np.inf
+    best = best2 = np.inf
     cpx = cpy = cqx = cqy = 0.0
     for swap in range(2):
         A = P if swap == 0 else Q
@@ -128,9 +148,9 @@ def _closest_features(P, Q):
             for e in range(max(ne, 1)):  # a single point is a zero-length segment
                 j = (e + 1) % kb
                 cx, cy = _closest_on_segment(ax, ay, B[e, 0], B[e, 1], B[j, 0], B[j, 1])
-                d = np.hypot(ax - cx, ay - cy)
-                if d < best:
-                    best = d
+                best, closer = _closer(ax - cx, ay - cy, best, best2)
+                if closer:
+                    best2 = best * best * DIST_FILTER
                     if swap == 0:
                         cpx, cpy, cqx, cqy = ax, ay, cx, cy
                     else:
@@ -309,7 +329,7 @@ def _world_vertex(verts, px, py, c, s, i):
     return px + c * vx - s * vy, py + s * vx + c * vy
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _point_vs_polygon(bi, bf, verts, poses, a, b, margin, c_psi, c_n, c_pa, c_pb, start, axis):
     """`_core_vs_core` for a single-point core (a disc's) against a polygon's (three or more
     vertices) while the point lies outside the polygon by more than NEAR_TOUCH: the operations of
@@ -322,16 +342,16 @@ def _point_vs_polygon(bi, bf, verts, poses, a, b, margin, c_psi, c_n, c_pa, c_pb
     X, Y = _world_vertex(verts, poses[pt, 0], poses[pt, 1], poses[pt, 2], poses[pt, 3], bi[pt, BI_VSTART])
     gx, gy, gc, gs = poses[pg, 0], poses[pg, 1], poses[pg, 2], poses[pg, 3]
     g0, k = bi[pg, BI_VSTART], bi[pg, BI_VCOUNT]
-    best = np.inf
+    best = best2 = np.inf
     cpx = cpy = cqx = cqy = 0.0
     for swap in range(2):  # _closest_features(P, Q): first P's vertices against Q, then Q's against P
         if (swap == 0) != point_is_a:  # the polygon's vertices against the point (a zero-length segment)
             for i in range(k):
                 ax, ay = _world_vertex(verts, gx, gy, gc, gs, g0 + i)
                 cx, cy = _closest_on_segment(ax, ay, X, Y, X, Y)
-                d = np.hypot(ax - cx, ay - cy)
-                if d < best:
-                    best = d
+                best, closer = _closer(ax - cx, ay - cy, best, best2)
+                if closer:
+                    best2 = best * best * DIST_FILTER
                     if point_is_a:  # swap 1: A = the polygon (Q), B = the point (P)
                         cpx, cpy, cqx, cqy = cx, cy, ax, ay
                     else:
@@ -341,9 +361,9 @@ def _point_vs_polygon(bi, bf, verts, poses, a, b, margin, c_psi, c_n, c_pa, c_pb
                 e0x, e0y = _world_vertex(verts, gx, gy, gc, gs, g0 + e)
                 e1x, e1y = _world_vertex(verts, gx, gy, gc, gs, g0 + (e + 1) % k)
                 cx, cy = _closest_on_segment(X, Y, e0x, e0y, e1x, e1y)
-                d = np.hypot(X - cx, Y - cy)
-                if d < best:
-                    best = d
+                best, closer = _closer(X - cx, Y - cy, best, best2)
+                if closer:
+                    best2 = best * best * DIST_FILTER
                     if point_is_a:
                         cpx, cpy, cqx, cqy = X, Y, cx, cy
                     else:

@@ -31,13 +31,13 @@ from models.contact import (
     detect_planar_into,
     detect_spatial,
     has_script,
-    jacobian_packed,
+    jacobian_at,
     place_scripted,
     planar_scratch,
     scripted_bias,
     tangents_packed,
 )
-from models.kinematics import body_pose_3d
+from models.kinematics import body_pose_3d, positions
 from models.predicates import evaluate, evaluate_with
 from models.stepper import (
     LAW_ACTIVE,
@@ -146,18 +146,20 @@ def _classify_with(g_op, g_index, g_lo, g_hi, u_op, u_index, u_lo, u_hi, q, pair
 
 
 @numba.njit(cache=True, inline="always")
-def _assemble(bi, bf, pi, dimension, q, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, W_n, W_t, W_o, c_bias, scripted, with_friction):
+def _assemble(bi, bf, pi, dimension, q, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, W_n, W_t, W_o, c_bias, scripted, with_friction, pos):
     """Stage assemble: W_n of the first nc (> 0) contacts at q; with scripted obstacles the frames
-    and their velocity bias; with friction (every rung with forces) t, o and W_t, W_o."""
-    jacobian_packed(bi, bf, pi, q, nc, c_pair, c_n, c_pa, c_pb, W_n)
+    and their velocity bias; with friction (every rung with forces) t, o and W_t, W_o. pos: the
+    rollout's scratch for the bodies' origins (nb, 3), filled here at q."""
+    positions(bi, bf, q, pos)
+    jacobian_at(bi, pi, pos, nc, c_pair, c_n, c_pa, c_pb, W_n)
     if scripted:
         tangents_packed(dimension, nc, c_n, c_t, c_o)
         scripted_bias(bf, pi, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, c_bias)
     if with_friction:
         tangents_packed(dimension, nc, c_n, c_t, c_o)
-        jacobian_packed(bi, bf, pi, q, nc, c_pair, c_t, c_pa, c_pb, W_t)
+        jacobian_at(bi, pi, pos, nc, c_pair, c_t, c_pa, c_pb, W_t)
         if dimension == 3:
-            jacobian_packed(bi, bf, pi, q, nc, c_pair, c_o, c_pa, c_pb, W_o)
+            jacobian_at(bi, pi, pos, nc, c_pair, c_o, c_pa, c_pb, W_o)
 
 
 @numba.njit(cache=True, inline="always")
@@ -453,7 +455,9 @@ def rollout_kernel(
                 status = StepStatus.UNSUPPORTED_PAIR.value
                 break
             if nc > 0:
-                _assemble(bi, bf, pi, dimension, q, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, W_n, W_t, W_o, c_bias, scripted, not kinematic)
+                _assemble(
+                    bi, bf, pi, dimension, q, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, W_n, W_t, W_o, c_bias, scripted, not kinematic, pos
+                )
             if has_law:
                 law_speeds(S, law, q, q_index, controls[k], u)
             # stages solve and integrate: the rung's step kernel (in line: arguments of an inlined
@@ -655,7 +659,7 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
             _distances(nc, c_pair, c_psi, c_slot, first_slot, pair_psi)
             _classify_with(g_op, g_index, g_lo, g_hi, u_op, u_index, u_lo, u_hi, q, pair_psi, stack)
         if k == 0 or stage == STAGE_JACOBIANS:
-            _assemble(bi, bf, pi, dimension, q, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, W_n, W_t, W_o, c_bias, False, True)
+            _assemble(bi, bf, pi, dimension, q, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, W_n, W_t, W_o, c_bias, False, True, pos)
         if k == 0 or stage >= STAGE_SOLVE:
             if rotating:  # as rollout_kernel: A depends on q
                 A = system_matrix(bi, bf, q, nv, eps_eff, h, D.v_index, D.kp, D.kd, D.max_force)

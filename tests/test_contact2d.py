@@ -273,3 +273,25 @@ def test_the_disc_polygon_path_gives_the_general_paths_contact_bit_for_bit(tmp_p
         handed_over += direct < 0
         fast += direct >= 0
     assert handed_over >= 5 and fast >= 200
+
+
+def test_the_distance_filter_decides_as_hypot_does():
+    """`_closer` skips hypot where the sums of squares rule a candidate out: on candidates at
+    random scales and on ones within a few ulps of the best (where the squares' round-off
+    could mislead a filter without slack), it decides and returns what hypot would."""
+    from models.contact2d import DIST_FILTER, _closer
+
+    rng = np.random.default_rng(7)
+    skipped = 0
+    for _ in range(20_000):
+        scale = 10.0 ** rng.uniform(-8, 3)
+        dx, dy = rng.normal(size=2) * scale
+        best = np.hypot(*(rng.normal(size=2) * scale))
+        if rng.random() < 0.5:  # at the best, give or take a few ulps
+            best = np.hypot(dx, dy) + rng.integers(-3, 4) * np.spacing(best)
+        got = _closer(dx, dy, best, best * best * DIST_FILTER)
+        d = np.hypot(dx, dy)
+        assert got == ((d, True) if d < best else (best, False))
+        skipped += bool(dx * dx + dy * dy > best * best * DIST_FILTER)
+    assert _closer(3.0, 4.0, np.inf, np.inf) == (5.0, True)  # the first candidate of a search
+    assert 5_000 < skipped < 15_000
