@@ -329,7 +329,7 @@ def _world_vertex(verts, px, py, c, s, i):
     return px + c * vx - s * vy, py + s * vx + c * vy
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def _point_vs_polygon(bi, bf, verts, poses, a, b, margin, c_psi, c_n, c_pa, c_pb, start, axis):
     """`_core_vs_core` for a single-point core (a disc's) against a polygon's (three or more
     vertices) while the point lies outside the polygon by more than NEAR_TOUCH: the operations of
