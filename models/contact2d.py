@@ -119,18 +119,19 @@ DIST_FILTER = 1.0 + 1e-9
 
 @numba.njit(cache=True, inline="always")
 def _closer(dx, dy, best, best2):
-    """(hypot(dx, dy), True) when that is below best, else (best, False), in a distance search
-    whose best so far is best and best2 = best * best * DIST_FILTER. hypot is a libm call
-    (about 6 ns here, against 1 for the sum of squares) and most candidates are farther than
-    the best by far more than the squares' round-off, so it runs only where the squares do
-    not rule the candidate out: the same results as hypot on every candidate, bit for bit."""
+    """(best, best2, closer) after a candidate at (dx, dy) in a distance search whose best so far
+    is best, with best2 = best * best * DIST_FILTER (both inf at first): closer when
+    hypot(dx, dy) is below best, which it then replaces. hypot is a libm call (about 6 ns here,
+    against 1 for the sum of squares) and most candidates are farther than the best by far more
+    than the squares' round-off, so it runs only where the squares do not rule the candidate
+    out: the same results as hypot on every candidate, bit for bit."""
     d2 = dx * dx + dy * dy
     if d2 > best2:
-        return best, False
+        return best, best2, False
     d = np.hypot(dx, dy)
     if d < best:
-        return d, True
-    return best, False
+        return d, d * d * DIST_FILTER, True
+    return best, best2, False
 
 
 @numba.njit(cache=True)
@@ -148,9 +149,8 @@ def _closest_features(P, Q):
             for e in range(max(ne, 1)):  # a single point is a zero-length segment
                 j = (e + 1) % kb
                 cx, cy = _closest_on_segment(ax, ay, B[e, 0], B[e, 1], B[j, 0], B[j, 1])
-                best, closer = _closer(ax - cx, ay - cy, best, best2)
+                best, best2, closer = _closer(ax - cx, ay - cy, best, best2)
                 if closer:
-                    best2 = best * best * DIST_FILTER
                     if swap == 0:
                         cpx, cpy, cqx, cqy = ax, ay, cx, cy
                     else:
@@ -349,9 +349,8 @@ def _point_vs_polygon(bi, bf, verts, poses, a, b, margin, c_psi, c_n, c_pa, c_pb
             for i in range(k):
                 ax, ay = _world_vertex(verts, gx, gy, gc, gs, g0 + i)
                 cx, cy = _closest_on_segment(ax, ay, X, Y, X, Y)
-                best, closer = _closer(ax - cx, ay - cy, best, best2)
+                best, best2, closer = _closer(ax - cx, ay - cy, best, best2)
                 if closer:
-                    best2 = best * best * DIST_FILTER
                     if point_is_a:  # swap 1: A = the polygon (Q), B = the point (P)
                         cpx, cpy, cqx, cqy = cx, cy, ax, ay
                     else:
@@ -361,9 +360,8 @@ def _point_vs_polygon(bi, bf, verts, poses, a, b, margin, c_psi, c_n, c_pa, c_pb
                 e0x, e0y = _world_vertex(verts, gx, gy, gc, gs, g0 + e)
                 e1x, e1y = _world_vertex(verts, gx, gy, gc, gs, g0 + (e + 1) % k)
                 cx, cy = _closest_on_segment(X, Y, e0x, e0y, e1x, e1y)
-                best, closer = _closer(X - cx, Y - cy, best, best2)
+                best, best2, closer = _closer(X - cx, Y - cy, best, best2)
                 if closer:
-                    best2 = best * best * DIST_FILTER
                     if point_is_a:
                         cpx, cpy, cqx, cqy = X, Y, cx, cy
                     else:

@@ -289,9 +289,10 @@ def test_the_distance_filter_decides_as_hypot_does():
         best = np.hypot(*(rng.normal(size=2) * scale))
         if rng.random() < 0.5:  # at the best, give or take a few ulps
             best = np.hypot(dx, dy) + rng.integers(-3, 4) * np.spacing(best)
-        got = _closer(dx, dy, best, best * best * DIST_FILTER)
+        best2 = best * best * DIST_FILTER
+        got = _closer(dx, dy, best, best2)
         d = np.hypot(dx, dy)
-        assert got == ((d, True) if d < best else (best, False))
+        assert got == ((d, d * d * DIST_FILTER, True) if d < best else (best, best2, False))
         skipped += bool(dx * dx + dy * dy > best * best * DIST_FILTER)
-    assert _closer(3.0, 4.0, np.inf, np.inf) == (5.0, True)  # the first candidate of a search
+    assert _closer(3.0, 4.0, np.inf, np.inf) == (5.0, 25.0 * DIST_FILTER, True)  # a search's first candidate
     assert 5_000 < skipped < 15_000
