@@ -177,16 +177,15 @@ def _matvec_plus(M, z, q):
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _matvec_on(M, z, q, J, nj):
-    """w = M z + q for a z that is zero outside the nj indices J[:nj]: O(n nj)."""
+def _matvec_on_into(M, z, q, J, nj, w):
+    """w = M z + q for a z that is zero outside the nj indices J[:nj]: O(n nj), into the
+    caller's w (at least n entries)."""
     n = q.shape[0]
-    w = np.empty(n)
     for i in range(n):
         s = q[i]
         for a in range(nj):
             s += M[i, J[a]] * z[J[a]]
         w[i] = s
-    return w
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -553,19 +552,30 @@ def lemke_warm_kernel(M, q, max_pivots, guess, tol):
     """
     n = q.shape[0]
     if n > 0:
-        work = np.empty(n, np.int64)
-        nj = np.int64(0)
-        for i in range(n):
-            if guess[i]:
-                work[nj] = i
-                nj += 1
-        z, ok = _solve_on(M, q, work, nj)
-        if ok:
-            w = _matvec_on(M, z, q, work, nj)
-            if _natural_map_residual(z, w, q) <= tol:
-                return z, w, STATUS_SOLVED, 0, guess, True
+        z = np.empty(n)
+        w = np.empty(n)
+        if warm_guess_into(M, q, guess, tol, np.empty(n, np.int64), np.empty((n + 1, n)), z, w):
+            return z, w, STATUS_SOLVED, 0, guess, True
     z, w, status, pivots, basic_z = _lemke(M, q, max_pivots)
     return z, w, status, pivots, basic_z, False
+
+
+@numba.njit(cache=True, error_model="numpy")
+def warm_guess_into(M, q, guess, tol, J, A, z, w):
+    """`lemke_warm_kernel`'s guess, on the caller's arrays (J: n ints, A: (n + 1, n), z and w:
+    n each, or larger): z_J = -M[J, J]^-1 q_J on the guessed basic set, z = 0 elsewhere, w = M z
+    + q. Returns whether that point's natural-map residual is at most tol (False where M[J, J]
+    is numerically singular)."""
+    n = q.shape[0]
+    nj = np.int64(0)
+    for i in range(n):
+        if guess[i]:
+            J[nj] = i
+            nj += 1
+    if not _solve_on_into(M, q, J, nj, A, z):
+        return False
+    _matvec_on_into(M, z, q, J, nj, w)
+    return _natural_map_residual(z, w, q) <= tol
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
@@ -692,18 +702,27 @@ def _basis_point(M, q, basis, n, work):
 def _solve_on(M, q, J, nj):
     """(z, ok): z_J = -M[J, J]^-1 q_J on the nj indices J[:nj], z = 0 elsewhere; ok is False
     when M[J, J] is numerically singular (then z = 0)."""
+    z2 = np.empty(q.shape[0])
+    ok = _solve_on_into(M, q, J, nj, np.empty((nj + 1, nj)), z2)
+    return z2, ok
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _solve_on_into(M, q, J, nj, A, z):
+    """`_solve_on` on the caller's A (at least (nj + 1, nj): M[J, J] and, in row nj, -q_J, for
+    `_gauss_solve`) and z (at least n entries). Returns ok."""
     n = q.shape[0]
-    A = np.empty((nj + 1, nj))  # M[J, J] and, in its last row, -q_J (`_gauss_solve`)
     for a in range(nj):
         A[nj, a] = -q[J[a]]
         for c in range(nj):
             A[a, c] = M[J[a], J[c]]
     ok = _gauss_solve(A, nj)
-    z2 = np.zeros(n)
+    for i in range(n):
+        z[i] = 0.0
     if ok:
         for a in range(nj):
-            z2[J[a]] = A[nj, a]
-    return z2, ok
+            z[J[a]] = A[nj, a]
+    return ok
 
 
 # --------------------------------------------------------------------------------------------

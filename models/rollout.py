@@ -50,10 +50,13 @@ from models.stepper import (
     PART_CONTACT_SOLVE,
     SOLVER_AUTO,
     SOLVER_LEMKE,
+    WARM_DONE,
     SceneTables,
     Solver,
     StepStatus,
     System,
+    _deformations,
+    _uses_pgs,
     any_limited,
     basis_table,
     contact_stage,
@@ -65,6 +68,8 @@ from models.stepper import (
     kinematic_step,
     make_system,
     mass_matrix,
+    planar_warm_buffers,
+    planar_warm_step,
     system_matrix,
 )
 from models.task import Outcome
@@ -419,6 +424,8 @@ def rollout_kernel(
     A, Ainv, M_const, rhs_const = system.A, system.Ainv, system.M_const, system.rhs_const
     constant_A, limited = not has_rotations(bi), any_limited(max_force)
     kinematic, eps, compliant, theta = model.kinematic, model.eps, model.compliant, model.theta
+    planar_warm = dimension == 2 and constant_A and not limited and not kinematic
+    B = planar_warm_buffers(slots if planar_warm else 0, nv, q.shape[0], v_index.shape[0], basis)
     eps_eff = model.quasistatic_inertia if eps == 0.0 else eps
     max_records, rec_t, rec_q, rec_nu, n_rec = _start_records(max_records, q, nu)
     t, steps, lcp_solves, pivots, max_residual, max_size, min_psi, force_steps, sweeps = 0.0, 0, 0, 0, 0.0, 0, np.inf, 0, 0
@@ -481,10 +488,25 @@ def rollout_kernel(
                 if not constant_A:
                     A = system_matrix(bi, bf, q, nv, eps_eff, h, v_index, kp, kd, max_force)
                     system = System(A, Ainv, M_const, rhs_const, system.dofs, system.count, system.inv)  # (no blocks: A changes)
-                r = dynamics_step_inline(
-                    model, step_solver, D, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis
-                )
-                q2, nu2, q_ref2, dn2, dt2, st, piv, res, size, p_n, p_t, sw, basis = r
+                taken = False
+                if planar_warm and not _uses_pgs(model, step_solver, nc, limited):
+                    # the usual step while contacts persist, without numba's runtime (`planar_warm_step`)
+                    warm, n_act, res = planar_warm_step(
+                        model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B
+                    )
+                    if warm == WARM_DONE:
+                        taken = True
+                        q2, nu2, q_ref2, basis = B.q.copy(), B.nu.copy(), B.q_ref.copy(), B.basis.copy()  # (B is rewritten next step)
+                        if compliant:
+                            dn2, dt2 = _deformations(
+                                h, tables.pf, c_pair, c_slot, B.active[:n_act], B.z[:n_act], B.p_t[:n_act], delta_n, delta_t
+                            )
+                        st, piv, size, p_n, p_t = StepStatus.OK.value, 0, 4 * n_act, B.impulses[:nc], B.frictions[:nc]
+                if not taken:
+                    r = dynamics_step_inline(
+                        model, step_solver, D, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis
+                    )
+                    q2, nu2, q_ref2, dn2, dt2, st, piv, res, size, p_n, p_t, sw, basis = r
                 if step_solver.method == SOLVER_AUTO and sw >= solver.max_sweeps:
                     step_solver = lemke
                 if keep_warm and st == StepStatus.OK:

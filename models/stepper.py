@@ -74,6 +74,7 @@ from models.lcp import (
     lemke_kernel,
     lemke_warm_kernel,
     natural_map_residual,
+    warm_guess_into,
 )
 
 #: Quasistatic rungs: inertia scale standing in for eps -> 0 (times the mass matrix).
@@ -478,10 +479,8 @@ def drive_reference(h, q_ref, u, lower, upper):
 def integrate_positions(bi, q, nu, h):
     """q + h G(q) nu, renormalising quaternions (the paper's q^{l+1} = q^l + h G nu^{l+1})."""
     out = q.copy()
+    _integrate_translations_into(bi, q, nu, h, out)
     for b in range(bi.shape[0]):
-        for k in range(4):  # translations and the planar/yaw angle: G = identity
-            if bi[b, BI_QMAP + k] >= 0:
-                out[bi[b, BI_QMAP + k]] = q[bi[b, BI_QMAP + k]] + h * nu[bi[b, BI_VMAP + k]]
         if bi[b, BI_QMAP + Q_QW] >= 0:
             quat = np.empty(4)
             for k in range(4):
@@ -496,6 +495,16 @@ def integrate_positions(bi, q, nu, h):
             for k in range(4):
                 out[bi[b, BI_QMAP + Q_QW + k]] = quat[k] / norm
     return out
+
+
+@numba.njit(cache=True, inline="always")
+def _integrate_translations_into(bi, q, nu, h, out):
+    """out = q + h nu on the translations and the planar/yaw angle (G = identity there), in the
+    caller's out; its other entries (quaternions) untouched."""
+    for b in range(bi.shape[0]):
+        for k in range(4):
+            if bi[b, BI_QMAP + k] >= 0:
+                out[bi[b, BI_QMAP + k]] = q[bi[b, BI_QMAP + k]] + h * nu[bi[b, BI_VMAP + k]]
 
 
 # ----------------------------------------------------------------------------- the step
@@ -689,19 +698,26 @@ def _drives(h, q, q_ref, u, drives, rhs):
     unlimited drives to rhs. A force-limited drive j instead gets -h max_force[j] (its impulse
     enters the contact problem shifted to be >= 0) and its PD impulse at nu = 0 in a[j].
     Returns (q_ref+, a)."""
+    q_ref_new = np.empty(q_ref.shape[0])
+    a = np.empty(q_ref.shape[0])
+    _drives_into(h, q, q_ref, u, drives, rhs, q_ref_new, a)
+    return q_ref_new, a
+
+
+@numba.njit(cache=True, inline="always")
+def _drives_into(h, q, q_ref, u, drives, rhs, q_ref_new, a):
+    """`_drives` into the caller's q_ref_new and a (one entry per drive)."""
     q_index, v_index, kp, kd, max_force = drives.q_index, drives.v_index, drives.kp, drives.kd, drives.max_force
     lower, upper = drives.lower, drives.upper  # hoisted: a tuple's array read in the loop is counted per pass
-    q_ref_new = q_ref.copy()
-    a = np.zeros(v_index.shape[0])
     for j in range(v_index.shape[0]):
         q_ref_new[j], ff = drive_reference(h, q_ref[j], u[j], lower[j], upper[j])
         pd = h * (kp[j] * (q_ref_new[j] - q[q_index[j]]) + kd[j] * ff)
+        a[j] = 0.0
         if np.isfinite(max_force[j]):
             a[j] = pd
             rhs[v_index[j]] -= h * max_force[j]
         else:
             rhs[v_index[j]] += pd
-    return q_ref_new, a
 
 
 @numba.njit(cache=True, inline="always")
@@ -740,6 +756,10 @@ def _free_velocity(model, drives, tables, system, h, q, nu, q_ref, u, dofs, coun
     else from its body blocks (dofs, count, inv: `models.contact_pgs.body_blocks`)."""
     bi, bf = tables.bi, tables.bf
     nv = nu.shape[0]
+    if _constant_plane(model, tables.spatial, system, nv):
+        nu_free, q_ref_new, drive_a = np.empty(nv), np.empty(q_ref.shape[0]), np.empty(q_ref.shape[0])
+        _free_velocity_into(model, drives, system, h, q, nu, q_ref, u, np.empty(nv), nu_free, q_ref_new, drive_a)
+        return nu_free, q_ref_new, drive_a
     quasistatic = model.eps == 0.0
     rhs = system.rhs_const.copy()
     eps = model.quasistatic_inertia if quasistatic else model.eps
@@ -760,15 +780,44 @@ def _free_velocity(model, drives, tables, system, h, q, nu, q_ref, u, dofs, coun
 
 
 @numba.njit(cache=True, inline="always")
+def _constant_plane(model, spatial, system, nv):
+    """Whether `_free_velocity_into` serves the step: a planar scene whose A and (for a dynamic
+    rung) M are constant and held by the System."""
+    return not spatial and system.Ainv.shape[0] == nv and (model.eps == 0.0 or system.M_const.shape[0] == nv)
+
+
+@numba.njit(cache=True, inline="always")
+def _free_velocity_into(model, drives, system, h, q, nu, q_ref, u, rhs, nu_free, q_ref_new, a):
+    """`_free_velocity` where `_constant_plane` holds, on the caller's arrays: rhs (scratch) and
+    nu_free (nv each), q_ref_new and a (one entry per drive)."""
+    nv = nu.shape[0]
+    rhs_const = system.rhs_const
+    for v in range(nv):
+        rhs[v] = rhs_const[v]
+    if model.eps != 0.0:
+        add_product(rhs, system.M_const, nu, model.eps)
+    _drives_into(h, q, q_ref, u, drives, rhs, q_ref_new, a)
+    for v in range(nv):
+        nu_free[v] = 0.0
+    add_product(nu_free, system.Ainv, rhs, 1.0)
+
+
+@numba.njit(cache=True, inline="always")
 def _active_contacts(W_n, nc):
     """The contacts that couple to a free DOF (W_n column above ZERO_COLUMN)."""
     active = np.empty(nc, np.int64)
+    return active[: _active_into(W_n, nc, active)]
+
+
+@numba.njit(cache=True, inline="always")
+def _active_into(W_n, nc, active):
+    """`_active_contacts` into the caller's active (at least nc entries): returns their count."""
     n_act = 0
     for i in range(nc):
         if _column_norm(W_n, i) > ZERO_COLUMN:
             active[n_act] = i
             n_act += 1
-    return active[:n_act]
+    return n_act
 
 
 @numba.njit(cache=True, inline="always")
@@ -1228,6 +1277,38 @@ def _planar_lcp(model, h, dofs, count, inv, nu_free, active, pi, pf, contacts, d
     as there), on two flat buffers (I: ints, F: floats) instead of contact_lcp's 15 arrays (the squeeze's
     contact steps 7% faster, docs/measurements.md). Returns what contact_lcp returns; M, q, Y,
     gen and cf are views of F and I."""
+    nc = active.shape[0]
+    nv = nu_free.shape[0]
+    n, m, ng = 4 * nc, 3 * nc, 2 * nc
+    n_int, n_float = _planar_scratch(nc)
+    I = np.empty(n_int + 2 * m + nc, np.int64)
+    F = np.empty(n_float + n * n + n + nv * ng + 2 * m)
+    # after the scratch: F holds M, q, Y and cf; I holds gen and fric
+    fM = n_float
+    fq = fM + n * n
+    fY = fq + n
+    fC = fY + nv * ng
+    Mlcp = F[fM:fq].reshape(n, n)
+    qlcp = F[fq:fY]
+    Y = F[fY:fC].reshape(nv, ng)
+    cf = F[fC : fC + 2 * m].reshape(2, m)
+    gen = I[n_int : n_int + 2 * m].reshape(2, m)
+    fric = I[n_int + 2 * m : n_int + 2 * m + nc]
+    _planar_lcp_into(model, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, I, F, Mlcp, qlcp, Y, gen, cf, fric)
+    return Mlcp, qlcp, Y, gen, cf, fric, nc, fric[:0]
+
+
+@numba.njit(cache=True, inline="always")
+def _planar_scratch(nc):
+    """(ints, floats): the scratch `_planar_lcp_into` needs for nc active contacts."""
+    ng = 2 * nc
+    return ng * (2 + LOCAL_DOFS + 1), ng * (LOCAL_DOFS + ng + 2)
+
+
+@numba.njit(cache=True, inline="always")
+def _planar_lcp_into(model, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, I, F, M, qv, Y, gen, cf, fric):
+    """`_planar_lcp` on the caller's arrays: the scratch I and F (`_planar_scratch`, or larger)
+    and the LCP's M (n, n), q (n), Y (nv, ng), gen and cf (2, m), fric (nc), n = 4 nc."""
     c_pair, c_psi, c_slot, c_bias, W_n, W_t = contacts.pair, contacts.psi, contacts.slot, contacts.bias, contacts.W_n, contacts.W_t
     compliant = model.compliant
     nc = active.shape[0]
@@ -1238,24 +1319,15 @@ def _planar_lcp(model, h, dofs, count, inv, nu_free, active, pi, pf, contacts, d
     m = 3 * nc
     n = 4 * nc
     LD = LOCAL_DOFS
+    # I: each generator's bodies (oB, 2 each), its local DOFs (oL, LD each) and their count
+    # (oN); F: the generators' entries (fB), G (fG), a row of C^T G (fp), B^T nu_free (fS)
     oB = 0
     oL = oB + 2 * ng
     oN = oL + ng * LD
-    oG = oN + ng
-    oF = oG + 2 * m
-    I = np.empty(oF + nc, np.int64)
     fB = 0
-    fY = fB + ng * LD
-    fG = fY + nv * ng
-    fM = fG + ng * ng
-    fq = fM + n * n
-    fp = fq + n
+    fG = fB + ng * LD
+    fp = fG + ng * ng
     fS = fp + ng
-    fC = fS + ng
-    F = np.empty(fC + 2 * m)
-    # I: each generator's bodies (oB, 2 each), its local DOFs (oL, LD each) and their count
-    # (oN), gen (oG, 2 x m), fric (oF); F: the generators' entries (fB), Y (fY, nv x ng), G (fG),
-    # M (fM), q (fq), a row of C^T G (fp), B^T nu_free (fS), cf (fC, 2 x m)
     # generators (_generators): normal k, then its tangent nc + k
     for g in range(ng):
         k = g if g < nc else g - nc
@@ -1284,8 +1356,9 @@ def _planar_lcp(model, h, dofs, count, inv, nu_free, active, pi, pf, contacts, d
                 a += 1
         I[oN + g] = a
     # Delassus matrix (_delassus)
-    for x in range(nv * ng):
-        F[fY + x] = 0.0
+    for v in range(nv):
+        for g in range(ng):
+            Y[v, g] = 0.0
     for g in range(ng):
         a0 = 0
         for s in range(2):
@@ -1297,7 +1370,7 @@ def _planar_lcp(model, h, dofs, count, inv, nu_free, active, pi, pf, contacts, d
                 acc = 0.0
                 for c in range(mm):
                     acc += inv[b, r, c] * F[fB + g * LD + a0 + c]
-                F[fY + dofs[b, r] * ng + g] = acc
+                Y[dofs[b, r], g] = acc
             a0 += mm
     for x in range(ng * ng):
         F[fG + x] = 0.0
@@ -1309,25 +1382,25 @@ def _planar_lcp(model, h, dofs, count, inv, nu_free, active, pi, pf, contacts, d
                 continue
             acc = 0.0
             for a in range(I[oN + g1]):
-                acc += F[fB + g1 * LD + a] * F[fY + I[oL + g1 * LD + a] * ng + g2]
+                acc += F[fB + g1 * LD + a] * Y[I[oL + g1 * LD + a], g2]
             F[fG + g1 * ng + g2] = acc
             F[fG + g2 * ng + g1] = acc
     # M = C^T G C (_fill_jacobian_block; row r's generator a0 and sign x0: c1 = 0 in the plane)
-    for x in range(n * n):
-        F[fM + x] = 0.0
-    for x in range(n):
-        F[fq + x] = 0.0
+    for r in range(n):
+        for c in range(n):
+            M[r, c] = 0.0
+        qv[r] = 0.0
     for r in range(m):
         a0 = r if r < nc else nc + (r - nc) // d
         x0 = 1.0 if (r < nc or (r - nc) % d == 0) else -1.0
         for g in range(ng):
             F[fp + g] = x0 * F[fG + a0 * ng + g] + 0.0 * F[fG + a0 * ng + g]
         for k in range(nc):
-            F[fM + r * n + k] = F[fp + k]
+            M[r, k] = F[fp + k]
         for f in range(nf):
             pt = F[fp + nc + f]
-            F[fM + r * n + nc + f * d] = pt * 1.0 + 0.0 * 0.0
-            F[fM + r * n + nc + f * d + 1] = pt * -1.0 + 0.0 * 0.0
+            M[r, nc + f * d] = pt * 1.0 + 0.0 * 0.0
+            M[r, nc + f * d + 1] = pt * -1.0 + 0.0 * 0.0
     # B^T nu_free, the rows (_normal_rows, _friction_rows), gamma (_scale_gamma)
     for g in range(ng):
         s0 = 0.0
@@ -1337,67 +1410,195 @@ def _planar_lcp(model, h, dofs, count, inv, nu_free, active, pi, pf, contacts, d
     reg = 0.0
     if not compliant and model.regularization > 0.0:
         for k in range(nc):
-            reg = max(reg, model.regularization * F[fM + k * n + k])
+            reg = max(reg, model.regularization * M[k, k])
     for k in range(nc):
         i = active[k]
-        F[fq + k] = c_psi[i] / h + (1.0 * F[fS + k] + 0.0 * F[fS + k]) + c_bias[i, 0]
-        F[fM + k * n + k] += reg
+        qv[k] = c_psi[i] / h + (1.0 * F[fS + k] + 0.0 * F[fS + k]) + c_bias[i, 0]
+        M[k, k] += reg
         if compliant:
             K, C = pf[c_pair[i], PF_K], pf[c_pair[i], PF_C]
             comp = 1.0 / (h * (h * K + C))
-            F[fM + k * n + k] += comp
-            F[fq + k] += comp * C * delta_n[c_slot[i]]
+            M[k, k] += comp
+            qv[k] += comp * C * delta_n[c_slot[i]]
     for f in range(nf):
         k = f
         i = active[k]
         pr = c_pair[i]
         g = m + f
-        F[fM + g * n + k] = pf[pr, PF_MU]
+        M[g, k] = pf[pr, PF_MU]
         K, C = pf[pr, PF_K], pf[pr, PF_C]
         slot = c_slot[i]
         for j in range(d):
             r = nc + f * d + j
             x0 = 1.0 if j == 0 else -1.0
             jt = x0 * F[fS + nc + f] + 0.0 * F[fS + nc + f]
-            F[fq + r] = jt + x0 * c_bias[i, 1] + 0.0 * c_bias[i, 2]
-            F[fM + r * n + g] = 1.0
-            F[fM + g * n + r] = -1.0
+            qv[r] = jt + x0 * c_bias[i, 1] + 0.0 * c_bias[i, 2]
+            M[r, g] = 1.0
+            M[g, r] = -1.0
             if compliant:
                 comp = 1.0 / (h * (h * K + C))
                 for j2 in range(d):
                     r2 = nc + f * d + j2
                     y0 = 1.0 if j2 == 0 else -1.0
-                    F[fM + r * n + r2] += comp * (x0 * y0 + 0.0 * 0.0)
-                F[fq + r] -= K / (h * K + C) * (x0 * delta_t[slot, 0] + 0.0 * delta_t[slot, 1])
+                    M[r, r2] += comp * (x0 * y0 + 0.0 * 0.0)
+                qv[r] -= K / (h * K + C) * (x0 * delta_t[slot, 0] + 0.0 * delta_t[slot, 1])
     for f in range(nf):
         g = m + f
         sc = 0.0
         for j in range(d):
             r = nc + f * d + j
-            sc = max(sc, abs(F[fM + r * n + r]))
+            sc = max(sc, abs(M[r, r]))
         if sc > 0.0:
             for r in range(n):
-                F[fM + r * n + g] *= sc
-                F[fM + g * n + r] *= sc
+                M[r, g] *= sc
+                M[g, r] *= sc
     # C (_combinations) and fric: every active contact
     for r in range(m):
         a0 = r if r < nc else nc + (r - nc) // d
-        I[oG + r] = a0
-        I[oG + m + r] = a0
-        F[fC + r] = 1.0 if (r < nc or (r - nc) % d == 0) else -1.0
-        F[fC + m + r] = 0.0
+        gen[0, r] = a0
+        gen[1, r] = a0
+        cf[0, r] = 1.0 if (r < nc or (r - nc) % d == 0) else -1.0
+        cf[1, r] = 0.0
     for k in range(nc):
-        I[oF + k] = k
-    return (
-        F[fM : fM + n * n].reshape(n, n),
-        F[fq : fq + n],
-        F[fY : fY + nv * ng].reshape(nv, ng),
-        I[oG : oG + 2 * m].reshape(2, m),
-        F[fC : fC + 2 * m].reshape(2, m),
-        I[oF : oF + nc],
-        nf,
-        I[oF:oF],
+        fric[k] = k
+
+
+class PlanarWarm(NamedTuple):
+    """The arrays of `planar_warm_step`, made once per rollout (`planar_warm_buffers`) for a
+    contact capacity: every array the step writes, so that it runs without numba's runtime."""
+
+    rhs: np.ndarray  # (nv,) scratch
+    nu_free: np.ndarray  # (nv,)
+    q_ref: np.ndarray  # (drives,) q_ref+
+    drive_a: np.ndarray  # (drives,)
+    active: np.ndarray  # (cap,) int
+    I: np.ndarray  # int scratch of `_planar_lcp_into` and gen (2, 3 cap) after it
+    F: np.ndarray  # float scratch of `_planar_lcp_into`
+    M: np.ndarray  # (4 cap, 4 cap)
+    q_lcp: np.ndarray  # (4 cap,)
+    Y: np.ndarray  # (nv, 2 cap)
+    gen: np.ndarray  # (2, 3 cap) int
+    cf: np.ndarray  # (2, 3 cap)
+    fric: np.ndarray  # (cap,) int
+    guess: np.ndarray  # (4 cap,) bool
+    J: np.ndarray  # (4 cap,) int
+    A: np.ndarray  # (4 cap + 1, 4 cap)
+    z: np.ndarray  # (4 cap,)
+    w: np.ndarray  # (4 cap,)
+    t: np.ndarray  # (2 cap,)
+    p_t: np.ndarray  # (cap, 2) friction impulses of the active contacts
+    nu: np.ndarray  # (nv,) nu+
+    q: np.ndarray  # (nq,) q+
+    blend: np.ndarray  # (nv,) theta nu+ + (1 - theta) nu
+    basis: np.ndarray  # basis table, shaped as the rollout's
+    impulses: np.ndarray  # (cap,) p_n by contact
+    frictions: np.ndarray  # (cap, 2) p_t by contact
+
+
+@numba.njit(cache=True)
+def planar_warm_buffers(cap, nv, nq, drives, basis):
+    """`PlanarWarm` for up to cap contacts (a `models.contact.ContactSet`'s capacity)."""
+    n, m, ng = 4 * cap, 3 * cap, 2 * cap
+    n_int, n_float = _planar_scratch(cap)
+    return PlanarWarm(
+        np.empty(nv),
+        np.empty(nv),
+        np.empty(drives),
+        np.empty(drives),
+        np.empty(cap, np.int64),
+        np.empty(n_int, np.int64),
+        np.empty(n_float),
+        np.empty((n, n)),
+        np.empty(n),
+        np.empty((nv, ng)),
+        np.empty((2, m), np.int64),
+        np.empty((2, m)),
+        np.empty(cap, np.int64),
+        np.empty(n, np.bool_),
+        np.empty(n, np.int64),
+        np.empty((n + 1, n)),
+        np.empty(n),
+        np.empty(n),
+        np.empty(ng),
+        np.empty((cap, 2)),
+        np.empty(nv),
+        np.empty(nq),
+        np.empty(nv),
+        np.empty_like(basis),
+        np.empty(cap),
+        np.empty((cap, 2)),
     )
+
+
+#: `planar_warm_step`'s outcomes: the step is done, or the caller takes the general path.
+WARM_DONE, WARM_NOT_TAKEN = 0, 1
+
+
+@numba.njit(cache=True, _nrt=False)
+def planar_warm_step(model, drives, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B):
+    """A contact step of `_lemke_step` whose LCP the previous step's basis solves (the usual
+    step while contacts persist), in the plane with A constant and no force-limited drive,
+    compiled without numba's runtime: no reference counts, no allocation; every array is B's
+    (`PlanarWarm`). Where the LCP is not `_planar_case`, the guess does not solve it or the state
+    leaves the finite range, it returns WARM_NOT_TAKEN and the caller takes the general path,
+    which solves the step again from the start. Else (WARM_DONE): q+, nu+, q_ref+, the next basis
+    table and the impulses by contact in B (the compliant deformations are the caller's: B.z and
+    B.p_t hold the active contacts' impulses). The same operations in the same order as
+    `_lemke_step`: the same bits (tests/test_planar_warm.py). Returns (outcome, active
+    contacts, residual)."""
+    nv = nu.shape[0]
+    if tables.spatial or any_limited(drives.max_force) or system.Ainv.shape[0] != nv:
+        return WARM_NOT_TAKEN, 0, 0.0
+    if not _constant_plane(model, tables.spatial, system, nv):
+        return WARM_NOT_TAKEN, 0, 0.0
+    system_ok = system.count.shape[0] == tables.bi.shape[0]  # A^-1's body blocks held (`_blocks`)
+    if not system_ok:
+        return WARM_NOT_TAKEN, 0, 0.0
+    _free_velocity_into(model, drives, system, h, q, nu, q_ref, u, B.rhs, B.nu_free, B.q_ref, B.drive_a)
+    n_act = _active_into(contacts.W_n, nc, B.active)
+    active = B.active[:n_act]
+    if not _planar_case(False, drives.max_force, active, contacts.pair, tables.pf, contacts.W_t):
+        return WARM_NOT_TAKEN, n_act, 0.0
+    n, m, ng = 4 * n_act, 3 * n_act, 2 * n_act
+    M, q_lcp, Y, gen, cf, fric = B.M[:n, :n], B.q_lcp[:n], B.Y[:, :ng], B.gen[:, :m], B.cf[:, :m], B.fric[:n_act]
+    dofs, count, inv, pi, pf = system.dofs, system.count, system.inv, tables.pi, tables.pf
+    _planar_lcp_into(
+        model, h, dofs, count, inv, B.nu_free, active, pi, pf, contacts, delta_n, delta_t, B.I, B.F, M, q_lcp, Y, gen, cf, fric
+    )
+    _scale_lcp(M, q_lcp, m)
+    lim = fric[:0]
+    _fill_basis_guess(B.guess, basis, active, contacts.slot, fric, n_act, 2, lim, m, n)
+    guess = B.guess[:n]
+    if not warm_guess_into(M, q_lcp, guess, WARM_TOLERANCE, B.J, B.A, B.z, B.w):
+        return WARM_NOT_TAKEN, n_act, 0.0
+    z, w = B.z[:n], B.w[:n]
+    residual = natural_map_residual(z, w, q_lcp)
+    if not (residual <= LCP_TOLERANCE):
+        return WARM_NOT_TAKEN, n_act, residual
+    p_t = B.p_t[:n_act]
+    _impulses_into(False, n_act, m, n_act, fric, gen, cf, z, Y, B.nu_free, B.t[:ng], p_t, B.nu)
+    _fill_basis_kept(B.basis, basis, guess, active, contacts.slot, fric, n_act, 2, lim, m)
+    for i in range(nc):
+        B.impulses[i] = 0.0
+        B.frictions[i, 0] = 0.0
+        B.frictions[i, 1] = 0.0
+    for k in range(n_act):
+        B.impulses[active[k]] = z[k]
+        B.frictions[active[k], 0] = p_t[k, 0]
+        B.frictions[active[k], 1] = p_t[k, 1]
+    # the position update (`_integrate_checked`; in the plane integrate_positions has only its
+    # translations and angles)
+    velocity = B.nu
+    if model.theta != 1.0:
+        velocity = B.blend
+        for v in range(nv):
+            velocity[v] = model.theta * B.nu[v] + (1.0 - model.theta) * nu[v]
+    for i in range(q.shape[0]):
+        B.q[i] = q[i]
+    _integrate_translations_into(tables.bi, q, velocity, h, B.q)
+    if not (_finite_and_bounded(B.q) and _finite_and_bounded(B.nu)):
+        return WARM_NOT_TAKEN, n_act, residual
+    return WARM_DONE, n_act, residual
 
 
 @numba.njit(cache=True, inline="always")
@@ -1454,21 +1655,34 @@ def _contact_solve(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf,
     p_t = np.zeros((nc, 2))
     if (status != STATUS_SOLVED and status != STATUS_SOLVED_INACCURATE) or not (residual <= LCP_TOLERANCE):
         return nu_free, p_n, p_t, StepStatus.LCP_FAILED.value, pivots, residual, n, basis
-    # the generators' impulses t = C z: p_n, then each friction contact's impulse along t and o
-    t = np.zeros(Y.shape[1])
+    nu_new = np.empty(nu_free.shape[0])
+    _impulses_into(spatial, nc, m, nf, fric, gen, cf, z, Y, nu_free, np.empty(Y.shape[1]), p_t, nu_new)
+    basis_new = _basis_kept(basis, basic_z, active, slot, fric, nf, d, lim, m)
+    return nu_new, p_n, p_t, StepStatus.OK.value, pivots, residual, n, basis_new
+
+
+@numba.njit(cache=True, inline="always")
+def _impulses_into(spatial, nc, m, nf, fric, gen, cf, z, Y, nu_free, t, p_t, nu_new):
+    """The contact LCP's solution z as impulses and velocity, on the caller's arrays: the
+    generators' impulses t = C z (ng = Y.shape[1] entries), each friction contact's impulse
+    along t and o in p_t (nc, 2; zeroed first), and nu+ = nu_free + Y t in nu_new, by
+    add_product's loops, not numba's BLAS call: the same bits on every CPU (OpenBLAS picks its
+    kernel by CPU), and 0.15-0.3 us less a contact step."""
+    for g in range(Y.shape[1]):
+        t[g] = 0.0
     for r in range(m):
         t[gen[0, r]] += cf[0, r] * z[r]
         t[gen[1, r]] += cf[1, r] * z[r]
+    for k in range(nc):
+        p_t[k, 0] = 0.0
+        p_t[k, 1] = 0.0
     for f in range(nf):
         p_t[fric[f], 0] = t[nc + f]
         if spatial:
             p_t[fric[f], 1] = t[nc + nf + f]
-    # nu+ = nu_free + Y t by add_product's loops, not numba's BLAS call: the same bits on every
-    # CPU (OpenBLAS picks its kernel by CPU), and 0.15-0.3 us less a contact step
-    nu_new = nu_free.copy()
+    for v in range(nu_free.shape[0]):
+        nu_new[v] = nu_free[v]
     add_product(nu_new, Y, t, 1.0)
-    basis_new = _basis_kept(basis, basic_z, active, slot, fric, nf, d, lim, m)
-    return nu_new, p_n, p_t, StepStatus.OK.value, pivots, residual, n, basis_new
 
 
 @numba.njit(cache=True, inline="always")
@@ -1506,12 +1720,21 @@ def _basis_guess(basis, active, slot, fric, nf, d, lim, m, n):
     step's table (`basis_table`; rows: the contact slots, slot.shape[0] of them, then the
     drives): each contact's and force-limited drive's flags; one that was not in the previous
     LCP, or a table of another shape, guesses w basic (no force) on its rows."""
-    guess = np.zeros(n, np.bool_)
+    guess = np.empty(n, np.bool_)
+    _fill_basis_guess(guess, basis, active, slot, fric, nf, d, lim, m, n)
+    return guess
+
+
+@numba.njit(cache=True, inline="always")
+def _fill_basis_guess(guess, basis, active, slot, fric, nf, d, lim, m, n):
+    """`_basis_guess` into the caller's guess (at least n entries)."""
+    for r in range(n):
+        guess[r] = False
     nc = active.shape[0]
     nl = lim.shape[0]
     slots = slot.shape[0]
     if basis.shape[1] != BASIS_DIRECTIONS + d or basis.shape[0] < slots:
-        return guess
+        return
     nd = nf * d
     for k in range(nc):
         s = slot[active[k]]
@@ -1528,7 +1751,6 @@ def _basis_guess(basis, active, slot, fric, nf, d, lim, m, n):
         if r < basis.shape[0] and basis[r, BASIS_PRESENT] != 0:
             guess[nc + nd + e] = basis[r, BASIS_NORMAL] != 0
             guess[m + nf + e] = basis[r, BASIS_GAMMA] != 0
-    return guess
 
 
 @numba.njit(cache=True, inline="always")
@@ -1536,10 +1758,20 @@ def _basis_kept(basis, basic_z, active, slot, fric, nf, d, lim, m):
     """The table (`basis_table`, shaped as the given one) of this step's final basis basic_z:
     the rows of its contacts and force-limited drives present, all others absent. A table of
     another shape than the LCP needs is replaced by one that fits nothing (no warm start)."""
-    out = np.zeros_like(basis)
+    out = np.empty_like(basis)
+    _fill_basis_kept(out, basis, basic_z, active, slot, fric, nf, d, lim, m)
+    return out
+
+
+@numba.njit(cache=True, inline="always")
+def _fill_basis_kept(out, basis, basic_z, active, slot, fric, nf, d, lim, m):
+    """`_basis_kept` into the caller's out (shaped as basis)."""
+    for r in range(out.shape[0]):
+        for c in range(out.shape[1]):
+            out[r, c] = 0
     slots = slot.shape[0]
     if basis.shape[1] != BASIS_DIRECTIONS + d or basis.shape[0] < slots:
-        return out
+        return
     nc = active.shape[0]
     nl = lim.shape[0]
     nd = nf * d
@@ -1558,7 +1790,6 @@ def _basis_kept(basis, basic_z, active, slot, fric, nf, d, lim, m):
             out[r, BASIS_PRESENT] = 1
             out[r, BASIS_NORMAL] = basic_z[nc + nd + e]
             out[r, BASIS_GAMMA] = basic_z[m + nf + e]
-    return out
 
 
 @numba.njit(cache=True)

@@ -1,0 +1,145 @@
+"""The planar warm step (`planar_warm_step`) against the general Lemke step (`dynamics_step`).
+
+While contacts persist, a planar step's LCP is solved by the previous step's basis, and the
+rollout takes that step in `planar_warm_step`: compiled without numba's runtime, on arrays made
+once per rollout (docs/measurements.md: the squeeze's contact step about a third cheaper). Its
+contract is to be the general step bit for bit where it is taken (the same q+, nu+, q_ref+,
+basis table, impulses and compliant deformations), and to be taken exactly where the general
+step accepts its warm guess. Checked at states of every planar rung that solves an LCP, on the
+planar scenarios with friction, with random commands (fixed seeds).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from models.contact import ContactSet, contact_buffers, contact_frames, place_scripted, scripted_bias
+from models.rollout import _start_system
+from models.rungs import compiled, rung_for
+from models.scenario import load_scenario
+from models.stepper import (
+    SOLVER_LEMKE,
+    WARM_DONE,
+    SceneTables,
+    StepStatus,
+    _active_contacts,
+    _deformations,
+    _planar_case,
+    basis_table,
+    dynamics_step,
+    planar_warm_buffers,
+    planar_warm_step,
+)
+from planner.bench import SCENARIOS
+
+RUNGS = ("quasistatic-rigid", "quasistatic-compliant", "dynamic-rigid", "dynamic-compliant")
+SCENES = ("two_finger_triangle", "four_finger_grasp", "incline_block")
+STATES = 30  # compared per scene and rung (states with an active contact, sampled along rollouts)
+
+
+def _slots(pair, first_slot):
+    """Each contact's slot: its pair's first slot plus its rank among the pair's contacts."""
+    slots = np.empty(len(pair), np.int64)
+    for i, p in enumerate(pair):
+        slots[i] = first_slot[p] + int(np.sum(pair[:i] == p))
+    return slots
+
+
+def _both_steps(sc, rung, state, u, h, t):
+    """(general, warm, covered) at the state: the general step from the basis of a first
+    general step at the same state (its warm start), `planar_warm_step`'s result fields from
+    that basis (None where it was not taken), and whether the LCP is the planar builder's
+    (`_planar_case`). None where no contact is detected."""
+    c = compiled(sc)
+    S = c.scene._replace(bf=c.scene.bf.copy(), base_pos=c.scene.base_pos.copy(), base_quat=c.scene.base_quat.copy())
+    place_scripted(S.bf, S.base_pos, S.base_quat, t)
+    frames = contact_frames(S, state.q, state.nu, h)
+    nc = len(frames.pair)
+    if nc == 0:
+        return None
+    buffers, first_slot = contact_buffers(S.pi, S.nv)
+    cap = buffers.pair.shape[0]
+    bias = np.zeros((nc, 3))
+    scripted_bias(S.bf, S.pi, nc, frames.pair, frames.n, frames.t, frames.o, frames.pa, frames.pb, bias)
+    model, D = rung.model, c.drives
+    solver = rung.solver._replace(method=SOLVER_LEMKE)
+    system = _start_system(S, D, model, h, state.q)
+    tables = SceneTables(S.bi, S.bf, S.pi, S.pf, False)
+    W_n = np.ascontiguousarray(frames.W_n)
+    contacts = ContactSet(
+        frames.pair, frames.psi, _slots(frames.pair, first_slot), W_n, np.ascontiguousarray(frames.W_t), np.zeros_like(W_n), bias
+    )
+    u = np.asarray(u, dtype=float)
+    basis = basis_table(cap, D.v_index.shape[0], 2)
+    warm_n, warm_t = np.zeros(cap), np.zeros((cap, 2))
+    args = (h, state.q, state.nu, state.q_ref, state.delta_n, state.delta_t, u, contacts, nc, warm_n, warm_t)
+    first = dynamics_step(model, solver, D, tables, system, *args, basis)
+    general = dynamics_step(model, solver, D, tables, system, *args, first.basis)
+    B = planar_warm_buffers(cap, S.nv, state.q.shape[0], D.v_index.shape[0], first.basis)
+    outcome, n_act, residual = planar_warm_step(
+        model, D, tables, system, h, state.q, state.nu, state.q_ref, u, contacts, nc, state.delta_n, state.delta_t, first.basis, B
+    )
+    warm = None
+    if outcome == WARM_DONE:
+        delta_n, delta_t = state.delta_n, state.delta_t
+        if model.compliant:
+            delta_n, delta_t = _deformations(
+                h, S.pf, contacts.pair, contacts.slot, B.active[:n_act], B.z[:n_act], B.p_t[:n_act], state.delta_n, state.delta_t
+            )
+        warm = {
+            "q": B.q,
+            "nu": B.nu,
+            "q_ref": B.q_ref,
+            "delta_n": delta_n,
+            "delta_t": delta_t,
+            "residual": residual,
+            "lcp_size": 4 * n_act,
+            "p_n": B.impulses[:nc],
+            "p_t": B.frictions[:nc],
+            "basis": B.basis,
+        }
+    covered = _planar_case(False, D.max_force, _active_contacts(W_n, nc), contacts.pair, S.pf, contacts.W_t)
+    return general, warm, covered
+
+
+@pytest.mark.parametrize("name, rung_name", [(name, rung) for name in SCENES for rung in RUNGS])
+def test_the_planar_warm_step_is_the_general_one_bit_for_bit(name, rung_name):
+    sc = load_scenario(SCENARIOS / f"{name}.toml")
+    rung = rung_for(sc, rung_name)
+    h = sc.rung_settings(rung_name).h
+    policy = np.array([sc.spec.task.policy.speeds.get(a, 0.0) for a in sc.actuated])
+    rng = np.random.default_rng(sum(map(ord, name + rung_name)) + 1)
+    state, t, touching = rung.initial_state(sc), 0.0, False
+    compared, taken = 0, 0
+    for _ in range(2000):
+        if compared == STATES:
+            break
+        # the policy's command with noise: to the first contact in 20 ms rollouts, then states a
+        # random 1-29 steps apart
+        u = policy + rng.uniform(-0.3, 0.3, size=policy.shape)
+        steps = int(rng.integers(1, 30)) if touching else max(1, int(round(0.02 / h)))
+        out = rung.rollout(sc, state, u[None, :], [steps * h], h, stop_at_outcome=False, t0=t)
+        if not out.ok or t > sc.spec.task.horizon:  # (start over)
+            state, t, touching = rung.initial_state(sc), 0.0, False
+            continue
+        state, t = out.state, t + steps * h
+        both = _both_steps(sc, rung, state, u, h, t)
+        touching = both is not None
+        if not touching:
+            continue
+        general, warm, covered = both
+        # taken exactly where the general step builds the planar LCP, accepts its warm guess (no
+        # pivot) and succeeds
+        accepted = covered and general.status == StepStatus.OK and general.pivots == 0 and general.lcp_size > 0
+        assert (warm is not None) == accepted, f"t = {t}: warm step taken {warm is not None}, general pivots {general.pivots}"
+        if warm is not None:
+            for what, b in warm.items():
+                a = getattr(general, what)
+                a, b = np.asarray(a), np.asarray(b)
+                assert a.shape == b.shape, (what, a.shape, b.shape)
+                assert np.array_equal(a, b), f"{what} differs at t = {t}: max |diff| {np.max(np.abs(a - b))}"
+            taken += 1
+        compared += 1
+    assert compared == STATES, f"only {compared} states with contact"
+    assert taken >= STATES // 2, f"the warm step was taken at {taken} of {compared} states"
