@@ -48,6 +48,7 @@ from models.stepper import (
     LAW_TARGET,
     PART_ASSEMBLY,
     PART_CONTACT_SOLVE,
+    PART_STEP,
     SOLVER_AUTO,
     SOLVER_LEMKE,
     WARM_DONE,
@@ -492,7 +493,7 @@ def rollout_kernel(
                 if planar_warm and not _uses_pgs(model, step_solver, nc, limited):
                     # the usual step while contacts persist, without numba's runtime (`planar_warm_step`)
                     warm, n_act, res = planar_warm_step(
-                        model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B
+                        model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, PART_STEP
                     )
                     if warm == WARM_DONE:
                         taken = True
@@ -648,7 +649,8 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
     depends on q, the contact problem's assembly, its solve warm-started from the state's own
     first solve as in a steady push (Lemke's basis, PGS's impulses), the integration), and its
     first parts: STAGE_ASSEMBLY (A, the free velocity and the LCP's assembly) and
-    STAGE_CONTACT_SOLVE (that and the contact solve). Every
+    STAGE_CONTACT_SOLVE (that and the contact solve); where the rollout would take the planar
+    warm step at the state (`models.stepper.planar_warm_step`), these time it and its parts. Every
     stage runs once first (STAGE_SETUP: only that), so a
     stage's cost per call is (time(stage) - time(STAGE_SETUP)) / repeats. For `ladder bench`
     (planar scenes without scripted obstacles, or spatial ones). Returns (the contacts found,
@@ -669,6 +671,9 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
     rotating = has_rotations(bi)
     eps_eff = model.quasistatic_inertia if model.eps == 0.0 else model.eps
     nc, pivots, sweeps = 0, 0, 0
+    limited = any_limited(D.max_force)
+    B = planar_warm_buffers(c_psi.shape[0], nv, q.shape[0], D.v_index.shape[0], basis)
+    warm = False  # whether the rollout takes the planar warm step at the state (as rollout_kernel)
     for k in range(repeats + 1):
         if k == 0 or stage == STAGE_DETECT:
             if dimension == 3:
@@ -688,12 +693,23 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
                 system = System(A, system.Ainv, system.M_const, system.rhs_const, system.dofs, system.count, system.inv)
         if k > 0 and stage > STAGE_SOLVE:
             part = PART_ASSEMBLY if stage == STAGE_ASSEMBLY else PART_CONTACT_SOLVE
-            contact_stage(part, model, solver, D, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis)
-        if k == 0 or stage == STAGE_SOLVE:
+            if warm:
+                planar_warm_step(model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, part)
+            else:
+                contact_stage(
+                    part, model, solver, D, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis
+                )
+        if k > 0 and stage == STAGE_SOLVE and warm:
+            planar_warm_step(model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, PART_STEP)
+            pivots, sweeps = 0, 0
+        elif k == 0 or stage == STAGE_SOLVE:
             r = dynamics_step(model, solver, D, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis)
             if k == 0:  # the warm starts (Lemke's basis, PGS's impulses) of a steady push
                 basis = r.basis
                 _keep_warm(nc, c_slot, r.p_n, r.p_t, warm_n, warm_t, warm_slots, 0)
+                if dimension == 2 and not rotating and not limited and not model.kinematic and not _uses_pgs(model, solver, nc, limited):
+                    args = (model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, PART_STEP)
+                    warm = planar_warm_step(*args)[0] == WARM_DONE
             else:
                 pivots, sweeps = r.pivots, r.sweeps
         if stage == STAGE_SETUP:

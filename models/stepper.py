@@ -611,8 +611,9 @@ def _uses_pgs(model, solver, nc, limited):
     return nc > 0 and use_pgs and not limited
 
 
-#: Parts of a dynamics step `contact_stage` runs (`ladder bench`'s cost split).
-PART_ASSEMBLY, PART_CONTACT_SOLVE = 0, 1
+#: Parts of a dynamics step `contact_stage` and `planar_warm_step` run (`ladder bench`'s cost
+#: split); PART_STEP: all of it.
+PART_ASSEMBLY, PART_CONTACT_SOLVE, PART_STEP = 0, 1, 2
 
 
 @numba.njit(cache=True)
@@ -1535,7 +1536,7 @@ WARM_DONE, WARM_NOT_TAKEN = 0, 1
 
 
 @numba.njit(cache=True, _nrt=False)
-def planar_warm_step(model, drives, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B):
+def planar_warm_step(model, drives, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, part):
     """A contact step of `_lemke_step` whose LCP the previous step's basis solves (the usual
     step while contacts persist), in the plane with A constant and no force-limited drive,
     compiled without numba's runtime: no reference counts, no allocation; every array is B's
@@ -1544,8 +1545,9 @@ def planar_warm_step(model, drives, tables, system, h, q, nu, q_ref, u, contacts
     which solves the step again from the start. Else (WARM_DONE): q+, nu+, q_ref+, the next basis
     table and the impulses by contact in B (the compliant deformations are the caller's: B.z and
     B.p_t hold the active contacts' impulses). The same operations in the same order as
-    `_lemke_step`: the same bits (tests/test_planar_warm.py). Returns (outcome, active
-    contacts, residual)."""
+    `_lemke_step`: the same bits (tests/test_planar_warm.py). part: PART_STEP, or the first
+    parts only, for the cost split (as `contact_stage`). Returns (outcome, active contacts,
+    residual)."""
     nv = nu.shape[0]
     if tables.spatial or any_limited(drives.max_force) or system.Ainv.shape[0] != nv:
         return WARM_NOT_TAKEN, 0, 0.0
@@ -1569,8 +1571,12 @@ def planar_warm_step(model, drives, tables, system, h, q, nu, q_ref, u, contacts
     lim = fric[:0]
     _fill_basis_guess(B.guess, basis, active, contacts.slot, fric, n_act, 2, lim, m, n)
     guess = B.guess[:n]
+    if part == PART_ASSEMBLY:
+        return WARM_DONE, n_act, 0.0
     if not warm_guess_into(M, q_lcp, guess, WARM_TOLERANCE, B.J, B.A, B.z, B.w):
         return WARM_NOT_TAKEN, n_act, 0.0
+    if part == PART_CONTACT_SOLVE:
+        return WARM_DONE, n_act, 0.0
     z, w = B.z[:n], B.w[:n]
     residual = natural_map_residual(z, w, q_lcp)
     if not (residual <= LCP_TOLERANCE):

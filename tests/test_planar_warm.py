@@ -19,6 +19,7 @@ from models.rollout import _start_system
 from models.rungs import compiled, rung_for
 from models.scenario import load_scenario
 from models.stepper import (
+    PART_STEP,
     SOLVER_LEMKE,
     WARM_DONE,
     SceneTables,
@@ -77,9 +78,8 @@ def _both_steps(sc, rung, state, u, h, t):
     first = dynamics_step(model, solver, D, tables, system, *args, basis)
     general = dynamics_step(model, solver, D, tables, system, *args, first.basis)
     B = planar_warm_buffers(cap, S.nv, state.q.shape[0], D.v_index.shape[0], first.basis)
-    outcome, n_act, residual = planar_warm_step(
-        model, D, tables, system, h, state.q, state.nu, state.q_ref, u, contacts, nc, state.delta_n, state.delta_t, first.basis, B
-    )
+    step = (h, state.q, state.nu, state.q_ref, u, contacts, nc, state.delta_n, state.delta_t, first.basis, B, PART_STEP)
+    outcome, n_act, residual = planar_warm_step(model, D, tables, system, *step)
     warm = None
     if outcome == WARM_DONE:
         delta_n, delta_t = state.delta_n, state.delta_t
