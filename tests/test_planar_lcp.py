@@ -21,6 +21,7 @@ from models.rungs import compiled, rung_for
 from models.scenario import load_scenario
 from models.stepper import SceneTables, _active_contacts, _free_velocity, _planar_case, _planar_lcp, contact_lcp
 from planner.bench import SCENARIOS
+from tests.planar_states import sampled_states, slots
 
 RUNGS = ("quasistatic-rigid", "quasistatic-compliant", "dynamic-rigid", "dynamic-compliant")
 SCENES = ("two_finger_triangle", "four_finger_grasp", "incline_block", "bouncing_disc")
@@ -30,14 +31,6 @@ STATES = 40  # compared per scene and rung (states with an active contact, sampl
 WITH_FRICTION = ("two_finger_triangle", "four_finger_grasp", "incline_block")
 #: at least this many active contacts at one of the states compared
 MOST_CONTACTS = {"two_finger_triangle": 2, "four_finger_grasp": 2, "incline_block": 2, "bouncing_disc": 1}
-
-
-def _slots(pair, first_slot):
-    """Each contact's slot: its pair's first slot plus its rank among the pair's contacts."""
-    slots = np.empty(len(pair), np.int64)
-    for i, p in enumerate(pair):
-        slots[i] = first_slot[p] + int(np.sum(pair[:i] == p))
-    return slots
 
 
 def _both_builds(sc, rung, state, u, h, t):
@@ -60,7 +53,7 @@ def _both_builds(sc, rung, state, u, h, t):
     nu_free, _, drive_a = _free_velocity(model, D, tables, system, h, state.q, state.nu, state.q_ref, u, dofs, count, inv)
     W_n = np.ascontiguousarray(frames.W_n)
     contacts = ContactSet(
-        frames.pair, frames.psi, _slots(frames.pair, first_slot), W_n, np.ascontiguousarray(frames.W_t), np.zeros_like(W_n), bias
+        frames.pair, frames.psi, slots(frames.pair, first_slot), W_n, np.ascontiguousarray(frames.W_t), np.zeros_like(W_n), bias
     )
     active = _active_contacts(W_n, nc)
     if len(active) == 0:
@@ -82,22 +75,13 @@ def test_planar_build_is_the_general_one_bit_for_bit(name, rung_name):
     sc = load_scenario(SCENARIOS / f"{name}.toml")
     rung = rung_for(sc, rung_name)
     h = sc.rung_settings(rung_name).h
-    policy = np.array([sc.spec.task.policy.speeds.get(a, 0.0) for a in sc.actuated])
-    rng = np.random.default_rng(sum(map(ord, name + rung_name)))
-    state, t, touching = rung.initial_state(sc), 0.0, False
-    compared, most = 0, 0
-    for _ in range(2000):
-        if compared == STATES:
+    states = sampled_states(sc, rung, h, sum(map(ord, name + rung_name)))
+    compared, most, touching = 0, 0, None
+    while compared < STATES:
+        try:
+            state, u, t = states.send(touching)
+        except StopIteration:
             break
-        # the policy's command (the fingers close) with noise: to the first contact in 20 ms
-        # rollouts, then states a random 1-29 steps apart
-        u = policy + rng.uniform(-0.3, 0.3, size=policy.shape)
-        steps = int(rng.integers(1, 30)) if touching else max(1, int(round(0.02 / h)))
-        out = rung.rollout(sc, state, u[None, :], [steps * h], h, stop_at_outcome=False, t0=t)
-        if not out.ok or t > sc.spec.task.horizon:  # (start over)
-            state, t, touching = rung.initial_state(sc), 0.0, False
-            continue
-        state, t = out.state, t + steps * h
         general, planar, covered, n_active = _both_builds(sc, rung, state, u, h, t)
         touching = n_active > 0
         if not touching:

@@ -33,18 +33,11 @@ from models.stepper import (
     planar_warm_step,
 )
 from planner.bench import SCENARIOS
+from tests.planar_states import sampled_states, slots
 
 RUNGS = ("quasistatic-rigid", "quasistatic-compliant", "dynamic-rigid", "dynamic-compliant")
 SCENES = ("two_finger_triangle", "four_finger_grasp", "incline_block")
 STATES = 30  # compared per scene and rung (states with an active contact, sampled along rollouts)
-
-
-def _slots(pair, first_slot):
-    """Each contact's slot: its pair's first slot plus its rank among the pair's contacts."""
-    slots = np.empty(len(pair), np.int64)
-    for i, p in enumerate(pair):
-        slots[i] = first_slot[p] + int(np.sum(pair[:i] == p))
-    return slots
 
 
 def _both_steps(sc, rung, state, u, h, t):
@@ -69,7 +62,7 @@ def _both_steps(sc, rung, state, u, h, t):
     tables = SceneTables(S.bi, S.bf, S.pi, S.pf, False)
     W_n = np.ascontiguousarray(frames.W_n)
     contacts = ContactSet(
-        frames.pair, frames.psi, _slots(frames.pair, first_slot), W_n, np.ascontiguousarray(frames.W_t), np.zeros_like(W_n), bias
+        frames.pair, frames.psi, slots(frames.pair, first_slot), W_n, np.ascontiguousarray(frames.W_t), np.zeros_like(W_n), bias
     )
     u = np.asarray(u, dtype=float)
     basis = basis_table(cap, D.v_index.shape[0], 2)
@@ -108,22 +101,13 @@ def test_the_planar_warm_step_is_the_general_one_bit_for_bit(name, rung_name):
     sc = load_scenario(SCENARIOS / f"{name}.toml")
     rung = rung_for(sc, rung_name)
     h = sc.rung_settings(rung_name).h
-    policy = np.array([sc.spec.task.policy.speeds.get(a, 0.0) for a in sc.actuated])
-    rng = np.random.default_rng(sum(map(ord, name + rung_name)) + 1)
-    state, t, touching = rung.initial_state(sc), 0.0, False
-    compared, taken = 0, 0
-    for _ in range(2000):
-        if compared == STATES:
+    states = sampled_states(sc, rung, h, sum(map(ord, name + rung_name)) + 1)
+    compared, taken, touching = 0, 0, None
+    while compared < STATES:
+        try:
+            state, u, t = states.send(touching)
+        except StopIteration:
             break
-        # the policy's command with noise: to the first contact in 20 ms rollouts, then states a
-        # random 1-29 steps apart
-        u = policy + rng.uniform(-0.3, 0.3, size=policy.shape)
-        steps = int(rng.integers(1, 30)) if touching else max(1, int(round(0.02 / h)))
-        out = rung.rollout(sc, state, u[None, :], [steps * h], h, stop_at_outcome=False, t0=t)
-        if not out.ok or t > sc.spec.task.horizon:  # (start over)
-            state, t, touching = rung.initial_state(sc), 0.0, False
-            continue
-        state, t = out.state, t + steps * h
         both = _both_steps(sc, rung, state, u, h, t)
         touching = both is not None
         if not touching:
