@@ -57,7 +57,7 @@ from models.stepper import (
     StepStatus,
     System,
     _deformations,
-    _uses_pgs,
+    _may_take_planar_warm,
     any_limited,
     basis_table,
     contact_stage,
@@ -425,8 +425,7 @@ def rollout_kernel(
     A, Ainv, M_const, rhs_const = system.A, system.Ainv, system.M_const, system.rhs_const
     constant_A, limited = not has_rotations(bi), any_limited(max_force)
     kinematic, eps, compliant, theta = model.kinematic, model.eps, model.compliant, model.theta
-    planar_warm = dimension == 2 and constant_A and not limited and not kinematic
-    B = planar_warm_buffers(slots if planar_warm else 0, nv, q.shape[0], v_index.shape[0], basis)
+    B = planar_warm_buffers(slots if dimension == 2 else 0, nv, q.shape[0], v_index.shape[0], basis)
     eps_eff = model.quasistatic_inertia if eps == 0.0 else eps
     max_records, rec_t, rec_q, rec_nu, n_rec = _start_records(max_records, q, nu)
     t, steps, lcp_solves, pivots, max_residual, max_size, min_psi, force_steps, sweeps = 0.0, 0, 0, 0, 0.0, 0, np.inf, 0, 0
@@ -490,7 +489,7 @@ def rollout_kernel(
                     A = system_matrix(bi, bf, q, nv, eps_eff, h, v_index, kp, kd, max_force)
                     system = System(A, Ainv, M_const, rhs_const, system.dofs, system.count, system.inv)  # (no blocks: A changes)
                 taken = False
-                if planar_warm and not _uses_pgs(model, step_solver, nc, limited):
+                if _may_take_planar_warm(dimension == 2, constant_A, limited, model, step_solver, nc):
                     # the usual step while contacts persist, without numba's runtime (`planar_warm_step`)
                     warm, n_act, res = planar_warm_step(
                         model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, PART_STEP
@@ -707,7 +706,7 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
             if k == 0:  # the warm starts (Lemke's basis, PGS's impulses) of a steady push
                 basis = r.basis
                 _keep_warm(nc, c_slot, r.p_n, r.p_t, warm_n, warm_t, warm_slots, 0)
-                if dimension == 2 and not rotating and not limited and not model.kinematic and not _uses_pgs(model, solver, nc, limited):
+                if _may_take_planar_warm(dimension == 2, not rotating, limited, model, solver, nc):
                     args = (model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, PART_STEP)
                     warm = planar_warm_step(*args)[0] == WARM_DONE
             else:

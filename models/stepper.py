@@ -604,6 +604,13 @@ def _pgs_tolerance(model, solver):
 
 
 @numba.njit(cache=True, inline="always")
+def _may_take_planar_warm(planar, constant_A, limited, model, solver, nc):
+    """Whether a step with nc contacts may go to `planar_warm_step` (planar: the scene's
+    dimension is 2): A constant, no force-limited drive, not kinematic, a Lemke step."""
+    return planar and constant_A and not limited and not model.kinematic and not _uses_pgs(model, solver, nc, limited)
+
+
+@numba.njit(cache=True, inline="always")
 def _uses_pgs(model, solver, nc, limited):
     """Whether a step with nc contacts (limited: force-limited drives, whose box rows only the
     LCP has) solves them by PGS (`contact_pgs`), not the LCP by Lemke."""
@@ -1549,12 +1556,10 @@ def planar_warm_step(model, drives, tables, system, h, q, nu, q_ref, u, contacts
     parts only, for the cost split (as `contact_stage`). Returns (outcome, active contacts,
     residual)."""
     nv = nu.shape[0]
-    if tables.spatial or any_limited(drives.max_force) or system.Ainv.shape[0] != nv:
+    # A^-1's body blocks held (`_blocks`), A (and M) constant in the plane, no force limit
+    if system.count.shape[0] != tables.bi.shape[0] or not _constant_plane(model, tables.spatial, system, nv):
         return WARM_NOT_TAKEN, 0, 0.0
-    if not _constant_plane(model, tables.spatial, system, nv):
-        return WARM_NOT_TAKEN, 0, 0.0
-    system_ok = system.count.shape[0] == tables.bi.shape[0]  # A^-1's body blocks held (`_blocks`)
-    if not system_ok:
+    if any_limited(drives.max_force):
         return WARM_NOT_TAKEN, 0, 0.0
     _free_velocity_into(model, drives, system, h, q, nu, q_ref, u, B.rhs, B.nu_free, B.q_ref, B.drive_a)
     n_act = _active_into(contacts.W_n, nc, B.active)
