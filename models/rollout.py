@@ -56,7 +56,6 @@ from models.stepper import (
     Solver,
     StepStatus,
     System,
-    _deformations,
     _may_take_planar_warm,
     any_limited,
     basis_table,
@@ -425,7 +424,8 @@ def rollout_kernel(
     A, Ainv, M_const, rhs_const = system.A, system.Ainv, system.M_const, system.rhs_const
     constant_A, limited = not has_rotations(bi), any_limited(max_force)
     kinematic, eps, compliant, theta = model.kinematic, model.eps, model.compliant, model.theta
-    B = planar_warm_buffers(slots if dimension == 2 else 0, nv, q.shape[0], v_index.shape[0], basis)
+    # the planar warm step's arrays; it writes its results on `side`, the other side from the state's
+    B, side = planar_warm_buffers(slots if dimension == 2 else 0, nv, q.shape[0], v_index.shape[0], basis, delta_n.shape[0]), 0
     eps_eff = model.quasistatic_inertia if eps == 0.0 else eps
     max_records, rec_t, rec_q, rec_nu, n_rec = _start_records(max_records, q, nu)
     t, steps, lcp_solves, pivots, max_residual, max_size, min_psi, force_steps, sweeps = 0.0, 0, 0, 0, 0.0, 0, np.inf, 0, 0
@@ -492,15 +492,14 @@ def rollout_kernel(
                 if _may_take_planar_warm(dimension == 2, constant_A, limited, model, step_solver, nc):
                     # the usual step while contacts persist, without numba's runtime (`planar_warm_step`)
                     warm, n_act, res = planar_warm_step(
-                        model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, PART_STEP
+                        model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, side, PART_STEP
                     )
                     if warm == WARM_DONE:
                         taken = True
-                        q2, nu2, q_ref2, basis = B.q.copy(), B.nu.copy(), B.q_ref.copy(), B.basis.copy()  # (B is rewritten next step)
+                        q2, nu2, q_ref2, basis = B.q[side], B.nu[side], B.q_ref[side], B.basis[side]
                         if compliant:
-                            dn2, dt2 = _deformations(
-                                h, tables.pf, c_pair, c_slot, B.active[:n_act], B.z[:n_act], B.p_t[:n_act], delta_n, delta_t
-                            )
+                            dn2, dt2 = B.delta_n[side], B.delta_t[side]
+                        side = 1 - side  # the next warm step writes the other side, not this state
                         st, piv, size, p_n, p_t = StepStatus.OK.value, 0, 4 * n_act, B.impulses[:nc], B.frictions[:nc]
                 if not taken:
                     r = dynamics_step_inline(
@@ -671,7 +670,7 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
     eps_eff = model.quasistatic_inertia if model.eps == 0.0 else model.eps
     nc, pivots, sweeps = 0, 0, 0
     limited = any_limited(D.max_force)
-    B = planar_warm_buffers(c_psi.shape[0], nv, q.shape[0], D.v_index.shape[0], basis)
+    B = planar_warm_buffers(c_psi.shape[0], nv, q.shape[0], D.v_index.shape[0], basis, delta_n.shape[0])
     warm = False  # whether the rollout takes the planar warm step at the state (as rollout_kernel)
     for k in range(repeats + 1):
         if k == 0 or stage == STAGE_DETECT:
@@ -693,13 +692,13 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
         if k > 0 and stage > STAGE_SOLVE:
             part = PART_ASSEMBLY if stage == STAGE_ASSEMBLY else PART_CONTACT_SOLVE
             if warm:
-                planar_warm_step(model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, part)
+                planar_warm_step(model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, 0, part)
             else:
                 contact_stage(
                     part, model, solver, D, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis
                 )
         if k > 0 and stage == STAGE_SOLVE and warm:
-            planar_warm_step(model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, PART_STEP)
+            planar_warm_step(model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, 0, PART_STEP)
             pivots, sweeps = 0, 0
         elif k == 0 or stage == STAGE_SOLVE:
             r = dynamics_step(model, solver, D, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis)
@@ -707,7 +706,7 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
                 basis = r.basis
                 _keep_warm(nc, c_slot, r.p_n, r.p_t, warm_n, warm_t, warm_slots, 0)
                 if _may_take_planar_warm(dimension == 2, not rotating, limited, model, solver, nc):
-                    args = (model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, PART_STEP)
+                    args = (model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, 0, PART_STEP)
                     warm = planar_warm_step(*args)[0] == WARM_DONE
             else:
                 pivots, sweeps = r.pivots, r.sweeps

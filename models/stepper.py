@@ -731,8 +731,21 @@ def _drives_into(h, q, q_ref, u, drives, rhs, q_ref_new, a):
 @numba.njit(cache=True, inline="always")
 def _deformations(h, pf, c_pair, c_slot, active, p_n, p_t, delta_n, delta_t):
     """Compliant contact: delta+ = (p + C delta) / (h K + C) per active contact k (p_n[k], p_t[k])."""
-    delta_n_new = np.zeros_like(delta_n)
-    delta_t_new = np.zeros_like(delta_t)
+    delta_n_new = np.empty_like(delta_n)
+    delta_t_new = np.empty_like(delta_t)
+    _deformations_into(h, pf, c_pair, c_slot, active, p_n, p_t, delta_n, delta_t, delta_n_new, delta_t_new)
+    return delta_n_new, delta_t_new
+
+
+@numba.njit(cache=True, inline="always")
+def _deformations_into(h, pf, c_pair, c_slot, active, p_n, p_t, delta_n, delta_t, delta_n_new, delta_t_new):
+    """`_deformations` into the caller's arrays (shaped as delta_n, delta_t; zeros where no
+    contact is active)."""
+    for s in range(delta_n_new.shape[0]):
+        delta_n_new[s] = 0.0
+    for s in range(delta_t_new.shape[0]):
+        for c in range(delta_t_new.shape[1]):
+            delta_t_new[s, c] = 0.0
     for k in range(active.shape[0]):
         i = active[k]
         K, C = pf[c_pair[i], PF_K], pf[c_pair[i], PF_C]
@@ -740,7 +753,6 @@ def _deformations(h, pf, c_pair, c_slot, active, p_n, p_t, delta_n, delta_t):
         delta_n_new[slot] = (p_n[k] + C * delta_n[slot]) / (h * K + C)
         for c in range(2):
             delta_t_new[slot, c] = (p_t[k, c] + C * delta_t[slot, c]) / (h * K + C)
-    return delta_n_new, delta_t_new
 
 
 @numba.njit(cache=True, inline="always")
@@ -1473,11 +1485,14 @@ def _planar_lcp_into(model, h, dofs, count, inv, nu_free, active, pi, pf, contac
 
 class PlanarWarm(NamedTuple):
     """The arrays of `planar_warm_step`, made once per rollout (`planar_warm_buffers`) for a
-    contact capacity: every array the step writes, so that it runs without numba's runtime."""
+    contact capacity: every array the step writes, so that it runs without numba's runtime.
+    The step's results (q+, nu+, q_ref+, the next basis table, the deformations) have two
+    sides: a step writes one side while the state it starts from may be the other's, so that
+    the rollout takes them as its next state without copying."""
 
     rhs: np.ndarray  # (nv,) scratch
     nu_free: np.ndarray  # (nv,)
-    q_ref: np.ndarray  # (drives,) q_ref+
+    q_ref: np.ndarray  # (2, drives) q_ref+
     drive_a: np.ndarray  # (drives,)
     active: np.ndarray  # (cap,) int
     I: np.ndarray  # int scratch of `_planar_lcp_into` and gen (2, 3 cap) after it
@@ -1495,23 +1510,26 @@ class PlanarWarm(NamedTuple):
     w: np.ndarray  # (4 cap,)
     t: np.ndarray  # (2 cap,)
     p_t: np.ndarray  # (cap, 2) friction impulses of the active contacts
-    nu: np.ndarray  # (nv,) nu+
-    q: np.ndarray  # (nq,) q+
+    nu: np.ndarray  # (2, nv) nu+ on either side
+    q: np.ndarray  # (2, nq) q+
     blend: np.ndarray  # (nv,) theta nu+ + (1 - theta) nu
-    basis: np.ndarray  # basis table, shaped as the rollout's
+    basis: np.ndarray  # (2, rows, columns) the next basis table, each shaped as the rollout's
     impulses: np.ndarray  # (cap,) p_n by contact
     frictions: np.ndarray  # (cap, 2) p_t by contact
+    delta_n: np.ndarray  # (2, slots) compliant deformations delta_n+ (rungs with compliance)
+    delta_t: np.ndarray  # (2, slots, 2) delta_t+
 
 
 @numba.njit(cache=True)
-def planar_warm_buffers(cap, nv, nq, drives, basis):
-    """`PlanarWarm` for up to cap contacts (a `models.contact.ContactSet`'s capacity)."""
+def planar_warm_buffers(cap, nv, nq, drives, basis, slots):
+    """`PlanarWarm` for up to cap contacts (a `models.contact.ContactSet`'s capacity), basis
+    tables shaped as basis and deformations of `slots` contact slots."""
     n, m, ng = 4 * cap, 3 * cap, 2 * cap
     n_int, n_float = _planar_scratch(cap)
     return PlanarWarm(
         np.empty(nv),
         np.empty(nv),
-        np.empty(drives),
+        np.empty((2, drives)),
         np.empty(drives),
         np.empty(cap, np.int64),
         np.empty(n_int, np.int64),
@@ -1529,12 +1547,14 @@ def planar_warm_buffers(cap, nv, nq, drives, basis):
         np.empty(n),
         np.empty(ng),
         np.empty((cap, 2)),
+        np.empty((2, nv)),
+        np.empty((2, nq)),
         np.empty(nv),
-        np.empty(nq),
-        np.empty(nv),
-        np.empty_like(basis),
+        np.empty((2, basis.shape[0], basis.shape[1]), basis.dtype),
         np.empty(cap),
         np.empty((cap, 2)),
+        np.empty((2, slots)),
+        np.empty((2, slots, 2)),
     )
 
 
@@ -1543,15 +1563,16 @@ WARM_DONE, WARM_NOT_TAKEN = 0, 1
 
 
 @numba.njit(cache=True, _nrt=False)
-def planar_warm_step(model, drives, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, part):
+def planar_warm_step(model, drives, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, side, part):
     """A contact step of `_lemke_step` whose LCP the previous step's basis solves (the usual
     step while contacts persist), in the plane with A constant and no force-limited drive,
     compiled without numba's runtime: no reference counts, no allocation; every array is B's
     (`PlanarWarm`). Where the LCP is not `_planar_case`, the guess does not solve it or the state
     leaves the finite range, it returns WARM_NOT_TAKEN and the caller takes the general path,
     which solves the step again from the start. Else (WARM_DONE): q+, nu+, q_ref+, the next basis
-    table and the impulses by contact in B (the compliant deformations are the caller's: B.z and
-    B.p_t hold the active contacts' impulses). The same operations in the same order as
+    table and, with compliance, the deformations on B's side `side` (0 or 1: not the side the
+    state q, nu, q_ref, basis, delta_n, delta_t is on), and the impulses by contact in B. The
+    same operations in the same order as
     `_lemke_step`: the same bits (tests/test_planar_warm.py). part: PART_STEP, or the first
     parts only, for the cost split (as `contact_stage`). Returns (outcome, active contacts,
     residual)."""
@@ -1561,7 +1582,8 @@ def planar_warm_step(model, drives, tables, system, h, q, nu, q_ref, u, contacts
         return WARM_NOT_TAKEN, 0, 0.0
     if any_limited(drives.max_force):
         return WARM_NOT_TAKEN, 0, 0.0
-    _free_velocity_into(model, drives, system, h, q, nu, q_ref, u, B.rhs, B.nu_free, B.q_ref, B.drive_a)
+    q_new, nu_new, q_ref_new, basis_new = B.q[side], B.nu[side], B.q_ref[side], B.basis[side]
+    _free_velocity_into(model, drives, system, h, q, nu, q_ref, u, B.rhs, B.nu_free, q_ref_new, B.drive_a)
     n_act = _active_into(contacts.W_n, nc, B.active)
     active = B.active[:n_act]
     if not _planar_case(False, drives.max_force, active, contacts.pair, tables.pf, contacts.W_t):
@@ -1587,8 +1609,10 @@ def planar_warm_step(model, drives, tables, system, h, q, nu, q_ref, u, contacts
     if not (residual <= LCP_TOLERANCE):
         return WARM_NOT_TAKEN, n_act, residual
     p_t = B.p_t[:n_act]
-    _impulses_into(False, n_act, m, n_act, fric, gen, cf, z, Y, B.nu_free, B.t[:ng], p_t, B.nu)
-    _fill_basis_kept(B.basis, basis, guess, active, contacts.slot, fric, n_act, 2, lim, m)
+    _impulses_into(False, n_act, m, n_act, fric, gen, cf, z, Y, B.nu_free, B.t[:ng], p_t, nu_new)
+    _fill_basis_kept(basis_new, basis, guess, active, contacts.slot, fric, n_act, 2, lim, m)
+    if model.compliant:
+        _deformations_into(h, tables.pf, contacts.pair, contacts.slot, active, z, p_t, delta_n, delta_t, B.delta_n[side], B.delta_t[side])
     for i in range(nc):
         B.impulses[i] = 0.0
         B.frictions[i, 0] = 0.0
@@ -1599,15 +1623,15 @@ def planar_warm_step(model, drives, tables, system, h, q, nu, q_ref, u, contacts
         B.frictions[active[k], 1] = p_t[k, 1]
     # the position update (`_integrate_checked`; in the plane integrate_positions has only its
     # translations and angles)
-    velocity = B.nu
+    velocity = nu_new
     if model.theta != 1.0:
         velocity = B.blend
         for v in range(nv):
-            velocity[v] = model.theta * B.nu[v] + (1.0 - model.theta) * nu[v]
+            velocity[v] = model.theta * nu_new[v] + (1.0 - model.theta) * nu[v]
     for i in range(q.shape[0]):
-        B.q[i] = q[i]
-    _integrate_translations_into(tables.bi, q, velocity, h, B.q)
-    if not (_finite_and_bounded(B.q) and _finite_and_bounded(B.nu)):
+        q_new[i] = q[i]
+    _integrate_translations_into(tables.bi, q, velocity, h, q_new)
+    if not (_finite_and_bounded(q_new) and _finite_and_bounded(nu_new)):
         return WARM_NOT_TAKEN, n_act, residual
     return WARM_DONE, n_act, residual
 

@@ -4,7 +4,8 @@ While contacts persist, a planar step's LCP is solved by the previous step's bas
 rollout takes that step in `planar_warm_step`: compiled without numba's runtime, on arrays made
 once per rollout (docs/measurements.md: the squeeze's contact step about a third cheaper). Its
 contract is to be the general step bit for bit where it is taken (the same q+, nu+, q_ref+,
-basis table, impulses and compliant deformations), and to be taken exactly where the general
+basis table, impulses and compliant deformations, on the side of its buffers it is given and
+not the other), and to be taken exactly where the general
 step accepts its warm guess. Checked at states of every planar rung that solves an LCP, on the
 planar scenarios with friction, with random commands (fixed seeds).
 """
@@ -25,7 +26,6 @@ from models.stepper import (
     SceneTables,
     StepStatus,
     _active_contacts,
-    _deformations,
     _planar_case,
     basis_table,
     dynamics_step,
@@ -70,27 +70,30 @@ def _both_steps(sc, rung, state, u, h, t):
     args = (h, state.q, state.nu, state.q_ref, state.delta_n, state.delta_t, u, contacts, nc, warm_n, warm_t)
     first = dynamics_step(model, solver, D, tables, system, *args, basis)
     general = dynamics_step(model, solver, D, tables, system, *args, first.basis)
-    B = planar_warm_buffers(cap, S.nv, state.q.shape[0], D.v_index.shape[0], first.basis)
-    step = (h, state.q, state.nu, state.q_ref, u, contacts, nc, state.delta_n, state.delta_t, first.basis, B, PART_STEP)
+    B = planar_warm_buffers(cap, S.nv, state.q.shape[0], D.v_index.shape[0], first.basis, state.delta_n.shape[0])
+    side = int(np.round(t / h)) % 2  # the side the step writes; the other (the state's) must stay as it was
+    for a in (B.q, B.nu, B.q_ref, B.basis, B.delta_n, B.delta_t):
+        a[...] = 7
+    step = (h, state.q, state.nu, state.q_ref, u, contacts, nc, state.delta_n, state.delta_t, first.basis, B, side, PART_STEP)
     outcome, n_act, residual = planar_warm_step(model, D, tables, system, *step)
+    for a in (B.q, B.nu, B.q_ref, B.basis, B.delta_n, B.delta_t):
+        assert np.all(a[1 - side] == 7), "the warm step wrote the other side"
     warm = None
     if outcome == WARM_DONE:
         delta_n, delta_t = state.delta_n, state.delta_t
         if model.compliant:
-            delta_n, delta_t = _deformations(
-                h, S.pf, contacts.pair, contacts.slot, B.active[:n_act], B.z[:n_act], B.p_t[:n_act], state.delta_n, state.delta_t
-            )
+            delta_n, delta_t = B.delta_n[side], B.delta_t[side]
         warm = {
-            "q": B.q,
-            "nu": B.nu,
-            "q_ref": B.q_ref,
+            "q": B.q[side],
+            "nu": B.nu[side],
+            "q_ref": B.q_ref[side],
             "delta_n": delta_n,
             "delta_t": delta_t,
             "residual": residual,
             "lcp_size": 4 * n_act,
             "p_n": B.impulses[:nc],
             "p_t": B.frictions[:nc],
-            "basis": B.basis,
+            "basis": B.basis[side],
         }
     covered = _planar_case(False, D.max_force, _active_contacts(W_n, nc), contacts.pair, S.pf, contacts.W_t)
     return general, warm, covered
