@@ -311,7 +311,8 @@ def jacobian_packed(bi, bf, pi, q, nc, c_pair, dirs, c_pa, c_pb, W):
     jacobian_at(bi, pi, pos, nc, c_pair, dirs, c_pa, c_pb, W)
 
 
-@numba.njit(cache=True)
+# without numba's runtime: a per-step call whose array arguments are not reference-counted
+@numba.njit(cache=True, _nrt=False)
 def jacobian_at(bi, pi, pos, nc, c_pair, dirs, c_pa, c_pb, W):
     """Fill W[:, :nc] with the Jacobian columns of directions dirs[i] at each contact, the
     bodies' origins at pos (`models.kinematics.positions`): the rollout computes them once a

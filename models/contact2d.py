@@ -250,7 +250,8 @@ def core_distance(P, Q):
     return -depth, nx, ny, cqx + depth * nx, cqy + depth * ny, cqx, cqy
 
 
-@numba.njit(cache=True)
+# without numba's runtime: a per-step call whose array arguments are not reference-counted
+@numba.njit(cache=True, _nrt=False)
 def _write(c_psi, c_n, c_pa, c_pb, idx, psi, nx, ny, pax, pay, pbx, pby):
     c_psi[idx] = psi
     c_n[idx, 0], c_n[idx, 1], c_n[idx, 2] = nx, ny, 0.0
@@ -299,7 +300,8 @@ def _halfspace_vs_core(bi, bf, verts, poses, h, b, h_is_a, margin, c_psi, c_n, c
     return count
 
 
-@numba.njit(cache=True)
+# without numba's runtime: a per-step call whose array arguments are not reference-counted
+@numba.njit(cache=True, _nrt=False)
 def apart_along(bi, bf, verts, poses, a, b, nx, ny):
     """A lower bound of the signed distance of bodies a and b (two cores with their radii): their
     gap along the unit axis (nx, ny), from a to b, with both at their poses (separating-axis
@@ -329,7 +331,8 @@ def _world_vertex(verts, px, py, c, s, i):
     return px + c * vx - s * vy, py + s * vx + c * vy
 
 
-@numba.njit(cache=True)
+# without numba's runtime: a per-step call whose array arguments are not reference-counted
+@numba.njit(cache=True, _nrt=False)
 def _point_vs_polygon(bi, bf, verts, poses, a, b, margin, c_psi, c_n, c_pa, c_pb, start, axis):
     """`_core_vs_core` for a single-point core (a disc's) against a polygon's (three or more
     vertices) while the point lies outside the polygon by more than NEAR_TOUCH: the operations of

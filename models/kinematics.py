@@ -511,7 +511,8 @@ def G_matrix(S: SceneData, q: np.ndarray) -> np.ndarray:
     return G
 
 
-@numba.njit(cache=True)
+# without numba's runtime: a per-step call whose array arguments are not reference-counted
+@numba.njit(cache=True, _nrt=False)
 def planar_poses(bi, bf, q, poses):
     """Fill poses (nb, 4) with (x, y, cos theta, sin theta) of every planar body at q."""
     for b in range(bi.shape[0]):
@@ -530,7 +531,8 @@ def planar_poses(bi, bf, q, poses):
         poses[b, 3] = np.sin(theta)
 
 
-@numba.njit(cache=True)
+# without numba's runtime: a per-step call whose array arguments are not reference-counted
+@numba.njit(cache=True, _nrt=False)
 def positions(bi, bf, q, out):
     """Fill out (nb, 3) with every body's origin at q (planar: z = 0)."""
     for b in range(bi.shape[0]):

@@ -63,6 +63,7 @@ from models.stepper import (
     dynamics_step,
     dynamics_step_inline,
     free_step,
+    free_step_into,
     gravity_force,
     has_rotations,
     kinematic_step,
@@ -424,8 +425,10 @@ def rollout_kernel(
     A, Ainv, M_const, rhs_const = system.A, system.Ainv, system.M_const, system.rhs_const
     constant_A, limited = not has_rotations(bi), any_limited(max_force)
     kinematic, eps, compliant, theta = model.kinematic, model.eps, model.compliant, model.theta
-    # the planar warm step's arrays; it writes its results on `side`, the other side from the state's
+    # the planar warm step's arrays and the free step's results: each writes its results on its
+    # side, not the one its last results (which the state may be) are on
     B, side = planar_warm_buffers(slots if dimension == 2 else 0, nv, q.shape[0], v_index.shape[0], basis, delta_n.shape[0]), 0
+    free_q, free_nu, free_q_ref, free_side = np.empty((2, q.shape[0])), np.empty((2, nv)), np.empty((2, q_ref.shape[0])), 0
     eps_eff = model.quasistatic_inertia if eps == 0.0 else eps
     max_records, rec_t, rec_q, rec_nu, n_rec = _start_records(max_records, q, nu)
     t, steps, lcp_solves, pivots, max_residual, max_size, min_psi, force_steps, sweeps = 0.0, 0, 0, 0, 0.0, 0, np.inf, 0, 0
@@ -478,9 +481,17 @@ def rollout_kernel(
                 )
                 size, p_n = nc, np.zeros(nc)
             elif nc == 0 and constant_A and not limited:  # the cheap path: no contact problem
-                q2, nu2, q_ref2, st = free_step(
-                    eps, theta, h, bi, Ainv, M_const, rhs_const, q, nu, q_ref, u, q_index, v_index, kp, kd, lower, upper
-                )
+                f_q, f_nu, f_q_ref = free_q[free_side], free_nu[free_side], free_q_ref[free_side]
+                if free_step_into(
+                    eps, theta, h, bi, Ainv, M_const, rhs_const, q, nu, q_ref, u, q_index, v_index, kp, kd, lower, upper, B.rhs, B.blend,
+                    f_q, f_nu, f_q_ref,
+                ):  # fmt: skip
+                    q2, nu2, q_ref2, st = f_q, f_nu, f_q_ref, StepStatus.OK.value
+                    free_side = 1 - free_side  # the next free step writes the other side, not this state
+                else:  # the status
+                    q2, nu2, q_ref2, st = free_step(
+                        eps, theta, h, bi, Ainv, M_const, rhs_const, q, nu, q_ref, u, q_index, v_index, kp, kd, lower, upper
+                    )
                 if compliant and (delta_n.any() or delta_t.any()):
                     dn2, dt2 = np.zeros_like(delta_n), np.zeros_like(delta_t)
                 piv, res, size, p_n = 0, 0.0, 0, no_impulse

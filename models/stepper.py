@@ -549,28 +549,50 @@ def free_step(eps, theta, h, bi, Ainv, M_const, rhs_const, q, nu, q_ref, u, q_in
     contact problem). Plain arrays, not `Drives` / `System`: this step takes about a
     microsecond, and numba reference-counts every array of a tuple argument on each call
     (measured: whole tuples on the per-step calls made the paper scene's rungs up to 45% slower).
+    The rollout takes it in `free_step_into`, on its own arrays.
     """
-    quasistatic = eps == 0.0
-    rhs = rhs_const.copy()
-    if not quasistatic:
+    nv = rhs_const.shape[0]
+    rhs, blend, q_new, nu_new, q_ref_new = np.empty(nv), np.empty(nv), np.empty_like(q), np.empty(nv), q_ref.copy()
+    args = (q_index, v_index, kp, kd, lower, upper, rhs, blend, q_new, nu_new, q_ref_new)
+    if free_step_into(eps, theta, h, bi, Ainv, M_const, rhs_const, q, nu, q_ref, u, *args):
+        return q_new, nu_new, q_ref_new, StepStatus.OK.value
+    status = StepStatus.DIVERGED.value
+    if not (np.all(np.isfinite(q_new)) and np.all(np.isfinite(nu_new))):
+        status = StepStatus.NON_FINITE.value
+    return q, nu, q_ref, status
+
+
+@numba.njit(cache=True, _nrt=False)
+def free_step_into(
+    eps, theta, h, bi, Ainv, M_const, rhs_const, q, nu, q_ref, u, q_index, v_index, kp, kd, lower, upper, rhs, blend, q_new, nu_new, q_ref_new  # noqa: E501
+):  # fmt: skip
+    """`free_step` into the caller's arrays (rhs, blend: scratch of nv; q_new, nu_new,
+    q_ref_new: q+, nu+, q_ref+), compiled without numba's runtime (as `planar_warm_step`: no
+    reference counts, no allocation). Returns whether q+ and nu+ are finite and bounded (else
+    the caller takes `free_step` for the status). A constant A has no spatial rotation (its
+    quaternions come with angular velocities), so the position update is
+    `_integrate_translations_into`."""
+    for i in range(rhs.shape[0]):
+        rhs[i] = rhs_const[i]
+    if eps != 0.0:  # dynamic: the momentum term
         add_product(rhs, M_const, nu, eps)
-    q_ref_new = q_ref.copy()
+    for j in range(q_ref.shape[0]):
+        q_ref_new[j] = q_ref[j]
     for j in range(v_index.shape[0]):
         q_ref_new[j], ff = drive_reference(h, q_ref[j], u[j], lower[j], upper[j])
         rhs[v_index[j]] += h * (kp[j] * (q_ref_new[j] - q[q_index[j]]) + kd[j] * ff)
-    nu_new = np.zeros(rhs.shape[0])
+    for v in range(nu_new.shape[0]):
+        nu_new[v] = 0.0
     add_product(nu_new, Ainv, rhs, 1.0)
-    if theta == 1.0:
-        q_new = integrate_positions(bi, q, nu_new, h)
-    else:
-        q_new = integrate_positions(bi, q, theta * nu_new + (1.0 - theta) * nu, h)
-    status = StepStatus.OK.value
-    if not (_finite_and_bounded(q_new) and _finite_and_bounded(nu_new)):
-        status = StepStatus.DIVERGED.value
-        if not (np.all(np.isfinite(q_new)) and np.all(np.isfinite(nu_new))):
-            status = StepStatus.NON_FINITE.value
-        return q, nu, q_ref, status
-    return q_new, nu_new, q_ref_new, status
+    velocity = nu_new
+    if theta != 1.0:
+        velocity = blend
+        for v in range(nu_new.shape[0]):
+            blend[v] = theta * nu_new[v] + (1.0 - theta) * nu[v]
+    for i in range(q.shape[0]):
+        q_new[i] = q[i]
+    _integrate_translations_into(bi, q, velocity, h, q_new)
+    return _finite_and_bounded(q_new) and _finite_and_bounded(nu_new)
 
 
 @numba.njit(cache=True)
