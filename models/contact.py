@@ -23,7 +23,7 @@ import numba
 import numpy as np
 
 from models.contact2d import APART_SLACK, apart_along, collide_2d
-from models.contact3d import collide_pair_3d_inline, pose_of, tangent_basis
+from models.contact3d import _basis, collide_pair_3d_inline, pose_of
 from models.kinematics import (
     BF_BOUND,
     BF_HSN,
@@ -292,7 +292,7 @@ def tangents_packed(dimension, nc, c_n, c_t, c_o):
         if dimension == 2:
             c_t[i, 0], c_t[i, 1], c_t[i, 2] = -c_n[i, 1], c_n[i, 0], 0.0
         else:
-            t, o = tangent_basis(c_n[i])
+            t, o = _basis((c_n[i, 0], c_n[i, 1], c_n[i, 2]))  # (`tangent_basis` without its arrays)
             c_t[i, 0], c_t[i, 1], c_t[i, 2] = t[0], t[1], t[2]
             c_o[i, 0], c_o[i, 1], c_o[i, 2] = o[0], o[1], o[2]
 
@@ -389,18 +389,18 @@ def scripted_bias(bf, pi, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, bias):
     that no free DOF carries. It enters the contact problem beside W^T nu."""
     for i in range(nc):
         p = c_pair[i]
-        rel = np.zeros(3)
+        r0, r1, r2 = 0.0, 0.0, 0.0  # the relative velocity (scalars: no allocation in the rollout's step)
         for side in range(2):
             b = pi[p, 1] if side == 0 else pi[p, 0]
             sign = 1.0 if side == 0 else -1.0
             pt = c_pb[i] if side == 0 else c_pa[i]
             w = bf[b, BF_SCRIPT_V + 3]
-            rel[0] += sign * (bf[b, BF_SCRIPT_V] - w * (pt[1] - bf[b, BF_POS + 1]))
-            rel[1] += sign * (bf[b, BF_SCRIPT_V + 1] + w * (pt[0] - bf[b, BF_POS]))
-            rel[2] += sign * bf[b, BF_SCRIPT_V + 2]
-        bias[i, 0] = c_n[i, 0] * rel[0] + c_n[i, 1] * rel[1] + c_n[i, 2] * rel[2]
-        bias[i, 1] = c_t[i, 0] * rel[0] + c_t[i, 1] * rel[1] + c_t[i, 2] * rel[2]
-        bias[i, 2] = c_o[i, 0] * rel[0] + c_o[i, 1] * rel[1] + c_o[i, 2] * rel[2]
+            r0 += sign * (bf[b, BF_SCRIPT_V] - w * (pt[1] - bf[b, BF_POS + 1]))
+            r1 += sign * (bf[b, BF_SCRIPT_V + 1] + w * (pt[0] - bf[b, BF_POS]))
+            r2 += sign * bf[b, BF_SCRIPT_V + 2]
+        bias[i, 0] = c_n[i, 0] * r0 + c_n[i, 1] * r1 + c_n[i, 2] * r2
+        bias[i, 1] = c_t[i, 0] * r0 + c_t[i, 1] * r1 + c_t[i, 2] * r2
+        bias[i, 2] = c_o[i, 0] * r0 + c_o[i, 1] * r1 + c_o[i, 2] * r2
 
 
 # ----------------------------------------------------------------------------- Python facing

@@ -111,7 +111,7 @@ class RolloutOutput(NamedTuple):
 # ones are inlined (numba IR inlining: no call, no reference counting of their arguments).
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, _nrt=False)  # a call without numba's runtime: no array argument reference-counted
 def _distances(nc, c_pair, c_psi, c_slot, first_slot, pair_psi):
     """Stage detect (after `models.contact`'s detection into the buffers): each contact's
     slot, each pair's smallest psi. Returns the
@@ -140,7 +140,7 @@ def _classify(goal, unsafe, q, pair_psi):
     return outcome
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, _nrt=False)  # a call without numba's runtime: no array argument reference-counted
 def _classify_with(g_op, g_index, g_lo, g_hi, u_op, u_index, u_lo, u_hi, q, pair_psi, stack):
     """Stage classify on the rollout's stack: unsafe first, then goal."""
     outcome = Outcome.NONE.value
@@ -151,7 +151,7 @@ def _classify_with(g_op, g_index, g_lo, g_hi, u_op, u_index, u_lo, u_hi, q, pair
     return outcome
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, _nrt=False)  # a call without numba's runtime: no array argument reference-counted
 def _assemble(bi, bf, pi, dimension, q, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, W_n, W_t, W_o, c_bias, scripted, with_friction, pos):
     """Stage assemble: W_n of the first nc (> 0) contacts at q; with scripted obstacles the frames
     and their velocity bias; with friction (every rung with forces) t, o and W_t, W_o. pos: the
@@ -184,7 +184,7 @@ def _keep_warm(nc, c_slot, p_n, p_t, warm_n, warm_t, warm_slots, n_warm):
     return nc
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, _nrt=False)  # a call without numba's runtime: no array argument reference-counted
 def _record_forces(c_pair, c_n, c_t, c_o, p_n, p_t, h, pair_force, pair_wrench):
     """Stage record: each pair's normal force and world-frame force on its body B over the
     step. Returns whether some contact carried a positive normal impulse."""
