@@ -94,7 +94,15 @@ class PgsResult(NamedTuple):
 @numba.njit(cache=True)
 def _invert_small(B, m, out):
     """out[:m, :m] = B[:m, :m]^-1 by Gauss-Jordan with partial pivoting; False if singular."""
-    work = np.zeros((m, 2 * m))
+    return _invert_small_into(B, m, out, np.zeros((m, 2 * m)))
+
+
+@numba.njit(cache=True, inline="always")
+def _invert_small_into(B, m, out, work):
+    """`_invert_small` on the caller's work (at least (m, 2 m)), zeroed here."""
+    for r in range(m):
+        for c in range(2 * m):
+            work[r, c] = 0.0
     big = 0.0
     for r in range(m):
         for c in range(m):
@@ -140,7 +148,25 @@ def body_blocks(bi, A, Ainv):
     dofs = np.full((nb, BODY_DOFS), -1, np.int64)
     count = np.zeros(nb, np.int64)
     inv = np.zeros((nb, BODY_DOFS, BODY_DOFS))
-    block = np.zeros((BODY_DOFS, BODY_DOFS))
+    ok = body_blocks_into(bi, A, Ainv, dofs, count, inv, np.zeros((BODY_DOFS, BODY_DOFS)), np.zeros((BODY_DOFS, 2 * BODY_DOFS)))
+    return dofs, count, inv, ok
+
+
+@numba.njit(cache=True, inline="always")
+def body_blocks_into(bi, A, Ainv, dofs, count, inv, block, work):
+    """`body_blocks` into the caller's dofs (nb, BODY_DOFS), count (nb,) and inv (nb,
+    BODY_DOFS, BODY_DOFS), with the scratch block (BODY_DOFS, BODY_DOFS) and work (BODY_DOFS,
+    2 BODY_DOFS): all set here. Returns ok."""
+    nb = bi.shape[0]
+    for b in range(nb):
+        count[b] = 0
+        for r in range(BODY_DOFS):
+            dofs[b, r] = -1
+            for c in range(BODY_DOFS):
+                inv[b, r, c] = 0.0
+    for r in range(BODY_DOFS):
+        for c in range(BODY_DOFS):
+            block[r, c] = 0.0
     have_inverse = Ainv.shape[0] == A.shape[0]
     for b in range(nb):
         m = np.int64(0)
@@ -157,22 +183,30 @@ def body_blocks(bi, A, Ainv):
                 else:
                     block[r, c] = A[dofs[b, r], dofs[b, c]]
         if m > 0 and not have_inverse:
-            if not _invert_small(block, m, inv[b]):
-                return dofs, count, inv, False
-    return dofs, count, inv, True
+            if not _invert_small_into(block, m, inv[b], work):
+                return False
+    return True
 
 
 @numba.njit(cache=True)
 def block_solve(dofs, count, inv, rhs):
     """A^-1 rhs from the body blocks of `body_blocks`: O(bodies)."""
     out = np.zeros(rhs.shape[0])
+    block_solve_into(dofs, count, inv, rhs, out)
+    return out
+
+
+@numba.njit(cache=True, inline="always")
+def block_solve_into(dofs, count, inv, rhs, out):
+    """`block_solve` into the caller's out (rhs.shape[0] entries), zeroed here."""
+    for v in range(rhs.shape[0]):
+        out[v] = 0.0
     for b in range(count.shape[0]):
         for r in range(count[b]):
             s = 0.0
             for c in range(count[b]):
                 s += inv[b, r, c] * rhs[dofs[b, c]]
             out[dofs[b, r]] = s
-    return out
 
 
 # ----------------------------------------------------------------------------- one contact's blocks

@@ -448,20 +448,31 @@ def _rotation_to_quat(R: np.ndarray) -> np.ndarray:
 @numba.njit(cache=True)
 def quat_mul(a, b):
     """Hamilton product of (w, x, y, z) quaternions."""
-    return np.array(
-        [
-            a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3],
-            a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2],
-            a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1],
-            a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0],
-        ]
+    d0, d1, d2, d3 = quat_mul_scalars(a[0], a[1], a[2], a[3], b[0], b[1], b[2], b[3])
+    return np.array([d0, d1, d2, d3])
+
+
+@numba.njit(cache=True, inline="always")
+def quat_mul_scalars(a0, a1, a2, a3, b0, b1, b2, b3):
+    """`quat_mul` of quaternions given and returned as four scalars each."""
+    return (
+        a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3,
+        a0 * b1 + a1 * b0 + a2 * b3 - a3 * b2,
+        a0 * b2 - a1 * b3 + a2 * b0 + a3 * b1,
+        a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0,
     )
 
 
 @numba.njit(cache=True)
 def quat_to_matrix(q):
-    w, x, y, z = q[0], q[1], q[2], q[3]
     R = np.empty((3, 3))
+    quat_matrix_into(q[0], q[1], q[2], q[3], R)
+    return R
+
+
+@numba.njit(cache=True, inline="always")
+def quat_matrix_into(w, x, y, z, R):
+    """`quat_to_matrix` of (w, x, y, z) into the caller's R (3, 3)."""
     R[0, 0] = 1 - 2 * (y * y + z * z)
     R[0, 1] = 2 * (x * y - w * z)
     R[0, 2] = 2 * (x * z + w * y)
@@ -471,7 +482,6 @@ def quat_to_matrix(q):
     R[2, 0] = 2 * (x * z - w * y)
     R[2, 1] = 2 * (y * z + w * x)
     R[2, 2] = 1 - 2 * (x * x + y * y)
-    return R
 
 
 @numba.njit(cache=True)

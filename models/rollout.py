@@ -51,12 +51,14 @@ from models.stepper import (
     PART_STEP,
     SOLVER_AUTO,
     SOLVER_LEMKE,
+    SPATIAL_WARM_CONTACTS,
     WARM_DONE,
     SceneTables,
     Solver,
     StepStatus,
     System,
     _may_take_planar_warm,
+    _may_take_spatial_warm,
     any_limited,
     basis_table,
     contact_stage,
@@ -71,6 +73,8 @@ from models.stepper import (
     mass_matrix,
     planar_warm_buffers,
     planar_warm_step,
+    spatial_warm_buffers,
+    spatial_warm_step,
     system_matrix,
 )
 from models.task import Outcome
@@ -417,8 +421,11 @@ def rollout_kernel(
         has_law = has_law or law[j, LAW_ACTIVE] != 0.0
     stack = np.zeros(max(g_op.shape[0], u_op.shape[0]) + 1, np.bool_)
     slots, directions = c_psi.shape[0], model.friction_directions if dimension == 3 else 2
+    # at the steps that start a warm period the basis is this cold table, never written into
+    # (nor is the caller's table: the steps write their next tables into new arrays or their buffers)
+    cold = basis_table(slots, v_index.shape[0], directions)
     if basis.shape[0] != slots + v_index.shape[0] or basis.shape[1] != 3 + directions:
-        basis = basis_table(slots, v_index.shape[0], directions)
+        basis = cold
     # the warm start is dropped at the steps that start a period of model.warm_period (Model)
     warm_every = int(np.round(model.warm_period / h)) if model.warm_period > 0.0 else 0
     system = _start_system(S, D, model, h, q)
@@ -427,7 +434,12 @@ def rollout_kernel(
     kinematic, eps, compliant, theta = model.kinematic, model.eps, model.compliant, model.theta
     # the planar warm step's arrays and the free step's results: each writes its results on its
     # side, not the one its last results (which the state may be) are on
-    B, side = planar_warm_buffers(slots if dimension == 2 else 0, nv, q.shape[0], v_index.shape[0], basis, delta_n.shape[0]), 0
+    # (buffers for contacts only where the warm step can run: `_may_take_planar_warm`, `_may_take_spatial_warm`)
+    planar_cap = slots if dimension == 2 and constant_A and not limited and not kinematic else 0
+    B, side = planar_warm_buffers(planar_cap, nv, q.shape[0], v_index.shape[0], basis, delta_n.shape[0]), 0
+    spatial_cap = min(slots, SPATIAL_WARM_CONTACTS) if dimension == 3 and not limited and not kinematic else 0
+    W = spatial_warm_buffers(spatial_cap, directions, bi.shape[0], nv, q.shape[0], v_index.shape[0], basis, delta_n.shape[0])
+    w_side = 0
     free_q, free_nu, free_q_ref, free_side = np.empty((2, q.shape[0])), np.empty((2, nv)), np.empty((2, q_ref.shape[0])), 0
     eps_eff = model.quasistatic_inertia if eps == 0.0 else eps
     max_records, rec_t, rec_q, rec_nu, n_rec = _start_records(max_records, q, nu)
@@ -443,7 +455,7 @@ def rollout_kernel(
             u = u.copy()  # the laws' speeds, step by step
         for _ in range(int(np.round(durations[k] / h))):
             if warm_every > 0 and int(np.round((t0 + t) / h)) % warm_every == 0:
-                basis[:, :] = 0
+                basis = cold
             if scripted:  # obstacles where they are at this time
                 place_scripted(bf, S.base_pos, S.base_quat, t0 + t)
             # stage detect (SceneData crosses a call only in space, where detection needs it)
@@ -496,11 +508,24 @@ def rollout_kernel(
                     dn2, dt2 = np.zeros_like(delta_n), np.zeros_like(delta_t)
                 piv, res, size, p_n = 0, 0.0, 0, no_impulse
             else:
-                if not constant_A:
+                taken = False
+                if _may_take_spatial_warm(dimension == 3, limited, model, step_solver, nc):
+                    # the usual step while contacts persist, without numba's runtime (`spatial_warm_step`)
+                    warm, size, res = spatial_warm_step(
+                        model, D, tables, system, not constant_A, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, W, w_side,
+                        PART_STEP,
+                    )  # fmt: skip
+                    if warm == WARM_DONE:
+                        taken = True
+                        q2, nu2, q_ref2, basis = W.q[w_side], W.nu[w_side], W.q_ref[w_side], W.basis[w_side]
+                        if compliant:
+                            dn2, dt2 = W.delta_n[w_side], W.delta_t[w_side]
+                        w_side = 1 - w_side  # the next warm step writes the other side, not this state
+                        st, piv, p_n, p_t = StepStatus.OK.value, 0, W.impulses[:nc], W.frictions[:nc]
+                if not constant_A and not taken:
                     A = system_matrix(bi, bf, q, nv, eps_eff, h, v_index, kp, kd, max_force)
                     system = System(A, Ainv, M_const, rhs_const, system.dofs, system.count, system.inv)  # (no blocks: A changes)
-                taken = False
-                if _may_take_planar_warm(dimension == 2, constant_A, limited, model, step_solver, nc):
+                if not taken and _may_take_planar_warm(dimension == 2, constant_A, limited, model, step_solver, nc):
                     # the usual step while contacts persist, without numba's runtime (`planar_warm_step`)
                     warm, n_act, res = planar_warm_step(
                         model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, side, PART_STEP
@@ -659,7 +684,8 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
     first solve as in a steady push (Lemke's basis, PGS's impulses), the integration), and its
     first parts: STAGE_ASSEMBLY (A, the free velocity and the LCP's assembly) and
     STAGE_CONTACT_SOLVE (that and the contact solve); where the rollout would take the planar
-    warm step at the state (`models.stepper.planar_warm_step`), these time it and its parts. Every
+    or spatial warm step at the state (`models.stepper.planar_warm_step`,
+    `models.stepper.spatial_warm_step`), these time it and its parts. Every
     stage runs once first (STAGE_SETUP: only that), so a
     stage's cost per call is (time(stage) - time(STAGE_SETUP)) / repeats. For `ladder bench`
     (planar scenes without scripted obstacles, or spatial ones). Returns (the contacts found,
@@ -682,7 +708,10 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
     nc, pivots, sweeps = 0, 0, 0
     limited = any_limited(D.max_force)
     B = planar_warm_buffers(c_psi.shape[0], nv, q.shape[0], D.v_index.shape[0], basis, delta_n.shape[0])
+    spatial_cap = min(c_psi.shape[0], SPATIAL_WARM_CONTACTS) if dimension == 3 else 0
+    W = spatial_warm_buffers(spatial_cap, directions, bi.shape[0], nv, q.shape[0], D.v_index.shape[0], basis, delta_n.shape[0])
     warm = False  # whether the rollout takes the planar warm step at the state (as rollout_kernel)
+    warm3 = False  # the spatial warm step
     for k in range(repeats + 1):
         if k == 0 or stage == STAGE_DETECT:
             if dimension == 3:
@@ -697,19 +726,25 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
         if k == 0 or stage == STAGE_JACOBIANS:
             _assemble(bi, bf, pi, dimension, q, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, W_n, W_t, W_o, c_bias, False, True, pos)
         if k == 0 or stage >= STAGE_SOLVE:
-            if rotating:  # as rollout_kernel: A depends on q
+            if rotating and not warm3:  # as rollout_kernel: A depends on q (the spatial warm step builds its own)
                 A = system_matrix(bi, bf, q, nv, eps_eff, h, D.v_index, D.kp, D.kd, D.max_force)
                 system = System(A, system.Ainv, system.M_const, system.rhs_const, system.dofs, system.count, system.inv)
         if k > 0 and stage > STAGE_SOLVE:
             part = PART_ASSEMBLY if stage == STAGE_ASSEMBLY else PART_CONTACT_SOLVE
             if warm:
                 planar_warm_step(model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, 0, part)
+            elif warm3:
+                spatial_warm_step(model, D, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, W, 0, part)
             else:
                 contact_stage(
                     part, model, solver, D, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis
                 )
         if k > 0 and stage == STAGE_SOLVE and warm:
             planar_warm_step(model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, 0, PART_STEP)
+            pivots, sweeps = 0, 0
+        elif k > 0 and stage == STAGE_SOLVE and warm3:
+            args3 = (model, D, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, W, 0, PART_STEP)
+            spatial_warm_step(*args3)
             pivots, sweeps = 0, 0
         elif k == 0 or stage == STAGE_SOLVE:
             r = dynamics_step(model, solver, D, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis)
@@ -719,6 +754,9 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
                 if _may_take_planar_warm(dimension == 2, not rotating, limited, model, solver, nc):
                     args = (model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, 0, PART_STEP)
                     warm = planar_warm_step(*args)[0] == WARM_DONE
+                if _may_take_spatial_warm(dimension == 3, limited, model, solver, nc):
+                    args3 = (model, D, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, W, 0, PART_STEP)
+                    warm3 = spatial_warm_step(*args3)[0] == WARM_DONE
             else:
                 pivots, sweeps = r.pivots, r.sweeps
         if stage == STAGE_SETUP:

@@ -52,7 +52,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from models.contact_pgs import BODY_DOFS, PgsStatus, block_solve, body_blocks, contact_pgs
+from models.contact_pgs import BODY_DOFS, PgsStatus, block_solve, block_solve_into, body_blocks, body_blocks_into, contact_pgs
 from models.kinematics import (
     BF_INERTIA,
     BF_MASS,
@@ -64,8 +64,8 @@ from models.kinematics import (
     Q_QW,
     V_ANGLE,
     V_WX,
-    quat_mul,
-    quat_to_matrix,
+    quat_matrix_into,
+    quat_mul_scalars,
 )
 from models.lcp import (
     STATUS_SOLVED,
@@ -340,7 +340,17 @@ def basis_table(slots, drives, directions):
 @numba.njit(cache=True)
 def mass_matrix(bi, bf, q, nv):
     """M(q) in velocity coordinates: m on translations, I_zz on planar/yaw angles, R I R^T on rotations."""
-    M = np.zeros((nv, nv))
+    M = np.empty((nv, nv))
+    _mass_matrix_into(bi, bf, q, M, np.empty((3, 3)), np.empty((3, 3)))
+    return M
+
+
+@numba.njit(cache=True, inline="always")
+def _mass_matrix_into(bi, bf, q, M, R, I):
+    """`mass_matrix` into the caller's M (nv, nv), zeroed here; R and I (3, 3) scratch."""
+    for r in range(M.shape[0]):
+        for c in range(M.shape[1]):
+            M[r, c] = 0.0
     for b in range(bi.shape[0]):
         for k in range(3):
             if bi[b, BI_VMAP + k] >= 0:
@@ -348,40 +358,61 @@ def mass_matrix(bi, bf, q, nv):
         if bi[b, BI_VMAP + V_ANGLE] >= 0:
             M[bi[b, BI_VMAP + V_ANGLE], bi[b, BI_VMAP + V_ANGLE]] = bf[b, BF_INERTIA + 2]
         if bi[b, BI_VMAP + V_WX] >= 0:
-            I = world_inertia(bi, bf, q, b)
+            _world_inertia_into(bi, bf, q, b, R, I)
             for r in range(3):
                 for c in range(3):
                     M[bi[b, BI_VMAP + V_WX + r], bi[b, BI_VMAP + V_WX + c]] = I[r, c]
-    return M
 
 
 @numba.njit(cache=True)
 def body_rotation(bi, q, b):
     """Body b's rotation matrix from its (normalised) quaternion coordinates in q."""
-    quat = np.empty(4)
-    for k in range(4):
-        quat[k] = q[bi[b, BI_QMAP + Q_QW + k]]
-    return quat_to_matrix(quat / np.sqrt(np.sum(quat * quat)))
+    R = np.empty((3, 3))
+    _rotation_into(bi, q, b, R)
+    return R
+
+
+@numba.njit(cache=True, inline="always")
+def _rotation_into(bi, q, b, R):
+    """`body_rotation` into the caller's R (3, 3)."""
+    w, x, y, z = q[bi[b, BI_QMAP + Q_QW]], q[bi[b, BI_QMAP + Q_QW + 1]], q[bi[b, BI_QMAP + Q_QW + 2]], q[bi[b, BI_QMAP + Q_QW + 3]]
+    norm = np.sqrt(0.0 + w * w + x * x + y * y + z * z)  # (np.sum's order, from 0)
+    quat_matrix_into(w / norm, x / norm, y / norm, z / norm, R)
 
 
 @numba.njit(cache=True)
 def world_inertia(bi, bf, q, b):
     """Body b's inertia about its centre in world axes: R diag(I) R^T."""
-    R = body_rotation(bi, q, b)
     I = np.empty((3, 3))
+    _world_inertia_into(bi, bf, q, b, np.empty((3, 3)), I)
+    return I
+
+
+@numba.njit(cache=True, inline="always")
+def _world_inertia_into(bi, bf, q, b, R, I):
+    """`world_inertia` into the caller's I (3, 3), with R (3, 3) scratch."""
+    _rotation_into(bi, q, b, R)
     for r in range(3):
         for c in range(3):
             s = 0.0
             for k in range(3):
                 s += R[r, k] * bf[b, BF_INERTIA + k] * R[c, k]
             I[r, c] = s
-    return I
 
 
 @numba.njit(cache=True)
 def mass_times(bi, bf, q, nu):
     """M(q) nu body by body (the products of `mass_matrix` without forming it): O(bodies)."""
-    out = np.zeros(nu.shape[0])
+    out = np.empty(nu.shape[0])
+    _mass_times_into(bi, bf, q, nu, out, np.empty((3, 3)), np.empty((3, 3)))
+    return out
+
+
+@numba.njit(cache=True, inline="always")
+def _mass_times_into(bi, bf, q, nu, out, R, I):
+    """`mass_times` into the caller's out (nv), zeroed here; R and I (3, 3) scratch."""
+    for v in range(out.shape[0]):
+        out[v] = 0.0
     for b in range(bi.shape[0]):
         for k in range(3):
             if bi[b, BI_VMAP + k] >= 0:
@@ -389,13 +420,12 @@ def mass_times(bi, bf, q, nu):
         if bi[b, BI_VMAP + V_ANGLE] >= 0:
             out[bi[b, BI_VMAP + V_ANGLE]] = bf[b, BF_INERTIA + 2] * nu[bi[b, BI_VMAP + V_ANGLE]]
         if bi[b, BI_VMAP + V_WX] >= 0:
-            I = world_inertia(bi, bf, q, b)
+            _world_inertia_into(bi, bf, q, b, R, I)
             for r in range(3):
                 s = 0.0
                 for c in range(3):
                     s += I[r, c] * nu[bi[b, BI_VMAP + V_WX + c]]
                 out[bi[b, BI_VMAP + V_WX + r]] = s
-    return out
 
 
 @numba.njit(cache=True)
@@ -420,36 +450,52 @@ def gravity_force(bi, bf, gravity, nv):
 @numba.njit(cache=True)
 def gyroscopic_force(bi, bf, q, nu, nv):
     """-w x (I_world w) for free spatial rotations (the paper's k(t, q, nu))."""
-    f = np.zeros(nv)
+    f = np.empty(nv)
+    _gyroscopic_into(bi, bf, q, nu, f, np.empty((3, 3)))
+    return f
+
+
+@numba.njit(cache=True, inline="always")
+def _gyroscopic_into(bi, bf, q, nu, f, R):
+    """`gyroscopic_force` into the caller's f (nv), zeroed here; R (3, 3) scratch."""
+    for v in range(f.shape[0]):
+        f[v] = 0.0
     for b in range(bi.shape[0]):
         if bi[b, BI_VMAP + V_WX] < 0:
             continue
-        R = body_rotation(bi, q, b)
-        w = np.empty(3)
-        for k in range(3):
-            w[k] = nu[bi[b, BI_VMAP + V_WX + k]]
+        _rotation_into(bi, q, b, R)
+        w0, w1, w2 = nu[bi[b, BI_VMAP + V_WX]], nu[bi[b, BI_VMAP + V_WX + 1]], nu[bi[b, BI_VMAP + V_WX + 2]]
         # L = R diag(I) R^T w, written out: numba's @ calls BLAS, whose overhead dwarfs a 3 x 3
-        Lb = np.empty(3)
-        for k in range(3):
-            Lb[k] = bf[b, BF_INERTIA + k] * (R[0, k] * w[0] + R[1, k] * w[1] + R[2, k] * w[2])
-        L = np.empty(3)
-        for k in range(3):
-            L[k] = R[k, 0] * Lb[0] + R[k, 1] * Lb[1] + R[k, 2] * Lb[2]
-        f[bi[b, BI_VMAP + V_WX]] -= w[1] * L[2] - w[2] * L[1]
-        f[bi[b, BI_VMAP + V_WX + 1]] -= w[2] * L[0] - w[0] * L[2]
-        f[bi[b, BI_VMAP + V_WX + 2]] -= w[0] * L[1] - w[1] * L[0]
-    return f
+        l0 = bf[b, BF_INERTIA] * (R[0, 0] * w0 + R[1, 0] * w1 + R[2, 0] * w2)
+        l1 = bf[b, BF_INERTIA + 1] * (R[0, 1] * w0 + R[1, 1] * w1 + R[2, 1] * w2)
+        l2 = bf[b, BF_INERTIA + 2] * (R[0, 2] * w0 + R[1, 2] * w1 + R[2, 2] * w2)
+        L0 = R[0, 0] * l0 + R[0, 1] * l1 + R[0, 2] * l2
+        L1 = R[1, 0] * l0 + R[1, 1] * l1 + R[1, 2] * l2
+        L2 = R[2, 0] * l0 + R[2, 1] * l1 + R[2, 2] * l2
+        f[bi[b, BI_VMAP + V_WX]] -= w1 * L2 - w2 * L1
+        f[bi[b, BI_VMAP + V_WX + 1]] -= w2 * L0 - w0 * L2
+        f[bi[b, BI_VMAP + V_WX + 2]] -= w0 * L1 - w1 * L0
 
 
 @numba.njit(cache=True)
 def system_matrix(bi, bf, q, nv, eps, h, v_index, kp, kd, max_force):
     """A = eps M + h (h kp + kd) on the DOFs of unlimited drives (a force-limited drive's
     impulse is an unknown of the contact problem instead; see `contact_lcp`)."""
-    A = eps * mass_matrix(bi, bf, q, nv)
+    A = np.empty((nv, nv))
+    _system_matrix_into(bi, bf, q, eps, h, v_index, kp, kd, max_force, A, np.empty((3, 3)), np.empty((3, 3)))
+    return A
+
+
+@numba.njit(cache=True, inline="always")
+def _system_matrix_into(bi, bf, q, eps, h, v_index, kp, kd, max_force, A, R, I):
+    """`system_matrix` into the caller's A (nv, nv); R and I (3, 3) scratch."""
+    _mass_matrix_into(bi, bf, q, A, R, I)
+    for r in range(A.shape[0]):
+        for c in range(A.shape[1]):
+            A[r, c] = eps * A[r, c]
     for j in range(v_index.shape[0]):
         if not np.isfinite(max_force[j]):
             A[v_index[j], v_index[j]] += h * (h * kp[j] + kd[j])
-    return A
 
 
 @numba.njit(cache=True)
@@ -478,23 +524,29 @@ def drive_reference(h, q_ref, u, lower, upper):
 @numba.njit(cache=True)
 def integrate_positions(bi, q, nu, h):
     """q + h G(q) nu, renormalising quaternions (the paper's q^{l+1} = q^l + h G nu^{l+1})."""
-    out = q.copy()
+    out = np.empty(q.shape[0])
+    _integrate_positions_into(bi, q, nu, h, out)
+    return out
+
+
+@numba.njit(cache=True, inline="always")
+def _integrate_positions_into(bi, q, nu, h, out):
+    """`integrate_positions` into the caller's out (nq)."""
+    for i in range(q.shape[0]):
+        out[i] = q[i]
     _integrate_translations_into(bi, q, nu, h, out)
     for b in range(bi.shape[0]):
         if bi[b, BI_QMAP + Q_QW] >= 0:
-            quat = np.empty(4)
-            for k in range(4):
-                quat[k] = q[bi[b, BI_QMAP + Q_QW + k]]
-            omega = np.array([0.0, nu[bi[b, BI_VMAP + V_WX]], nu[bi[b, BI_VMAP + V_WX + 1]], nu[bi[b, BI_VMAP + V_WX + 2]]])
-            dq = quat_mul(omega, quat)
-            norm = 0.0
-            for k in range(4):
-                quat[k] += 0.5 * h * dq[k]
-                norm += quat[k] * quat[k]
-            norm = np.sqrt(norm)
-            for k in range(4):
-                out[bi[b, BI_QMAP + Q_QW + k]] = quat[k] / norm
-    return out
+            i0, i1, i2, i3 = bi[b, BI_QMAP + Q_QW], bi[b, BI_QMAP + Q_QW + 1], bi[b, BI_QMAP + Q_QW + 2], bi[b, BI_QMAP + Q_QW + 3]
+            b0, b1, b2, b3 = q[i0], q[i1], q[i2], q[i3]
+            a0, a1, a2, a3 = 0.0, nu[bi[b, BI_VMAP + V_WX]], nu[bi[b, BI_VMAP + V_WX + 1]], nu[bi[b, BI_VMAP + V_WX + 2]]
+            d0, d1, d2, d3 = quat_mul_scalars(a0, a1, a2, a3, b0, b1, b2, b3)  # quat_mul(omega, quat)
+            b0 += 0.5 * h * d0
+            b1 += 0.5 * h * d1
+            b2 += 0.5 * h * d2
+            b3 += 0.5 * h * d3
+            norm = np.sqrt(0.0 + b0 * b0 + b1 * b1 + b2 * b2 + b3 * b3)
+            out[i0], out[i1], out[i2], out[i3] = b0 / norm, b1 / norm, b2 / norm, b3 / norm
 
 
 @numba.njit(cache=True, inline="always")
@@ -630,6 +682,13 @@ def _may_take_planar_warm(planar, constant_A, limited, model, solver, nc):
     """Whether a step with nc contacts may go to `planar_warm_step` (planar: the scene's
     dimension is 2): A constant, no force-limited drive, not kinematic, a Lemke step."""
     return planar and constant_A and not limited and not model.kinematic and not _uses_pgs(model, solver, nc, limited)
+
+
+@numba.njit(cache=True, inline="always")
+def _may_take_spatial_warm(spatial, limited, model, solver, nc):
+    """Whether a step with nc contacts may go to `spatial_warm_step` (spatial: the scene's
+    dimension is 3): no force-limited drive, not kinematic, a Lemke step with contacts."""
+    return spatial and nc > 0 and not limited and not model.kinematic and not _uses_pgs(model, solver, nc, limited)
 
 
 @numba.njit(cache=True, inline="always")
@@ -866,7 +925,7 @@ def _active_into(W_n, nc, active):
 def _lemke_step(model, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, basis):
     """dynamics_step with the dense LCP solved by Lemke (see `_contact_solve`)."""
     # A is block diagonal by body: its blocks' inverses serve the free velocity (when A changes
-    # with q) and the Delassus matrix (`_delassus`)
+    # with q) and the Delassus matrix (`_delassus_into`)
     dofs, count, inv, ok = _blocks(tables.bi, system)
     if not ok:
         return StepResult(q, nu, q_ref, delta_n, delta_t, StepStatus.SINGULAR.value, 0, 0.0, 0, np.zeros(nc), np.zeros((nc, 2)), 0, basis)
@@ -987,12 +1046,12 @@ def contact_lcp(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, co
     Unknowns z = (p_n (nc), beta (nf * d), x (nl), gamma (nf), s (nl)); with J = [W_n | D | E]
     the top-left block of M is J^T A^-1 J. It is assembled over the DOFs contacts touch: J = B C,
     B the generators (the Jacobian columns of each contact's n, t, o and the drives' unit DOFs,
-    `_generators`), C how each LCP column combines them (a friction direction is cos t + sin o),
+    `_generators_into`), C how each LCP column combines them (a friction direction is cos t + sin o),
     and the Delassus matrix G = B^T A^-1 B from A's body blocks (dofs, count, inv:
     `models.contact_pgs.body_blocks`), so M = C^T G C costs O(contacts^2), not O(nv contacts^2).
 
     Returns (M, q, Y = A^-1 B, gen, cf: LCP column r < m is cf[0, r] B[:, gen[0, r]] +
-    cf[1, r] B[:, gen[1, r]] (`_combinations`), fric, nf, lim: the indices of the nl
+    cf[1, r] B[:, gen[1, r]] (`_combinations_into`), fric, nf, lim: the indices of the nl
     force-limited drives).
 
     A force-limited drive j (limit F, P = h F) is a bounded impulse p = x - P, x in [0, 2P]:
@@ -1001,58 +1060,87 @@ def contact_lcp(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, co
     p = P and r = 0 between: the box split 0 <= x _|_ r + s >= 0, 0 <= s _|_ 2P - x >= 0.
     nu_free has the -P shift in it already (`_drives`); E's columns are the drives' unit DOFs.
     """
-    compliant, directions = model.compliant, model.friction_directions
+    nc = active.shape[0]
+    lim = np.empty(drives.max_force.shape[0], np.int64)
+    nl = _limited_into(drives.max_force, lim)
+    fric = np.empty(nc, np.int64)
+    nf = _friction_into(spatial, active, contacts.pair, pf, contacts.W_t, contacts.W_o, fric)
+    d = model.friction_directions if spatial else 2
+    ng = nc + (2 if spatial else 1) * nf + nl
+    m = nc + nf * d + nl
+    n = m + nf + nl
+    Mlcp, qlcp, Y, gen, cf = np.empty((n, n)), np.empty(n), np.empty((nu_free.shape[0], ng)), np.empty((2, m), np.int64), np.empty((2, m))
+    body, ldof, nloc = np.empty((ng, 2), np.int64), np.empty((ng, LOCAL_DOFS), np.int64), np.empty(ng, np.int64)
+    Bl = np.empty((ng, LOCAL_DOFS))
+    G, p, Bt_nu, Jt_nu = np.empty((ng, ng)), np.empty(ng), np.empty(ng), np.empty(m)
+    scratch = (body, ldof, nloc, Bl, G, p, Bt_nu, Jt_nu)
+    contact_lcp_into(
+        model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, drives, drive_a, lim, nl, fric, nf,
+        scratch, Mlcp, qlcp, Y, gen, cf,
+    )  # fmt: skip
+    return Mlcp, qlcp, Y, gen, cf, fric, nf, lim[:nl]
+
+
+@numba.njit(cache=True, inline="always")
+def contact_lcp_into(
+    model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, drives, drive_a, lim, nl, fric, nf,
+    scratch, Mlcp, qlcp, Y, gen, cf,
+):  # fmt: skip
+    """`contact_lcp` on the caller's arrays, given the force-limited drives (lim, nl:
+    `_limited_into`) and the friction contacts (fric, nf: `_friction_into`), each array shaped
+    exactly (ng = nc + nf (2 in space, else 1) + nl generators, m = nc + d nf + nl, n = m + nf +
+    nl): the scratch (body (ng, 2), ldof (ng, LOCAL_DOFS), nloc (ng,), Bl (ng, LOCAL_DOFS), G
+    (ng, ng), p, Bt_nu (ng each), Jt_nu (m); a tuple: an inlined function takes at most 30
+    arguments), and the LCP's M (n, n), q (n), Y (nv, ng), gen and cf (2, m), all set here."""
+    body, ldof, nloc, Bl, G, p, Bt_nu, Jt_nu = scratch
+    compliant = model.compliant
     c_pair, c_psi, c_slot, c_bias = contacts.pair, contacts.psi, contacts.slot, contacts.bias
     W_n, W_t, W_o = contacts.W_n, contacts.W_t, contacts.W_o
     v_index, kp, kd, max_force = drives.v_index, drives.kp, drives.kd, drives.max_force
     nc = active.shape[0]
-    nv = nu_free.shape[0]
-    lim, nl = _limited_drives(max_force)
-    d = directions if spatial else 2
-    fric, nf = _friction_contacts(spatial, active, c_pair, pf, W_t, W_o)
+    d = model.friction_directions if spatial else 2
     nd = nf * d
     m = nc + nd + nl
-    body, ldof, nloc, Bl = _generators(spatial, active, fric, nf, lim, nl, v_index, pi, c_pair, W_n, W_t, W_o, dofs, count)
-    Y, G = _delassus(body, ldof, nloc, Bl, dofs, count, inv, nv)
-    gen, cf = _combinations(spatial, d, nc, fric, nf, nl)
+    _generators_into(spatial, active, fric, nf, lim, nl, v_index, pi, c_pair, W_n, W_t, W_o, dofs, count, body, ldof, nloc, Bl)
+    _delassus_into(body, ldof, nloc, Bl, dofs, count, inv, Y, G)
+    _combinations_into(spatial, d, nc, fric, nf, nl, gen, cf)
     n = m + nf + nl
-    Mlcp = np.zeros((n, n))
-    qlcp = np.zeros(n)
-    _fill_jacobian_block(Mlcp, G, gen, cf, spatial, d, nc, nf, nl)
-    Bt_nu = np.empty(nloc.shape[0])
+    for r in range(n):
+        qlcp[r] = 0.0
+        for c in range(n):
+            Mlcp[r, c] = 0.0
+    _fill_jacobian_block(Mlcp, G, gen, cf, spatial, d, nc, nf, nl, p)
     for g in range(nloc.shape[0]):  # B^T nu_free, over each generator's local DOFs
         s0 = 0.0
         for a in range(nloc[g]):
             s0 += Bl[g, a] * nu_free[ldof[g, a]]
         Bt_nu[g] = s0
-    Jt_nu = np.empty(m)
     for r in range(m):  # J^T nu_free = C^T (B^T nu_free)
         Jt_nu[r] = cf[0, r] * Bt_nu[gen[0, r]] + cf[1, r] * Bt_nu[gen[1, r]]
     _normal_rows(Mlcp, qlcp, compliant, h, active, pf, c_pair, c_psi, c_slot, c_bias, Jt_nu, delta_n, model.regularization)
     _friction_rows(Mlcp, qlcp, compliant, h, d, m, active, fric, nf, cf, pf, c_pair, c_slot, c_bias, Jt_nu, delta_t)
     _scale_gamma(Mlcp, d, m, nc, nf)
     _drive_rows(Mlcp, qlcp, h, nc + nd, m + nf, lim, nl, kp, kd, max_force, drive_a, Jt_nu)
-    return Mlcp, qlcp, Y, gen, cf, fric, nf, lim[:nl]
 
 
 @numba.njit(cache=True, inline="always")
-def _limited_drives(max_force):
-    """The force-limited drives (finite max_force): (indices in a buffer of all drives, count)."""
+def _limited_into(max_force, lim):
+    """The force-limited drives (finite max_force) into the caller's lim (one entry per drive):
+    their indices, first. Returns their count."""
     nl = 0
-    lim = np.empty(max_force.shape[0], np.int64)
     for j in range(max_force.shape[0]):
         if np.isfinite(max_force[j]):
             lim[nl] = j
             nl += 1
-    return lim, nl
+    return nl
 
 
 @numba.njit(cache=True, inline="always")
-def _friction_contacts(spatial, active, c_pair, pf, W_t, W_o):
+def _friction_into(spatial, active, c_pair, pf, W_t, W_o, fric):
     """The active contacts (positions k in active) with friction rows: mu > 0 and a tangent
-    Jacobian column that couples to a free DOF. Returns (fric, nf)."""
+    Jacobian column that couples to a free DOF, into the caller's fric (at least nc entries).
+    Returns their count nf."""
     nc = active.shape[0]
-    fric = np.empty(nc, np.int64)
     nf = 0
     for k in range(nc):
         i = active[k]
@@ -1062,27 +1150,29 @@ def _friction_contacts(spatial, active, c_pair, pf, W_t, W_o):
         if pf[c_pair[i], PF_MU] > 0.0 and couples:
             fric[nf] = k
             nf += 1
-    return fric, nf
+    return nf
 
 
-#: Local DOFs of a generator (`_generators`): the DOFs of the (at most two) bodies it touches.
+#: Local DOFs of a generator (`_generators_into`): the DOFs of the (at most two) bodies it touches.
 LOCAL_DOFS = 2 * BODY_DOFS
 
 
 @numba.njit(cache=True, inline="always")
-def _generators(spatial, active, fric, nf, lim, nl, v_index, pi, c_pair, W_n, W_t, W_o, dofs, count):
+def _generators_into(spatial, active, fric, nf, lim, nl, v_index, pi, c_pair, W_n, W_t, W_o, dofs, count, body, ldof, nloc, Bl):
     """The columns B that the LCP's J = B C combines, gathered on the DOFs they touch: each
     active contact's normal (generator k), each friction contact's t (nc + f) and, in space, o
-    (nc + nf + f), each force-limited drive's unit DOF (last). Returns (body (ng, 2): the bodies
-    with DOFs each touches, -1 padded; ldof (ng, LOCAL_DOFS): those bodies' DOFs, body by body;
-    nloc (ng,): how many; Bl (ng, LOCAL_DOFS): the column's entries there)."""
+    (nc + nf + f), each force-limited drive's unit DOF (last). Into the caller's arrays, shaped
+    for the ng generators and set here: body (ng, 2): the bodies with DOFs each touches, -1
+    padded; ldof (ng, LOCAL_DOFS): those bodies' DOFs, body by body; nloc (ng,): how many; Bl
+    (ng, LOCAL_DOFS): the column's entries there."""
     nc = active.shape[0]
     nt = 2 if spatial else 1
     ng = nc + nt * nf + nl
-    body = np.full((ng, 2), -1, np.int64)
-    ldof = np.zeros((ng, LOCAL_DOFS), np.int64)
-    nloc = np.zeros(ng, np.int64)
-    Bl = np.zeros((ng, LOCAL_DOFS))
+    for g in range(ng):
+        body[g, 0], body[g, 1], nloc[g] = -1, -1, 0
+        for a in range(LOCAL_DOFS):
+            ldof[g, a] = 0
+            Bl[g, a] = 0.0
     # each contact's normal (g < nc), then its friction generators t and o (the gather written
     # out here: a helper's array arguments would be reference-counted per generator)
     for g in range(nc + nt * nf):
@@ -1123,17 +1213,18 @@ def _generators(spatial, active, fric, nf, lim, nl, v_index, pi, c_pair, W_n, W_
             for r in range(count[b]):
                 ldof[g, r] = dofs[b, r]
                 Bl[g, r] = 1.0 if dofs[b, r] == v else 0.0
-    return body, ldof, nloc, Bl
 
 
 @numba.njit(cache=True, inline="always")
-def _delassus(body, ldof, nloc, Bl, dofs, count, inv, nv):
-    """(Y = A^-1 B (nv, ng), G = B^T A^-1 B (ng, ng)) over the DOFs of the bodies each generator
-    touches: A is block diagonal by body (inv: its blocks' inverses), so Y[:, g] lives on g's
-    bodies and G[g1, g2] is zero unless g1 and g2 share one. G is symmetric: its upper triangle
-    is mirrored."""
+def _delassus_into(body, ldof, nloc, Bl, dofs, count, inv, Y, G):
+    """(Y = A^-1 B (nv, ng), G = B^T A^-1 B (ng, ng)) into the caller's Y and G, set here, over
+    the DOFs of the bodies each generator touches: A is block diagonal by body (inv: its blocks'
+    inverses), so Y[:, g] lives on g's bodies and G[g1, g2] is zero unless g1 and g2 share one.
+    G is symmetric: its upper triangle is mirrored."""
     ng = nloc.shape[0]
-    Y = np.zeros((nv, ng))
+    for v in range(Y.shape[0]):
+        for g in range(ng):
+            Y[v, g] = 0.0
     for g in range(ng):
         a0 = 0
         for s in range(2):
@@ -1147,7 +1238,9 @@ def _delassus(body, ldof, nloc, Bl, dofs, count, inv, nv):
                     acc += inv[b, r, c] * Bl[g, a0 + c]
                 Y[dofs[b, r], g] = acc
             a0 += m
-    G = np.zeros((ng, ng))
+    for g1 in range(ng):
+        for g2 in range(ng):
+            G[g1, g2] = 0.0
     for g1 in range(ng):
         p, r = body[g1, 0], body[g1, 1]
         for g2 in range(g1, ng):
@@ -1158,19 +1251,17 @@ def _delassus(body, ldof, nloc, Bl, dofs, count, inv, nv):
                 acc += Bl[g1, a] * Y[ldof[g1, a], g2]
             G[g1, g2] = acc
             G[g2, g1] = acc
-    return Y, G
 
 
 @numba.njit(cache=True, inline="always")
-def _fill_jacobian_block(Mlcp, G, gen, cf, spatial, d, nc, nf, nl):
+def _fill_jacobian_block(Mlcp, G, gen, cf, spatial, d, nc, nf, nl, p):
     """M[:m, :m] = C^T G C, row by row: the row p = (C^T G)[r] (ng), then each column group
     from it (a normal's generator, a friction contact's d directions from its t and o
-    generators, a drive's DOF), so the inner loops are contiguous."""
+    generators, a drive's DOF), so the inner loops are contiguous. p: scratch (ng)."""
     ng = G.shape[0]
     nt = 2 if spatial else 1
     nd = nf * d
     m = nc + nd + nl
-    p = np.empty(ng)
     for r in range(m):
         a0, a1, x0, x1 = gen[0, r], gen[1, r], cf[0, r], cf[1, r]
         for g in range(ng):
@@ -1188,17 +1279,14 @@ def _fill_jacobian_block(Mlcp, G, gen, cf, spatial, d, nc, nf, nl):
 
 
 @numba.njit(cache=True, inline="always")
-def _combinations(spatial, d, nc, fric, nf, nl):
+def _combinations_into(spatial, d, nc, fric, nf, nl, gen, cf):
     """C of J = B C, as (gen (2, m), cf (2, m)): LCP column r < m is cf[0, r] B[:, gen[0, r]] +
     cf[1, r] B[:, gen[1, r]] (cf[1, r] = 0 for a single generator). A friction row's
     (cf[0, r], cf[1, r]) is its direction in the (t, o) basis: the d directions around the cone
     in space, +t and -t in the plane, the same for every friction contact (computed for the
-    first, copied for the others)."""
+    first, copied for the others), into the caller's gen and cf (2, m each)."""
     nt = 2 if spatial else 1
     nd = nf * d
-    m = nc + nd + nl
-    gen = np.empty((2, m), np.int64)
-    cf = np.empty((2, m))
     for k in range(nc):
         gen[0, k] = gen[1, k] = k
         cf[0, k], cf[1, k] = 1.0, 0.0
@@ -1218,7 +1306,6 @@ def _combinations(spatial, d, nc, fric, nf, nl):
         r = nc + nd + e
         gen[0, r] = gen[1, r] = nc + nt * nf + e
         cf[0, r], cf[1, r] = 1.0, 0.0
-    return gen, cf
 
 
 @numba.njit(cache=True, inline="always")
@@ -1313,8 +1400,8 @@ def _drive_rows(Mlcp, qlcp, h, first_row, first_slack, lim, nl, kp, kd, max_forc
 def _planar_lcp(model, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t):
     """`contact_lcp` for the planar case (`_planar_case`): every active contact with friction
     rows (its normal generator k, its tangent nc + k, the directions +t and -t), no force-limited
-    drive. The same LCP bit for bit (tests/test_planar_lcp.py): `_generators`, `_delassus`,
-    `_fill_jacobian_block`, the rows, `_scale_gamma` and `_combinations` written out with their
+    drive. The same LCP bit for bit (tests/test_planar_lcp.py): `_generators_into`, `_delassus_into`,
+    `_fill_jacobian_block`, the rows, `_scale_gamma` and `_combinations_into` written out with their
     operations in their order, a zero coefficient's products included (they decide a zero's sign
     as there), on two flat buffers (I: ints, F: floats) instead of contact_lcp's 15 arrays (the squeeze's
     contact steps 7% faster, docs/measurements.md). Returns what contact_lcp returns; M, q, Y,
@@ -1370,7 +1457,7 @@ def _planar_lcp_into(model, h, dofs, count, inv, nu_free, active, pi, pf, contac
     fG = fB + ng * LD
     fp = fG + ng * ng
     fS = fp + ng
-    # generators (_generators): normal k, then its tangent nc + k
+    # generators (_generators_into): normal k, then its tangent nc + k
     for g in range(ng):
         k = g if g < nc else g - nc
         i = active[k]
@@ -1397,7 +1484,7 @@ def _planar_lcp_into(model, h, dofs, count, inv, nu_free, active, pi, pf, contac
                 F[fB + g * LD + a] = W_n[v, i] if g < nc else W_t[v, i]
                 a += 1
         I[oN + g] = a
-    # Delassus matrix (_delassus)
+    # Delassus matrix (_delassus_into)
     for v in range(nv):
         for g in range(ng):
             Y[v, g] = 0.0
@@ -1494,7 +1581,7 @@ def _planar_lcp_into(model, h, dofs, count, inv, nu_free, active, pi, pf, contac
             for r in range(n):
                 M[r, g] *= sc
                 M[g, r] *= sc
-    # C (_combinations) and fric: every active contact
+    # C (_combinations_into) and fric: every active contact
     for r in range(m):
         a0 = r if r < nc else nc + (r - nc) // d
         gen[0, r] = a0
@@ -1595,7 +1682,7 @@ def planar_warm_step(model, drives, tables, system, h, q, nu, q_ref, u, contacts
     table and, with compliance, the deformations on B's side `side` (0 or 1: not the side the
     state q, nu, q_ref, basis, delta_n, delta_t is on), and the impulses by contact in B. The
     same operations in the same order as
-    `_lemke_step`: the same bits (tests/test_planar_warm.py). part: PART_STEP, or the first
+    `_lemke_step`: the same bits (tests/test_warm_steps.py). part: PART_STEP, or the first
     parts only, for the cost split (as `contact_stage`). Returns (outcome, active contacts,
     residual)."""
     nv = nu.shape[0]
@@ -1658,10 +1745,236 @@ def planar_warm_step(model, drives, tables, system, h, q, nu, q_ref, u, contacts
     return WARM_DONE, n_act, residual
 
 
+#: Active contacts the spatial warm step's buffers hold (`spatial_warm_buffers`): a step with more
+#: takes the general path. Its LCP has (2 + d) of them unknowns, so at d = 8 M is 120 x 120
+#: (115 kB, under malloc's threshold for a mapping of its own, made once per rollout).
+SPATIAL_WARM_CONTACTS = 12
+
+
+class SpatialWarm(NamedTuple):
+    """The arrays of `spatial_warm_step`, made once per rollout (`spatial_warm_buffers`) for up
+    to cap contacts, d friction directions, nb bodies: every array the step writes, so that it
+    runs without numba's runtime (as `PlanarWarm`, with A's blocks, the free velocity's
+    rotational terms and the general LCP build's scratch). The results (q+, nu+, q_ref+, the
+    next basis table, the deformations) have two sides, as `PlanarWarm`'s. ng = 3 cap, m = (1
+    + d) cap, n = (2 + d) cap."""
+
+    rhs: np.ndarray  # (nv,) scratch
+    nu_free: np.ndarray  # (nv,)
+    q_ref: np.ndarray  # (2, drives) q_ref+
+    drive_a: np.ndarray  # (drives,)
+    active: np.ndarray  # (cap,) int
+    fric: np.ndarray  # (cap,) int
+    lim: np.ndarray  # (0,) int: no force-limited drive takes this step
+    A: np.ndarray  # (nv, nv) A(q) where it depends on q
+    R: np.ndarray  # (3, 3) scratch
+    I: np.ndarray  # (3, 3) scratch
+    mass_nu: np.ndarray  # (nv,) M(q) nu
+    gyro: np.ndarray  # (nv,) the gyroscopic force
+    dofs: np.ndarray  # (nb, BODY_DOFS) int: A^-1's body blocks (`body_blocks`)
+    count: np.ndarray  # (nb,) int
+    inv: np.ndarray  # (nb, BODY_DOFS, BODY_DOFS)
+    block: np.ndarray  # (BODY_DOFS, BODY_DOFS) scratch
+    work: np.ndarray  # (BODY_DOFS, 2 BODY_DOFS) scratch
+    body: np.ndarray  # (ng, 2) int: the generators (`_generators_into`)
+    ldof: np.ndarray  # (ng, LOCAL_DOFS) int
+    nloc: np.ndarray  # (ng,) int
+    Bl: np.ndarray  # (ng, LOCAL_DOFS)
+    G: np.ndarray  # (ng * ng,) the Delassus matrix, flat (a step views its own sizes' part)
+    p: np.ndarray  # (ng,) scratch
+    Bt_nu: np.ndarray  # (ng,)
+    Jt_nu: np.ndarray  # (m,)
+    M: np.ndarray  # (n * n,) flat, as G
+    q_lcp: np.ndarray  # (n,)
+    Y: np.ndarray  # (nv * ng,) flat
+    gen: np.ndarray  # (2 * m,) int, flat
+    cf: np.ndarray  # (2 * m,) flat
+    guess: np.ndarray  # (n,) bool
+    J: np.ndarray  # (n,) int
+    lu: np.ndarray  # (n + 1, n) the warm start's elimination
+    z: np.ndarray  # (n,)
+    w: np.ndarray  # (n,)
+    t: np.ndarray  # (ng,)
+    p_t: np.ndarray  # (cap, 2) friction impulses of the active contacts
+    nu: np.ndarray  # (2, nv) nu+ on either side
+    q: np.ndarray  # (2, nq) q+
+    blend: np.ndarray  # (nv,) theta nu+ + (1 - theta) nu
+    basis: np.ndarray  # (2, rows, columns) the next basis table, each shaped as the rollout's
+    impulses: np.ndarray  # (cap,) p_n by contact
+    frictions: np.ndarray  # (cap, 2) p_t by contact
+    delta_n: np.ndarray  # (2, slots) compliant deformations delta_n+ (rungs with compliance)
+    delta_t: np.ndarray  # (2, slots, 2) delta_t+
+
+
+@numba.njit(cache=True)
+def spatial_warm_buffers(cap, d, nb, nv, nq, drives, basis, slots):
+    """`SpatialWarm` for up to cap contacts (0: none; the step then is never taken), d friction
+    directions and nb bodies; basis tables shaped as basis, deformations of `slots` slots."""
+    ng, m, n = 3 * cap, (1 + d) * cap, (2 + d) * cap
+    return SpatialWarm(
+        np.empty(nv),
+        np.empty(nv),
+        np.empty((2, drives)),
+        np.empty(drives),
+        np.empty(cap, np.int64),
+        np.empty(cap, np.int64),
+        np.empty(0, np.int64),
+        np.empty((nv, nv)),
+        np.empty((3, 3)),
+        np.empty((3, 3)),
+        np.empty(nv),
+        np.empty(nv),
+        np.empty((nb, BODY_DOFS), np.int64),
+        np.empty(nb, np.int64),
+        np.empty((nb, BODY_DOFS, BODY_DOFS)),
+        np.empty((BODY_DOFS, BODY_DOFS)),
+        np.empty((BODY_DOFS, 2 * BODY_DOFS)),
+        np.empty((ng, 2), np.int64),
+        np.empty((ng, LOCAL_DOFS), np.int64),
+        np.empty(ng, np.int64),
+        np.empty((ng, LOCAL_DOFS)),
+        np.empty(ng * ng),
+        np.empty(ng),
+        np.empty(ng),
+        np.empty(m),
+        np.empty(n * n),
+        np.empty(n),
+        np.empty(nv * ng),
+        np.empty(2 * m, np.int64),
+        np.empty(2 * m),
+        np.empty(n, np.bool_),
+        np.empty(n, np.int64),
+        np.empty((n + 1, n)),
+        np.empty(n),
+        np.empty(n),
+        np.empty(ng),
+        np.empty((cap, 2)),
+        np.empty((2, nv)),
+        np.empty((2, nq)),
+        np.empty(nv),
+        np.empty((2, basis.shape[0], basis.shape[1]), basis.dtype),
+        np.empty(cap),
+        np.empty((cap, 2)),
+        np.empty((2, slots)),
+        np.empty((2, slots, 2)),
+    )
+
+
+@numba.njit(cache=True, _nrt=False)
+def spatial_warm_step(model, drives, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, W, side, part):
+    """A contact step of `_lemke_step` whose LCP the previous step's basis solves, in space with
+    no force-limited drive, compiled without numba's runtime: no reference counts, no
+    allocation; every array is W's (`SpatialWarm`). rotating: A depends on q (`has_rotations`),
+    so A(q) and its body blocks are built here (`system_matrix`, `body_blocks`), where the
+    general step has the rollout build them. Where there are no active contacts or more than W
+    holds, a block of A is singular, the guess does not solve the LCP or the state leaves the
+    finite range, it returns WARM_NOT_TAKEN and the caller takes the general path, which solves
+    the step again from the start. Else (WARM_DONE): q+, nu+, q_ref+, the next basis table and,
+    with compliance, the deformations on W's side `side` (not the side the state is on), and
+    the impulses by contact in W. The same operations in the same order as `_lemke_step`: the
+    same bits (tests/test_warm_steps.py). part: PART_STEP, or the first parts only, for the
+    cost split (as `contact_stage`). Returns (outcome, the LCP's size, residual)."""
+    bi, bf, pi, pf = tables.bi, tables.bf, tables.pi, tables.pf
+    nv = nu.shape[0]
+    if not tables.spatial or nc > W.active.shape[0] or any_limited(drives.max_force):
+        return WARM_NOT_TAKEN, 0, 0.0
+    quasistatic = model.eps == 0.0
+    eps = model.quasistatic_inertia if quasistatic else model.eps
+    # A^-1's body blocks (`_blocks`): the System's where A is constant, else of A(q)
+    dofs, count, inv = system.dofs, system.count, system.inv
+    if count.shape[0] != bi.shape[0]:
+        A = system.A
+        if rotating:
+            _system_matrix_into(bi, bf, q, eps, h, drives.v_index, drives.kp, drives.kd, drives.max_force, W.A, W.R, W.I)
+            A = W.A
+        if not body_blocks_into(bi, A, system.Ainv, W.dofs, W.count, W.inv, W.block, W.work):
+            return WARM_NOT_TAKEN, 0, 0.0
+        dofs, count, inv = W.dofs, W.count, W.inv
+    # the free velocity (`_free_velocity`, in space)
+    rhs, nu_free, q_ref_new = W.rhs, W.nu_free, W.q_ref[side]
+    for v in range(nv):
+        rhs[v] = system.rhs_const[v]
+    if not quasistatic:
+        if system.M_const.shape[0] == nv:
+            add_product(rhs, system.M_const, nu, eps)
+        else:
+            _mass_times_into(bi, bf, q, nu, W.mass_nu, W.R, W.I)
+            for v in range(nv):
+                rhs[v] += eps * W.mass_nu[v]
+        _gyroscopic_into(bi, bf, q, nu, W.gyro, W.R)
+        he = h * eps
+        for v in range(nv):
+            rhs[v] += he * W.gyro[v]
+    _drives_into(h, q, q_ref, u, drives, rhs, q_ref_new, W.drive_a)
+    if system.Ainv.shape[0] == nv:
+        for v in range(nv):
+            nu_free[v] = 0.0
+        add_product(nu_free, system.Ainv, rhs, 1.0)
+    else:
+        block_solve_into(dofs, count, inv, rhs, nu_free)
+    # the LCP (`contact_lcp`), scaled, and the previous basis's guess
+    n_act = _active_into(contacts.W_n, nc, W.active)
+    if n_act == 0:
+        return WARM_NOT_TAKEN, 0, 0.0
+    active = W.active[:n_act]
+    fric = W.fric[:n_act]
+    nf = _friction_into(True, active, contacts.pair, pf, contacts.W_t, contacts.W_o, fric)
+    d = model.friction_directions
+    ng, m = n_act + 2 * nf, n_act + nf * d
+    n = m + nf
+    lim = W.lim[:0]
+    # (the matrices of this step's sizes as C-contiguous views of flat buffers: a view such as
+    # M[:n, :n] has a row stride numba does not know, and indexing it made the build 35% slower)
+    M, q_lcp = W.M[: n * n].reshape((n, n)), W.q_lcp[:n]
+    Y, gen, cf = W.Y[: nv * ng].reshape((nv, ng)), W.gen[: 2 * m].reshape((2, m)), W.cf[: 2 * m].reshape((2, m))
+    scratch = (W.body[:ng], W.ldof[:ng], W.nloc[:ng], W.Bl[:ng], W.G[: ng * ng].reshape((ng, ng)), W.p[:ng], W.Bt_nu[:ng], W.Jt_nu[:m])
+    contact_lcp_into(
+        model, True, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, drives, W.drive_a, lim, 0, fric, nf,
+        scratch, M, q_lcp, Y, gen, cf,
+    )  # fmt: skip
+    _scale_lcp(M, q_lcp, m)
+    _fill_basis_guess(W.guess, basis, active, contacts.slot, fric, nf, d, lim, m, n)
+    guess = W.guess[:n]
+    if part == PART_ASSEMBLY:
+        return WARM_DONE, n, 0.0
+    if not warm_guess_into(M, q_lcp, guess, WARM_TOLERANCE, W.J, W.lu, W.z, W.w):
+        return WARM_NOT_TAKEN, n, 0.0
+    if part == PART_CONTACT_SOLVE:
+        return WARM_DONE, n, 0.0
+    z, w = W.z[:n], W.w[:n]
+    residual = natural_map_residual(z, w, q_lcp)
+    if not (residual <= LCP_TOLERANCE):
+        return WARM_NOT_TAKEN, n, residual
+    nu_new, p_t = W.nu[side], W.p_t[:n_act]
+    _impulses_into(True, n_act, m, nf, fric, gen, cf, z, Y, nu_free, W.t[:ng], p_t, nu_new)
+    _fill_basis_kept(W.basis[side], basis, guess, active, contacts.slot, fric, nf, d, lim, m)
+    if model.compliant:
+        _deformations_into(h, pf, contacts.pair, contacts.slot, active, z, p_t, delta_n, delta_t, W.delta_n[side], W.delta_t[side])
+    for i in range(nc):
+        W.impulses[i] = 0.0
+        W.frictions[i, 0] = 0.0
+        W.frictions[i, 1] = 0.0
+    for k in range(n_act):
+        W.impulses[active[k]] = z[k]
+        W.frictions[active[k], 0] = p_t[k, 0]
+        W.frictions[active[k], 1] = p_t[k, 1]
+    # the position update (`_integrate_checked`)
+    velocity = nu_new
+    if model.theta != 1.0:
+        velocity = W.blend
+        for v in range(nv):
+            velocity[v] = model.theta * nu_new[v] + (1.0 - model.theta) * nu[v]
+    q_new = W.q[side]
+    _integrate_positions_into(bi, q, velocity, h, q_new)
+    if not (_finite_and_bounded(q_new) and _finite_and_bounded(nu_new)):
+        return WARM_NOT_TAKEN, n, residual
+    return WARM_DONE, n, residual
+
+
 @numba.njit(cache=True, inline="always")
 def _planar_case(spatial, max_force, active, c_pair, pf, W_t):
     """Whether `_planar_lcp` builds this step's LCP: a planar scene without force-limited
-    drives whose active contacts (at least one) all have friction rows (`_friction_contacts`).
+    drives whose active contacts (at least one) all have friction rows (`_friction_into`).
     (It takes arrays, not the contact set and the drives: an inlined helper reference-counts
     every array of the tuples it is passed.)"""
     if spatial or active.shape[0] == 0 or any_limited(max_force):

@@ -1,5 +1,5 @@
-"""States in contact along rollouts of a planar scenario, for the tests that hold a specialised
-planar path of the contact step to the general one (test_planar_lcp, test_planar_warm)."""
+"""States in contact along rollouts of a scenario, for the tests that hold a specialised
+path of the contact step to the general one (test_planar_lcp, test_warm_steps)."""
 
 from __future__ import annotations
 

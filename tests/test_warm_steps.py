@@ -1,13 +1,14 @@
-"""The planar warm step (`planar_warm_step`) against the general Lemke step (`dynamics_step`).
+"""The warm steps (`planar_warm_step`, `spatial_warm_step`) against the general Lemke step
+(`dynamics_step`).
 
-While contacts persist, a planar step's LCP is solved by the previous step's basis, and the
-rollout takes that step in `planar_warm_step`: compiled without numba's runtime, on arrays made
-once per rollout (docs/measurements.md: the squeeze's contact step about a third cheaper). Its
-contract is to be the general step bit for bit where it is taken (the same q+, nu+, q_ref+,
-basis table, impulses and compliant deformations, on the side of its buffers it is given and
-not the other), and to be taken exactly where the general
-step accepts its warm guess. Checked at states of every planar rung that solves an LCP, on the
-planar scenarios with friction, with random commands (fixed seeds).
+While contacts persist, a step's LCP is solved by the previous step's basis, and the rollout
+takes that step in `planar_warm_step` (in the plane) or `spatial_warm_step` (in space): compiled
+without numba's runtime, on arrays made once per rollout (docs/measurements.md). Their contract
+is to be the general step bit for bit where they are taken (the same q+, nu+, q_ref+, basis
+table, impulses and compliant deformations, on the side of their buffers they are given and not
+the other), and to be taken exactly where the general step accepts its warm guess. Checked at
+states of every rung that solves an LCP, on the planar scenarios with friction and the spatial
+ones, with random commands (fixed seeds).
 """
 
 from __future__ import annotations
@@ -22,29 +23,36 @@ from models.scenario import load_scenario
 from models.stepper import (
     PART_STEP,
     SOLVER_LEMKE,
+    SPATIAL_WARM_CONTACTS,
     WARM_DONE,
     SceneTables,
     StepStatus,
     _active_contacts,
     _planar_case,
+    any_limited,
     basis_table,
     dynamics_step,
+    has_rotations,
     planar_warm_buffers,
     planar_warm_step,
+    spatial_warm_buffers,
+    spatial_warm_step,
 )
 from planner.bench import SCENARIOS
 from tests.planar_states import sampled_states, slots
 
 RUNGS = ("quasistatic-rigid", "quasistatic-compliant", "dynamic-rigid", "dynamic-compliant")
-SCENES = ("two_finger_triangle", "four_finger_grasp", "incline_block")
+SCENES = ("two_finger_triangle", "four_finger_grasp", "incline_block", "box_push_3d", "box_rotate_3d")
 STATES = 30  # compared per scene and rung (states with an active contact, sampled along rollouts)
 
 
 def _both_steps(sc, rung, state, u, h, t):
     """(general, warm, covered) at the state: the general step from the basis of a first
-    general step at the same state (its warm start), `planar_warm_step`'s result fields from
-    that basis (None where it was not taken), and whether the LCP is the planar builder's
-    (`_planar_case`). None where no contact is detected."""
+    general step at the same state (its warm start), the warm step's result fields from that
+    basis (`planar_warm_step` in the plane, `spatial_warm_step` in space, with the rollout's
+    capacity; None where it was not taken), and whether the warm step covers the step: in the
+    plane, the LCP is the planar builder's (`_planar_case`); in space, no force-limited drive
+    and no more contacts than its buffers hold. None where no contact is detected."""
     c = compiled(sc)
     S = c.scene._replace(bf=c.scene.bf.copy(), base_pos=c.scene.base_pos.copy(), base_quat=c.scene.base_quat.copy())
     place_scripted(S.bf, S.base_pos, S.base_quat, t)
@@ -59,23 +67,32 @@ def _both_steps(sc, rung, state, u, h, t):
     model, D = rung.model, c.drives
     solver = rung.solver._replace(method=SOLVER_LEMKE)
     system = _start_system(S, D, model, h, state.q)
-    tables = SceneTables(S.bi, S.bf, S.pi, S.pf, False)
+    spatial = S.dimension == 3
+    tables = SceneTables(S.bi, S.bf, S.pi, S.pf, spatial)
     W_n = np.ascontiguousarray(frames.W_n)
-    contacts = ContactSet(
-        frames.pair, frames.psi, slots(frames.pair, first_slot), W_n, np.ascontiguousarray(frames.W_t), np.zeros_like(W_n), bias
-    )
+    W_o = np.ascontiguousarray(frames.W_o) if spatial else np.zeros_like(W_n)
+    contacts = ContactSet(frames.pair, frames.psi, slots(frames.pair, first_slot), W_n, np.ascontiguousarray(frames.W_t), W_o, bias)
     u = np.asarray(u, dtype=float)
-    basis = basis_table(cap, D.v_index.shape[0], 2)
+    basis = basis_table(cap, D.v_index.shape[0], model.friction_directions if spatial else 2)
     warm_n, warm_t = np.zeros(cap), np.zeros((cap, 2))
     args = (h, state.q, state.nu, state.q_ref, state.delta_n, state.delta_t, u, contacts, nc, warm_n, warm_t)
     first = dynamics_step(model, solver, D, tables, system, *args, basis)
     general = dynamics_step(model, solver, D, tables, system, *args, first.basis)
-    B = planar_warm_buffers(cap, S.nv, state.q.shape[0], D.v_index.shape[0], first.basis, state.delta_n.shape[0])
+    nq, na, slots_n = state.q.shape[0], D.v_index.shape[0], state.delta_n.shape[0]
     side = int(np.round(t / h)) % 2  # the side the step writes; the other (the state's) must stay as it was
+    if spatial:
+        spatial_cap = min(cap, SPATIAL_WARM_CONTACTS)
+        B = spatial_warm_buffers(spatial_cap, model.friction_directions, S.bi.shape[0], S.nv, nq, na, first.basis, slots_n)
+    else:
+        B = planar_warm_buffers(cap, S.nv, nq, na, first.basis, slots_n)
     for a in (B.q, B.nu, B.q_ref, B.basis, B.delta_n, B.delta_t):
         a[...] = 7
     step = (h, state.q, state.nu, state.q_ref, u, contacts, nc, state.delta_n, state.delta_t, first.basis, B, side, PART_STEP)
-    outcome, n_act, residual = planar_warm_step(model, D, tables, system, *step)
+    if spatial:
+        outcome, size, residual = spatial_warm_step(model, D, tables, system, has_rotations(S.bi), *step)
+    else:
+        outcome, n_act, residual = planar_warm_step(model, D, tables, system, *step)
+        size = 4 * n_act
     for a in (B.q, B.nu, B.q_ref, B.basis, B.delta_n, B.delta_t):
         assert np.all(a[1 - side] == 7), "the warm step wrote the other side"
     warm = None
@@ -90,17 +107,20 @@ def _both_steps(sc, rung, state, u, h, t):
             "delta_n": delta_n,
             "delta_t": delta_t,
             "residual": residual,
-            "lcp_size": 4 * n_act,
+            "lcp_size": size,
             "p_n": B.impulses[:nc],
             "p_t": B.frictions[:nc],
             "basis": B.basis[side],
         }
-    covered = _planar_case(False, D.max_force, _active_contacts(W_n, nc), contacts.pair, S.pf, contacts.W_t)
+    if spatial:
+        covered = not any_limited(D.max_force) and nc <= spatial_cap
+    else:
+        covered = _planar_case(False, D.max_force, _active_contacts(W_n, nc), contacts.pair, S.pf, contacts.W_t)
     return general, warm, covered
 
 
 @pytest.mark.parametrize("name, rung_name", [(name, rung) for name in SCENES for rung in RUNGS])
-def test_the_planar_warm_step_is_the_general_one_bit_for_bit(name, rung_name):
+def test_the_warm_step_is_the_general_one_bit_for_bit(name, rung_name):
     sc = load_scenario(SCENARIOS / f"{name}.toml")
     rung = rung_for(sc, rung_name)
     h = sc.rung_settings(rung_name).h
@@ -116,7 +136,7 @@ def test_the_planar_warm_step_is_the_general_one_bit_for_bit(name, rung_name):
         if not touching:
             continue
         general, warm, covered = both
-        # taken exactly where the general step builds the planar LCP, accepts its warm guess (no
+        # taken exactly where it covers the step and the general step accepts its warm guess (no
         # pivot) and succeeds
         accepted = covered and general.status == StepStatus.OK and general.pivots == 0 and general.lcp_size > 0
         assert (warm is not None) == accepted, f"t = {t}: warm step taken {warm is not None}, general pivots {general.pivots}"
