@@ -19,7 +19,8 @@ def sampled_states(sc, rung, h, seed, tries=2000):
     the first contact in 20 ms rollouts, then states a random 1-29 steps apart, starting over
     where a rollout fails or the task's horizon passes. The caller says whether each state had a
     contact by sending True or False into the generator (`send`) before the next one."""
-    policy = np.array([sc.spec.task.policy.speeds.get(a, 0.0) for a in sc.actuated])
+    speeds = sc.spec.task.policy.speeds if sc.spec.task.policy is not None else {}  # (no policy: noise about rest)
+    policy = np.array([speeds.get(a, 0.0) for a in sc.actuated])
     rng = np.random.default_rng(seed)
     state, t, touching = rung.initial_state(sc), 0.0, False
     for _ in range(tries):
