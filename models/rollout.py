@@ -432,9 +432,9 @@ def rollout_kernel(
     A, Ainv, M_const, rhs_const = system.A, system.Ainv, system.M_const, system.rhs_const
     constant_A, limited = not has_rotations(bi), any_limited(max_force)
     kinematic, eps, compliant, theta = model.kinematic, model.eps, model.compliant, model.theta
-    # the planar warm step's arrays and the free step's results: each writes its results on its
-    # side, not the one its last results (which the state may be) are on
-    # (buffers for contacts only where the warm step can run: `_may_take_planar_warm`, `_may_take_spatial_warm`)
+    # the warm steps' arrays (planar, spatial) and the free step's results: each writes its results
+    # on its side, not the one its last results (which the state may be) are on; buffers for
+    # contacts only where that warm step can run (`_may_take_planar_warm`, `_may_take_spatial_warm`)
     planar_cap = slots if dimension == 2 and constant_A and not limited and not kinematic else 0
     B, side = planar_warm_buffers(planar_cap, nv, q.shape[0], v_index.shape[0], basis, delta_n.shape[0]), 0
     spatial_cap = min(slots, SPATIAL_WARM_CONTACTS) if dimension == 3 and not limited and not kinematic else 0
