@@ -53,6 +53,7 @@ from models.stepper import (
     SOLVER_LEMKE,
     SPATIAL_WARM_CONTACTS,
     WARM_DONE,
+    WARM_NOT_TAKEN,
     SceneTables,
     Solver,
     StepStatus,
@@ -76,6 +77,7 @@ from models.stepper import (
     spatial_warm_buffers,
     spatial_warm_step,
     system_matrix,
+    warm_results,
 )
 from models.task import Outcome
 
@@ -432,14 +434,14 @@ def rollout_kernel(
     A, Ainv, M_const, rhs_const = system.A, system.Ainv, system.M_const, system.rhs_const
     constant_A, limited = not has_rotations(bi), any_limited(max_force)
     kinematic, eps, compliant, theta = model.kinematic, model.eps, model.compliant, model.theta
-    # the warm steps' arrays (planar, spatial) and the free step's results: each writes its results
-    # on its side, not the one its last results (which the state may be) are on; buffers for
-    # contacts only where that warm step can run (`_may_take_planar_warm`, `_may_take_spatial_warm`)
+    # the warm steps' arrays (planar, spatial; their results R, which the free step's scratch is
+    # also) and the free step's results: each writes its results on its side, not the one its last
+    # results (which the state may be) are on; buffers for contacts only where that warm step can
+    # run (`_may_take_planar_warm`, `_may_take_spatial_warm`)
     planar_cap = slots if dimension == 2 and constant_A and not limited and not kinematic else 0
-    B, side = planar_warm_buffers(planar_cap, nv, q.shape[0], v_index.shape[0], basis, delta_n.shape[0]), 0
     spatial_cap = min(slots, SPATIAL_WARM_CONTACTS) if dimension == 3 and not limited and not kinematic else 0
-    W = spatial_warm_buffers(spatial_cap, directions, bi.shape[0], nv, q.shape[0], v_index.shape[0], basis, delta_n.shape[0])
-    w_side = 0
+    R = warm_results(max(planar_cap, spatial_cap), nv, q.shape[0], v_index.shape[0], basis, delta_n.shape[0])
+    B, W, side = planar_warm_buffers(planar_cap, R), spatial_warm_buffers(spatial_cap, directions, bi.shape[0], R), 0
     free_q, free_nu, free_q_ref, free_side = np.empty((2, q.shape[0])), np.empty((2, nv)), np.empty((2, q_ref.shape[0])), 0
     eps_eff = model.quasistatic_inertia if eps == 0.0 else eps
     max_records, rec_t, rec_q, rec_nu, n_rec = _start_records(max_records, q, nu)
@@ -495,7 +497,7 @@ def rollout_kernel(
             elif nc == 0 and constant_A and not limited:  # the cheap path: no contact problem
                 f_q, f_nu, f_q_ref = free_q[free_side], free_nu[free_side], free_q_ref[free_side]
                 if free_step_into(
-                    eps, theta, h, bi, Ainv, M_const, rhs_const, q, nu, q_ref, u, q_index, v_index, kp, kd, lower, upper, B.rhs, B.blend,
+                    eps, theta, h, bi, Ainv, M_const, rhs_const, q, nu, q_ref, u, q_index, v_index, kp, kd, lower, upper, R.rhs, R.blend,
                     f_q, f_nu, f_q_ref,
                 ):  # fmt: skip
                     q2, nu2, q_ref2, st = f_q, f_nu, f_q_ref, StepStatus.OK.value
@@ -508,36 +510,28 @@ def rollout_kernel(
                     dn2, dt2 = np.zeros_like(delta_n), np.zeros_like(delta_t)
                 piv, res, size, p_n = 0, 0.0, 0, no_impulse
             else:
-                taken = False
+                # the usual step while contacts persist, without numba's runtime: a warm step
+                # (`spatial_warm_step`, `planar_warm_step`), else the general one
+                warm = WARM_NOT_TAKEN
                 if _may_take_spatial_warm(dimension == 3, limited, model, step_solver, nc):
-                    # the usual step while contacts persist, without numba's runtime (`spatial_warm_step`)
                     warm, size, res = spatial_warm_step(
-                        model, D, tables, system, not constant_A, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, W, w_side,
+                        model, D, tables, system, not constant_A, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, W, side,
                         PART_STEP,
                     )  # fmt: skip
-                    if warm == WARM_DONE:
-                        taken = True
-                        q2, nu2, q_ref2, basis = W.q[w_side], W.nu[w_side], W.q_ref[w_side], W.basis[w_side]
-                        if compliant:
-                            dn2, dt2 = W.delta_n[w_side], W.delta_t[w_side]
-                        w_side = 1 - w_side  # the next warm step writes the other side, not this state
-                        st, piv, p_n, p_t = StepStatus.OK.value, 0, W.impulses[:nc], W.frictions[:nc]
-                if not constant_A and not taken:
+                if not constant_A and warm != WARM_DONE:
                     A = system_matrix(bi, bf, q, nv, eps_eff, h, v_index, kp, kd, max_force)
                     system = System(A, Ainv, M_const, rhs_const, system.dofs, system.count, system.inv)  # (no blocks: A changes)
-                if not taken and _may_take_planar_warm(dimension == 2, constant_A, limited, model, step_solver, nc):
-                    # the usual step while contacts persist, without numba's runtime (`planar_warm_step`)
-                    warm, n_act, res = planar_warm_step(
+                if warm != WARM_DONE and _may_take_planar_warm(dimension == 2, constant_A, limited, model, step_solver, nc):
+                    warm, size, res = planar_warm_step(
                         model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, side, PART_STEP
                     )
-                    if warm == WARM_DONE:
-                        taken = True
-                        q2, nu2, q_ref2, basis = B.q[side], B.nu[side], B.q_ref[side], B.basis[side]
-                        if compliant:
-                            dn2, dt2 = B.delta_n[side], B.delta_t[side]
-                        side = 1 - side  # the next warm step writes the other side, not this state
-                        st, piv, size, p_n, p_t = StepStatus.OK.value, 0, 4 * n_act, B.impulses[:nc], B.frictions[:nc]
-                if not taken:
+                if warm == WARM_DONE:  # its results, on its side of R
+                    q2, nu2, q_ref2, basis = R.q[side], R.nu[side], R.q_ref[side], R.basis[side]
+                    if compliant:
+                        dn2, dt2 = R.delta_n[side], R.delta_t[side]
+                    side = 1 - side  # the next warm step writes the other side, not this state
+                    st, piv, p_n, p_t = StepStatus.OK.value, 0, R.impulses[:nc], R.frictions[:nc]
+                else:
                     r = dynamics_step_inline(
                         model, step_solver, D, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis
                     )
@@ -707,9 +701,10 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
     eps_eff = model.quasistatic_inertia if model.eps == 0.0 else model.eps
     nc, pivots, sweeps = 0, 0, 0
     limited = any_limited(D.max_force)
-    B = planar_warm_buffers(c_psi.shape[0], nv, q.shape[0], D.v_index.shape[0], basis, delta_n.shape[0])
+    planar_cap = c_psi.shape[0] if dimension == 2 else 0
     spatial_cap = min(c_psi.shape[0], SPATIAL_WARM_CONTACTS) if dimension == 3 else 0
-    W = spatial_warm_buffers(spatial_cap, directions, bi.shape[0], nv, q.shape[0], D.v_index.shape[0], basis, delta_n.shape[0])
+    R = warm_results(max(planar_cap, spatial_cap), nv, q.shape[0], D.v_index.shape[0], basis, delta_n.shape[0])
+    B, W = planar_warm_buffers(planar_cap, R), spatial_warm_buffers(spatial_cap, directions, bi.shape[0], R)
     warm = False  # whether the rollout takes the planar warm step at the state (as rollout_kernel)
     warm3 = False  # the spatial warm step
     for k in range(repeats + 1):

@@ -582,6 +582,31 @@ def _finite_and_bounded(x):
 
 
 @numba.njit(cache=True, inline="always")
+def _by_contact_into(nc, active, p_n, p_t, impulses, frictions):
+    """The active contacts' impulses p_n (n_act), p_t (n_act, 2) by contact: impulses (nc),
+    frictions (nc, 2), zeros for the contacts not active."""
+    for i in range(nc):
+        impulses[i] = 0.0
+        frictions[i, 0] = 0.0
+        frictions[i, 1] = 0.0
+    for k in range(active.shape[0]):
+        impulses[active[k]] = p_n[k]
+        frictions[active[k], 0] = p_t[k, 0]
+        frictions[active[k], 1] = p_t[k, 1]
+
+
+@numba.njit(cache=True, inline="always")
+def _blended(theta, nu_new, nu, blend):
+    """The position update's velocity theta nu+ + (1 - theta) nu: nu_new itself at theta = 1,
+    else written into blend (nv)."""
+    if theta == 1.0:
+        return nu_new
+    for v in range(nu_new.shape[0]):
+        blend[v] = theta * nu_new[v] + (1.0 - theta) * nu[v]
+    return blend
+
+
+@numba.njit(cache=True, inline="always")
 def add_product(out, A, x, scale):
     """out += scale A x, in place, with plain loops: the per-step products are a few entries,
     where a BLAS call costs more than the arithmetic."""
@@ -636,11 +661,7 @@ def free_step_into(
     for v in range(nu_new.shape[0]):
         nu_new[v] = 0.0
     add_product(nu_new, Ainv, rhs, 1.0)
-    velocity = nu_new
-    if theta != 1.0:
-        velocity = blend
-        for v in range(nu_new.shape[0]):
-            blend[v] = theta * nu_new[v] + (1.0 - theta) * nu[v]
+    velocity = _blended(theta, nu_new, nu, blend)
     for i in range(q.shape[0]):
         q_new[i] = q[i]
     _integrate_translations_into(bi, q, velocity, h, q_new)
@@ -962,10 +983,7 @@ def _lemke_step(model, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t
             drive_a,
             basis,
         )
-        for k in range(n_act):
-            impulses[active[k]] = p_n[k]
-            frictions[active[k], 0] = p_t[k, 0]
-            frictions[active[k], 1] = p_t[k, 1]
+        _by_contact_into(nc, active, p_n, p_t, impulses, frictions)
         if status == StepStatus.OK and model.compliant:
             delta_n_new, delta_t_new = _deformations(h, tables.pf, contacts.pair, contacts.slot, active, p_n, p_t, delta_n, delta_t)
     elif model.compliant:  # no contact problem: every deformation relaxes to zero
@@ -1592,63 +1610,83 @@ def _planar_lcp_into(model, h, dofs, count, inv, nu_free, active, pi, pf, contac
         fric[k] = k
 
 
-class PlanarWarm(NamedTuple):
-    """The arrays of `planar_warm_step`, made once per rollout (`planar_warm_buffers`) for a
-    contact capacity: every array the step writes, so that it runs without numba's runtime.
-    The step's results (q+, nu+, q_ref+, the next basis table, the deformations) have two
-    sides: a step writes one side while the state it starts from may be the other's, so that
-    the rollout takes them as its next state without copying."""
+class WarmResults(NamedTuple):
+    """The arrays a warm step (`planar_warm_step`, `spatial_warm_step`) writes outside its
+    contact problem, made once per rollout (`warm_results`) and held by both steps' buffers:
+    the free velocity's and the position update's scratch, the impulses by contact, and the
+    step's results (q+, nu+, q_ref+, the next basis table, the deformations) on two sides: a
+    step writes one side while the state it starts from may be the other's, so that the
+    rollout takes them as its next state without copying."""
 
     rhs: np.ndarray  # (nv,) scratch
     nu_free: np.ndarray  # (nv,)
-    q_ref: np.ndarray  # (2, drives) q_ref+
     drive_a: np.ndarray  # (drives,)
-    active: np.ndarray  # (cap,) int
-    I: np.ndarray  # int scratch of `_planar_lcp_into` and gen (2, 3 cap) after it
-    F: np.ndarray  # float scratch of `_planar_lcp_into`
-    M: np.ndarray  # (4 cap, 4 cap)
-    q_lcp: np.ndarray  # (4 cap,)
-    Y: np.ndarray  # (nv, 2 cap)
-    gen: np.ndarray  # (2, 3 cap) int
-    cf: np.ndarray  # (2, 3 cap)
-    fric: np.ndarray  # (cap,) int
-    guess: np.ndarray  # (4 cap,) bool
-    J: np.ndarray  # (4 cap,) int
-    A: np.ndarray  # (4 cap + 1, 4 cap)
-    z: np.ndarray  # (4 cap,)
-    w: np.ndarray  # (4 cap,)
-    t: np.ndarray  # (2 cap,)
-    p_t: np.ndarray  # (cap, 2) friction impulses of the active contacts
-    nu: np.ndarray  # (2, nv) nu+ on either side
-    q: np.ndarray  # (2, nq) q+
-    blend: np.ndarray  # (nv,) theta nu+ + (1 - theta) nu
-    basis: np.ndarray  # (2, rows, columns) the next basis table, each shaped as the rollout's
+    blend: np.ndarray  # (nv,) theta nu+ + (1 - theta) nu (`_blended`)
     impulses: np.ndarray  # (cap,) p_n by contact
     frictions: np.ndarray  # (cap, 2) p_t by contact
+    q_ref: np.ndarray  # (2, drives) q_ref+ on either side
+    nu: np.ndarray  # (2, nv) nu+
+    q: np.ndarray  # (2, nq) q+
+    basis: np.ndarray  # (2, rows, columns) the next basis table, each shaped as the rollout's
     delta_n: np.ndarray  # (2, slots) compliant deformations delta_n+ (rungs with compliance)
     delta_t: np.ndarray  # (2, slots, 2) delta_t+
 
 
 @numba.njit(cache=True)
-def planar_warm_buffers(cap, nv, nq, drives, basis, slots):
-    """`PlanarWarm` for up to cap contacts (a `models.contact.ContactSet`'s capacity), basis
-    tables shaped as basis and deformations of `slots` contact slots."""
-    n, m, ng = 4 * cap, 3 * cap, 2 * cap
-    n_int, n_float = _planar_scratch(cap)
-    return PlanarWarm(
+def warm_results(cap, nv, nq, drives, basis, slots):
+    """`WarmResults` for up to cap contacts, basis tables shaped as basis and deformations of
+    `slots` contact slots."""
+    return WarmResults(
         np.empty(nv),
         np.empty(nv),
-        np.empty((2, drives)),
         np.empty(drives),
+        np.empty(nv),
+        np.empty(cap),
+        np.empty((cap, 2)),
+        np.empty((2, drives)),
+        np.empty((2, nv)),
+        np.empty((2, nq)),
+        np.empty((2, basis.shape[0], basis.shape[1]), basis.dtype),
+        np.empty((2, slots)),
+        np.empty((2, slots, 2)),
+    )
+
+
+class WarmLCP(NamedTuple):
+    """A warm step's contact problem (`warm_lcp`) for up to cap contacts: an LCP of n unknowns
+    whose first m rows are the generators' (J^T's columns: normals and friction directions),
+    ng contact directions (2 a contact in the plane, 3 in space). The matrices are flat: a step
+    views its own sizes' part as a C-contiguous array (`buf[: n * n].reshape((n, n))`; a view
+    such as M[:n, :n] has a row stride numba does not know, and indexing it made the build 35%
+    slower)."""
+
+    active: np.ndarray  # (cap,) int
+    fric: np.ndarray  # (cap,) int
+    M: np.ndarray  # (n * n,) flat
+    q_lcp: np.ndarray  # (n,)
+    Y: np.ndarray  # (nv * ng,) flat
+    gen: np.ndarray  # (2 * m,) int, flat
+    cf: np.ndarray  # (2 * m,) flat
+    guess: np.ndarray  # (n,) bool
+    J: np.ndarray  # (n,) int
+    lu: np.ndarray  # (n + 1, n) the warm start's elimination
+    z: np.ndarray  # (n,)
+    w: np.ndarray  # (n,)
+    t: np.ndarray  # (ng,)
+    p_t: np.ndarray  # (cap, 2) friction impulses of the active contacts
+
+
+@numba.njit(cache=True)
+def warm_lcp(cap, n, m, ng, nv):
+    """`WarmLCP` for up to cap contacts, n unknowns, m generators, ng directions, nv DOFs."""
+    return WarmLCP(
         np.empty(cap, np.int64),
-        np.empty(n_int, np.int64),
-        np.empty(n_float),
-        np.empty((n, n)),
+        np.empty(cap, np.int64),
+        np.empty(n * n),
         np.empty(n),
-        np.empty((nv, ng)),
-        np.empty((2, m), np.int64),
-        np.empty((2, m)),
-        np.empty(cap, np.int64),
+        np.empty(nv * ng),
+        np.empty(2 * m, np.int64),
+        np.empty(2 * m),
         np.empty(n, np.bool_),
         np.empty(n, np.int64),
         np.empty((n + 1, n)),
@@ -1656,15 +1694,26 @@ def planar_warm_buffers(cap, nv, nq, drives, basis, slots):
         np.empty(n),
         np.empty(ng),
         np.empty((cap, 2)),
-        np.empty((2, nv)),
-        np.empty((2, nq)),
-        np.empty(nv),
-        np.empty((2, basis.shape[0], basis.shape[1]), basis.dtype),
-        np.empty(cap),
-        np.empty((cap, 2)),
-        np.empty((2, slots)),
-        np.empty((2, slots, 2)),
     )
+
+
+class PlanarWarm(NamedTuple):
+    """The arrays of `planar_warm_step`, made once per rollout (`planar_warm_buffers`) for a
+    contact capacity: every array the step writes, so that it runs without numba's runtime."""
+
+    I: np.ndarray  # int scratch of `_planar_lcp_into`
+    F: np.ndarray  # float scratch of `_planar_lcp_into`
+    lcp: WarmLCP  # n = 4 cap, m = 3 cap, ng = 2 cap
+    out: WarmResults
+
+
+@numba.njit(cache=True)
+def planar_warm_buffers(cap, out):
+    """`PlanarWarm` for up to cap contacts (a `models.contact.ContactSet`'s capacity; 0: none,
+    the step then is never taken), writing into out (`warm_results`)."""
+    n_int, n_float = _planar_scratch(cap)
+    nv = out.rhs.shape[0]
+    return PlanarWarm(np.empty(n_int, np.int64), np.empty(n_float), warm_lcp(cap, 4 * cap, 3 * cap, 2 * cap, nv), out)
 
 
 #: `planar_warm_step`'s outcomes: the step is done, or the caller takes the general path.
@@ -1679,70 +1728,70 @@ def planar_warm_step(model, drives, tables, system, h, q, nu, q_ref, u, contacts
     (`PlanarWarm`). Where the LCP is not `_planar_case`, the guess does not solve it or the state
     leaves the finite range, it returns WARM_NOT_TAKEN and the caller takes the general path,
     which solves the step again from the start. Else (WARM_DONE): q+, nu+, q_ref+, the next basis
-    table and, with compliance, the deformations on B's side `side` (0 or 1: not the side the
-    state q, nu, q_ref, basis, delta_n, delta_t is on), and the impulses by contact in B. The
-    same operations in the same order as
-    `_lemke_step`: the same bits (tests/test_warm_steps.py). part: PART_STEP, or the first
-    parts only, for the cost split (as `contact_stage`). Returns (outcome, active contacts,
-    residual)."""
+    table and, with compliance, the deformations on side `side` of B.out (`WarmResults`; 0 or
+    1: not the side the state q, nu, q_ref, basis, delta_n, delta_t is on), and the impulses by
+    contact. The same operations in the same order as `_lemke_step`: the same bits
+    (tests/test_warm_steps.py). part: PART_STEP, or the first parts only, for the cost split (as
+    `contact_stage`). Returns (outcome, the LCP's size, residual)."""
     nv = nu.shape[0]
     # A^-1's body blocks held (`_blocks`), A (and M) constant in the plane, no force limit
     if system.count.shape[0] != tables.bi.shape[0] or not _constant_plane(model, tables.spatial, system, nv):
         return WARM_NOT_TAKEN, 0, 0.0
     if any_limited(drives.max_force):
         return WARM_NOT_TAKEN, 0, 0.0
-    q_new, nu_new, q_ref_new, basis_new = B.q[side], B.nu[side], B.q_ref[side], B.basis[side]
-    _free_velocity_into(model, drives, system, h, q, nu, q_ref, u, B.rhs, B.nu_free, q_ref_new, B.drive_a)
-    n_act = _active_into(contacts.W_n, nc, B.active)
-    active = B.active[:n_act]
+    L, R = B.lcp, B.out
+    _free_velocity_into(model, drives, system, h, q, nu, q_ref, u, R.rhs, R.nu_free, R.q_ref[side], R.drive_a)
+    n_act = _active_into(contacts.W_n, nc, L.active)
+    active = L.active[:n_act]
     if not _planar_case(False, drives.max_force, active, contacts.pair, tables.pf, contacts.W_t):
-        return WARM_NOT_TAKEN, n_act, 0.0
+        return WARM_NOT_TAKEN, 0, 0.0
     n, m, ng = 4 * n_act, 3 * n_act, 2 * n_act
-    M, q_lcp, Y, gen, cf, fric = B.M[:n, :n], B.q_lcp[:n], B.Y[:, :ng], B.gen[:, :m], B.cf[:, :m], B.fric[:n_act]
+    M, q_lcp, Y, gen, cf = _lcp_views(L, nv, n, m, ng)
+    fric = L.fric[:n_act]
     dofs, count, inv, pi, pf = system.dofs, system.count, system.inv, tables.pi, tables.pf
     _planar_lcp_into(
-        model, h, dofs, count, inv, B.nu_free, active, pi, pf, contacts, delta_n, delta_t, B.I, B.F, M, q_lcp, Y, gen, cf, fric
+        model, h, dofs, count, inv, R.nu_free, active, pi, pf, contacts, delta_n, delta_t, B.I, B.F, M, q_lcp, Y, gen, cf, fric
     )
     _scale_lcp(M, q_lcp, m)
     lim = fric[:0]
-    _fill_basis_guess(B.guess, basis, active, contacts.slot, fric, n_act, 2, lim, m, n)
-    guess = B.guess[:n]
+    _fill_basis_guess(L.guess, basis, active, contacts.slot, fric, n_act, 2, lim, m, n)
+    guess = L.guess[:n]
     if part == PART_ASSEMBLY:
-        return WARM_DONE, n_act, 0.0
-    if not warm_guess_into(M, q_lcp, guess, WARM_TOLERANCE, B.J, B.A, B.z, B.w):
-        return WARM_NOT_TAKEN, n_act, 0.0
+        return WARM_DONE, n, 0.0
+    if not warm_guess_into(M, q_lcp, guess, WARM_TOLERANCE, L.J, L.lu, L.z, L.w):
+        return WARM_NOT_TAKEN, n, 0.0
     if part == PART_CONTACT_SOLVE:
-        return WARM_DONE, n_act, 0.0
-    z, w = B.z[:n], B.w[:n]
+        return WARM_DONE, n, 0.0
+    z, w = L.z[:n], L.w[:n]
     residual = natural_map_residual(z, w, q_lcp)
     if not (residual <= LCP_TOLERANCE):
-        return WARM_NOT_TAKEN, n_act, residual
-    p_t = B.p_t[:n_act]
-    _impulses_into(False, n_act, m, n_act, fric, gen, cf, z, Y, B.nu_free, B.t[:ng], p_t, nu_new)
-    _fill_basis_kept(basis_new, basis, guess, active, contacts.slot, fric, n_act, 2, lim, m)
+        return WARM_NOT_TAKEN, n, residual
+    nu_new, p_t = R.nu[side], L.p_t[:n_act]
+    _impulses_into(False, n_act, m, n_act, fric, gen, cf, z, Y, R.nu_free, L.t[:ng], p_t, nu_new)
+    _fill_basis_kept(R.basis[side], basis, guess, active, contacts.slot, fric, n_act, 2, lim, m)
     if model.compliant:
-        _deformations_into(h, tables.pf, contacts.pair, contacts.slot, active, z, p_t, delta_n, delta_t, B.delta_n[side], B.delta_t[side])
-    for i in range(nc):
-        B.impulses[i] = 0.0
-        B.frictions[i, 0] = 0.0
-        B.frictions[i, 1] = 0.0
-    for k in range(n_act):
-        B.impulses[active[k]] = z[k]
-        B.frictions[active[k], 0] = p_t[k, 0]
-        B.frictions[active[k], 1] = p_t[k, 1]
+        _deformations_into(h, pf, contacts.pair, contacts.slot, active, z, p_t, delta_n, delta_t, R.delta_n[side], R.delta_t[side])
+    _by_contact_into(nc, active, z, p_t, R.impulses, R.frictions)
     # the position update (`_integrate_checked`; in the plane integrate_positions has only its
     # translations and angles)
-    velocity = nu_new
-    if model.theta != 1.0:
-        velocity = B.blend
-        for v in range(nv):
-            velocity[v] = model.theta * nu_new[v] + (1.0 - model.theta) * nu[v]
+    velocity = _blended(model.theta, nu_new, nu, R.blend)
+    q_new = R.q[side]
     for i in range(q.shape[0]):
         q_new[i] = q[i]
     _integrate_translations_into(tables.bi, q, velocity, h, q_new)
     if not (_finite_and_bounded(q_new) and _finite_and_bounded(nu_new)):
-        return WARM_NOT_TAKEN, n_act, residual
-    return WARM_DONE, n_act, residual
+        return WARM_NOT_TAKEN, n, residual
+    return WARM_DONE, n, residual
+
+
+@numba.njit(cache=True, inline="always")
+def _lcp_views(L, nv, n, m, ng):
+    """A `WarmLCP`'s arrays for a step's sizes (n unknowns, m generators, ng directions): M
+    (n, n), q_lcp (n,), Y (nv, ng), gen and cf (2, m), the matrices C-contiguous views of the
+    flat buffers."""
+    M, q_lcp = L.M[: n * n].reshape((n, n)), L.q_lcp[:n]
+    Y, gen, cf = L.Y[: nv * ng].reshape((nv, ng)), L.gen[: 2 * m].reshape((2, m)), L.cf[: 2 * m].reshape((2, m))
+    return M, q_lcp, Y, gen, cf
 
 
 #: Active contacts the spatial warm step's buffers hold (`spatial_warm_buffers`): a step with more
@@ -1755,16 +1804,9 @@ class SpatialWarm(NamedTuple):
     """The arrays of `spatial_warm_step`, made once per rollout (`spatial_warm_buffers`) for up
     to cap contacts, d friction directions, nb bodies: every array the step writes, so that it
     runs without numba's runtime (as `PlanarWarm`, with A's blocks, the free velocity's
-    rotational terms and the general LCP build's scratch). The results (q+, nu+, q_ref+, the
-    next basis table, the deformations) have two sides, as `PlanarWarm`'s. ng = 3 cap, m = (1
-    + d) cap, n = (2 + d) cap."""
+    rotational terms and the general LCP build's scratch). ng = 3 cap, m = (1 + d) cap, n = (2
+    + d) cap."""
 
-    rhs: np.ndarray  # (nv,) scratch
-    nu_free: np.ndarray  # (nv,)
-    q_ref: np.ndarray  # (2, drives) q_ref+
-    drive_a: np.ndarray  # (drives,)
-    active: np.ndarray  # (cap,) int
-    fric: np.ndarray  # (cap,) int
     lim: np.ndarray  # (0,) int: no force-limited drive takes this step
     A: np.ndarray  # (nv, nv) A(q) where it depends on q
     R: np.ndarray  # (3, 3) scratch
@@ -1780,44 +1822,21 @@ class SpatialWarm(NamedTuple):
     ldof: np.ndarray  # (ng, LOCAL_DOFS) int
     nloc: np.ndarray  # (ng,) int
     Bl: np.ndarray  # (ng, LOCAL_DOFS)
-    G: np.ndarray  # (ng * ng,) the Delassus matrix, flat (a step views its own sizes' part)
+    G: np.ndarray  # (ng * ng,) the Delassus matrix, flat (as `WarmLCP`'s M)
     p: np.ndarray  # (ng,) scratch
     Bt_nu: np.ndarray  # (ng,)
     Jt_nu: np.ndarray  # (m,)
-    M: np.ndarray  # (n * n,) flat, as G
-    q_lcp: np.ndarray  # (n,)
-    Y: np.ndarray  # (nv * ng,) flat
-    gen: np.ndarray  # (2 * m,) int, flat
-    cf: np.ndarray  # (2 * m,) flat
-    guess: np.ndarray  # (n,) bool
-    J: np.ndarray  # (n,) int
-    lu: np.ndarray  # (n + 1, n) the warm start's elimination
-    z: np.ndarray  # (n,)
-    w: np.ndarray  # (n,)
-    t: np.ndarray  # (ng,)
-    p_t: np.ndarray  # (cap, 2) friction impulses of the active contacts
-    nu: np.ndarray  # (2, nv) nu+ on either side
-    q: np.ndarray  # (2, nq) q+
-    blend: np.ndarray  # (nv,) theta nu+ + (1 - theta) nu
-    basis: np.ndarray  # (2, rows, columns) the next basis table, each shaped as the rollout's
-    impulses: np.ndarray  # (cap,) p_n by contact
-    frictions: np.ndarray  # (cap, 2) p_t by contact
-    delta_n: np.ndarray  # (2, slots) compliant deformations delta_n+ (rungs with compliance)
-    delta_t: np.ndarray  # (2, slots, 2) delta_t+
+    lcp: WarmLCP
+    out: WarmResults
 
 
 @numba.njit(cache=True)
-def spatial_warm_buffers(cap, d, nb, nv, nq, drives, basis, slots):
+def spatial_warm_buffers(cap, d, nb, out):
     """`SpatialWarm` for up to cap contacts (0: none; the step then is never taken), d friction
-    directions and nb bodies; basis tables shaped as basis, deformations of `slots` slots."""
+    directions and nb bodies, writing into out (`warm_results`)."""
     ng, m, n = 3 * cap, (1 + d) * cap, (2 + d) * cap
+    nv = out.rhs.shape[0]
     return SpatialWarm(
-        np.empty(nv),
-        np.empty(nv),
-        np.empty((2, drives)),
-        np.empty(drives),
-        np.empty(cap, np.int64),
-        np.empty(cap, np.int64),
         np.empty(0, np.int64),
         np.empty((nv, nv)),
         np.empty((3, 3)),
@@ -1837,26 +1856,8 @@ def spatial_warm_buffers(cap, d, nb, nv, nq, drives, basis, slots):
         np.empty(ng),
         np.empty(ng),
         np.empty(m),
-        np.empty(n * n),
-        np.empty(n),
-        np.empty(nv * ng),
-        np.empty(2 * m, np.int64),
-        np.empty(2 * m),
-        np.empty(n, np.bool_),
-        np.empty(n, np.int64),
-        np.empty((n + 1, n)),
-        np.empty(n),
-        np.empty(n),
-        np.empty(ng),
-        np.empty((cap, 2)),
-        np.empty((2, nv)),
-        np.empty((2, nq)),
-        np.empty(nv),
-        np.empty((2, basis.shape[0], basis.shape[1]), basis.dtype),
-        np.empty(cap),
-        np.empty((cap, 2)),
-        np.empty((2, slots)),
-        np.empty((2, slots, 2)),
+        warm_lcp(cap, n, m, ng, nv),
+        out,
     )
 
 
@@ -1870,13 +1871,14 @@ def spatial_warm_step(model, drives, tables, system, rotating, h, q, nu, q_ref, 
     holds, a block of A is singular, the guess does not solve the LCP or the state leaves the
     finite range, it returns WARM_NOT_TAKEN and the caller takes the general path, which solves
     the step again from the start. Else (WARM_DONE): q+, nu+, q_ref+, the next basis table and,
-    with compliance, the deformations on W's side `side` (not the side the state is on), and
-    the impulses by contact in W. The same operations in the same order as `_lemke_step`: the
+    with compliance, the deformations on side `side` of W.out (`WarmResults`; not the side the
+    state is on), and the impulses by contact. The same operations in the same order as `_lemke_step`: the
     same bits (tests/test_warm_steps.py). part: PART_STEP, or the first parts only, for the
     cost split (as `contact_stage`). Returns (outcome, the LCP's size, residual)."""
     bi, bf, pi, pf = tables.bi, tables.bf, tables.pi, tables.pf
     nv = nu.shape[0]
-    if not tables.spatial or nc > W.active.shape[0] or any_limited(drives.max_force):
+    L, R = W.lcp, W.out
+    if not tables.spatial or nc > L.active.shape[0] or any_limited(drives.max_force):
         return WARM_NOT_TAKEN, 0, 0.0
     quasistatic = model.eps == 0.0
     eps = model.quasistatic_inertia if quasistatic else model.eps
@@ -1891,7 +1893,7 @@ def spatial_warm_step(model, drives, tables, system, rotating, h, q, nu, q_ref, 
             return WARM_NOT_TAKEN, 0, 0.0
         dofs, count, inv = W.dofs, W.count, W.inv
     # the free velocity (`_free_velocity`, in space)
-    rhs, nu_free, q_ref_new = W.rhs, W.nu_free, W.q_ref[side]
+    rhs, nu_free, q_ref_new = R.rhs, R.nu_free, R.q_ref[side]
     for v in range(nv):
         rhs[v] = system.rhs_const[v]
     if not quasistatic:
@@ -1905,7 +1907,7 @@ def spatial_warm_step(model, drives, tables, system, rotating, h, q, nu, q_ref, 
         he = h * eps
         for v in range(nv):
             rhs[v] += he * W.gyro[v]
-    _drives_into(h, q, q_ref, u, drives, rhs, q_ref_new, W.drive_a)
+    _drives_into(h, q, q_ref, u, drives, rhs, q_ref_new, R.drive_a)
     if system.Ainv.shape[0] == nv:
         for v in range(nv):
             nu_free[v] = 0.0
@@ -1913,58 +1915,44 @@ def spatial_warm_step(model, drives, tables, system, rotating, h, q, nu, q_ref, 
     else:
         block_solve_into(dofs, count, inv, rhs, nu_free)
     # the LCP (`contact_lcp`), scaled, and the previous basis's guess
-    n_act = _active_into(contacts.W_n, nc, W.active)
+    n_act = _active_into(contacts.W_n, nc, L.active)
     if n_act == 0:
         return WARM_NOT_TAKEN, 0, 0.0
-    active = W.active[:n_act]
-    fric = W.fric[:n_act]
+    active = L.active[:n_act]
+    fric = L.fric[:n_act]
     nf = _friction_into(True, active, contacts.pair, pf, contacts.W_t, contacts.W_o, fric)
     d = model.friction_directions
     ng, m = n_act + 2 * nf, n_act + nf * d
     n = m + nf
     lim = W.lim[:0]
-    # (the matrices of this step's sizes as C-contiguous views of flat buffers: a view such as
-    # M[:n, :n] has a row stride numba does not know, and indexing it made the build 35% slower)
-    M, q_lcp = W.M[: n * n].reshape((n, n)), W.q_lcp[:n]
-    Y, gen, cf = W.Y[: nv * ng].reshape((nv, ng)), W.gen[: 2 * m].reshape((2, m)), W.cf[: 2 * m].reshape((2, m))
+    M, q_lcp, Y, gen, cf = _lcp_views(L, nv, n, m, ng)
     scratch = (W.body[:ng], W.ldof[:ng], W.nloc[:ng], W.Bl[:ng], W.G[: ng * ng].reshape((ng, ng)), W.p[:ng], W.Bt_nu[:ng], W.Jt_nu[:m])
     contact_lcp_into(
-        model, True, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, drives, W.drive_a, lim, 0, fric, nf,
+        model, True, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, drives, R.drive_a, lim, 0, fric, nf,
         scratch, M, q_lcp, Y, gen, cf,
     )  # fmt: skip
     _scale_lcp(M, q_lcp, m)
-    _fill_basis_guess(W.guess, basis, active, contacts.slot, fric, nf, d, lim, m, n)
-    guess = W.guess[:n]
+    _fill_basis_guess(L.guess, basis, active, contacts.slot, fric, nf, d, lim, m, n)
+    guess = L.guess[:n]
     if part == PART_ASSEMBLY:
         return WARM_DONE, n, 0.0
-    if not warm_guess_into(M, q_lcp, guess, WARM_TOLERANCE, W.J, W.lu, W.z, W.w):
+    if not warm_guess_into(M, q_lcp, guess, WARM_TOLERANCE, L.J, L.lu, L.z, L.w):
         return WARM_NOT_TAKEN, n, 0.0
     if part == PART_CONTACT_SOLVE:
         return WARM_DONE, n, 0.0
-    z, w = W.z[:n], W.w[:n]
+    z, w = L.z[:n], L.w[:n]
     residual = natural_map_residual(z, w, q_lcp)
     if not (residual <= LCP_TOLERANCE):
         return WARM_NOT_TAKEN, n, residual
-    nu_new, p_t = W.nu[side], W.p_t[:n_act]
-    _impulses_into(True, n_act, m, nf, fric, gen, cf, z, Y, nu_free, W.t[:ng], p_t, nu_new)
-    _fill_basis_kept(W.basis[side], basis, guess, active, contacts.slot, fric, nf, d, lim, m)
+    nu_new, p_t = R.nu[side], L.p_t[:n_act]
+    _impulses_into(True, n_act, m, nf, fric, gen, cf, z, Y, nu_free, L.t[:ng], p_t, nu_new)
+    _fill_basis_kept(R.basis[side], basis, guess, active, contacts.slot, fric, nf, d, lim, m)
     if model.compliant:
-        _deformations_into(h, pf, contacts.pair, contacts.slot, active, z, p_t, delta_n, delta_t, W.delta_n[side], W.delta_t[side])
-    for i in range(nc):
-        W.impulses[i] = 0.0
-        W.frictions[i, 0] = 0.0
-        W.frictions[i, 1] = 0.0
-    for k in range(n_act):
-        W.impulses[active[k]] = z[k]
-        W.frictions[active[k], 0] = p_t[k, 0]
-        W.frictions[active[k], 1] = p_t[k, 1]
+        _deformations_into(h, pf, contacts.pair, contacts.slot, active, z, p_t, delta_n, delta_t, R.delta_n[side], R.delta_t[side])
+    _by_contact_into(nc, active, z, p_t, R.impulses, R.frictions)
     # the position update (`_integrate_checked`)
-    velocity = nu_new
-    if model.theta != 1.0:
-        velocity = W.blend
-        for v in range(nv):
-            velocity[v] = model.theta * nu_new[v] + (1.0 - model.theta) * nu[v]
-    q_new = W.q[side]
+    velocity = _blended(model.theta, nu_new, nu, R.blend)
+    q_new = R.q[side]
     _integrate_positions_into(bi, q, velocity, h, q_new)
     if not (_finite_and_bounded(q_new) and _finite_and_bounded(nu_new)):
         return WARM_NOT_TAKEN, n, residual

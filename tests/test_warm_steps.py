@@ -37,6 +37,7 @@ from models.stepper import (
     planar_warm_step,
     spatial_warm_buffers,
     spatial_warm_step,
+    warm_results,
 )
 from planner.bench import SCENARIOS
 from tests.planar_states import sampled_states, slots
@@ -80,37 +81,37 @@ def _both_steps(sc, rung, state, u, h, t):
     general = dynamics_step(model, solver, D, tables, system, *args, first.basis)
     nq, na, slots_n = state.q.shape[0], D.v_index.shape[0], state.delta_n.shape[0]
     side = int(np.round(t / h)) % 2  # the side the step writes; the other (the state's) must stay as it was
+    spatial_cap = min(cap, SPATIAL_WARM_CONTACTS)
+    R = warm_results(spatial_cap if spatial else cap, S.nv, nq, na, first.basis, slots_n)
     if spatial:
-        spatial_cap = min(cap, SPATIAL_WARM_CONTACTS)
-        B = spatial_warm_buffers(spatial_cap, model.friction_directions, S.bi.shape[0], S.nv, nq, na, first.basis, slots_n)
+        B = spatial_warm_buffers(spatial_cap, model.friction_directions, S.bi.shape[0], R)
     else:
-        B = planar_warm_buffers(cap, S.nv, nq, na, first.basis, slots_n)
-    for a in (B.q, B.nu, B.q_ref, B.basis, B.delta_n, B.delta_t):
+        B = planar_warm_buffers(cap, R)
+    for a in (R.q, R.nu, R.q_ref, R.basis, R.delta_n, R.delta_t):
         a[...] = 7
     step = (h, state.q, state.nu, state.q_ref, u, contacts, nc, state.delta_n, state.delta_t, first.basis, B, side, PART_STEP)
     if spatial:
         outcome, size, residual = spatial_warm_step(model, D, tables, system, has_rotations(S.bi), *step)
     else:
-        outcome, n_act, residual = planar_warm_step(model, D, tables, system, *step)
-        size = 4 * n_act
-    for a in (B.q, B.nu, B.q_ref, B.basis, B.delta_n, B.delta_t):
+        outcome, size, residual = planar_warm_step(model, D, tables, system, *step)
+    for a in (R.q, R.nu, R.q_ref, R.basis, R.delta_n, R.delta_t):
         assert np.all(a[1 - side] == 7), "the warm step wrote the other side"
     warm = None
     if outcome == WARM_DONE:
         delta_n, delta_t = state.delta_n, state.delta_t
         if model.compliant:
-            delta_n, delta_t = B.delta_n[side], B.delta_t[side]
+            delta_n, delta_t = R.delta_n[side], R.delta_t[side]
         warm = {
-            "q": B.q[side],
-            "nu": B.nu[side],
-            "q_ref": B.q_ref[side],
+            "q": R.q[side],
+            "nu": R.nu[side],
+            "q_ref": R.q_ref[side],
             "delta_n": delta_n,
             "delta_t": delta_t,
             "residual": residual,
             "lcp_size": size,
-            "p_n": B.impulses[:nc],
-            "p_t": B.frictions[:nc],
-            "basis": B.basis[side],
+            "p_n": R.impulses[:nc],
+            "p_t": R.frictions[:nc],
+            "basis": R.basis[side],
         }
     if spatial:
         covered = not any_limited(D.max_force) and nc <= spatial_cap
