@@ -400,6 +400,74 @@ def _tangential_update(spatial, f0, f1, u0, u1, g00, g01, g11, bound, cosines, s
 # ----------------------------------------------------------------------------- the solver
 
 
+class PgsWork(NamedTuple):
+    """The arrays of a PGS solve (`pgs_work`) for up to cap contacts and d friction directions:
+    each active contact's rows, which `_gather_contacts_into` sets (its DOFs cdof, cm of them;
+    Jacobian rows jn, jt, jo; y = A^-1 J^T rows yn, yt, yo; the Delassus blocks gnn, g00, g01,
+    g11, compliance comp; the constant terms bn, bt; mu; whether it has friction), its
+    impulses p_n, f and the directions' cosines and sines. Made per call by `contact_pgs`,
+    once per rollout for `models.stepper.spatial_pgs_step`."""
+
+    cosines: np.ndarray  # (d,)
+    sines: np.ndarray  # (d,)
+    cdof: np.ndarray  # (cap, CONTACT_DOFS) int
+    cm: np.ndarray  # (cap,) int
+    jn: np.ndarray  # (cap, CONTACT_DOFS)
+    jt: np.ndarray
+    jo: np.ndarray
+    yn: np.ndarray
+    yt: np.ndarray
+    yo: np.ndarray
+    active: np.ndarray  # (cap,) int: the active contacts' indices
+    fric: np.ndarray  # (cap,) bool
+    gnn: np.ndarray  # (cap,)
+    g00: np.ndarray
+    g01: np.ndarray
+    g11: np.ndarray
+    comp: np.ndarray
+    bn: np.ndarray
+    bt: np.ndarray  # (cap, 2)
+    mu: np.ndarray  # (cap,)
+    p_n: np.ndarray  # (cap,) normal impulses of the active contacts
+    f: np.ndarray  # (cap, 2) their friction impulses in the (t, o) basis
+
+
+@numba.njit(cache=True)
+def pgs_work(cap, d):
+    """`PgsWork` for up to cap contacts and d friction directions."""
+    rows = (cap, CONTACT_DOFS)
+    return PgsWork(
+        np.empty(d),
+        np.empty(d),
+        np.empty(rows, np.int64),
+        np.empty(cap, np.int64),
+        np.empty(rows),
+        np.empty(rows),
+        np.empty(rows),
+        np.empty(rows),
+        np.empty(rows),
+        np.empty(rows),
+        np.empty(cap, np.int64),
+        np.empty(cap, np.bool_),
+        np.empty(cap),
+        np.empty(cap),
+        np.empty(cap),
+        np.empty(cap),
+        np.empty(cap),
+        np.empty(cap),
+        np.empty((cap, 2)),
+        np.empty(cap),
+        np.empty(cap),
+        np.empty((cap, 2)),
+    )
+
+
+@numba.njit(cache=True, inline="always")
+def _pgs_directions(model, spatial):
+    """The friction directions PGS's polygon has: 0 for the exact cone's disk in space."""
+    return (0 if model.exact_cone else model.friction_directions) if spatial else 2
+
+
 @numba.njit(cache=True)
 def contact_pgs(
     model,
@@ -433,28 +501,63 @@ def contact_pgs(
 
     Returns a `PgsResult`.
     """
-    compliant, directions = model.compliant, model.friction_directions
-    c_slot = contacts.slot
-    d = (0 if model.exact_cone else directions) if spatial else 2  # 0: the exact cone's disk
-    cosines = np.empty(d)
-    sines = np.empty(d)
+    P = pgs_work(nc, _pgs_directions(model, spatial))
+    v = np.empty(nu_free.shape[0])
+    status, sweeps, residual, unknowns, n = contact_pgs_into(
+        model, spatial, h, pi, pf, contacts, nc, delta_n, delta_t, dofs, count, inv, nu_free, warm_n, warm_t, zero_column, tolerance,
+        max_sweeps, P, v,
+    )  # fmt: skip
+    p_out = np.zeros(nc)
+    t_out = np.zeros((nc, 2))
+    for k in range(n):
+        p_out[P.active[k]] = P.p_n[k]
+        t_out[P.active[k], 0] = P.f[k, 0]
+        t_out[P.active[k], 1] = P.f[k, 1]
+    return PgsResult(v, p_out, t_out, P.active[:n], status, sweeps, residual, unknowns)
+
+
+@numba.njit(cache=True, inline="always")
+def contact_pgs_into(
+    model, spatial, h, pi, pf, contacts, nc, delta_n, delta_t, dofs, count, inv, nu_free, warm_n, warm_t, zero_column, tolerance,
+    max_sweeps, P, v,
+):  # fmt: skip
+    """`contact_pgs` on the caller's arrays: P (`PgsWork` for at least nc contacts and the
+    directions `_pgs_directions` gives) and v (nv), nu+. Returns (status: a PgsStatus value,
+    sweeps, residual, unknowns, n): the n active contacts are P.active[:n], their impulses
+    P.p_n[:n] and P.f[:n]."""
+    d = _pgs_directions(model, spatial)
+    cosines, sines = P.cosines[:d], P.sines[:d]
     for j in range(d):
         cosines[j] = np.cos(2.0 * np.pi * j / d)
         sines[j] = np.sin(2.0 * np.pi * j / d)
+    for i in range(nu_free.shape[0]):
+        v[i] = nu_free[i]
     # each active contact's DOFs, Jacobian rows, A^-1 times them, Delassus blocks and terms
-    cdof, cm, jn, jt, jo, yn, yt, yo, active, fric, gnn, g00, g01, g11, comp, bn, bt, mu, n, nf = _gather_contacts(
-        compliant, spatial, h, pi, pf, contacts, nc, delta_n, delta_t, dofs, count, inv, zero_column
-    )
-    unknowns = n + nf * (2 if spatial else 1)
-    p_out = np.zeros(nc)
-    t_out = np.zeros((nc, 2))
+    n, nf = _gather_contacts_into(model.compliant, spatial, h, pi, pf, contacts, nc, delta_n, delta_t, dofs, count, inv, zero_column, P)
     if n == 0:
-        return PgsResult(nu_free.copy(), p_out, t_out, active[:0], PgsStatus.CONVERGED.value, 0, 0.0, 0)
+        return PgsStatus.CONVERGED.value, 0, 0.0, 0, 0
+    unknowns = n + nf * (2 if spatial else 1)
+    cdof, cm, jn, jt, jo, yn, yt, yo = P.cdof, P.cm, P.jn, P.jt, P.jo, P.yn, P.yt, P.yo
+    active, fric, gnn, g00, g01, g11, comp, bn, bt, mu, p_n, f = (
+        P.active,
+        P.fric,
+        P.gnn,
+        P.g00,
+        P.g01,
+        P.g11,
+        P.comp,
+        P.bn,
+        P.bt,
+        P.mu,
+        P.p_n,
+        P.f,
+    )
     scale = _impulse_scale(n, cdof, cm, jn, gnn, bn, nu_free)
-    v = nu_free.copy()
-    p_n = np.zeros(n)
-    f = np.zeros((n, 2))
-    _warm_start(n, spatial, d, active, c_slot, warm_n, warm_t, cdof, cm, yn, yt, yo, fric, mu, p_n, f, v, cosines, sines)
+    for k in range(n):
+        p_n[k] = 0.0
+        f[k, 0] = 0.0
+        f[k, 1] = 0.0
+    _warm_start(n, spatial, d, active, contacts.slot, warm_n, warm_t, cdof, cm, yn, yt, yo, fric, mu, p_n, f, v, cosines, sines)
     status, sweeps, residual = _sweeps(
         n,
         spatial,
@@ -484,41 +587,29 @@ def contact_pgs(
         tolerance,
         max_sweeps,
     )
-    for k in range(n):
-        p_out[active[k]] = p_n[k]
-        t_out[active[k], 0] = f[k, 0]
-        t_out[active[k], 1] = f[k, 1]
-    return PgsResult(v, p_out, t_out, active[:n], status, sweeps, residual, unknowns)
+    return status, sweeps, residual, unknowns, n
 
 
 @numba.njit(cache=True, inline="always")
-def _gather_contacts(compliant, spatial, h, pi, pf, contacts, nc, delta_n, delta_t, dofs, count, inv, zero_column):
-    """Gather the active contacts into rows 0..n-1 of per-contact arrays: their DOFs cdof (cm
-    of them), Jacobian rows jn, jt (jo), y = A^-1 J^T rows, the Delassus blocks gnn, g00, g01,
-    g11 (compliance comp on the diagonal), the constant terms bn, bt (approach, scripted bias,
-    previous deformation), mu and whether each has friction. Returns (cdof, cm, jn, jt, jo, yn,
-    yt, yo, active, fric, gnn, g00, g01, g11, comp, bn, bt, mu, n, nf): n active contacts, nf
-    with friction."""
+def _gather_contacts_into(compliant, spatial, h, pi, pf, contacts, nc, delta_n, delta_t, dofs, count, inv, zero_column, P):
+    """Gather the active contacts into rows 0..n-1 of P's per-contact arrays (`PgsWork`; rows
+    up to nc zeroed first): their DOFs, Jacobian rows, y = A^-1 J^T rows, Delassus blocks
+    (compliance comp on the diagonal), the constant terms bn, bt (approach, scripted bias,
+    previous deformation), mu and whether each has friction. Returns (n, nf): n active
+    contacts, nf with friction."""
     c_pair, c_psi, c_slot, c_bias = contacts.pair, contacts.psi, contacts.slot, contacts.bias
     W_n, W_t, W_o = contacts.W_n, contacts.W_t, contacts.W_o
-    cdof = np.zeros((nc, CONTACT_DOFS), np.int64)
-    cm = np.zeros(nc, np.int64)
-    jn = np.zeros((nc, CONTACT_DOFS))
-    jt = np.zeros((nc, CONTACT_DOFS))
-    jo = np.zeros((nc, CONTACT_DOFS))
-    yn = np.zeros((nc, CONTACT_DOFS))
-    yt = np.zeros((nc, CONTACT_DOFS))
-    yo = np.zeros((nc, CONTACT_DOFS))
-    active = np.empty(nc, np.int64)
-    fric = np.zeros(nc, np.bool_)
-    gnn = np.zeros(nc)
-    g00 = np.zeros(nc)
-    g01 = np.zeros(nc)
-    g11 = np.zeros(nc)
-    comp = np.zeros(nc)
-    bn = np.zeros(nc)
-    bt = np.zeros((nc, 2))
-    mu = np.zeros(nc)
+    cdof, cm, jn, jt, jo, yn, yt, yo = P.cdof, P.cm, P.jn, P.jt, P.jo, P.yn, P.yt, P.yo
+    active, fric, gnn, g00, g01, g11, comp, bn, bt, mu = P.active, P.fric, P.gnn, P.g00, P.g01, P.g11, P.comp, P.bn, P.bt, P.mu
+    for k in range(nc):
+        for j in range(CONTACT_DOFS):
+            cdof[k, j] = 0
+            jn[k, j] = jt[k, j] = jo[k, j] = 0.0
+            yn[k, j] = yt[k, j] = yo[k, j] = 0.0
+        cm[k] = 0
+        fric[k] = False
+        gnn[k] = g00[k] = g01[k] = g11[k] = comp[k] = bn[k] = mu[k] = 0.0
+        bt[k, 0] = bt[k, 1] = 0.0
     n = 0
     nf = 0
     for i in range(nc):
@@ -558,7 +649,7 @@ def _gather_contacts(compliant, spatial, h, pi, pf, contacts, nc, delta_n, delta
         if fric[n]:
             nf += 1
         n += 1
-    return cdof, cm, jn, jt, jo, yn, yt, yo, active, fric, gnn, g00, g01, g11, comp, bn, bt, mu, n, nf
+    return n, nf
 
 
 @numba.njit(cache=True, inline="always")

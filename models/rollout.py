@@ -37,6 +37,7 @@ from models.contact import (
     scripted_bias,
     tangents_packed,
 )
+from models.contact_pgs import _pgs_directions, pgs_work
 from models.kinematics import body_pose_3d, positions
 from models.predicates import evaluate, evaluate_with
 from models.stepper import (
@@ -59,7 +60,9 @@ from models.stepper import (
     StepStatus,
     System,
     _may_take_planar_warm,
+    _may_take_spatial_pgs,
     _may_take_spatial_warm,
+    _uses_pgs,
     any_limited,
     basis_table,
     contact_stage,
@@ -74,6 +77,7 @@ from models.stepper import (
     mass_matrix,
     planar_warm_buffers,
     planar_warm_step,
+    spatial_pgs_step,
     spatial_warm_buffers,
     spatial_warm_step,
     system_matrix,
@@ -440,8 +444,10 @@ def rollout_kernel(
     # run (`_may_take_planar_warm`, `_may_take_spatial_warm`)
     planar_cap = slots if dimension == 2 and constant_A and not limited and not kinematic else 0
     spatial_cap = min(slots, SPATIAL_WARM_CONTACTS) if dimension == 3 and not limited and not kinematic else 0
-    R = warm_results(max(planar_cap, spatial_cap), nv, q.shape[0], v_index.shape[0], basis, delta_n.shape[0])
+    pgs_cap = slots if dimension == 3 and not limited and not kinematic and _uses_pgs(model, solver, slots, False) else 0
+    R = warm_results(max(planar_cap, spatial_cap, pgs_cap), nv, q.shape[0], v_index.shape[0], basis, delta_n.shape[0])
     B, W, side = planar_warm_buffers(planar_cap, R), spatial_warm_buffers(spatial_cap, directions, bi.shape[0], R), 0
+    P = pgs_work(pgs_cap, _pgs_directions(model, True))
     free_q, free_nu, free_q_ref, free_side = np.empty((2, q.shape[0])), np.empty((2, nv)), np.empty((2, q_ref.shape[0])), 0
     eps_eff = model.quasistatic_inertia if eps == 0.0 else eps
     max_records, rec_t, rec_q, rec_nu, n_rec = _start_records(max_records, q, nu)
@@ -510,10 +516,17 @@ def rollout_kernel(
                     dn2, dt2 = np.zeros_like(delta_n), np.zeros_like(delta_t)
                 piv, res, size, p_n = 0, 0.0, 0, no_impulse
             else:
-                # the usual step while contacts persist, without numba's runtime: a warm step
-                # (`spatial_warm_step`, `planar_warm_step`), else the general one
-                warm = WARM_NOT_TAKEN
-                if _may_take_spatial_warm(dimension == 3, limited, model, step_solver, nc):
+                # the usual step, without numba's runtime: in space PGS's (`spatial_pgs_step`) or,
+                # while contacts persist, a warm step (`spatial_warm_step`, `planar_warm_step`);
+                # else the general one
+                warm, pgs = WARM_NOT_TAKEN, False
+                if _may_take_spatial_pgs(dimension == 3, limited, model, step_solver, nc):
+                    pgs = True
+                    warm, size, res, sw = spatial_pgs_step(
+                        model, step_solver, D, tables, system, not constant_A, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t,
+                        warm_n, warm_t, W, P, side, PART_STEP,
+                    )  # fmt: skip
+                elif _may_take_spatial_warm(dimension == 3, limited, model, step_solver, nc):
                     warm, size, res = spatial_warm_step(
                         model, D, tables, system, not constant_A, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, W, side,
                         PART_STEP,
@@ -526,7 +539,9 @@ def rollout_kernel(
                         model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, side, PART_STEP
                     )
                 if warm == WARM_DONE:  # its results, on its side of R
-                    q2, nu2, q_ref2, basis = R.q[side], R.nu[side], R.q_ref[side], R.basis[side]
+                    q2, nu2, q_ref2 = R.q[side], R.nu[side], R.q_ref[side]
+                    if not pgs:  # (PGS keeps the basis table as it is)
+                        basis = R.basis[side]
                     if compliant:
                         dn2, dt2 = R.delta_n[side], R.delta_t[side]
                     side = 1 - side  # the next warm step writes the other side, not this state
@@ -703,10 +718,12 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
     limited = any_limited(D.max_force)
     planar_cap = c_psi.shape[0] if dimension == 2 else 0
     spatial_cap = min(c_psi.shape[0], SPATIAL_WARM_CONTACTS) if dimension == 3 else 0
-    R = warm_results(max(planar_cap, spatial_cap), nv, q.shape[0], D.v_index.shape[0], basis, delta_n.shape[0])
+    R = warm_results(c_psi.shape[0], nv, q.shape[0], D.v_index.shape[0], basis, delta_n.shape[0])
     B, W = planar_warm_buffers(planar_cap, R), spatial_warm_buffers(spatial_cap, directions, bi.shape[0], R)
+    P = pgs_work(c_psi.shape[0] if dimension == 3 else 0, _pgs_directions(model, True))
     warm = False  # whether the rollout takes the planar warm step at the state (as rollout_kernel)
     warm3 = False  # the spatial warm step
+    warm_pgs = False  # the spatial PGS step
     for k in range(repeats + 1):
         if k == 0 or stage == STAGE_DETECT:
             if dimension == 3:
@@ -721,7 +738,7 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
         if k == 0 or stage == STAGE_JACOBIANS:
             _assemble(bi, bf, pi, dimension, q, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, W_n, W_t, W_o, c_bias, False, True, pos)
         if k == 0 or stage >= STAGE_SOLVE:
-            if rotating and not warm3:  # as rollout_kernel: A depends on q (the spatial warm step builds its own)
+            if rotating and not (warm3 or warm_pgs):  # as rollout_kernel: A depends on q (the spatial steps build their own)
                 A = system_matrix(bi, bf, q, nv, eps_eff, h, D.v_index, D.kp, D.kd, D.max_force)
                 system = System(A, system.Ainv, system.M_const, system.rhs_const, system.dofs, system.count, system.inv)
         if k > 0 and stage > STAGE_SOLVE:
@@ -730,6 +747,11 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
                 planar_warm_step(model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, 0, part)
             elif warm3:
                 spatial_warm_step(model, D, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, W, 0, part)
+            elif warm_pgs:
+                spatial_pgs_step(
+                    model, solver, D, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, warm_n, warm_t, W, P, 0,
+                    part,
+                )  # fmt: skip
             else:
                 contact_stage(
                     part, model, solver, D, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis
@@ -741,6 +763,10 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
             args3 = (model, D, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, W, 0, PART_STEP)
             spatial_warm_step(*args3)
             pivots, sweeps = 0, 0
+        elif k > 0 and stage == STAGE_SOLVE and warm_pgs:
+            argsp = (model, solver, D, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t)
+            sweeps = spatial_pgs_step(*argsp, warm_n, warm_t, W, P, 0, PART_STEP)[3]
+            pivots = 0
         elif k == 0 or stage == STAGE_SOLVE:
             r = dynamics_step(model, solver, D, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis)
             if k == 0:  # the warm starts (Lemke's basis, PGS's impulses) of a steady push
@@ -752,6 +778,9 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
                 if _may_take_spatial_warm(dimension == 3, limited, model, solver, nc):
                     args3 = (model, D, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, W, 0, PART_STEP)
                     warm3 = spatial_warm_step(*args3)[0] == WARM_DONE
+                if _may_take_spatial_pgs(dimension == 3, limited, model, solver, nc):
+                    argsp = (model, solver, D, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t)
+                    warm_pgs = spatial_pgs_step(*argsp, warm_n, warm_t, W, P, 0, PART_STEP)[0] == WARM_DONE
             else:
                 pivots, sweeps = r.pivots, r.sweeps
         if stage == STAGE_SETUP:

@@ -52,7 +52,16 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from models.contact_pgs import BODY_DOFS, PgsStatus, block_solve, block_solve_into, body_blocks, body_blocks_into, contact_pgs
+from models.contact_pgs import (
+    BODY_DOFS,
+    PgsStatus,
+    block_solve,
+    block_solve_into,
+    body_blocks,
+    body_blocks_into,
+    contact_pgs,
+    contact_pgs_into,
+)
 from models.kinematics import (
     BF_INERTIA,
     BF_MASS,
@@ -710,6 +719,13 @@ def _may_take_spatial_warm(spatial, limited, model, solver, nc):
     """Whether a step with nc contacts may go to `spatial_warm_step` (spatial: the scene's
     dimension is 3): no force-limited drive, not kinematic, a Lemke step with contacts."""
     return spatial and nc > 0 and not limited and not model.kinematic and not _uses_pgs(model, solver, nc, limited)
+
+
+@numba.njit(cache=True, inline="always")
+def _may_take_spatial_pgs(spatial, limited, model, solver, nc):
+    """Whether a step with nc contacts may go to `spatial_pgs_step`: in space, not kinematic, a
+    PGS step (`_uses_pgs`)."""
+    return spatial and not model.kinematic and _uses_pgs(model, solver, nc, limited)
 
 
 @numba.njit(cache=True, inline="always")
@@ -1875,45 +1891,15 @@ def spatial_warm_step(model, drives, tables, system, rotating, h, q, nu, q_ref, 
     state is on), and the impulses by contact. The same operations in the same order as `_lemke_step`: the
     same bits (tests/test_warm_steps.py). part: PART_STEP, or the first parts only, for the
     cost split (as `contact_stage`). Returns (outcome, the LCP's size, residual)."""
-    bi, bf, pi, pf = tables.bi, tables.bf, tables.pi, tables.pf
+    bi, pi, pf = tables.bi, tables.pi, tables.pf
     nv = nu.shape[0]
     L, R = W.lcp, W.out
     if not tables.spatial or nc > L.active.shape[0] or any_limited(drives.max_force):
         return WARM_NOT_TAKEN, 0, 0.0
-    quasistatic = model.eps == 0.0
-    eps = model.quasistatic_inertia if quasistatic else model.eps
-    # A^-1's body blocks (`_blocks`): the System's where A is constant, else of A(q)
-    dofs, count, inv = system.dofs, system.count, system.inv
-    if count.shape[0] != bi.shape[0]:
-        A = system.A
-        if rotating:
-            _system_matrix_into(bi, bf, q, eps, h, drives.v_index, drives.kp, drives.kd, drives.max_force, W.A, W.R, W.I)
-            A = W.A
-        if not body_blocks_into(bi, A, system.Ainv, W.dofs, W.count, W.inv, W.block, W.work):
-            return WARM_NOT_TAKEN, 0, 0.0
-        dofs, count, inv = W.dofs, W.count, W.inv
-    # the free velocity (`_free_velocity`, in space)
-    rhs, nu_free, q_ref_new = R.rhs, R.nu_free, R.q_ref[side]
-    for v in range(nv):
-        rhs[v] = system.rhs_const[v]
-    if not quasistatic:
-        if system.M_const.shape[0] == nv:
-            add_product(rhs, system.M_const, nu, eps)
-        else:
-            _mass_times_into(bi, bf, q, nu, W.mass_nu, W.R, W.I)
-            for v in range(nv):
-                rhs[v] += eps * W.mass_nu[v]
-        _gyroscopic_into(bi, bf, q, nu, W.gyro, W.R)
-        he = h * eps
-        for v in range(nv):
-            rhs[v] += he * W.gyro[v]
-    _drives_into(h, q, q_ref, u, drives, rhs, q_ref_new, R.drive_a)
-    if system.Ainv.shape[0] == nv:
-        for v in range(nv):
-            nu_free[v] = 0.0
-        add_product(nu_free, system.Ainv, rhs, 1.0)
-    else:
-        block_solve_into(dofs, count, inv, rhs, nu_free)
+    ok, dofs, count, inv = _spatial_free_velocity_into(model, drives, tables, system, rotating, h, q, nu, q_ref, u, W, side, True)
+    if not ok:
+        return WARM_NOT_TAKEN, 0, 0.0
+    nu_free = R.nu_free
     # the LCP (`contact_lcp`), scaled, and the previous basis's guess
     n_act = _active_into(contacts.W_n, nc, L.active)
     if n_act == 0:
@@ -1957,6 +1943,96 @@ def spatial_warm_step(model, drives, tables, system, rotating, h, q, nu, q_ref, 
     if not (_finite_and_bounded(q_new) and _finite_and_bounded(nu_new)):
         return WARM_NOT_TAKEN, n, residual
     return WARM_DONE, n, residual
+
+
+@numba.njit(cache=True, inline="always")
+def _spatial_free_velocity_into(model, drives, tables, system, rotating, h, q, nu, q_ref, u, W, side, held):
+    """The free velocity of a step in space on W's arrays (`SpatialWarm`): A^-1's body blocks
+    (`_blocks`: the System's where A is constant, else of A(q), built here where rotating), and
+    into W.out nu_free, q_ref+ on side `side` and the drives' a. held: as `_free_velocity`,
+    taking the System's constant M and A^-1 where it holds them; else as `_pgs_step`, by body.
+    Returns (ok: A's blocks are not singular, dofs, count, inv)."""
+    bi, bf, R = tables.bi, tables.bf, W.out
+    nv = nu.shape[0]
+    quasistatic = model.eps == 0.0
+    eps = model.quasistatic_inertia if quasistatic else model.eps
+    dofs, count, inv = system.dofs, system.count, system.inv
+    if count.shape[0] != bi.shape[0]:
+        A = system.A
+        if rotating:
+            _system_matrix_into(bi, bf, q, eps, h, drives.v_index, drives.kp, drives.kd, drives.max_force, W.A, W.R, W.I)
+            A = W.A
+        if not body_blocks_into(bi, A, system.Ainv, W.dofs, W.count, W.inv, W.block, W.work):
+            return False, dofs, count, inv
+        dofs, count, inv = W.dofs, W.count, W.inv
+    rhs, nu_free = R.rhs, R.nu_free
+    for v in range(nv):
+        rhs[v] = system.rhs_const[v]
+    if not quasistatic:
+        if held and system.M_const.shape[0] == nv:
+            add_product(rhs, system.M_const, nu, eps)
+        else:
+            _mass_times_into(bi, bf, q, nu, W.mass_nu, W.R, W.I)
+            for v in range(nv):
+                rhs[v] += eps * W.mass_nu[v]
+        _gyroscopic_into(bi, bf, q, nu, W.gyro, W.R)
+        he = h * eps
+        for v in range(nv):
+            rhs[v] += he * W.gyro[v]
+    _drives_into(h, q, q_ref, u, drives, rhs, R.q_ref[side], R.drive_a)
+    if held and system.Ainv.shape[0] == nv:
+        for v in range(nv):
+            nu_free[v] = 0.0
+        add_product(nu_free, system.Ainv, rhs, 1.0)
+    else:
+        block_solve_into(dofs, count, inv, rhs, nu_free)
+    return True, dofs, count, inv
+
+
+@numba.njit(cache=True, _nrt=False)
+def spatial_pgs_step(
+    model, solver, drives, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, warm_n, warm_t, W, P, side,
+    part,
+):  # fmt: skip
+    """`_pgs_step` in space (PGS on the polygon or the exact cone), compiled without numba's
+    runtime: no reference counts, no allocation; the free velocity's arrays and the results
+    are W's (`SpatialWarm`, as `spatial_warm_step`'s), the contacts' rows P's
+    (`models.contact_pgs.PgsWork`). Where nc exceeds P, a block of A is singular, PGS does not
+    converge or the state leaves the finite range, it returns WARM_NOT_TAKEN and the caller
+    takes the general path, which solves the step again from the start (and returns its
+    status). Else (WARM_DONE): q+, nu+, q_ref+ and, with compliance, the deformations on side
+    `side` of W.out (not the side the state is on), and the impulses by contact. The same
+    operations in the same order as `_pgs_step`: the same bits (tests/test_warm_steps.py).
+    part: PART_STEP, or the first parts only, for the cost split (as `contact_stage`). Returns
+    (outcome, unknowns, residual, sweeps)."""
+    R = W.out
+    if not tables.spatial or nc > P.active.shape[0] or any_limited(drives.max_force):
+        return WARM_NOT_TAKEN, 0, 0.0, 0
+    ok, dofs, count, inv = _spatial_free_velocity_into(model, drives, tables, system, rotating, h, q, nu, q_ref, u, W, side, False)
+    if not ok:
+        return WARM_NOT_TAKEN, 0, 0.0, 0
+    if part == PART_ASSEMBLY:
+        return WARM_DONE, 0, 0.0, 0
+    nu_new = R.nu[side]
+    tolerance = _pgs_tolerance(model, solver)
+    status, sweeps, residual, unknowns, n = contact_pgs_into(
+        model, True, h, tables.pi, tables.pf, contacts, nc, delta_n, delta_t, dofs, count, inv, R.nu_free, warm_n, warm_t, ZERO_COLUMN,
+        tolerance, solver.max_sweeps, P, nu_new,
+    )  # fmt: skip
+    if status != PgsStatus.CONVERGED:
+        return WARM_NOT_TAKEN, unknowns, residual, sweeps
+    if part == PART_CONTACT_SOLVE:
+        return WARM_DONE, unknowns, residual, sweeps
+    active, p_n, f = P.active[:n], P.p_n[:n], P.f[:n]
+    if model.compliant:
+        _deformations_into(h, tables.pf, contacts.pair, contacts.slot, active, p_n, f, delta_n, delta_t, R.delta_n[side], R.delta_t[side])
+    _by_contact_into(nc, active, p_n, f, R.impulses, R.frictions)
+    velocity = _blended(model.theta, nu_new, nu, R.blend)  # the position update (`_integrate_checked`)
+    q_new = R.q[side]
+    _integrate_positions_into(tables.bi, q, velocity, h, q_new)
+    if not (_finite_and_bounded(q_new) and _finite_and_bounded(nu_new)):
+        return WARM_NOT_TAKEN, unknowns, residual, sweeps
+    return WARM_DONE, unknowns, residual, sweeps
 
 
 @numba.njit(cache=True, inline="always")

@@ -366,8 +366,9 @@ SPLIT_REPEATS = 20_000
 def _cost_split(scene: str, scenario, rung, state, u: np.ndarray, h: float, quick: bool) -> dict:
     """Where a contact step's time goes, at one state (`models.rollout.stage_loop`): detection,
     the pair distances and the task's predicates, the contact Jacobians, and the dynamics step in
-    its three parts (`models.stepper.contact_stage`, or the warm step where the rollout takes it at
-    the state: `models.stepper.planar_warm_step`, `models.stepper.spatial_warm_step`): the free
+    its three parts (`models.stepper.contact_stage`, or the step the rollout takes at the state:
+    `models.stepper.planar_warm_step`, `models.stepper.spatial_warm_step`,
+    `models.stepper.spatial_pgs_step`): the free
     velocity and the LCP's assembly, the
     warm-started contact solve, and the rest (the impulses' velocity update, the integration), in
     us per call (each stage's best of SPLIT_ROUNDS runs of SPLIT_REPEATS calls, the stages in
@@ -1044,7 +1045,8 @@ def contact_markdown(contact: dict | None) -> list[str]:
             "that run the stages in turns, us per call; the dynamics step "
             "in its three parts (`models.stepper.contact_stage`; on a state whose LCP the previous basis solves, the "
             "warm step the rollout takes there, `models.stepper.planar_warm_step` in the plane, "
-            "`models.stepper.spatial_warm_step` in space): A where it depends on q, the free "
+            "`models.stepper.spatial_warm_step` in space; with PGS in space, `models.stepper.spatial_pgs_step`): A "
+            "where it depends on q, the free "
             "velocity and the LCP's assembly (PGS "
             "assembles its blocks in its solve), the warm-started contact solve, the impulses' velocity update and the "
             "integration). The solve is warm-started from the state's own solution, so it does less work there than a "
