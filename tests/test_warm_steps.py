@@ -160,32 +160,47 @@ def test_the_warm_step_is_the_general_one_bit_for_bit(name, rung_name):
     sc = load_scenario(SCENARIOS / f"{name}.toml")
     rung = rung_for(sc, rung_name)
     h = sc.rung_settings(rung_name).h
-    states = sampled_states(sc, rung, h, sum(map(ord, name + rung_name)) + 1)
+
+    def both(state, u, t):
+        out = _both_steps(sc, rung, state, u, h, t)
+        if out is None:
+            return None
+        general, warm, covered = out
+        # taken exactly where it covers the step and the general step accepts its warm guess (no
+        # pivot) and succeeds
+        return general, warm, covered and general.status == StepStatus.OK and general.pivots == 0 and general.lcp_size > 0
+
+    _held_bit_for_bit(sampled_states(sc, rung, h, sum(map(ord, name + rung_name)) + 1), both, "warm")
+
+
+def _held_bit_for_bit(states, both, which):
+    """Compare a step with the general one at STATES states with contact of the sampler states:
+    both(state, u, t) gives (general, the step's result fields or None where it was not taken,
+    whether it should be taken) or None where no contact is detected. Every field the same bits,
+    taken exactly where it should be, and at half the states at least."""
     compared, taken, touching = 0, 0, None
     while compared < STATES:
         try:
             state, u, t = states.send(touching)
         except StopIteration:
             break
-        both = _both_steps(sc, rung, state, u, h, t)
-        touching = both is not None
+        out = both(state, u, t)
+        touching = out is not None
         if not touching:
             continue
-        general, warm, covered = both
-        # taken exactly where it covers the step and the general step accepts its warm guess (no
-        # pivot) and succeeds
-        accepted = covered and general.status == StepStatus.OK and general.pivots == 0 and general.lcp_size > 0
-        assert (warm is not None) == accepted, f"t = {t}: warm step taken {warm is not None}, general pivots {general.pivots}"
-        if warm is not None:
-            for what, b in warm.items():
-                a = getattr(general, what)
-                a, b = np.asarray(a), np.asarray(b)
+        general, fast, expected = out
+        assert (fast is not None) == expected, (
+            f"t = {t}: {which} step taken {fast is not None}, general {general.status}, {general.pivots} pivots"
+        )
+        if fast is not None:
+            for what, b in fast.items():
+                a, b = np.asarray(getattr(general, what)), np.asarray(b)
                 assert a.shape == b.shape, (what, a.shape, b.shape)
                 assert np.array_equal(a, b), f"{what} differs at t = {t}: max |diff| {np.max(np.abs(a - b))}"
             taken += 1
         compared += 1
     assert compared == STATES, f"only {compared} states with contact"
-    assert taken >= STATES // 2, f"the warm step was taken at {taken} of {compared} states"
+    assert taken >= STATES // 2, f"the {which} step was taken at {taken} of {compared} states"
 
 
 def _both_pgs_steps(sc, model, solver, state, u, h, t):
@@ -236,25 +251,9 @@ def test_the_spatial_pgs_step_is_the_general_one_bit_for_bit(name, rung_name, ex
     model = rung.model._replace(exact_cone=exact)
     solver = rung.solver._replace(method=SOLVER_PGS)
     h = sc.rung_settings(rung_name).h
-    states = sampled_states(sc, rung, h, sum(map(ord, name + rung_name)) + 2)
-    compared, taken, touching = 0, 0, None
-    while compared < STATES:
-        try:
-            state, u, t = states.send(touching)
-        except StopIteration:
-            break
-        both = _both_pgs_steps(sc, model, solver, state, u, h, t)
-        touching = both is not None
-        if not touching:
-            continue
-        general, pgs = both
-        assert (pgs is not None) == (general.status == StepStatus.OK), f"t = {t}: taken {pgs is not None}, status {general.status}"
-        if pgs is not None:
-            for what, b in pgs.items():
-                a, b = np.asarray(getattr(general, what)), np.asarray(b)
-                assert a.shape == b.shape, (what, a.shape, b.shape)
-                assert np.array_equal(a, b), f"{what} differs at t = {t}: max |diff| {np.max(np.abs(a - b))}"
-            taken += 1
-        compared += 1
-    assert compared == STATES, f"only {compared} states with contact"
-    assert taken >= STATES // 2, f"the PGS step was taken at {taken} of {compared} states"
+
+    def both(state, u, t):
+        out = _both_pgs_steps(sc, model, solver, state, u, h, t)
+        return None if out is None else (*out, out[0].status == StepStatus.OK)
+
+    _held_bit_for_bit(sampled_states(sc, rung, h, sum(map(ord, name + rung_name)) + 2), both, "PGS")
