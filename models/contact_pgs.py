@@ -188,17 +188,10 @@ def body_blocks_into(bi, A, Ainv, dofs, count, inv, block, work):
     return True
 
 
-@numba.njit(cache=True)
-def block_solve(dofs, count, inv, rhs):
-    """A^-1 rhs from the body blocks of `body_blocks`: O(bodies)."""
-    out = np.zeros(rhs.shape[0])
-    block_solve_into(dofs, count, inv, rhs, out)
-    return out
-
-
 @numba.njit(cache=True, inline="always")
 def block_solve_into(dofs, count, inv, rhs, out):
-    """`block_solve` into the caller's out (rhs.shape[0] entries), zeroed here."""
+    """A^-1 rhs from the body blocks of `body_blocks`, O(bodies), into the caller's out
+    (rhs.shape[0] entries), zeroed here."""
     for v in range(rhs.shape[0]):
         out[v] = 0.0
     for b in range(count.shape[0]):
@@ -507,13 +500,23 @@ def contact_pgs(
         model, spatial, h, pi, pf, contacts, nc, delta_n, delta_t, dofs, count, inv, nu_free, warm_n, warm_t, zero_column, tolerance,
         max_sweeps, P, v,
     )  # fmt: skip
-    p_out = np.zeros(nc)
-    t_out = np.zeros((nc, 2))
-    for k in range(n):
-        p_out[P.active[k]] = P.p_n[k]
-        t_out[P.active[k], 0] = P.f[k, 0]
-        t_out[P.active[k], 1] = P.f[k, 1]
+    p_out, t_out = np.empty(nc), np.empty((nc, 2))
+    _by_contact_into(nc, P.active[:n], P.p_n[:n], P.f[:n], p_out, t_out)
     return PgsResult(v, p_out, t_out, P.active[:n], status, sweeps, residual, unknowns)
+
+
+@numba.njit(cache=True, inline="always")
+def _by_contact_into(nc, active, p_n, p_t, impulses, frictions):
+    """The active contacts' impulses p_n (n_act), p_t (n_act, 2) by contact: impulses (nc),
+    frictions (nc, 2), zeros for the contacts not active."""
+    for i in range(nc):
+        impulses[i] = 0.0
+        frictions[i, 0] = 0.0
+        frictions[i, 1] = 0.0
+    for k in range(active.shape[0]):
+        impulses[active[k]] = p_n[k]
+        frictions[active[k], 0] = p_t[k, 0]
+        frictions[active[k], 1] = p_t[k, 1]
 
 
 @numba.njit(cache=True, inline="always")

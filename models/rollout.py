@@ -62,7 +62,6 @@ from models.stepper import (
     _may_take_planar_warm,
     _may_take_spatial_pgs,
     _may_take_spatial_warm,
-    _uses_pgs,
     any_limited,
     basis_table,
     contact_stage,
@@ -441,12 +440,15 @@ def rollout_kernel(
     # the warm steps' arrays (planar, spatial; their results R, which the free step's scratch is
     # also) and the free step's results: each writes its results on its side, not the one its last
     # results (which the state may be) are on; buffers for contacts only where that warm step can
-    # run (`_may_take_planar_warm`, `_may_take_spatial_warm`)
+    # run (`_may_take_planar_warm`, `_may_take_spatial_warm`, `_may_take_spatial_pgs`)
     planar_cap = slots if dimension == 2 and constant_A and not limited and not kinematic else 0
     spatial_cap = min(slots, SPATIAL_WARM_CONTACTS) if dimension == 3 and not limited and not kinematic else 0
-    pgs_cap = slots if dimension == 3 and not limited and not kinematic and _uses_pgs(model, solver, slots, False) else 0
+    pgs_cap = slots if _may_take_spatial_pgs(dimension == 3, limited, model, solver, slots) else 0
     R = warm_results(max(planar_cap, spatial_cap, pgs_cap), nv, q.shape[0], v_index.shape[0], basis, delta_n.shape[0])
     B, W, side = planar_warm_buffers(planar_cap, R), spatial_warm_buffers(spatial_cap, directions, bi.shape[0], R), 0
+    # the whole step (PART_STEP) as an int64, not a literal: the warm steps compile once for this
+    # kernel, stage_loop and Python's calls (a literal argument is a specialization of its own)
+    whole = np.int64(PART_STEP)
     P = pgs_work(pgs_cap, _pgs_directions(model, True))
     free_q, free_nu, free_q_ref, free_side = np.empty((2, q.shape[0])), np.empty((2, nv)), np.empty((2, q_ref.shape[0])), 0
     eps_eff = model.quasistatic_inertia if eps == 0.0 else eps
@@ -524,19 +526,19 @@ def rollout_kernel(
                     pgs = True
                     warm, size, res, sw = spatial_pgs_step(
                         model, step_solver, D, tables, system, not constant_A, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t,
-                        warm_n, warm_t, W, P, side, PART_STEP,
+                        warm_n, warm_t, W, P, side, whole,
                     )  # fmt: skip
                 elif _may_take_spatial_warm(dimension == 3, limited, model, step_solver, nc):
                     warm, size, res = spatial_warm_step(
                         model, D, tables, system, not constant_A, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, W, side,
-                        PART_STEP,
+                        whole,
                     )  # fmt: skip
                 if not constant_A and warm != WARM_DONE:
                     A = system_matrix(bi, bf, q, nv, eps_eff, h, v_index, kp, kd, max_force)
                     system = System(A, Ainv, M_const, rhs_const, system.dofs, system.count, system.inv)  # (no blocks: A changes)
                 if warm != WARM_DONE and _may_take_planar_warm(dimension == 2, constant_A, limited, model, step_solver, nc):
                     warm, size, res = planar_warm_step(
-                        model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, side, PART_STEP
+                        model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, side, whole
                     )
                 if warm == WARM_DONE:  # its results, on its side of R
                     q2, nu2, q_ref2 = R.q[side], R.nu[side], R.q_ref[side]
@@ -721,6 +723,9 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
     R = warm_results(c_psi.shape[0], nv, q.shape[0], D.v_index.shape[0], basis, delta_n.shape[0])
     B, W = planar_warm_buffers(planar_cap, R), spatial_warm_buffers(spatial_cap, directions, bi.shape[0], R)
     P = pgs_work(c_psi.shape[0] if dimension == 3 else 0, _pgs_directions(model, True))
+    # side 0 of R, the whole step and _assemble's flags as runtime values, not literals: the warm
+    # steps and _assemble compile once, for this loop, rollout_kernel and Python's calls alike
+    side, whole, scripted, with_friction = np.int64(0), np.int64(PART_STEP), np.bool_(False), np.bool_(True)
     warm = False  # whether the rollout takes the planar warm step at the state (as rollout_kernel)
     warm3 = False  # the spatial warm step
     warm_pgs = False  # the spatial PGS step
@@ -736,7 +741,7 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
             _distances(nc, c_pair, c_psi, c_slot, first_slot, pair_psi)
             _classify_with(g_op, g_index, g_lo, g_hi, u_op, u_index, u_lo, u_hi, q, pair_psi, stack)
         if k == 0 or stage == STAGE_JACOBIANS:
-            _assemble(bi, bf, pi, dimension, q, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, W_n, W_t, W_o, c_bias, False, True, pos)
+            _assemble(bi, bf, pi, dimension, q, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, W_n, W_t, W_o, c_bias, scripted, with_friction, pos)
         if k == 0 or stage >= STAGE_SOLVE:
             if rotating and not (warm3 or warm_pgs):  # as rollout_kernel: A depends on q (the spatial steps build their own)
                 A = system_matrix(bi, bf, q, nv, eps_eff, h, D.v_index, D.kp, D.kd, D.max_force)
@@ -744,28 +749,30 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
         if k > 0 and stage > STAGE_SOLVE:
             part = PART_ASSEMBLY if stage == STAGE_ASSEMBLY else PART_CONTACT_SOLVE
             if warm:
-                planar_warm_step(model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, 0, part)
+                planar_warm_step(model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, side, part)
             elif warm3:
-                spatial_warm_step(model, D, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, W, 0, part)
+                spatial_warm_step(
+                    model, D, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, W, side, part
+                )
             elif warm_pgs:
                 spatial_pgs_step(
-                    model, solver, D, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, warm_n, warm_t, W, P, 0,
-                    part,
+                    model, solver, D, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, warm_n, warm_t, W, P,
+                    side, part,
                 )  # fmt: skip
             else:
                 contact_stage(
                     part, model, solver, D, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis
                 )
         if k > 0 and stage == STAGE_SOLVE and warm:
-            planar_warm_step(model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, 0, PART_STEP)
+            planar_warm_step(model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, side, whole)
             pivots, sweeps = 0, 0
         elif k > 0 and stage == STAGE_SOLVE and warm3:
-            args3 = (model, D, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, W, 0, PART_STEP)
+            args3 = (model, D, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, W, side, whole)
             spatial_warm_step(*args3)
             pivots, sweeps = 0, 0
         elif k > 0 and stage == STAGE_SOLVE and warm_pgs:
             argsp = (model, solver, D, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t)
-            sweeps = spatial_pgs_step(*argsp, warm_n, warm_t, W, P, 0, PART_STEP)[3]
+            sweeps = spatial_pgs_step(*argsp, warm_n, warm_t, W, P, side, whole)[3]
             pivots = 0
         elif k == 0 or stage == STAGE_SOLVE:
             r = dynamics_step(model, solver, D, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis)
@@ -773,14 +780,14 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
                 basis = r.basis
                 _keep_warm(nc, c_slot, r.p_n, r.p_t, warm_n, warm_t, warm_slots, 0)
                 if _may_take_planar_warm(dimension == 2, not rotating, limited, model, solver, nc):
-                    args = (model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, 0, PART_STEP)
+                    args = (model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, side, whole)
                     warm = planar_warm_step(*args)[0] == WARM_DONE
                 if _may_take_spatial_warm(dimension == 3, limited, model, solver, nc):
-                    args3 = (model, D, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, W, 0, PART_STEP)
+                    args3 = (model, D, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, W, side, whole)
                     warm3 = spatial_warm_step(*args3)[0] == WARM_DONE
                 if _may_take_spatial_pgs(dimension == 3, limited, model, solver, nc):
                     argsp = (model, solver, D, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t)
-                    warm_pgs = spatial_pgs_step(*argsp, warm_n, warm_t, W, P, 0, PART_STEP)[0] == WARM_DONE
+                    warm_pgs = spatial_pgs_step(*argsp, warm_n, warm_t, W, P, side, whole)[0] == WARM_DONE
             else:
                 pivots, sweeps = r.pivots, r.sweeps
         if stage == STAGE_SETUP:

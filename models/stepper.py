@@ -55,7 +55,7 @@ import numpy as np
 from models.contact_pgs import (
     BODY_DOFS,
     PgsStatus,
-    block_solve,
+    _by_contact_into,
     block_solve_into,
     body_blocks,
     body_blocks_into,
@@ -409,17 +409,10 @@ def _world_inertia_into(bi, bf, q, b, R, I):
             I[r, c] = s
 
 
-@numba.njit(cache=True)
-def mass_times(bi, bf, q, nu):
-    """M(q) nu body by body (the products of `mass_matrix` without forming it): O(bodies)."""
-    out = np.empty(nu.shape[0])
-    _mass_times_into(bi, bf, q, nu, out, np.empty((3, 3)), np.empty((3, 3)))
-    return out
-
-
 @numba.njit(cache=True, inline="always")
 def _mass_times_into(bi, bf, q, nu, out, R, I):
-    """`mass_times` into the caller's out (nv), zeroed here; R and I (3, 3) scratch."""
+    """M(q) nu body by body (the products of `mass_matrix` without forming it), O(bodies), into
+    the caller's out (nv), zeroed here; R and I (3, 3) scratch."""
     for v in range(out.shape[0]):
         out[v] = 0.0
     for b in range(bi.shape[0]):
@@ -456,17 +449,10 @@ def gravity_force(bi, bf, gravity, nv):
     return f
 
 
-@numba.njit(cache=True)
-def gyroscopic_force(bi, bf, q, nu, nv):
-    """-w x (I_world w) for free spatial rotations (the paper's k(t, q, nu))."""
-    f = np.empty(nv)
-    _gyroscopic_into(bi, bf, q, nu, f, np.empty((3, 3)))
-    return f
-
-
 @numba.njit(cache=True, inline="always")
 def _gyroscopic_into(bi, bf, q, nu, f, R):
-    """`gyroscopic_force` into the caller's f (nv), zeroed here; R (3, 3) scratch."""
+    """-w x (I_world w) for free spatial rotations (the paper's k(t, q, nu)) into the caller's f
+    (nv), zeroed here; R (3, 3) scratch."""
     for v in range(f.shape[0]):
         f[v] = 0.0
     for b in range(bi.shape[0]):
@@ -588,20 +574,6 @@ def _finite_and_bounded(x):
         if not (abs(x[i]) <= DIVERGENCE_LIMIT):
             ok = False
     return ok
-
-
-@numba.njit(cache=True, inline="always")
-def _by_contact_into(nc, active, p_n, p_t, impulses, frictions):
-    """The active contacts' impulses p_n (n_act), p_t (n_act, 2) by contact: impulses (nc),
-    frictions (nc, 2), zeros for the contacts not active."""
-    for i in range(nc):
-        impulses[i] = 0.0
-        frictions[i, 0] = 0.0
-        frictions[i, 1] = 0.0
-    for k in range(active.shape[0]):
-        impulses[active[k]] = p_n[k]
-        frictions[active[k], 0] = p_t[k, 0]
-        frictions[active[k], 1] = p_t[k, 1]
 
 
 @numba.njit(cache=True, inline="always")
@@ -819,20 +791,11 @@ def dynamics_step_inline(model, solver, drives, tables, system, h, q, nu, q_ref,
 
 
 @numba.njit(cache=True, inline="always")
-def _drives(h, q, q_ref, u, drives, rhs):
-    """Advance the drive references (stopped at their limits) and add the PD terms of the
-    unlimited drives to rhs. A force-limited drive j instead gets -h max_force[j] (its impulse
-    enters the contact problem shifted to be >= 0) and its PD impulse at nu = 0 in a[j].
-    Returns (q_ref+, a)."""
-    q_ref_new = np.empty(q_ref.shape[0])
-    a = np.empty(q_ref.shape[0])
-    _drives_into(h, q, q_ref, u, drives, rhs, q_ref_new, a)
-    return q_ref_new, a
-
-
-@numba.njit(cache=True, inline="always")
 def _drives_into(h, q, q_ref, u, drives, rhs, q_ref_new, a):
-    """`_drives` into the caller's q_ref_new and a (one entry per drive)."""
+    """Advance the drive references (stopped at their limits) into q_ref_new and add the PD terms
+    of the unlimited drives to rhs. A force-limited drive j instead gets -h max_force[j] (its
+    impulse enters the contact problem shifted to be >= 0) and its PD impulse at nu = 0 in a[j]
+    (a: one entry per drive, as q_ref_new)."""
     q_index, v_index, kp, kd, max_force = drives.q_index, drives.v_index, drives.kp, drives.kd, drives.max_force
     lower, upper = drives.lower, drives.upper  # hoisted: a tuple's array read in the loop is counted per pass
     for j in range(v_index.shape[0]):
@@ -890,30 +853,25 @@ def _integrate_checked(bi, theta, h, q, nu, nu_new):
 @numba.njit(cache=True, inline="always")
 def _free_velocity(model, drives, tables, system, h, q, nu, q_ref, u, dofs, count, inv):
     """Stage assemble, without contacts: (nu_free = A^-1 rhs, q_ref+, a: the force-limited
-    drives' PD impulses at nu = 0, see `_drives`); A^-1 from system.Ainv when A is constant,
+    drives' PD impulses at nu = 0, see `_drives_into`); A^-1 from system.Ainv when A is constant,
     else from its body blocks (dofs, count, inv: `models.contact_pgs.body_blocks`)."""
-    bi, bf = tables.bi, tables.bf
     nv = nu.shape[0]
     if _constant_plane(model, tables.spatial, system, nv):
         nu_free, q_ref_new, drive_a = np.empty(nv), np.empty(q_ref.shape[0]), np.empty(q_ref.shape[0])
         _free_velocity_into(model, drives, system, h, q, nu, q_ref, u, np.empty(nv), nu_free, q_ref_new, drive_a)
         return nu_free, q_ref_new, drive_a
-    quasistatic = model.eps == 0.0
-    rhs = system.rhs_const.copy()
-    eps = model.quasistatic_inertia if quasistatic else model.eps
-    if not quasistatic:
-        if system.M_const.shape[0] == nv:
-            add_product(rhs, system.M_const, nu, eps)
-        else:
-            rhs += eps * mass_times(bi, bf, q, nu)
-        if tables.spatial:
-            rhs += h * eps * gyroscopic_force(bi, bf, q, nu, nv)
-    q_ref_new, drive_a = _drives(h, q, q_ref, u, drives, rhs)
-    if system.Ainv.shape[0] == nv:
-        nu_free = np.zeros(nv)
-        add_product(nu_free, system.Ainv, rhs, 1.0)
-    else:
-        nu_free = block_solve(dofs, count, inv, rhs)
+    return _free_velocity_by_body(model, drives, tables, system, True, h, q, nu, q_ref, u, dofs, count, inv)
+
+
+@numba.njit(cache=True, inline="always")
+def _free_velocity_by_body(model, drives, tables, system, held, h, q, nu, q_ref, u, dofs, count, inv):
+    """`_free_velocity_by_body_into` on new arrays: returns (nu_free, q_ref+, a)."""
+    nv, nd = nu.shape[0], q_ref.shape[0]
+    nu_free, q_ref_new, drive_a = np.empty(nv), np.empty(nd), np.empty(nd)
+    _free_velocity_by_body_into(
+        model, drives, tables.bi, tables.bf, tables.spatial, system, held, h, q, nu, q_ref, u, dofs, count, inv, np.empty(nv), nu_free,
+        q_ref_new, drive_a, np.empty(nv), np.empty(nv), np.empty((3, 3)), np.empty((3, 3)),
+    )  # fmt: skip
     return nu_free, q_ref_new, drive_a
 
 
@@ -1017,20 +975,11 @@ def _lemke_step(model, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t
 def _pgs_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis):
     """dynamics_step with PGS on the contact impulses; every product body by body, so the
     step costs O(bodies + contacts) beyond what the caller built (`models.contact_pgs`)."""
-    bi, bf = tables.bi, tables.bf
-    nv = nu.shape[0]
+    bi = tables.bi
     dofs, count, inv, ok = _blocks(bi, system)
     if not ok:
         return StepResult(q, nu, q_ref, delta_n, delta_t, StepStatus.SINGULAR.value, 0, 0.0, 0, np.zeros(nc), np.zeros((nc, 2)), 0, basis)
-    quasistatic = model.eps == 0.0
-    eps = model.quasistatic_inertia if quasistatic else model.eps
-    rhs = system.rhs_const.copy()
-    if not quasistatic:
-        rhs += eps * mass_times(bi, bf, q, nu)
-        if tables.spatial:
-            rhs += h * eps * gyroscopic_force(bi, bf, q, nu, nv)
-    q_ref_new, _ = _drives(h, q, q_ref, u, drives, rhs)
-    nu_free = block_solve(dofs, count, inv, rhs)
+    nu_free, q_ref_new, _ = _free_velocity_by_body(model, drives, tables, system, False, h, q, nu, q_ref, u, dofs, count, inv)
     tolerance = _pgs_tolerance(model, solver)
     r = contact_pgs(
         model,
@@ -1089,10 +1038,10 @@ def contact_lcp(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, co
     force-limited drives).
 
     A force-limited drive j (limit F, P = h F) is a bounded impulse p = x - P, x in [0, 2P]:
-    unbounded it would be a - b v (a: its PD impulse at v = 0, `_drives`; b = h (h kp + kd); v
+    unbounded it would be a - b v (a: its PD impulse at v = 0, `_drives_into`; b = h (h kp + kd); v
     its DOF's new speed), so its row says r = v + (p - a) / b, with r >= 0 at p = -P, r <= 0 at
     p = P and r = 0 between: the box split 0 <= x _|_ r + s >= 0, 0 <= s _|_ 2P - x >= 0.
-    nu_free has the -P shift in it already (`_drives`); E's columns are the drives' unit DOFs.
+    nu_free has the -P shift in it already (`_drives_into`); E's columns are the drives' unit DOFs.
     """
     nc = active.shape[0]
     lim = np.empty(drives.max_force.shape[0], np.int64)
@@ -1949,13 +1898,10 @@ def spatial_warm_step(model, drives, tables, system, rotating, h, q, nu, q_ref, 
 def _spatial_free_velocity_into(model, drives, tables, system, rotating, h, q, nu, q_ref, u, W, side, held):
     """The free velocity of a step in space on W's arrays (`SpatialWarm`): A^-1's body blocks
     (`_blocks`: the System's where A is constant, else of A(q), built here where rotating), and
-    into W.out nu_free, q_ref+ on side `side` and the drives' a. held: as `_free_velocity`,
-    taking the System's constant M and A^-1 where it holds them; else as `_pgs_step`, by body.
-    Returns (ok: A's blocks are not singular, dofs, count, inv)."""
+    into W.out nu_free, q_ref+ on side `side` and the drives' a (`_free_velocity_by_body_into`;
+    held as there). Returns (ok: A's blocks are not singular, dofs, count, inv)."""
     bi, bf, R = tables.bi, tables.bf, W.out
-    nv = nu.shape[0]
-    quasistatic = model.eps == 0.0
-    eps = model.quasistatic_inertia if quasistatic else model.eps
+    eps = model.quasistatic_inertia if model.eps == 0.0 else model.eps
     dofs, count, inv = system.dofs, system.count, system.inv
     if count.shape[0] != bi.shape[0]:
         A = system.A
@@ -1965,28 +1911,47 @@ def _spatial_free_velocity_into(model, drives, tables, system, rotating, h, q, n
         if not body_blocks_into(bi, A, system.Ainv, W.dofs, W.count, W.inv, W.block, W.work):
             return False, dofs, count, inv
         dofs, count, inv = W.dofs, W.count, W.inv
-    rhs, nu_free = R.rhs, R.nu_free
+    _free_velocity_by_body_into(
+        model, drives, bi, bf, True, system, held, h, q, nu, q_ref, u, dofs, count, inv, R.rhs, R.nu_free, R.q_ref[side], R.drive_a,
+        W.mass_nu, W.gyro, W.R, W.I,
+    )  # fmt: skip
+    return True, dofs, count, inv
+
+
+@numba.njit(cache=True, inline="always")
+def _free_velocity_by_body_into(
+    model, drives, bi, bf, spatial, system, held, h, q, nu, q_ref, u, dofs, count, inv, rhs, nu_free, q_ref_new, a, mass_nu, gyro, R, I
+):  # fmt: skip
+    """Stage assemble, without contacts, on the caller's arrays: nu_free = A^-1 rhs, q_ref+ in
+    q_ref_new and the force-limited drives' a (`_drives_into`); rhs, mass_nu, gyro (nv each), R, I
+    (3 x 3) are scratch. held: M nu and A^-1 rhs by the System's constant M and A^-1 where it
+    holds them (`_free_velocity`), else body by body (`_pgs_step`: M(q) nu, and A^-1 from its
+    body blocks dofs, count, inv: `models.contact_pgs.body_blocks`); spatial: with the
+    gyroscopic term."""
+    nv = nu.shape[0]
+    quasistatic = model.eps == 0.0
+    eps = model.quasistatic_inertia if quasistatic else model.eps
     for v in range(nv):
         rhs[v] = system.rhs_const[v]
     if not quasistatic:
         if held and system.M_const.shape[0] == nv:
             add_product(rhs, system.M_const, nu, eps)
         else:
-            _mass_times_into(bi, bf, q, nu, W.mass_nu, W.R, W.I)
+            _mass_times_into(bi, bf, q, nu, mass_nu, R, I)
             for v in range(nv):
-                rhs[v] += eps * W.mass_nu[v]
-        _gyroscopic_into(bi, bf, q, nu, W.gyro, W.R)
-        he = h * eps
-        for v in range(nv):
-            rhs[v] += he * W.gyro[v]
-    _drives_into(h, q, q_ref, u, drives, rhs, R.q_ref[side], R.drive_a)
+                rhs[v] += eps * mass_nu[v]
+        if spatial:
+            _gyroscopic_into(bi, bf, q, nu, gyro, R)
+            he = h * eps
+            for v in range(nv):
+                rhs[v] += he * gyro[v]
+    _drives_into(h, q, q_ref, u, drives, rhs, q_ref_new, a)
     if held and system.Ainv.shape[0] == nv:
         for v in range(nv):
             nu_free[v] = 0.0
         add_product(nu_free, system.Ainv, rhs, 1.0)
     else:
         block_solve_into(dofs, count, inv, rhs, nu_free)
-    return True, dofs, count, inv
 
 
 @numba.njit(cache=True, _nrt=False)
