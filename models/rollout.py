@@ -445,10 +445,11 @@ def rollout_kernel(
     spatial_cap = min(slots, SPATIAL_WARM_CONTACTS) if dimension == 3 and not limited and not kinematic else 0
     pgs_cap = slots if _may_take_spatial_pgs(dimension == 3, limited, model, solver, slots) else 0
     R = warm_results(max(planar_cap, spatial_cap, pgs_cap), nv, q.shape[0], v_index.shape[0], basis, delta_n.shape[0])
-    B, W, side = planar_warm_buffers(planar_cap, R), spatial_warm_buffers(spatial_cap, directions, bi.shape[0], R), 0
-    # the whole step (PART_STEP) as an int64, not a literal: the warm steps compile once for this
-    # kernel, stage_loop and Python's calls (a literal argument is a specialization of its own)
-    whole = np.int64(PART_STEP)
+    B, W = planar_warm_buffers(planar_cap, R), spatial_warm_buffers(spatial_cap, directions, bi.shape[0], R)
+    # the side and the whole step (PART_STEP) as int64s, not literals: the warm steps compile once
+    # for this kernel, stage_loop and Python's calls (a literal argument is a specialization of its
+    # own, compiled even where it is only the type inference's first guess at a loop's variable)
+    side, whole = np.int64(0), np.int64(PART_STEP)
     P = pgs_work(pgs_cap, _pgs_directions(model, True))
     free_q, free_nu, free_q_ref, free_side = np.empty((2, q.shape[0])), np.empty((2, nv)), np.empty((2, q_ref.shape[0])), 0
     eps_eff = model.quasistatic_inertia if eps == 0.0 else eps

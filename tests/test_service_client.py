@@ -6,10 +6,10 @@ from __future__ import annotations
 
 import json
 
+import httpx
 import pytest
 
 pytest.importorskip("fastapi")
-pytest.importorskip("httpx")
 
 from planner.cli import main  # noqa: E402
 from planner.service.client import Client, ServiceError, job_request  # noqa: E402
@@ -105,6 +105,42 @@ def test_the_client_cancels_and_reports_refusals(idle):
     with Client(idle) as anonymous, pytest.raises(ServiceError) as denied:
         anonymous.jobs()
     assert denied.value.status == 401 and "--token" in str(denied.value)
+
+
+def test_a_connection_closed_before_any_answer_is_tried_once_more_where_repeating_is_safe():
+    """The keep-alive race: a pooled connection the server closes as a request goes out gives
+    no response at all (httpx.RemoteProtocolError). A GET, a DELETE and a POST with its
+    Idempotency-Key go once more (the POST with the same key); a second drop, or a POST
+    without a key, is the service unreachable (status None)."""
+    seen = []  # (method, path, Idempotency-Key) of every request sent
+    drops = {"left": 0}
+
+    def answer(request: httpx.Request) -> httpx.Response:
+        seen.append((request.method, request.url.path, request.headers.get("Idempotency-Key")))
+        if drops["left"] > 0:
+            drops["left"] -= 1
+            raise httpx.RemoteProtocolError("Server disconnected without sending a response.", request=request)
+        return httpx.Response(200, json={"id": "j1", "state": "queued", "jobs": []})
+
+    with Client("http://127.0.0.1:9") as client:
+        client._http = httpx.Client(base_url=client.url, transport=httpx.MockTransport(answer))
+        for call, method in ((lambda: client.get("j1"), "GET"), (lambda: client.cancel("j1"), "DELETE")):
+            seen.clear()
+            drops["left"] = 1
+            assert call()["id"] == "j1" and [m for m, _, _ in seen] == [method, method]
+        seen.clear()
+        drops["left"] = 1
+        assert client.submit_request({"kind": "plan"}, idempotency_key="k7")["id"] == "j1"
+        assert seen == [("POST", "/jobs", "k7"), ("POST", "/jobs", "k7")]  # one key: never a second job
+        drops["left"] = 2
+        with pytest.raises(ServiceError) as twice:
+            client.jobs()
+        assert twice.value.status is None and "cannot reach the service" in str(twice.value)
+        seen.clear()
+        drops["left"] = 1
+        with pytest.raises(ServiceError) as unkeyed:
+            client._request("POST", "/jobs", json={})
+        assert unkeyed.value.status is None and len(seen) == 1  # not sent again: it might make a second job
 
 
 @pytest.mark.parametrize(

@@ -38,6 +38,9 @@ EVENTS_READ_TIMEOUT_S = 60.0
 #: How long an events stream is reconnected (with Last-Event-ID) while the server cannot be reached.
 RECONNECT_FOR_S = 60.0
 RECONNECT_PAUSE_S = 0.5
+#: Seconds an idle connection is kept for the next request: under uvicorn's 5 s (its
+#: timeout_keep_alive), so the client lets a connection go before the server closes it.
+KEEPALIVE_S = 4.0
 
 
 class ServiceError(Exception):
@@ -121,7 +124,8 @@ class Client:
             raise ServiceError(f"{url}: the service's address must start with http:// or https://")
         self.url = url.rstrip("/")
         headers = {"Authorization": f"Bearer {token}"} if token else {}
-        self._http = httpx.Client(base_url=self.url, headers=headers, timeout=timeout)
+        limits = httpx.Limits(keepalive_expiry=KEEPALIVE_S)
+        self._http = httpx.Client(base_url=self.url, headers=headers, timeout=timeout, limits=limits)
 
     def close(self) -> None:
         self._http.close()
@@ -133,10 +137,20 @@ class Client:
         self.close()
 
     def _request(self, method: str, path: str, **kwargs) -> httpx.Response:
-        try:
-            response = self._http.request(method, path, **kwargs)
-        except httpx.TransportError as exc:
-            raise ServiceError(f"cannot reach the service at {self.url}: {exc or type(exc).__name__}") from None
+        # a kept-alive connection the server closed as the request went out (no response at all:
+        # RemoteProtocolError) is not the service failing: where sending the request again is
+        # safe (a GET or DELETE, a POST with its Idempotency-Key), it goes once more, on a new
+        # connection
+        repeatable = method in ("GET", "DELETE") or "Idempotency-Key" in kwargs.get("headers", {})
+        for attempt in (0, 1):
+            try:
+                response = self._http.request(method, path, **kwargs)
+                break
+            except httpx.RemoteProtocolError as exc:
+                if not repeatable or attempt == 1:
+                    raise ServiceError(f"cannot reach the service at {self.url}: {exc or type(exc).__name__}") from None
+            except httpx.TransportError as exc:
+                raise ServiceError(f"cannot reach the service at {self.url}: {exc or type(exc).__name__}") from None
         if response.status_code >= 400:
             retry = response.headers.get("retry-after")
             raise ServiceError(
