@@ -137,20 +137,19 @@ class Client:
         self.close()
 
     def _request(self, method: str, path: str, **kwargs) -> httpx.Response:
-        # a kept-alive connection the server closed as the request went out (no response at all:
-        # RemoteProtocolError) is not the service failing: where sending the request again is
-        # safe (a GET or DELETE, a POST with its Idempotency-Key), it goes once more, on a new
-        # connection
+        # a pooled connection that died under the request (the server closed it as the request
+        # went out: RemoteProtocolError, "Server disconnected without sending a response"; or its
+        # socket is gone: "Bad file descriptor") is not the service failing: where sending the
+        # request again is safe (a GET or DELETE, a POST with its Idempotency-Key), it goes once
+        # more, on a new connection. A timeout is not retried: it would double the wait.
         repeatable = method in ("GET", "DELETE") or "Idempotency-Key" in kwargs.get("headers", {})
         for attempt in (0, 1):
             try:
                 response = self._http.request(method, path, **kwargs)
                 break
-            except httpx.RemoteProtocolError as exc:
-                if not repeatable or attempt == 1:
-                    raise ServiceError(f"cannot reach the service at {self.url}: {exc or type(exc).__name__}") from None
             except httpx.TransportError as exc:
-                raise ServiceError(f"cannot reach the service at {self.url}: {exc or type(exc).__name__}") from None
+                if not repeatable or attempt == 1 or isinstance(exc, httpx.TimeoutException):
+                    raise ServiceError(f"cannot reach the service at {self.url}: {exc or type(exc).__name__}") from None
         if response.status_code >= 400:
             retry = response.headers.get("retry-after")
             raise ServiceError(
