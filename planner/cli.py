@@ -751,12 +751,17 @@ def run_with_progress(rung, scenario, state, controls, durations, h, *, live: bo
             bar.stop()
 
 
+#: What a run with numba's cache cold says first. `make demo` from an empty cache took 27.8 min on
+#: this 2-core machine with another compile on the other core (2026-11-27; docs/measurements.md).
+COMPILE_NOTE = "compiling the physics kernels (first run only: about 25 minutes on two cores)"
+
+
 def announce_compile() -> None:
     """Say so (on stderr, with --json too) before the first call compiles the physics kernels
     (numba's cache is cold): otherwise the first run sits silent for minutes."""
     if kernels_cached():
         return
-    print("compiling the physics kernels (first run only, about 3.5 minutes)", file=sys.stderr, flush=True)
+    print(COMPILE_NOTE, file=sys.stderr, flush=True)
 
 
 def kernels_cached() -> bool:
