@@ -23,7 +23,7 @@ demo: $(VENV)/.installed
 	@mkdir -p $(OUT)
 	$(VENV)/bin/ladder check scenarios/two_finger_triangle.toml --out $(OUT)/two_finger_triangle.check.json
 	@for f in scenarios/*.toml; do $(VENV)/bin/ladder check $$f --json > /dev/null && echo "ok: $$f"; done
-	@echo "simulating the paper's scene up the model family (the first run compiles the kernels, about 25 minutes on two cores)"
+	@echo "simulating the paper's scene up the model family (ladder says so first when it must compile the kernels)"
 	@for rung in kinematic quasistatic-rigid dynamic-compliant; do \
 		$(VENV)/bin/ladder simulate scenarios/two_finger_triangle.toml --model $$rung --param v1=0.8 \
 			--json --plot $(OUT)/two_finger_triangle.$$rung.png > $(OUT)/two_finger_triangle.$$rung.json || exit $$?; \

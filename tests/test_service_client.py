@@ -6,10 +6,10 @@ from __future__ import annotations
 
 import json
 
-import httpx
 import pytest
 
 pytest.importorskip("fastapi")
+httpx = pytest.importorskip("httpx")
 
 from planner.cli import main  # noqa: E402
 from planner.service.client import Client, ServiceError, job_request  # noqa: E402
