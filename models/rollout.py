@@ -66,7 +66,6 @@ from models.stepper import (
     basis_table,
     contact_stage,
     dynamics_step,
-    dynamics_step_inline,
     free_step,
     free_step_into,
     gravity_force,
@@ -495,8 +494,7 @@ def rollout_kernel(
                 law_speeds(S, law, q, q_index, controls[k], u)
             # stages solve and integrate: the rung's step kernel (in line: arguments of an inlined
             # stage are reference-counted each step, which slowed the cheap rungs by about 10%);
-            # the contact step is numba-inlined (`dynamics_step_inline`): a call of it counted
-            # its ~30 arrays in and out every step
+            # the general contact step is a call of `dynamics_step` (not inlined: compiled once)
             p_t, dn2, dt2, sw = no_friction, delta_n, delta_t, 0
             if kinematic:
                 q2, nu2, q_ref2, st, piv, res = kinematic_step(
@@ -550,7 +548,7 @@ def rollout_kernel(
                     side = 1 - side  # the next warm step writes the other side, not this state
                     st, piv, p_n, p_t = StepStatus.OK.value, 0, R.impulses[:nc], R.frictions[:nc]
                 else:
-                    r = dynamics_step_inline(
+                    r = dynamics_step(
                         model, step_solver, D, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis
                     )
                     q2, nu2, q_ref2, dn2, dt2, st, piv, res, size, p_n, p_t, sw, basis = r

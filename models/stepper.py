@@ -664,10 +664,23 @@ def dynamics_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_
     input's where no LCP was solved). A force-limited drive's impulse is solved with the contacts, by
     Lemke. On the PGS path residual is `models.contact_pgs`'s and lcp_size the number of
     scalar impulses; where auto falls back to Lemke, sweeps still counts PGS's.
+
+    The step's once-a-step links (`_lemke_step`, `_pgs_step`, `_free_velocity`, `_contact_solve`,
+    `contact_lcp`) are inlined: a call reference-counts each of the ~30 arrays it is passed,
+    which was a fifth to a third of a contact step (docs/measurements.md, profiled). This step
+    itself is called, by the rollout too (its general path: a contact episode's first step, a
+    changed basis): inlined there it was compiled twice, about ten minutes of a first run's
+    compile, where its call costs no time the rollouts show (docs/measurements.md).
     """
-    return dynamics_step_inline(
-        model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis
-    )
+    sweeps = 0
+    if _uses_pgs(model, solver, nc, any_limited(drives.max_force)):
+        out = _pgs_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis)
+        if out.status == StepStatus.OK or solver.method == SOLVER_PGS or model.exact_cone:
+            return out  # (no LCP of the exact cone to fall back on)
+        sweeps = out.sweeps  # auto falls back on Lemke; the result counts PGS's sweeps
+    # one call site: numba compiles an inlined function anew at each (two doubled the step's
+    # compile time)
+    return _lemke_step(model, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, basis, sweeps)
 
 
 @numba.njit(cache=True, inline="always")
@@ -769,25 +782,6 @@ def contact_stage(part, model, solver, drives, tables, system, h, q, nu, q_ref, 
         return n
     z, w, status, pivots, basic_z, _ = lemke_warm_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1), guess, WARM_TOLERANCE)
     return n if status == STATUS_SOLVED or status == STATUS_SOLVED_INACCURATE else 0
-
-
-# The step's once-a-step links (dynamics_step_inline, _lemke_step, _pgs_step, _free_velocity,
-# _contact_solve, contact_lcp) are inlined: a call reference-counts each of the ~30 arrays it
-# is passed, which was a fifth to a third of a contact step (docs/measurements.md, profiled).
-@numba.njit(cache=True, inline="always")
-def dynamics_step_inline(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis):
-    """`dynamics_step` with a basis table (never None), inlined into its caller: the rollout
-    calls it so, since a call reference-counts every array of the ~30 it is passed (the
-    step's per-step once-a-step helpers below are inlined for the same reason)."""
-    if _uses_pgs(model, solver, nc, any_limited(drives.max_force)):
-        out = _pgs_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis)
-        if out.status == StepStatus.OK or solver.method == SOLVER_PGS or model.exact_cone:
-            return out  # (no LCP of the exact cone to fall back on)
-        r = _lemke_step(model, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, basis)
-        return StepResult(
-            r.q, r.nu, r.q_ref, r.delta_n, r.delta_t, r.status, r.pivots, r.residual, r.lcp_size, r.p_n, r.p_t, out.sweeps, r.basis
-        )
-    return _lemke_step(model, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, basis)
 
 
 @numba.njit(cache=True, inline="always")
@@ -917,13 +911,16 @@ def _active_into(W_n, nc, active):
 
 
 @numba.njit(cache=True, inline="always")
-def _lemke_step(model, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, basis):
-    """dynamics_step with the dense LCP solved by Lemke (see `_contact_solve`)."""
+def _lemke_step(model, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, basis, sweeps):
+    """dynamics_step with the dense LCP solved by Lemke (see `_contact_solve`); sweeps: PGS's,
+    where auto fell back on Lemke (else 0), as the result's."""
     # A is block diagonal by body: its blocks' inverses serve the free velocity (when A changes
     # with q) and the Delassus matrix (`_delassus_into`)
     dofs, count, inv, ok = _blocks(tables.bi, system)
     if not ok:
-        return StepResult(q, nu, q_ref, delta_n, delta_t, StepStatus.SINGULAR.value, 0, 0.0, 0, np.zeros(nc), np.zeros((nc, 2)), 0, basis)
+        return StepResult(
+            q, nu, q_ref, delta_n, delta_t, StepStatus.SINGULAR.value, 0, 0.0, 0, np.zeros(nc), np.zeros((nc, 2)), sweeps, basis
+        )
     nu_free, q_ref_new, drive_a = _free_velocity(model, drives, tables, system, h, q, nu, q_ref, u, dofs, count, inv)
     nu_new = nu_free
     delta_n_new = delta_n  # rigid models keep them zero; compliant ones get new arrays below
@@ -964,11 +961,13 @@ def _lemke_step(model, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t
         delta_n_new = np.zeros_like(delta_n)
         delta_t_new = np.zeros_like(delta_t)
     if status != StepStatus.OK:
-        return StepResult(q, nu, q_ref, delta_n, delta_t, status, pivots, residual, size, impulses, frictions, 0, basis)
+        return StepResult(q, nu, q_ref, delta_n, delta_t, status, pivots, residual, size, impulses, frictions, sweeps, basis)
     q_new, bad = _integrate_checked(tables.bi, model.theta, h, q, nu, nu_new)
     if bad != StepStatus.OK:
-        return StepResult(q, nu, q_ref, delta_n, delta_t, bad, pivots, residual, size, impulses, frictions, 0, basis)
-    return StepResult(q_new, nu_new, q_ref_new, delta_n_new, delta_t_new, status, pivots, residual, size, impulses, frictions, 0, basis_new)
+        return StepResult(q, nu, q_ref, delta_n, delta_t, bad, pivots, residual, size, impulses, frictions, sweeps, basis)
+    return StepResult(
+        q_new, nu_new, q_ref_new, delta_n_new, delta_t_new, status, pivots, residual, size, impulses, frictions, sweeps, basis_new
+    )
 
 
 @numba.njit(cache=True, inline="always")
