@@ -1021,7 +1021,10 @@ def _pgs_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, d
     )
 
 
-@numba.njit(cache=True, inline="always")
+# called, not inlined (as `_planar_lcp`): numba compiles an inlined function anew at each call
+# site, and the step's compile grows about as its size squared; once a general step, its call's
+# reference counts are not seen beside the build
+@numba.njit(cache=True)
 def contact_lcp(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, drives, drive_a):
     """Assemble the contact LCP of the active contacts and the force-limited drives.
 
@@ -1378,7 +1381,7 @@ def _drive_rows(Mlcp, qlcp, h, first_row, first_slack, lim, nl, kp, kd, max_forc
         qlcp[sx] = 2.0 * P * scale
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)  # called, not inlined (see `contact_lcp`)
 def _planar_lcp(model, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t):
     """`contact_lcp` for the planar case (`_planar_case`): every active contact with friction
     rows (its normal generator k, its tangent nc + k, the directions +t and -t), no force-limited
