@@ -665,12 +665,12 @@ def dynamics_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_
     Lemke. On the PGS path residual is `models.contact_pgs`'s and lcp_size the number of
     scalar impulses; where auto falls back to Lemke, sweeps still counts PGS's.
 
-    The step's once-a-step links (`_lemke_step`, `_pgs_step`, `_free_velocity`, `_contact_solve`,
-    `contact_lcp`) are inlined: a call reference-counts each of the ~30 arrays it is passed,
-    which was a fifth to a third of a contact step (docs/measurements.md, profiled). This step
-    itself is called, by the rollout too (its general path: a contact episode's first step, a
-    changed basis): inlined there it was compiled twice, about ten minutes of a first run's
-    compile, where its call costs no time the rollouts show (docs/measurements.md).
+    The step's once-a-step links (`_lemke_step`, `_pgs_step`, `_free_velocity`, `_contact_solve`)
+    are inlined: a call reference-counts each of the ~30 arrays it is passed, a fifth to a third
+    of a contact step when profiled (docs/measurements.md). This step, by the rollout too (its
+    general path: a contact episode's first step, a changed basis), and the LCP's builds
+    (`contact_lcp`, `_planar_lcp`) are called: inlined, they were compiled anew at each site,
+    minutes of a first run's compile, where their calls cost no time the rollouts show.
     """
     sweeps = 0
     if _uses_pgs(model, solver, nc, any_limited(drives.max_force)):
