@@ -751,8 +751,8 @@ def run_with_progress(rung, scenario, state, controls, durations, h, *, live: bo
             bar.stop()
 
 
-#: What a run with numba's cache cold says first. `make demo` from an empty cache took 27.8 min on
-#: this 2-core machine with another compile on the other core (2026-11-27; docs/measurements.md).
+#: What a run with numba's cache cold says first. `make demo` from an empty cache took 10.5 min on
+#: this 2-core machine with another compile on the other core (579a28d; docs/measurements.md).
 COMPILE_NOTE = "compiling the physics kernels (first run only: about 10 minutes on two cores)"
 
 
