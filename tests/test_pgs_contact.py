@@ -188,7 +188,19 @@ def test_sliding_box_decelerates_at_mu_g(tmp_path, solver):
     assert abs(result.state.q[1] - 0.05) < 1e-9 and abs(result.state.q[2]) < 1e-9  # flat on the plane
 
 
-# ----------------------------------------------------------------------------- in space
+@pytest.mark.parametrize("speed", [0.0, 1.0])
+def test_one_contact_is_solved_by_the_first_sweep_and_pgs_stops_there(tmp_path, speed):
+    """A disc on the plane, at rest or sliding: its one contact's normal passes through the
+    centre, so friction does not move the normal velocity, and the first sweep's two exact
+    minimisers solve the step. PGS stops after that sweep: its residual, recomputed after the
+    first sweep, decides (a rule that waited for a sweep without change took two)."""
+    mu, m = 0.5, 2.0
+    sc = scene(tmp_path, [body("disc", disc_shape(0.1), 0.0, 0.1, mass=m, inertia=0.5 * m * 0.01)], mu=mu)
+    frames, _, out = step(sc, "dynamic-rigid", "pgs", sc.start, np.array([speed, 0.0, 0.0]))
+    assert out.status == StepStatus.OK and out.sweeps == 1
+    assert out.p_n.sum() == pytest.approx(m * G * H, rel=1e-12)
+    friction_x = float(np.sum(out.p_t[:, 0] * frames.t[:, 0]))
+    assert friction_x == pytest.approx(-mu * m * G * H if speed else 0.0, rel=1e-12, abs=1e-15)
 
 
 def test_box_on_the_table_rests_with_pgs():
