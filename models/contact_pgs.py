@@ -764,8 +764,9 @@ def _sweeps(
 ):
     """PGS sweeps, in place on (p_n, f, v), until the recomputed residual (relative to the
     largest impulse; recomputed when the sweep's change predicts it passes: `RESIDUAL_CHECK`)
-    is below tolerance, or max_sweeps. Returns (status, sweeps, residual), the residual recomputed at the end when
-    not converged (NON_FINITE when it, or a sweep's change, is not finite)."""
+    is below tolerance, or max_sweeps. Returns (status, sweeps, residual), the residual
+    recomputed at the end when not converged (NON_FINITE when it, or a sweep's change, is not
+    finite)."""
     status = PgsStatus.NOT_CONVERGED.value
     sweeps = 0
     residual = np.inf

@@ -203,6 +203,9 @@ def test_one_contact_is_solved_by_the_first_sweep_and_pgs_stops_there(tmp_path, 
     assert friction_x == pytest.approx(-mu * m * G * H if speed else 0.0, rel=1e-12, abs=1e-15)
 
 
+# ----------------------------------------------------------------------------- in space
+
+
 def test_box_on_the_table_rests_with_pgs():
     sc = load_scenario(SCENARIOS / "box_push_3d.toml")
     rung = with_solver(sc, "dynamic-rigid", "pgs")
