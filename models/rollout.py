@@ -193,6 +193,33 @@ def _keep_warm(nc, c_slot, p_n, p_t, warm_n, warm_t, warm_slots, n_warm):
 
 
 @numba.njit(cache=True, _nrt=False)  # a call without numba's runtime: no array argument reference-counted
+def _keep_warm_world(nc, c_slot, p_t, c_t, c_o, warm_w, warm_slots, n_warm):
+    """In space, the PGS warm start's friction impulses kept by slot in world coordinates
+    (warm_w, (slots, 3); the previous step's slots reset), for `_warm_in_frames`. Call before
+    `_keep_warm`, which rewrites warm_slots."""
+    for i in range(n_warm):
+        s = warm_slots[i]
+        warm_w[s, 0] = warm_w[s, 1] = warm_w[s, 2] = 0.0
+    for i in range(nc):
+        s = c_slot[i]
+        for a in range(3):
+            warm_w[s, a] = p_t[i, 0] * c_t[i, a] + p_t[i, 1] * c_o[i, a]
+
+
+@numba.njit(cache=True, _nrt=False)
+def _warm_in_frames(nc, c_slot, c_t, c_o, warm_w, warm_t):
+    """In space, the PGS warm start's friction impulses in this step's contact frames: the kept
+    world impulses (`_keep_warm_world`) on each contact's t and o. The tangent basis follows the
+    normal discontinuously (box_push_3d's pusher normal along -x: t flips between +z and -z with
+    the sign of the normal's round-off), so impulses kept as (t, o) components would start a
+    step with its friction reversed (docs/measurements.md)."""
+    for i in range(nc):
+        s = c_slot[i]
+        warm_t[s, 0] = warm_w[s, 0] * c_t[i, 0] + warm_w[s, 1] * c_t[i, 1] + warm_w[s, 2] * c_t[i, 2]
+        warm_t[s, 1] = warm_w[s, 0] * c_o[i, 0] + warm_w[s, 1] * c_o[i, 1] + warm_w[s, 2] * c_o[i, 2]
+
+
+@numba.njit(cache=True, _nrt=False)  # a call without numba's runtime: no array argument reference-counted
 def _record_forces(c_pair, c_n, c_t, c_o, p_n, p_t, h, pair_force, pair_wrench):
     """Stage record: each pair's normal force and world-frame force on its body B over the
     step. Returns whether some contact carried a positive normal impulse."""
@@ -400,7 +427,8 @@ def rollout_kernel(
     contact problems are solved). t0: the time of the start state, where scripted obstacles
     are (their poses are written into S's pose tables as time goes on: pass a scene copy of
     the caller's own when the scene has one). PGS warm starts travel from step to step within the call
-    (by contact slot) and start cold in every call, so a rollout depends only on its inputs.
+    (by contact slot; in space their friction in world coordinates, `_warm_in_frames`) and start
+    cold in every call, so a rollout depends only on its inputs.
     Returns a `RolloutOutput`.
     """
     bi, bf, pi, verts, nv, dimension = S.bi, S.bf, S.pi, S.verts, S.nv, S.dimension
@@ -412,6 +440,7 @@ def rollout_kernel(
     c_pair, c_psi, c_slot, W_n, W_t, W_o, c_bias = contacts
     c_n, c_t, c_o, c_pa, c_pb, warm_n, warm_t, warm_slots = _contact_frames(c_psi.shape[0])
     n_warm, keep_warm = 0, solver.method != SOLVER_LEMKE  # PGS warm start: by slot
+    warm_w = np.zeros((c_psi.shape[0], 3))  # in space, its friction in world coordinates
     # auto: once PGS does not converge on a step (a stack: coupled contacts) the rest of the
     # call solves with Lemke, instead of paying PGS's sweeps before Lemke every step
     lemke = Solver(SOLVER_LEMKE, solver.tolerance, solver.max_sweeps, solver.auto_contacts)
@@ -521,6 +550,8 @@ def rollout_kernel(
                 # while contacts persist, a warm step (`spatial_warm_step`, `planar_warm_step`);
                 # else the general one
                 warm, pgs = WARM_NOT_TAKEN, False
+                if keep_warm and dimension == 3:
+                    _warm_in_frames(nc, c_slot, c_t, c_o, warm_w, warm_t)
                 if _may_take_spatial_pgs(dimension == 3, limited, model, step_solver, nc):
                     pgs = True
                     warm, size, res, sw = spatial_pgs_step(
@@ -555,6 +586,8 @@ def rollout_kernel(
                 if step_solver.method == SOLVER_AUTO and sw >= solver.max_sweeps:
                     step_solver = lemke
                 if keep_warm and st == StepStatus.OK:
+                    if dimension == 3:
+                        _keep_warm_world(nc, c_slot, p_t, c_t, c_o, warm_w, warm_slots, n_warm)
                     n_warm = _keep_warm(nc, c_slot, p_n, p_t, warm_n, warm_t, warm_slots, n_warm)
             sweeps, lcp_solves, max_size, pivots, max_residual = _tally(
                 sweeps, lcp_solves, max_size, pivots, max_residual, sw, size, piv, res

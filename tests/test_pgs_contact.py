@@ -18,6 +18,7 @@ import pytest
 
 from models.contact import CONTACT_MARGIN, ContactSet, contact_frames
 from models.contact_pgs import disk_minimiser, polygon_minimiser
+from models.rollout import _keep_warm_world, _warm_in_frames
 from models.rungs import RUNGS, compiled, rung_for
 from models.scenario import ScenarioError, load_scenario
 from models.schema import CONTACT_SOLVERS
@@ -227,6 +228,37 @@ def test_box_sliding_on_the_table_decelerates_at_mu_g(solver):
     assert result.status == "ok"
     assert result.state.nu[sc.velocities.index("box.x")] == pytest.approx(0.5 - steps * mu * G * H, abs=1e-6)
     assert abs(result.state.nu[sc.velocities.index("box.y")]) < 1e-9  # the cone's vertex lies along -x
+
+
+def test_the_warm_friction_is_kept_in_world_coordinates_across_a_flipped_tangent_basis():
+    p_t = np.array([[0.2, -0.1]])  # (t, o) components of slot 3's friction impulse
+    t, o = np.array([[0.0, 0.0, 1.0]]), np.array([[0.0, 1.0, 0.0]])
+    warm_w, warm_t, c_slot = np.zeros((5, 3)), np.zeros((5, 2)), np.array([3])
+    _keep_warm_world(1, c_slot, p_t, t, o, warm_w, np.zeros(5, np.int64), 0)
+    np.testing.assert_allclose(warm_w[3], 0.2 * t[0] - 0.1 * o[0])
+    _warm_in_frames(1, c_slot, -t, -o, warm_w, warm_t)  # the next step's basis flipped
+    np.testing.assert_array_equal(warm_t[3], [-0.2, 0.1])  # the same world impulse
+    _keep_warm_world(0, c_slot, p_t, t, o, warm_w, c_slot, 1)  # the slot not met again: reset
+    assert not warm_w.any()
+
+
+@pytest.mark.parametrize("exact", [True, False])
+def test_the_push_warm_starts_pgs_although_the_pushers_tangent_basis_flips(exact):
+    """box_push_3d's push from the Lemke rung's state (as `ladder bench` times it), with PGS: the
+    pusher's normal lies along -x, where the tangent basis flips between t = +z and -z with the
+    sign of the normal's round-off, and the pusher's friction on the box is vertical, at its
+    cone's edge. The warm start keeps friction in world coordinates, so every step after the
+    call's cold first one starts from the last step's impulses and takes about one sweep; kept
+    as (t, o) components, the friction started reversed at every flip, and the steps took 7, 8,
+    2 sweeps over and over (4.67 a step over the push, the box's speed swinging with them)."""
+    sc = load_scenario(SCENARIOS / "box_push_3d.toml")
+    base = rung_for(sc, "dynamic-rigid")
+    rung = replace(base, solver=contact_solver("pgs"), model=base.model._replace(exact_cone=exact))
+    u = np.array([[sc.spec.task.policy.speeds.get(name, 0.0) for name in sc.actuated]])
+    start = base.rollout(sc, base.initial_state(sc), u, [0.4], H, stop_at_outcome=False).state
+    out = rung.rollout(sc, start, u, [0.5], H, stop_at_outcome=False)
+    assert out.status == "ok" and out.steps == out.force_steps == 500
+    assert out.sweeps <= 10 + 1.2 * 499  # the cold first step, then the warm ones
 
 
 @pytest.mark.parametrize("d", [3, 4, 8])
