@@ -176,40 +176,33 @@ def _assemble(bi, bf, pi, dimension, q, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, W
             jacobian_at(bi, pi, pos, nc, c_pair, c_o, c_pa, c_pb, W_o)
 
 
-@numba.njit(cache=True, inline="always")
-def _keep_warm(nc, c_slot, p_n, p_t, warm_n, warm_t, warm_slots, n_warm):
-    """PGS warm start for the next step: this step's impulses by slot (the previous step's
-    slots reset, not all of them). Returns the number of slots written."""
-    for i in range(n_warm):
-        warm_n[warm_slots[i]] = 0.0
-        warm_t[warm_slots[i], 0] = 0.0
-        warm_t[warm_slots[i], 1] = 0.0
-    for i in range(nc):
-        warm_slots[i] = c_slot[i]
-        warm_n[c_slot[i]] = p_n[i]
-        warm_t[c_slot[i], 0] = p_t[i, 0]
-        warm_t[c_slot[i], 1] = p_t[i, 1]
-    return nc
-
-
 @numba.njit(cache=True, _nrt=False)  # a call without numba's runtime: no array argument reference-counted
-def _keep_warm_world(nc, c_slot, p_t, c_t, c_o, warm_w, warm_slots, n_warm):
-    """In space, the PGS warm start's friction impulses kept by slot in world coordinates
-    (warm_w, (slots, 3); the previous step's slots reset), for `_warm_in_frames`. Call before
-    `_keep_warm`, which rewrites warm_slots."""
+def _keep_warm(spatial, nc, c_slot, p_n, p_t, c_t, c_o, warm_n, warm_t, warm_w, warm_slots, n_warm):
+    """PGS warm start for the next step: this step's impulses by slot (the previous step's
+    slots reset, not all of them); in space the friction also in world coordinates (warm_w,
+    (slots, 3), from the step's frames c_t, c_o), which `_warm_in_frames` puts in the next
+    step's frames. Returns the number of slots written."""
     for i in range(n_warm):
         s = warm_slots[i]
+        warm_n[s] = 0.0
+        warm_t[s, 0] = warm_t[s, 1] = 0.0
         warm_w[s, 0] = warm_w[s, 1] = warm_w[s, 2] = 0.0
     for i in range(nc):
         s = c_slot[i]
-        for a in range(3):
-            warm_w[s, a] = p_t[i, 0] * c_t[i, a] + p_t[i, 1] * c_o[i, a]
+        warm_slots[i] = s
+        warm_n[s] = p_n[i]
+        warm_t[s, 0] = p_t[i, 0]
+        warm_t[s, 1] = p_t[i, 1]
+        if spatial:
+            for a in range(3):
+                warm_w[s, a] = p_t[i, 0] * c_t[i, a] + p_t[i, 1] * c_o[i, a]
+    return nc
 
 
 @numba.njit(cache=True, _nrt=False)
 def _warm_in_frames(nc, c_slot, c_t, c_o, warm_w, warm_t):
     """In space, the PGS warm start's friction impulses in this step's contact frames: the kept
-    world impulses (`_keep_warm_world`) on each contact's t and o. The tangent basis follows the
+    world impulses (`_keep_warm`) on each contact's t and o. The tangent basis follows the
     normal discontinuously (box_push_3d's pusher normal along -x: t flips between +z and -z with
     the sign of the normal's round-off), so impulses kept as (t, o) components would start a
     step with its friction reversed (docs/measurements.md)."""
@@ -294,10 +287,11 @@ def _start_system(S, D, model, h, q):
 @numba.njit(cache=True)
 def _contact_frames(cap):
     """Per-contact buffers of a rollout, allocated once: frames n, t, o and points pa, pb
-    (cap, 3), and the PGS warm start by slot (warm_n, warm_t, the slots last written)."""
+    (cap, 3), and the PGS warm start by slot (warm_n, warm_t, in space warm_w: `_keep_warm`;
+    the slots last written)."""
     c_n, c_t, c_o, c_pa, c_pb = np.zeros((cap, 3)), np.zeros((cap, 3)), np.zeros((cap, 3)), np.zeros((cap, 3)), np.zeros((cap, 3))
-    warm_n, warm_t, warm_slots = np.zeros(cap), np.zeros((cap, 2)), np.zeros(cap, np.int64)
-    return c_n, c_t, c_o, c_pa, c_pb, warm_n, warm_t, warm_slots
+    warm_n, warm_t, warm_w, warm_slots = np.zeros(cap), np.zeros((cap, 2)), np.zeros((cap, 3)), np.zeros(cap, np.int64)
+    return c_n, c_t, c_o, c_pa, c_pb, warm_n, warm_t, warm_w, warm_slots
 
 
 @numba.njit(cache=True)
@@ -427,7 +421,7 @@ def rollout_kernel(
     contact problems are solved). t0: the time of the start state, where scripted obstacles
     are (their poses are written into S's pose tables as time goes on: pass a scene copy of
     the caller's own when the scene has one). PGS warm starts travel from step to step within the call
-    (by contact slot; in space their friction in world coordinates, `_warm_in_frames`) and start
+    (by contact slot; in space their friction in world coordinates, `_keep_warm`) and start
     cold in every call, so a rollout depends only on its inputs.
     Returns a `RolloutOutput`.
     """
@@ -438,9 +432,8 @@ def rollout_kernel(
         place_scripted(bf, S.base_pos, S.base_quat, t0)
     contacts, first_slot = contact_buffers(pi, nv)  # buffers, allocated once
     c_pair, c_psi, c_slot, W_n, W_t, W_o, c_bias = contacts
-    c_n, c_t, c_o, c_pa, c_pb, warm_n, warm_t, warm_slots = _contact_frames(c_psi.shape[0])
+    c_n, c_t, c_o, c_pa, c_pb, warm_n, warm_t, warm_w, warm_slots = _contact_frames(c_psi.shape[0])
     n_warm, keep_warm = 0, solver.method != SOLVER_LEMKE  # PGS warm start: by slot
-    warm_w = np.zeros((c_psi.shape[0], 3))  # in space, its friction in world coordinates
     # auto: once PGS does not converge on a step (a stack: coupled contacts) the rest of the
     # call solves with Lemke, instead of paying PGS's sweeps before Lemke every step
     lemke = Solver(SOLVER_LEMKE, solver.tolerance, solver.max_sweeps, solver.auto_contacts)
@@ -586,9 +579,7 @@ def rollout_kernel(
                 if step_solver.method == SOLVER_AUTO and sw >= solver.max_sweeps:
                     step_solver = lemke
                 if keep_warm and st == StepStatus.OK:
-                    if dimension == 3:
-                        _keep_warm_world(nc, c_slot, p_t, c_t, c_o, warm_w, warm_slots, n_warm)
-                    n_warm = _keep_warm(nc, c_slot, p_n, p_t, warm_n, warm_t, warm_slots, n_warm)
+                    n_warm = _keep_warm(dimension == 3, nc, c_slot, p_n, p_t, c_t, c_o, warm_n, warm_t, warm_w, warm_slots, n_warm)
             sweeps, lcp_solves, max_size, pivots, max_residual = _tally(
                 sweeps, lcp_solves, max_size, pivots, max_residual, sw, size, piv, res
             )
@@ -738,7 +729,7 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
     tables = SceneTables(bi, bf, pi, S.pf, dimension == 3)
     contacts, first_slot = contact_buffers(pi, nv)
     c_pair, c_psi, c_slot, W_n, W_t, W_o, c_bias = contacts
-    c_n, c_t, c_o, c_pa, c_pb, warm_n, warm_t, warm_slots = _contact_frames(c_psi.shape[0])
+    c_n, c_t, c_o, c_pa, c_pb, warm_n, warm_t, warm_w, warm_slots = _contact_frames(c_psi.shape[0])
     unsupported, pair_psi, _, _, (pos, poses, speed, reach, axis) = _pair_buffers(pi.shape[0], bi.shape[0])
     g_op, g_index, g_lo, g_hi = goal
     u_op, u_index, u_lo, u_hi = unsafe
@@ -810,7 +801,7 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
             r = dynamics_step(model, solver, D, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis)
             if k == 0:  # the warm starts (Lemke's basis, PGS's impulses) of a steady push
                 basis = r.basis
-                _keep_warm(nc, c_slot, r.p_n, r.p_t, warm_n, warm_t, warm_slots, 0)
+                _keep_warm(dimension == 3, nc, c_slot, r.p_n, r.p_t, c_t, c_o, warm_n, warm_t, warm_w, warm_slots, 0)
                 if _may_take_planar_warm(dimension == 2, not rotating, limited, model, solver, nc):
                     args = (model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, side, whole)
                     warm = planar_warm_step(*args)[0] == WARM_DONE

@@ -18,7 +18,7 @@ import pytest
 
 from models.contact import CONTACT_MARGIN, ContactSet, contact_frames
 from models.contact_pgs import disk_minimiser, polygon_minimiser
-from models.rollout import _keep_warm_world, _warm_in_frames
+from models.rollout import _keep_warm, _warm_in_frames
 from models.rungs import RUNGS, compiled, rung_for
 from models.scenario import ScenarioError, load_scenario
 from models.schema import CONTACT_SOLVERS
@@ -233,12 +233,12 @@ def test_box_sliding_on_the_table_decelerates_at_mu_g(solver):
 def test_the_warm_friction_is_kept_in_world_coordinates_across_a_flipped_tangent_basis():
     p_t = np.array([[0.2, -0.1]])  # (t, o) components of slot 3's friction impulse
     t, o = np.array([[0.0, 0.0, 1.0]]), np.array([[0.0, 1.0, 0.0]])
-    warm_w, warm_t, c_slot = np.zeros((5, 3)), np.zeros((5, 2)), np.array([3])
-    _keep_warm_world(1, c_slot, p_t, t, o, warm_w, np.zeros(5, np.int64), 0)
+    warm_n, warm_t, warm_w, c_slot, warm_slots = np.zeros(5), np.zeros((5, 2)), np.zeros((5, 3)), np.array([3]), np.zeros(5, np.int64)
+    n_warm = _keep_warm(True, 1, c_slot, np.array([1.0]), p_t, t, o, warm_n, warm_t, warm_w, warm_slots, 0)
     np.testing.assert_allclose(warm_w[3], 0.2 * t[0] - 0.1 * o[0])
     _warm_in_frames(1, c_slot, -t, -o, warm_w, warm_t)  # the next step's basis flipped
     np.testing.assert_array_equal(warm_t[3], [-0.2, 0.1])  # the same world impulse
-    _keep_warm_world(0, c_slot, p_t, t, o, warm_w, c_slot, 1)  # the slot not met again: reset
+    _keep_warm(True, 0, c_slot, np.array([1.0]), p_t, t, o, warm_n, warm_t, warm_w, warm_slots, n_warm)  # the slot not met again: reset
     assert not warm_w.any()
 
 
