@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -166,14 +167,20 @@ _STATUS_MESSAGES = {
 @numba.njit(cache=True, error_model="numpy")
 def _matvec_plus(M, z, q):
     """w = M z + q with explicit loops (works for any array layout)."""
+    w = np.empty(q.shape[0])
+    _matvec_plus_into(M, z, q, w)
+    return w
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _matvec_plus_into(M, z, q, w):
+    """`_matvec_plus` into the caller's w (at least n entries)."""
     n = q.shape[0]
-    w = np.empty(n)
     for i in range(n):
         s = q[i]
         for j in range(n):
             s += M[i, j] * z[j]
         w[i] = s
-    return w
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -506,6 +513,44 @@ def lemke_kernel(M, q, max_pivots):
     return z, w, status, pivots
 
 
+class LemkeWork(NamedTuple):
+    """Lemke's arrays for LCPs of up to n unknowns (`lemke_work`), so that a caller that solves
+    many (a rollout's warm steps) allocates them once: the tableau's inverse basis, flat (a step
+    views its own size's part, `binv[: n * n].reshape((n, n))`, C-contiguous), and n-vectors."""
+
+    binv: np.ndarray  # (n * n,)
+    qbar: np.ndarray  # (n,) the basic variables' values
+    basis: np.ndarray  # (n,) int: the basic variable of each row
+    d: np.ndarray  # (n,) the entering column
+    mag: np.ndarray  # (n,) its round-off scale
+    hist: np.ndarray  # (n,) each row's round-off scale
+    col: np.ndarray  # (n,) scratch
+    cand: np.ndarray  # (n,) int: the ratio test's rows; the polish's basic set
+    idx: np.ndarray  # (n,) int: a pivot row's nonzeros
+    z: np.ndarray  # (n,) the polish's point
+    w: np.ndarray  # (n,)
+    A: np.ndarray  # (n + 1, n) the polish's elimination
+
+
+@numba.njit(cache=True)
+def lemke_work(n):
+    """`LemkeWork` for LCPs of up to n unknowns."""
+    return LemkeWork(
+        np.empty(n * n),
+        np.empty(n),
+        np.empty(n, np.int64),
+        np.empty(n),
+        np.empty(n),
+        np.empty(n),
+        np.empty(n),
+        np.empty(n, np.int64),
+        np.empty(n, np.int64),
+        np.empty(n),
+        np.empty(n),
+        np.empty((n + 1, n)),
+    )
+
+
 @numba.njit(cache=True, error_model="numpy")
 def _lemke(M, q, max_pivots):
     """`lemke_kernel`, also returning the final basis as flags: basic_z[i] is True where z_i
@@ -513,31 +558,47 @@ def _lemke(M, q, max_pivots):
     meaningless unless the status is STATUS_SOLVED)."""
     n = q.shape[0]
     z = np.zeros(n)
+    w = np.empty(n)
     basic_z = np.zeros(n, np.bool_)
-    if n == 0:
-        return z, np.zeros(0), STATUS_SOLVED, 0, basic_z
-    if _nonnegative(q):
-        return z, _matvec_plus(M, z, q), STATUS_SOLVED, 0, basic_z
+    status, pivots = lemke_into(M, q, max_pivots, lemke_work(n), z, w, basic_z)
+    return z, w, status, pivots, basic_z
 
+
+@numba.njit(cache=True, error_model="numpy")
+def lemke_into(M, q, max_pivots, work, z, w, basic_z):
+    """`_lemke` on the caller's arrays: work (`LemkeWork` for at least n = q.shape[0] unknowns),
+    z, w and basic_z (n entries each, set here). Returns (status, pivots). The same operations
+    in the same order as a solve on arrays of its own: the same bits."""
+    n = q.shape[0]
+    for i in range(n):
+        z[i] = 0.0
+        basic_z[i] = False
+    if n == 0 or _nonnegative(q):
+        _matvec_plus_into(M, z, q, w)
+        return STATUS_SOLVED, 0
     qscale = _max_abs(q)
-    Binv = np.eye(n)
-    qbar = q.copy()
-    basis = np.arange(n)  # basic variable of each row: w_i = i, z_j = n + j, z0 = 2n
-    d = np.empty(n)
-    mag = np.empty(n)
-    hist = np.ones(n)
-    col = np.empty(n)
-    cand = np.empty(n, dtype=np.int64)
-    idx = np.empty(n, dtype=np.int64)
-    entering, zrow = _lemke_first_pivot(Binv, qbar, basis, d, cand, idx, hist, qscale)
+    Binv = work.binv[: n * n].reshape((n, n))
+    qbar, basis, d, mag, hist = work.qbar[:n], work.basis[:n], work.d[:n], work.mag[:n], work.hist[:n]
+    col, cand, idx = work.col[:n], work.cand[:n], work.idx[:n]
+    for i in range(n):
+        for j in range(n):
+            Binv[i, j] = 0.0
+        Binv[i, i] = 1.0
+        qbar[i] = q[i]
+        basis[i] = i  # basic variable of each row: w_i = i, z_j = n + j, z0 = 2n
+        hist[i] = 1.0
+    entering, zrow = _lemke_first_pivot(Binv, qbar, basis, d, cand, idx, hist, qscale, mag)
     status, pivots = _lemke_path(M, Binv, qbar, basis, d, mag, hist, col, cand, idx, entering, zrow, qscale, max_pivots)
-    z = _z_from_basis(basis, qbar, n)
-    w = _matvec_plus(M, z, q)
-    z, w, status = _lemke_polish(M, q, basis, cand, z, w, status)
+    for i in range(n):
+        v = basis[i]
+        if n <= v < 2 * n:
+            z[v - n] = qbar[i]
+    _matvec_plus_into(M, z, q, w)
+    status = _lemke_polish(M, q, basis, work, z, w, status)
     for i in range(n):
         if n <= basis[i] < 2 * n:
             basic_z[basis[i] - n] = True
-    return z, w, status, pivots, basic_z
+    return status, pivots
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -603,18 +664,19 @@ def _max_abs(q):
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _lemke_first_pivot(Binv, qbar, basis, d, cand, idx, hist, qscale):
+def _lemke_first_pivot(Binv, qbar, basis, d, cand, idx, hist, qscale, ones):
     """Lemke's first pivot, in place: z0 enters (column -e) in the lexicographically smallest
-    row of (q, I), i.e. (one of) the most negative q_i, which makes the basis feasible.
+    row of (q, I), i.e. (one of) the most negative q_i, which makes the basis feasible. ones:
+    scratch (n), the ratio test's divisors.
 
     Returns (entering, zrow): the next entering variable (the complement of the w that left)
     and the row where z0 is basic.
     """
     n = qbar.shape[0]
-    ones = np.ones(n)
     for i in range(n):
         d[i] = -1.0
         cand[i] = i
+        ones[i] = 1.0
     r = _lex_select(qbar, Binv, ones, cand, n, LEMKE_TIE_TOL, np.int64(-1), qscale, hist)
     leaving = basis[r]
     _pivot(Binv, qbar, d, r, idx, hist)
@@ -673,48 +735,35 @@ def _lemke_path(M, Binv, qbar, basis, d, mag, hist, col, cand, idx, entering, zr
 
 @numba.njit(cache=True, error_model="numpy")
 def _lemke_polish(M, q, basis, work, z, w, status):
-    """Polish the end point (z, w) of a path that stopped SOLVED or on a ray: the
+    """Polish the end point (z, w) of a path that stopped SOLVED or on a ray, in place: the
     complementary point of the final basis (w_J = 0 on the basic z_J, z = 0 elsewhere)
     recomputed from the true q replaces it if its residual is lower; a ray end point that
-    solves the LCP to LEMKE_RESCUE_TOL becomes STATUS_SOLVED. Returns (z, w, status)."""
+    solves the LCP to LEMKE_RESCUE_TOL becomes STATUS_SOLVED. work: `LemkeWork` (its cand,
+    z, w and A). Returns the status."""
     n = q.shape[0]
     if status == STATUS_SOLVED or status == STATUS_RAY_TERMINATION:
-        z2, ok = _basis_point(M, q, basis, n, work)
-        if ok:
-            w2 = _matvec_plus(M, z2, q)
+        J, z2, w2 = work.cand, work.z, work.w
+        nj = np.int64(0)
+        for i in range(n):
+            if n <= basis[i] < 2 * n:
+                J[nj] = basis[i] - n
+                nj += 1
+        if _solve_on_into(M, q, J, nj, work.A, z2):
+            _matvec_plus_into(M, z2, q, w2)
             if _natural_map_residual(z2, w2, q) < _natural_map_residual(z, w, q):
-                z = z2
-                w = w2
+                for i in range(n):
+                    z[i] = z2[i]
+                    w[i] = w2[i]
         if status == STATUS_RAY_TERMINATION and _natural_map_residual(z, w, q) <= LEMKE_RESCUE_TOL:
             # The ray starts where z0 is (numerically) zero: the current point already
             # solves the LCP (z0 tied for leaving but round-off broke the tie the other way).
             status = STATUS_SOLVED
-    return z, w, status
-
-
-@numba.njit(cache=True, error_model="numpy")
-def _basis_point(M, q, basis, n, work):
-    """Solve M[J, J] z_J = -q_J for the basic z variables J of ``basis``; z = 0 elsewhere."""
-    nj = np.int64(0)
-    for i in range(n):
-        if n <= basis[i] < 2 * n:
-            work[nj] = basis[i] - n
-            nj += 1
-    return _solve_on(M, q, work, nj)
-
-
-@numba.njit(cache=True, error_model="numpy")
-def _solve_on(M, q, J, nj):
-    """(z, ok): z_J = -M[J, J]^-1 q_J on the nj indices J[:nj], z = 0 elsewhere; ok is False
-    when M[J, J] is numerically singular (then z = 0)."""
-    z2 = np.empty(q.shape[0])
-    ok = _solve_on_into(M, q, J, nj, np.empty((nj + 1, nj)), z2)
-    return z2, ok
+    return status
 
 
 @numba.njit(cache=True, error_model="numpy")
 def _solve_on_into(M, q, J, nj, A, z):
-    """`_solve_on` on the caller's A (at least (nj + 1, nj): M[J, J] and, in row nj, -q_J, for
+    """z_J = -M[J, J]^-1 q_J on the nj indices J[:nj], z = 0 elsewhere, on the caller's A (at least (nj + 1, nj): M[J, J] and, in row nj, -q_J, for
     `_gauss_solve`) and z (at least n entries). Returns ok."""
     n = q.shape[0]
     for a in range(nj):

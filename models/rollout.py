@@ -542,7 +542,7 @@ def rollout_kernel(
                 # the usual step, without numba's runtime: in space PGS's (`spatial_pgs_step`) or,
                 # while contacts persist, a warm step (`spatial_warm_step`, `planar_warm_step`);
                 # else the general one
-                warm, pgs = WARM_NOT_TAKEN, False
+                warm, pgs, warm_pivots = WARM_NOT_TAKEN, False, 0
                 if keep_warm and dimension == 3:
                     _warm_in_frames(nc, c_slot, c_t, c_o, warm_w, warm_t)
                 if _may_take_spatial_pgs(dimension == 3, limited, model, step_solver, nc):
@@ -552,7 +552,7 @@ def rollout_kernel(
                         warm_n, warm_t, W, P, side, whole,
                     )  # fmt: skip
                 elif _may_take_spatial_warm(dimension == 3, limited, model, step_solver, nc):
-                    warm, size, res = spatial_warm_step(
+                    warm, size, res, warm_pivots = spatial_warm_step(
                         model, D, tables, system, not constant_A, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, W, side,
                         whole,
                     )  # fmt: skip
@@ -570,7 +570,7 @@ def rollout_kernel(
                     if compliant:
                         dn2, dt2 = R.delta_n[side], R.delta_t[side]
                     side = 1 - side  # the next warm step writes the other side, not this state
-                    st, piv, p_n, p_t = StepStatus.OK.value, 0, R.impulses[:nc], R.frictions[:nc]
+                    st, piv, p_n, p_t = StepStatus.OK.value, warm_pivots, R.impulses[:nc], R.frictions[:nc]
                 else:
                     r = dynamics_step(
                         model, step_solver, D, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis
@@ -791,8 +791,7 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
             pivots, sweeps = 0, 0
         elif k > 0 and stage == STAGE_SOLVE and warm3:
             args3 = (model, D, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, W, side, whole)
-            spatial_warm_step(*args3)
-            pivots, sweeps = 0, 0
+            pivots, sweeps = spatial_warm_step(*args3)[3], 0
         elif k > 0 and stage == STAGE_SOLVE and warm_pgs:
             argsp = (model, solver, D, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t)
             sweeps = spatial_pgs_step(*argsp, warm_n, warm_t, W, P, side, whole)[3]

@@ -79,9 +79,12 @@ from models.kinematics import (
 from models.lcp import (
     STATUS_SOLVED,
     STATUS_SOLVED_INACCURATE,
+    LemkeWork,
     complementarity_residual,
+    lemke_into,
     lemke_kernel,
     lemke_warm_kernel,
+    lemke_work,
     natural_map_residual,
     warm_guess_into,
 )
@@ -1641,6 +1644,8 @@ class WarmLCP(NamedTuple):
     w: np.ndarray  # (n,)
     t: np.ndarray  # (ng,)
     p_t: np.ndarray  # (cap, 2) friction impulses of the active contacts
+    lemke: LemkeWork  # Lemke's arrays, where the guess does not solve the LCP (in space)
+    basic: np.ndarray  # (n,) bool: Lemke's final basis
 
 
 @numba.njit(cache=True)
@@ -1661,6 +1666,8 @@ def warm_lcp(cap, n, m, ng, nv):
         np.empty(n),
         np.empty(ng),
         np.empty((cap, 2)),
+        lemke_work(n),
+        np.empty(n, np.bool_),
     )
 
 
@@ -1830,31 +1837,34 @@ def spatial_warm_buffers(cap, d, nb, out):
 
 @numba.njit(cache=True, _nrt=False)
 def spatial_warm_step(model, drives, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, W, side, part):
-    """A contact step of `_lemke_step` whose LCP the previous step's basis solves, in space with
-    no force-limited drive, compiled without numba's runtime: no reference counts, no
-    allocation; every array is W's (`SpatialWarm`). rotating: A depends on q (`has_rotations`),
-    so A(q) and its body blocks are built here (`system_matrix`, `body_blocks`), where the
-    general step has the rollout build them. Where there are no active contacts or more than W
-    holds, a block of A is singular, the guess does not solve the LCP or the state leaves the
-    finite range, it returns WARM_NOT_TAKEN and the caller takes the general path, which solves
-    the step again from the start. Else (WARM_DONE): q+, nu+, q_ref+, the next basis table and,
-    with compliance, the deformations on side `side` of W.out (`WarmResults`; not the side the
-    state is on), and the impulses by contact. The same operations in the same order as `_lemke_step`: the
-    same bits (tests/test_warm_steps.py). part: PART_STEP, or the first parts only, for the
-    cost split (as `contact_stage`). Returns (outcome, the LCP's size, residual)."""
+    """A contact step of `_lemke_step` in space with no force-limited drive, compiled without
+    numba's runtime: no reference counts, no allocation; every array is W's (`SpatialWarm`).
+    The LCP is solved on the previous step's basis and, where that guess does not solve it,
+    by Lemke from scratch (`lemke_into`: a period's first step, a contact made or broken).
+    rotating: A depends on q (`has_rotations`), so A(q) and its body blocks are built here
+    (`system_matrix`, `body_blocks`), where the general step has the rollout build them. Where
+    there are no active contacts or more than W holds, a block of A is singular, Lemke does not
+    solve the LCP to LCP_TOLERANCE (the general path then regularizes it) or the state leaves
+    the finite range, it returns WARM_NOT_TAKEN and the caller takes the general path, which
+    solves the step again from the start. Else (WARM_DONE): q+, nu+, q_ref+, the next basis
+    table and, with compliance, the deformations on side `side` of W.out (`WarmResults`; not
+    the side the state is on), and the impulses by contact. The same operations in the same
+    order as `_lemke_step`: the same bits (tests/test_warm_steps.py). part: PART_STEP, or the
+    first parts only, for the cost split (as `contact_stage`). Returns (outcome, the LCP's
+    size, residual, Lemke's pivots)."""
     bi, pi, pf = tables.bi, tables.pi, tables.pf
     nv = nu.shape[0]
     L, R = W.lcp, W.out
     if not tables.spatial or nc > L.active.shape[0] or any_limited(drives.max_force):
-        return WARM_NOT_TAKEN, 0, 0.0
+        return WARM_NOT_TAKEN, 0, 0.0, 0
     ok, dofs, count, inv = _spatial_free_velocity_into(model, drives, tables, system, rotating, h, q, nu, q_ref, u, W, side, True)
     if not ok:
-        return WARM_NOT_TAKEN, 0, 0.0
+        return WARM_NOT_TAKEN, 0, 0.0, 0
     nu_free = R.nu_free
     # the LCP (`contact_lcp`), scaled, and the previous basis's guess
     n_act = _active_into(contacts.W_n, nc, L.active)
     if n_act == 0:
-        return WARM_NOT_TAKEN, 0, 0.0
+        return WARM_NOT_TAKEN, 0, 0.0, 0
     active = L.active[:n_act]
     fric = L.fric[:n_act]
     nf = _friction_into(True, active, contacts.pair, pf, contacts.W_t, contacts.W_o, fric)
@@ -1872,15 +1882,21 @@ def spatial_warm_step(model, drives, tables, system, rotating, h, q, nu, q_ref, 
     _fill_basis_guess(L.guess, basis, active, contacts.slot, fric, nf, d, lim, m, n)
     guess = L.guess[:n]
     if part == PART_ASSEMBLY:
-        return WARM_DONE, n, 0.0
-    if not warm_guess_into(M, q_lcp, guess, WARM_TOLERANCE, L.J, L.lu, L.z, L.w):
-        return WARM_NOT_TAKEN, n, 0.0
+        return WARM_DONE, n, 0.0, 0
+    z, w, pivots = L.z[:n], L.w[:n], 0
+    if not warm_guess_into(M, q_lcp, guess, WARM_TOLERANCE, L.J, L.lu, z, w):
+        # Lemke from scratch on this LCP, as `lemke_warm_kernel` goes on after a failed guess,
+        # on W's arrays (a period's first step, a contact made or broken); where that fails the
+        # general path regularizes the LCP
+        status, pivots = lemke_into(M, q_lcp, PIVOTS_PER_VARIABLE * (n + 1), L.lemke, z, w, L.basic)
+        if status != STATUS_SOLVED and status != STATUS_SOLVED_INACCURATE:
+            return WARM_NOT_TAKEN, n, 0.0, pivots
+        guess = L.basic[:n]
     if part == PART_CONTACT_SOLVE:
-        return WARM_DONE, n, 0.0
-    z, w = L.z[:n], L.w[:n]
+        return WARM_DONE, n, 0.0, pivots
     residual = natural_map_residual(z, w, q_lcp)
     if not (residual <= LCP_TOLERANCE):
-        return WARM_NOT_TAKEN, n, residual
+        return WARM_NOT_TAKEN, n, residual, pivots
     nu_new, p_t = R.nu[side], L.p_t[:n_act]
     _impulses_into(True, n_act, m, nf, fric, gen, cf, z, Y, nu_free, L.t[:ng], p_t, nu_new)
     _fill_basis_kept(R.basis[side], basis, guess, active, contacts.slot, fric, nf, d, lim, m)
@@ -1892,8 +1908,8 @@ def spatial_warm_step(model, drives, tables, system, rotating, h, q, nu, q_ref, 
     q_new = R.q[side]
     _integrate_positions_into(bi, q, velocity, h, q_new)
     if not (_finite_and_bounded(q_new) and _finite_and_bounded(nu_new)):
-        return WARM_NOT_TAKEN, n, residual
-    return WARM_DONE, n, residual
+        return WARM_NOT_TAKEN, n, residual, pivots
+    return WARM_DONE, n, residual, pivots
 
 
 @numba.njit(cache=True, inline="always")

@@ -6,7 +6,9 @@ takes that step in `planar_warm_step` (in the plane) or `spatial_warm_step` (in 
 without numba's runtime, on arrays made once per rollout (docs/measurements.md). Their contract
 is to be the general step bit for bit where they are taken (the same q+, nu+, q_ref+, basis
 table, impulses and compliant deformations, on the side of their buffers they are given and not
-the other), and to be taken exactly where the general step accepts its warm guess. Checked at
+the other), and to be taken exactly where the general step accepts its warm guess (in space,
+also where the guess fails: the spatial warm step then runs Lemke from scratch itself, and is
+taken wherever that solves the LCP without the general step's regularization). Checked at
 states of every rung that solves an LCP, on the planar scenarios with friction and the spatial
 ones, with random commands (fixed seeds).
 
@@ -51,7 +53,8 @@ from planner.bench import SCENARIOS
 from tests.planar_states import sampled_states, slots
 
 RUNGS = ("quasistatic-rigid", "quasistatic-compliant", "dynamic-rigid", "dynamic-compliant")
-SCENES = ("two_finger_triangle", "four_finger_grasp", "incline_block", "box_push_3d", "box_rotate_3d")
+SPATIAL_SCENES = ("box_push_3d", "box_rotate_3d")
+SCENES = ("two_finger_triangle", "four_finger_grasp", "incline_block", *SPATIAL_SCENES)
 STATES = 30  # compared per scene and rung (states with an active contact, sampled along rollouts)
 
 
@@ -108,11 +111,12 @@ def _results(R, side, nc, model, state, residual, size):
     }
 
 
-def _both_steps(sc, rung, state, u, h, t):
+def _both_steps(sc, rung, state, u, h, t, cold=False):
     """(general, warm, covered) at the state: the general step from the basis of a first
-    general step at the same state (its warm start), the warm step's result fields from that
-    basis (`planar_warm_step` in the plane, `spatial_warm_step` in space, with the rollout's
-    capacity; None where it was not taken), and whether the warm step covers the step: in the
+    general step at the same state (its warm start; cold: from the cold table, as a period's
+    first step), the warm step's result fields from that basis (`planar_warm_step` in the
+    plane, `spatial_warm_step` in space, with the rollout's capacity; None where it was not
+    taken; the pivots with them in space), and whether the warm step covers the step: in the
     plane, the LCP is the planar builder's (`_planar_case`); in space, no force-limited drive
     and no more contacts than its buffers hold. None where no contact is detected."""
     model = rung.model
@@ -127,7 +131,8 @@ def _both_steps(sc, rung, state, u, h, t):
     warm_n, warm_t = np.zeros(cap), np.zeros((cap, 2))
     args = (h, state.q, state.nu, state.q_ref, state.delta_n, state.delta_t, u, contacts, nc, warm_n, warm_t)
     first = dynamics_step(model, solver, D, tables, system, *args, basis)
-    general = dynamics_step(model, solver, D, tables, system, *args, first.basis)
+    start = basis if cold else first.basis
+    general = dynamics_step(model, solver, D, tables, system, *args, start)
     nq, na, slots_n = state.q.shape[0], D.v_index.shape[0], state.delta_n.shape[0]
     side = int(np.round(t / h)) % 2  # the side the step writes; the other (the state's) must stay as it was
     spatial_cap = min(cap, SPATIAL_WARM_CONTACTS)
@@ -138,16 +143,18 @@ def _both_steps(sc, rung, state, u, h, t):
         B = planar_warm_buffers(cap, R)
     for a in (R.q, R.nu, R.q_ref, R.basis, R.delta_n, R.delta_t):
         a[...] = 7
-    step = (h, state.q, state.nu, state.q_ref, u, contacts, nc, state.delta_n, state.delta_t, first.basis, B, side, PART_STEP)
+    step = (h, state.q, state.nu, state.q_ref, u, contacts, nc, state.delta_n, state.delta_t, start, B, side, PART_STEP)
+    pivots = {}
     if spatial:
-        outcome, size, residual = spatial_warm_step(model, D, tables, system, has_rotations(S.bi), *step)
+        outcome, size, residual, taken_pivots = spatial_warm_step(model, D, tables, system, has_rotations(S.bi), *step)
+        pivots = {"pivots": taken_pivots}
     else:
         outcome, size, residual = planar_warm_step(model, D, tables, system, *step)
     for a in (R.q, R.nu, R.q_ref, R.basis, R.delta_n, R.delta_t):
         assert np.all(a[1 - side] == 7), "the warm step wrote the other side"
     warm = None
     if outcome == WARM_DONE:
-        warm = _results(R, side, nc, model, state, residual, size) | {"basis": R.basis[side]}
+        warm = _results(R, side, nc, model, state, residual, size) | {"basis": R.basis[side]} | pivots
     if spatial:
         covered = not any_limited(D.max_force) and nc <= spatial_cap
     else:
@@ -166,11 +173,45 @@ def test_the_warm_step_is_the_general_one_bit_for_bit(name, rung_name):
         if out is None:
             return None
         general, warm, covered = out
-        # taken exactly where it covers the step and the general step accepts its warm guess (no
-        # pivot) and succeeds
-        return general, warm, covered and general.status == StepStatus.OK and general.pivots == 0 and general.lcp_size > 0
+        return general, warm, _taken_where(general, warm, covered, name in SPATIAL_SCENES, t)
 
     _held_bit_for_bit(sampled_states(sc, rung, h, sum(map(ord, name + rung_name)) + 1), both, "warm")
+
+
+def _taken_where(general, warm, covered, spatial, t):
+    """Whether the warm step should have been taken: where it covers the step and the general
+    step succeeds on its LCP, having accepted its warm guess (no pivot; in the plane), or
+    without regularizing it (in space, where the warm step runs Lemke itself where the guess
+    fails: not taken, the general step must have pivoted)."""
+    expected = covered and general.status == StepStatus.OK and general.lcp_size > 0
+    if not spatial:
+        return expected and general.pivots == 0
+    if expected and warm is None:  # only where Lemke's first solve fell short and the general step regularized
+        assert general.pivots > 0, f"t = {t}: not taken, though the general step took no pivot"
+        return False
+    return expected
+
+
+@pytest.mark.parametrize("name, rung_name", [(name, rung) for name in SPATIAL_SCENES for rung in RUNGS])
+def test_the_spatial_warm_step_solves_from_scratch_as_the_general_one(name, rung_name):
+    """From the cold table (a period's first step), where the guess (no force) fails, the
+    spatial warm step runs Lemke from scratch on its own arrays: the general step bit for bit,
+    the pivots too, and taken wherever the general step solves its LCP without regularizing."""
+    sc = load_scenario(SCENARIOS / f"{name}.toml")
+    rung = rung_for(sc, rung_name)
+    h = sc.rung_settings(rung_name).h
+    pivoted = []
+
+    def both(state, u, t):
+        out = _both_steps(sc, rung, state, u, h, t, cold=True)
+        if out is None:
+            return None
+        general, warm, covered = out
+        pivoted.append(warm is not None and warm["pivots"] > 0)
+        return general, warm, _taken_where(general, warm, covered, True, t)
+
+    _held_bit_for_bit(sampled_states(sc, rung, h, sum(map(ord, name + rung_name)) + 2), both, "warm")
+    assert sum(pivoted) >= STATES // 2, f"Lemke ran in the warm step at {sum(pivoted)} of {len(pivoted)} states"
 
 
 def _held_bit_for_bit(states, both, which):
