@@ -174,13 +174,25 @@ def _matvec_plus(M, z, q):
 
 @numba.njit(cache=True, error_model="numpy")
 def _matvec_plus_into(M, z, q, w):
-    """`_matvec_plus` into the caller's w (at least n entries)."""
+    """`_matvec_plus` into the caller's w (at least n entries). Four rows at a time, as
+    `_entering_column`: each row's sum adds the same terms in the same order (the same bits)."""
     n = q.shape[0]
-    for i in range(n):
-        s = q[i]
+    i = 0
+    while i + 4 <= n:
+        s0, s1, s2, s3 = q[i], q[i + 1], q[i + 2], q[i + 3]
         for j in range(n):
-            s += M[i, j] * z[j]
-        w[i] = s
+            x = z[j]
+            s0 += M[i, j] * x
+            s1 += M[i + 1, j] * x
+            s2 += M[i + 2, j] * x
+            s3 += M[i + 3, j] * x
+        w[i], w[i + 1], w[i + 2], w[i + 3] = s0, s1, s2, s3
+        i += 4
+    for r in range(i, n):
+        s = q[r]
+        for j in range(n):
+            s += M[r, j] * z[j]
+        w[r] = s
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -387,15 +399,35 @@ def _entering_column(M, Binv, var, n, d, mag, col, idx):
                 if abs(v) > amax:
                     amax = abs(v)
         if 2 * nnz > n:
-            for i in range(n):
+            # four rows at a time: each row's sums add the same terms in the same order (the
+            # same bits), as four independent chains the CPU overlaps
+            i = 0
+            while i + 4 <= n:
+                s0 = s1 = s2 = s3 = 0.0
+                m0 = m1 = m2 = m3 = 0.0
+                for k in range(n):
+                    c = col[k]
+                    t0, t1, t2, t3 = Binv[i, k] * c, Binv[i + 1, k] * c, Binv[i + 2, k] * c, Binv[i + 3, k] * c
+                    s0 += t0
+                    s1 += t1
+                    s2 += t2
+                    s3 += t3
+                    m0 += abs(t0)
+                    m1 += abs(t1)
+                    m2 += abs(t2)
+                    m3 += abs(t3)
+                d[i], d[i + 1], d[i + 2], d[i + 3] = -s0, -s1, -s2, -s3
+                mag[i], mag[i + 1], mag[i + 2], mag[i + 3] = m0, m1, m2, m3
+                i += 4
+            for r in range(i, n):
                 s = 0.0
                 m = 0.0
                 for k in range(n):
-                    t = Binv[i, k] * col[k]
+                    t = Binv[r, k] * col[k]
                     s += t
                     m += abs(t)
-                d[i] = -s
-                mag[i] = m
+                d[r] = -s
+                mag[r] = m
         else:
             for i in range(n):
                 s = 0.0
@@ -514,41 +546,36 @@ def lemke_kernel(M, q, max_pivots):
 
 
 class LemkeWork(NamedTuple):
-    """Lemke's arrays for LCPs of up to n unknowns (`lemke_work`), so that a caller that solves
-    many (a rollout's warm steps) allocates them once: the tableau's inverse basis, flat (a step
-    views its own size's part, `binv[: n * n].reshape((n, n))`, C-contiguous), and n-vectors."""
+    """Lemke's arrays for LCPs of up to N unknowns (`lemke_work`), so that a caller that solves
+    many (a rollout's warm steps) allocates them once; two flat buffers (each array a caller
+    passes on is reference-counted at each call), viewed per solve as C-contiguous arrays of
+    its own size n (`lemke_views`)."""
 
-    binv: np.ndarray  # (n * n,)
-    qbar: np.ndarray  # (n,) the basic variables' values
-    basis: np.ndarray  # (n,) int: the basic variable of each row
-    d: np.ndarray  # (n,) the entering column
-    mag: np.ndarray  # (n,) its round-off scale
-    hist: np.ndarray  # (n,) each row's round-off scale
-    col: np.ndarray  # (n,) scratch
-    cand: np.ndarray  # (n,) int: the ratio test's rows; the polish's basic set
-    idx: np.ndarray  # (n,) int: a pivot row's nonzeros
-    z: np.ndarray  # (n,) the polish's point
-    w: np.ndarray  # (n,)
-    A: np.ndarray  # (n + 1, n) the polish's elimination
+    f: np.ndarray  # (N * N + 7 N + (N + 1) N,) floats
+    i: np.ndarray  # (3 N,) ints
 
 
 @numba.njit(cache=True)
 def lemke_work(n):
     """`LemkeWork` for LCPs of up to n unknowns."""
-    return LemkeWork(
-        np.empty(n * n),
-        np.empty(n),
-        np.empty(n, np.int64),
-        np.empty(n),
-        np.empty(n),
-        np.empty(n),
-        np.empty(n),
-        np.empty(n, np.int64),
-        np.empty(n, np.int64),
-        np.empty(n),
-        np.empty(n),
-        np.empty((n + 1, n)),
-    )
+    return LemkeWork(np.empty(n * n + 7 * n + (n + 1) * n), np.empty(3 * n, np.int64))
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def lemke_views(work, n):
+    """work's arrays for an LCP of n unknowns: Binv (n, n), the tableau's inverse basis; qbar,
+    the basic variables' values; d, the entering column, and mag, its round-off scale; hist,
+    each row's round-off scale; col (scratch); z2, w2, the polish's point; A (n + 1, n), its
+    elimination; basis (ints), the basic variable of each row; cand, the ratio test's rows and
+    the polish's basic set; idx, a pivot row's nonzeros."""
+    f, i = work.f, work.i
+    Binv = f[: n * n].reshape((n, n))
+    o = n * n
+    qbar, d, mag, hist = f[o : o + n], f[o + n : o + 2 * n], f[o + 2 * n : o + 3 * n], f[o + 3 * n : o + 4 * n]
+    col, z2, w2 = f[o + 4 * n : o + 5 * n], f[o + 5 * n : o + 6 * n], f[o + 6 * n : o + 7 * n]
+    A = f[o + 7 * n : o + 7 * n + (n + 1) * n].reshape((n + 1, n))
+    basis, cand, idx = i[:n], i[n : 2 * n], i[2 * n : 3 * n]
+    return Binv, qbar, d, mag, hist, col, z2, w2, A, basis, cand, idx
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -577,9 +604,7 @@ def lemke_into(M, q, max_pivots, work, z, w, basic_z):
         _matvec_plus_into(M, z, q, w)
         return STATUS_SOLVED, 0
     qscale = _max_abs(q)
-    Binv = work.binv[: n * n].reshape((n, n))
-    qbar, basis, d, mag, hist = work.qbar[:n], work.basis[:n], work.d[:n], work.mag[:n], work.hist[:n]
-    col, cand, idx = work.col[:n], work.cand[:n], work.idx[:n]
+    Binv, qbar, d, mag, hist, col, z2, w2, A, basis, cand, idx = lemke_views(work, n)
     for i in range(n):
         for j in range(n):
             Binv[i, j] = 0.0
@@ -594,7 +619,7 @@ def lemke_into(M, q, max_pivots, work, z, w, basic_z):
         if n <= v < 2 * n:
             z[v - n] = qbar[i]
     _matvec_plus_into(M, z, q, w)
-    status = _lemke_polish(M, q, basis, work, z, w, status)
+    status = _lemke_polish(M, q, basis, cand, z2, w2, A, z, w, status)
     for i in range(n):
         if n <= basis[i] < 2 * n:
             basic_z[basis[i] - n] = True
@@ -734,21 +759,20 @@ def _lemke_path(M, Binv, qbar, basis, d, mag, hist, col, cand, idx, entering, zr
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _lemke_polish(M, q, basis, work, z, w, status):
+def _lemke_polish(M, q, basis, J, z2, w2, A, z, w, status):
     """Polish the end point (z, w) of a path that stopped SOLVED or on a ray, in place: the
     complementary point of the final basis (w_J = 0 on the basic z_J, z = 0 elsewhere)
     recomputed from the true q replaces it if its residual is lower; a ray end point that
-    solves the LCP to LEMKE_RESCUE_TOL becomes STATUS_SOLVED. work: `LemkeWork` (its cand,
-    z, w and A). Returns the status."""
+    solves the LCP to LEMKE_RESCUE_TOL becomes STATUS_SOLVED. J (ints), z2, w2 (n each), A
+    ((n + 1, n)): scratch. Returns the status."""
     n = q.shape[0]
     if status == STATUS_SOLVED or status == STATUS_RAY_TERMINATION:
-        J, z2, w2 = work.cand, work.z, work.w
         nj = np.int64(0)
         for i in range(n):
             if n <= basis[i] < 2 * n:
                 J[nj] = basis[i] - n
                 nj += 1
-        if _solve_on_into(M, q, J, nj, work.A, z2):
+        if _solve_on_into(M, q, J, nj, A, z2):
             _matvec_plus_into(M, z2, q, w2)
             if _natural_map_residual(z2, w2, q) < _natural_map_residual(z, w, q):
                 for i in range(n):
@@ -763,8 +787,9 @@ def _lemke_polish(M, q, basis, work, z, w, status):
 
 @numba.njit(cache=True, error_model="numpy")
 def _solve_on_into(M, q, J, nj, A, z):
-    """z_J = -M[J, J]^-1 q_J on the nj indices J[:nj], z = 0 elsewhere, on the caller's A (at least (nj + 1, nj): M[J, J] and, in row nj, -q_J, for
-    `_gauss_solve`) and z (at least n entries). Returns ok."""
+    """z_J = -M[J, J]^-1 q_J on the nj indices J[:nj], z = 0 elsewhere, on the caller's A (at
+    least (nj + 1, nj): M[J, J] and, in row nj, -q_J, for `_gauss_solve`) and z (at least n
+    entries). Returns ok: False where M[J, J] is numerically singular (then z = 0)."""
     n = q.shape[0]
     for a in range(nj):
         A[nj, a] = -q[J[a]]

@@ -560,7 +560,7 @@ def rollout_kernel(
                     A = system_matrix(bi, bf, q, nv, eps_eff, h, v_index, kp, kd, max_force)
                     system = System(A, Ainv, M_const, rhs_const, system.dofs, system.count, system.inv)  # (no blocks: A changes)
                 if warm != WARM_DONE and _may_take_planar_warm(dimension == 2, constant_A, limited, model, step_solver, nc):
-                    warm, size, res = planar_warm_step(
+                    warm, size, res, warm_pivots = planar_warm_step(
                         model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, side, whole
                     )
                 if warm == WARM_DONE:  # its results, on its side of R
@@ -787,8 +787,8 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
                     part, model, solver, D, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis
                 )
         if k > 0 and stage == STAGE_SOLVE and warm:
-            planar_warm_step(model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, side, whole)
-            pivots, sweeps = 0, 0
+            args = (model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, side, whole)
+            pivots, sweeps = planar_warm_step(*args)[3], 0
         elif k > 0 and stage == STAGE_SOLVE and warm3:
             args3 = (model, D, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, W, side, whole)
             pivots, sweeps = spatial_warm_step(*args3)[3], 0

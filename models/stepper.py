@@ -1644,8 +1644,7 @@ class WarmLCP(NamedTuple):
     w: np.ndarray  # (n,)
     t: np.ndarray  # (ng,)
     p_t: np.ndarray  # (cap, 2) friction impulses of the active contacts
-    lemke: LemkeWork  # Lemke's arrays, where the guess does not solve the LCP (in space)
-    basic: np.ndarray  # (n,) bool: Lemke's final basis
+    lemke: LemkeWork  # Lemke's arrays, where the guess does not solve the LCP (`_warm_solve`)
 
 
 @numba.njit(cache=True)
@@ -1667,7 +1666,6 @@ def warm_lcp(cap, n, m, ng, nv):
         np.empty(ng),
         np.empty((cap, 2)),
         lemke_work(n),
-        np.empty(n, np.bool_),
     )
 
 
@@ -1694,31 +1692,48 @@ def planar_warm_buffers(cap, out):
 WARM_DONE, WARM_NOT_TAKEN = 0, 1
 
 
+@numba.njit(cache=True, inline="always")
+def _warm_solve(M, q_lcp, guess, L, n):
+    """The warm steps' solve of their LCP (n unknowns, on `WarmLCP` L's arrays): the guessed
+    basis (`warm_guess_into`), and where that does not solve it, Lemke from scratch
+    (`lemke_into`), as `lemke_warm_kernel` goes on after a failed guess (a period's first step,
+    a contact made or broken). Returns (solved, pivots, the final basis's flags); z and w in
+    L.z[:n], L.w[:n]. Where Lemke fails, the general path regularizes the LCP."""
+    z, w = L.z[:n], L.w[:n]
+    if warm_guess_into(M, q_lcp, guess, WARM_TOLERANCE, L.J, L.lu, z, w):
+        return True, 0, guess
+    # the final basis's flags replace the guess (read no more)
+    status, pivots = lemke_into(M, q_lcp, PIVOTS_PER_VARIABLE * (n + 1), L.lemke, z, w, guess)
+    return status == STATUS_SOLVED or status == STATUS_SOLVED_INACCURATE, pivots, guess
+
+
 @numba.njit(cache=True, _nrt=False)
 def planar_warm_step(model, drives, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, side, part):
-    """A contact step of `_lemke_step` whose LCP the previous step's basis solves (the usual
-    step while contacts persist), in the plane with A constant and no force-limited drive,
+    """A contact step of `_lemke_step` in the plane with A constant and no force-limited drive,
     compiled without numba's runtime: no reference counts, no allocation; every array is B's
-    (`PlanarWarm`). Where the LCP is not `_planar_case`, the guess does not solve it or the state
-    leaves the finite range, it returns WARM_NOT_TAKEN and the caller takes the general path,
-    which solves the step again from the start. Else (WARM_DONE): q+, nu+, q_ref+, the next basis
-    table and, with compliance, the deformations on side `side` of B.out (`WarmResults`; 0 or
-    1: not the side the state q, nu, q_ref, basis, delta_n, delta_t is on), and the impulses by
-    contact. The same operations in the same order as `_lemke_step`: the same bits
+    (`PlanarWarm`). The LCP is solved on the previous step's basis (the usual step while
+    contacts persist) or, where that guess does not solve it, by Lemke from scratch
+    (`_warm_solve`). Where the LCP is not `_planar_case`, Lemke does not solve it to
+    LCP_TOLERANCE (the general path then regularizes it) or the state leaves the finite range,
+    it returns WARM_NOT_TAKEN and the caller takes the general path, which solves the step again
+    from the start. Else (WARM_DONE): q+, nu+, q_ref+, the next basis table and, with
+    compliance, the deformations on side `side` of B.out (`WarmResults`; 0 or 1: not the side
+    the state q, nu, q_ref, basis, delta_n, delta_t is on), and the impulses by contact. The
+    same operations in the same order as `_lemke_step`: the same bits
     (tests/test_warm_steps.py). part: PART_STEP, or the first parts only, for the cost split (as
-    `contact_stage`). Returns (outcome, the LCP's size, residual)."""
+    `contact_stage`). Returns (outcome, the LCP's size, residual, Lemke's pivots)."""
     nv = nu.shape[0]
     # A^-1's body blocks held (`_blocks`), A (and M) constant in the plane, no force limit
     if system.count.shape[0] != tables.bi.shape[0] or not _constant_plane(model, tables.spatial, system, nv):
-        return WARM_NOT_TAKEN, 0, 0.0
+        return WARM_NOT_TAKEN, 0, 0.0, 0
     if any_limited(drives.max_force):
-        return WARM_NOT_TAKEN, 0, 0.0
+        return WARM_NOT_TAKEN, 0, 0.0, 0
     L, R = B.lcp, B.out
     _free_velocity_into(model, drives, system, h, q, nu, q_ref, u, R.rhs, R.nu_free, R.q_ref[side], R.drive_a)
     n_act = _active_into(contacts.W_n, nc, L.active)
     active = L.active[:n_act]
     if not _planar_case(False, drives.max_force, active, contacts.pair, tables.pf, contacts.W_t):
-        return WARM_NOT_TAKEN, 0, 0.0
+        return WARM_NOT_TAKEN, 0, 0.0, 0
     n, m, ng = 4 * n_act, 3 * n_act, 2 * n_act
     M, q_lcp, Y, gen, cf = _lcp_views(L, nv, n, m, ng)
     fric = L.fric[:n_act]
@@ -1731,15 +1746,16 @@ def planar_warm_step(model, drives, tables, system, h, q, nu, q_ref, u, contacts
     _fill_basis_guess(L.guess, basis, active, contacts.slot, fric, n_act, 2, lim, m, n)
     guess = L.guess[:n]
     if part == PART_ASSEMBLY:
-        return WARM_DONE, n, 0.0
-    if not warm_guess_into(M, q_lcp, guess, WARM_TOLERANCE, L.J, L.lu, L.z, L.w):
-        return WARM_NOT_TAKEN, n, 0.0
+        return WARM_DONE, n, 0.0, 0
+    solved, pivots, guess = _warm_solve(M, q_lcp, guess, L, n)
+    if not solved:
+        return WARM_NOT_TAKEN, n, 0.0, pivots
     if part == PART_CONTACT_SOLVE:
-        return WARM_DONE, n, 0.0
+        return WARM_DONE, n, 0.0, pivots
     z, w = L.z[:n], L.w[:n]
     residual = natural_map_residual(z, w, q_lcp)
     if not (residual <= LCP_TOLERANCE):
-        return WARM_NOT_TAKEN, n, residual
+        return WARM_NOT_TAKEN, n, residual, pivots
     nu_new, p_t = R.nu[side], L.p_t[:n_act]
     _impulses_into(False, n_act, m, n_act, fric, gen, cf, z, Y, R.nu_free, L.t[:ng], p_t, nu_new)
     _fill_basis_kept(R.basis[side], basis, guess, active, contacts.slot, fric, n_act, 2, lim, m)
@@ -1754,8 +1770,8 @@ def planar_warm_step(model, drives, tables, system, h, q, nu, q_ref, u, contacts
         q_new[i] = q[i]
     _integrate_translations_into(tables.bi, q, velocity, h, q_new)
     if not (_finite_and_bounded(q_new) and _finite_and_bounded(nu_new)):
-        return WARM_NOT_TAKEN, n, residual
-    return WARM_DONE, n, residual
+        return WARM_NOT_TAKEN, n, residual, pivots
+    return WARM_DONE, n, residual, pivots
 
 
 @numba.njit(cache=True, inline="always")
@@ -1840,7 +1856,7 @@ def spatial_warm_step(model, drives, tables, system, rotating, h, q, nu, q_ref, 
     """A contact step of `_lemke_step` in space with no force-limited drive, compiled without
     numba's runtime: no reference counts, no allocation; every array is W's (`SpatialWarm`).
     The LCP is solved on the previous step's basis and, where that guess does not solve it,
-    by Lemke from scratch (`lemke_into`: a period's first step, a contact made or broken).
+    by Lemke from scratch (`_warm_solve`).
     rotating: A depends on q (`has_rotations`), so A(q) and its body blocks are built here
     (`system_matrix`, `body_blocks`), where the general step has the rollout build them. Where
     there are no active contacts or more than W holds, a block of A is singular, Lemke does not
@@ -1883,17 +1899,12 @@ def spatial_warm_step(model, drives, tables, system, rotating, h, q, nu, q_ref, 
     guess = L.guess[:n]
     if part == PART_ASSEMBLY:
         return WARM_DONE, n, 0.0, 0
-    z, w, pivots = L.z[:n], L.w[:n], 0
-    if not warm_guess_into(M, q_lcp, guess, WARM_TOLERANCE, L.J, L.lu, z, w):
-        # Lemke from scratch on this LCP, as `lemke_warm_kernel` goes on after a failed guess,
-        # on W's arrays (a period's first step, a contact made or broken); where that fails the
-        # general path regularizes the LCP
-        status, pivots = lemke_into(M, q_lcp, PIVOTS_PER_VARIABLE * (n + 1), L.lemke, z, w, L.basic)
-        if status != STATUS_SOLVED and status != STATUS_SOLVED_INACCURATE:
-            return WARM_NOT_TAKEN, n, 0.0, pivots
-        guess = L.basic[:n]
+    solved, pivots, guess = _warm_solve(M, q_lcp, guess, L, n)
+    if not solved:
+        return WARM_NOT_TAKEN, n, 0.0, pivots
     if part == PART_CONTACT_SOLVE:
         return WARM_DONE, n, 0.0, pivots
+    z, w = L.z[:n], L.w[:n]
     residual = natural_map_residual(z, w, q_lcp)
     if not (residual <= LCP_TOLERANCE):
         return WARM_NOT_TAKEN, n, residual, pivots

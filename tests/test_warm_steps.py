@@ -6,9 +6,9 @@ takes that step in `planar_warm_step` (in the plane) or `spatial_warm_step` (in 
 without numba's runtime, on arrays made once per rollout (docs/measurements.md). Their contract
 is to be the general step bit for bit where they are taken (the same q+, nu+, q_ref+, basis
 table, impulses and compliant deformations, on the side of their buffers they are given and not
-the other), and to be taken exactly where the general step accepts its warm guess (in space,
-also where the guess fails: the spatial warm step then runs Lemke from scratch itself, and is
-taken wherever that solves the LCP without the general step's regularization). Checked at
+the other), and to be taken wherever the general step solves its LCP without regularizing it:
+on the previous step's basis or, where that guess fails (a period's first step, a contact made
+or broken), by Lemke from scratch, which the warm steps run on their own arrays. Checked at
 states of every rung that solves an LCP, on the planar scenarios with friction and the spatial
 ones, with random commands (fixed seeds).
 
@@ -144,17 +144,15 @@ def _both_steps(sc, rung, state, u, h, t, cold=False):
     for a in (R.q, R.nu, R.q_ref, R.basis, R.delta_n, R.delta_t):
         a[...] = 7
     step = (h, state.q, state.nu, state.q_ref, u, contacts, nc, state.delta_n, state.delta_t, start, B, side, PART_STEP)
-    pivots = {}
     if spatial:
-        outcome, size, residual, taken_pivots = spatial_warm_step(model, D, tables, system, has_rotations(S.bi), *step)
-        pivots = {"pivots": taken_pivots}
+        outcome, size, residual, pivots = spatial_warm_step(model, D, tables, system, has_rotations(S.bi), *step)
     else:
-        outcome, size, residual = planar_warm_step(model, D, tables, system, *step)
+        outcome, size, residual, pivots = planar_warm_step(model, D, tables, system, *step)
     for a in (R.q, R.nu, R.q_ref, R.basis, R.delta_n, R.delta_t):
         assert np.all(a[1 - side] == 7), "the warm step wrote the other side"
     warm = None
     if outcome == WARM_DONE:
-        warm = _results(R, side, nc, model, state, residual, size) | {"basis": R.basis[side]} | pivots
+        warm = _results(R, side, nc, model, state, residual, size) | {"basis": R.basis[side], "pivots": pivots}
     if spatial:
         covered = not any_limited(D.max_force) and nc <= spatial_cap
     else:
@@ -173,30 +171,27 @@ def test_the_warm_step_is_the_general_one_bit_for_bit(name, rung_name):
         if out is None:
             return None
         general, warm, covered = out
-        return general, warm, _taken_where(general, warm, covered, name in SPATIAL_SCENES, t)
+        return general, warm, _taken_where(general, warm, covered, t)
 
     _held_bit_for_bit(sampled_states(sc, rung, h, sum(map(ord, name + rung_name)) + 1), both, "warm")
 
 
-def _taken_where(general, warm, covered, spatial, t):
+def _taken_where(general, warm, covered, t):
     """Whether the warm step should have been taken: where it covers the step and the general
-    step succeeds on its LCP, having accepted its warm guess (no pivot; in the plane), or
-    without regularizing it (in space, where the warm step runs Lemke itself where the guess
-    fails: not taken, the general step must have pivoted)."""
+    step solves its LCP without regularizing it (the warm step runs Lemke itself where its
+    guess fails: where it was not taken, the general step must have pivoted)."""
     expected = covered and general.status == StepStatus.OK and general.lcp_size > 0
-    if not spatial:
-        return expected and general.pivots == 0
     if expected and warm is None:  # only where Lemke's first solve fell short and the general step regularized
         assert general.pivots > 0, f"t = {t}: not taken, though the general step took no pivot"
         return False
     return expected
 
 
-@pytest.mark.parametrize("name, rung_name", [(name, rung) for name in SPATIAL_SCENES for rung in RUNGS])
-def test_the_spatial_warm_step_solves_from_scratch_as_the_general_one(name, rung_name):
+@pytest.mark.parametrize("name, rung_name", [(name, rung) for name in SCENES for rung in RUNGS])
+def test_the_warm_step_solves_from_scratch_as_the_general_one(name, rung_name):
     """From the cold table (a period's first step), where the guess (no force) fails, the
-    spatial warm step runs Lemke from scratch on its own arrays: the general step bit for bit,
-    the pivots too, and taken wherever the general step solves its LCP without regularizing."""
+    warm step runs Lemke from scratch on its own arrays: the general step bit for bit, the
+    pivots too, and taken wherever the general step solves its LCP without regularizing."""
     sc = load_scenario(SCENARIOS / f"{name}.toml")
     rung = rung_for(sc, rung_name)
     h = sc.rung_settings(rung_name).h
@@ -208,7 +203,7 @@ def test_the_spatial_warm_step_solves_from_scratch_as_the_general_one(name, rung
             return None
         general, warm, covered = out
         pivoted.append(warm is not None and warm["pivots"] > 0)
-        return general, warm, _taken_where(general, warm, covered, True, t)
+        return general, warm, _taken_where(general, warm, covered, t)
 
     _held_bit_for_bit(sampled_states(sc, rung, h, sum(map(ord, name + rung_name)) + 2), both, "warm")
     assert sum(pivoted) >= STATES // 2, f"Lemke ran in the warm step at {sum(pivoted)} of {len(pivoted)} states"
