@@ -587,7 +587,9 @@ def _lemke(M, q, max_pivots):
     z = np.zeros(n)
     w = np.empty(n)
     basic_z = np.zeros(n, np.bool_)
-    status, pivots = lemke_into(M, q, max_pivots, lemke_work(n), z, w, basic_z)
+    # q >= 0 (z = 0 solves it; n = 0 too): no pivot, so no tableau to make
+    work = lemke_work(0 if n == 0 or _nonnegative(q) else n)
+    status, pivots = lemke_into(M, q, max_pivots, work, z, w, basic_z)
     return z, w, status, pivots, basic_z
 
 
