@@ -80,6 +80,9 @@ from models.lcp import (
     STATUS_SOLVED,
     STATUS_SOLVED_INACCURATE,
     LemkeWork,
+    _gauss_solve,
+    _lemke,
+    _natural_map_residual,
     complementarity_residual,
     lemke_into,
     lemke_kernel,
@@ -769,21 +772,29 @@ def contact_stage(part, model, solver, drives, tables, system, h, q, nu, q_ref, 
     active = _active_contacts(contacts.W_n, nc)
     spatial = tables.spatial
     if _planar_case(spatial, drives.max_force, active, contacts.pair, tables.pf, contacts.W_t):  # (as _contact_solve)
-        Mlcp, qlcp, Y, gen, cf, fric, nf, lim = _planar_lcp(
+        Mlcp, qlcp, Y, gen, cf, fric, nf, lim, G = _planar_lcp(
             model, h, dofs, count, inv, nu_free, active, tables.pi, tables.pf, contacts, delta_n, delta_t
         )
     else:
-        Mlcp, qlcp, Y, gen, cf, fric, nf, lim = contact_lcp(
+        Mlcp, qlcp, Y, gen, cf, fric, nf, lim, G = contact_lcp(
             model, spatial, h, dofs, count, inv, nu_free, active, tables.pi, tables.pf, contacts, delta_n, delta_t, drives, drive_a
         )
     d = model.friction_directions if spatial else 2
-    m = active.shape[0] + nf * d + lim.shape[0]
+    nc = active.shape[0]
+    m = nc + nf * d + lim.shape[0]
     n = qlcp.shape[0]
-    _scale_lcp(Mlcp, qlcp, m)
+    on_generators = _on_generators(spatial, lim.shape[0])  # (as _contact_solve)
+    comp, gs, gmu = np.empty(nc), np.empty(nf), np.empty(nf)
+    reg, scale = _scale_contact_lcp(
+        model, on_generators, h, Mlcp, qlcp, G, gen, cf, active, fric, nf, tables.pf, contacts.pair, m, comp, gs, gmu
+    )
     guess = _basis_guess(basis, active, contacts.slot, fric, nf, d, lim, m, n)
     if part == PART_ASSEMBLY:
         return n
-    z, w, status, pivots, basic_z, _ = lemke_warm_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1), guess, WARM_TOLERANCE)
+    if on_generators:
+        status = _guess_or_lemke(G, gen, cf, model.compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, Mlcp, qlcp, scale, guess)[2]
+    else:
+        status = lemke_warm_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1), guess, WARM_TOLERANCE)[2]
     return n if status == STATUS_SOLVED or status == STATUS_SOLVED_INACCURATE else 0
 
 
@@ -1040,7 +1051,7 @@ def contact_lcp(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, co
 
     Returns (M, q, Y = A^-1 B, gen, cf: LCP column r < m is cf[0, r] B[:, gen[0, r]] +
     cf[1, r] B[:, gen[1, r]] (`_combinations_into`), fric, nf, lim: the indices of the nl
-    force-limited drives).
+    force-limited drives, G).
 
     A force-limited drive j (limit F, P = h F) is a bounded impulse p = x - P, x in [0, 2P]:
     unbounded it would be a - b v (a: its PD impulse at v = 0, `_drives_into`; b = h (h kp + kd); v
@@ -1066,7 +1077,7 @@ def contact_lcp(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, co
         model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, drives, drive_a, lim, nl, fric, nf,
         scratch, Mlcp, qlcp, Y, gen, cf,
     )  # fmt: skip
-    return Mlcp, qlcp, Y, gen, cf, fric, nf, lim[:nl]
+    return Mlcp, qlcp, Y, gen, cf, fric, nf, lim[:nl], G
 
 
 @numba.njit(cache=True, inline="always")
@@ -1080,24 +1091,38 @@ def contact_lcp_into(
     nl): the scratch (body (ng, 2), ldof (ng, LOCAL_DOFS), nloc (ng,), Bl (ng, LOCAL_DOFS), G
     (ng, ng), p, Bt_nu (ng each), Jt_nu (m); a tuple: an inlined function takes at most 30
     arguments), and the LCP's M (n, n), q (n), Y (nv, ng), gen and cf (2, m), all set here."""
+    lcp_generators_into(
+        model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, drives, lim, nl, fric, nf, scratch, qlcp,
+        Y, gen, cf,
+    )  # fmt: skip
+    G = scratch[4]
+    reg = _regularization(G, gen, cf, active.shape[0], model.compliant, model.regularization)
+    lcp_matrix_into(model, spatial, h, active, pf, contacts.pair, drives, drive_a, lim, nl, fric, nf, reg, scratch, Mlcp, qlcp, gen, cf)
+
+
+@numba.njit(cache=True, inline="always")
+def lcp_generators_into(
+    model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, drives, lim, nl, fric, nf, scratch, qlcp, Y,
+    gen, cf,
+):  # fmt: skip
+    """The first part of `contact_lcp_into`, all the LCP but M: the generators (`_generators_into`),
+    G and Y (`_delassus_into`, G in scratch[4]), C (gen, cf) and q (the normal and friction rows';
+    the drives' rows are M's part, `lcp_matrix_into`), unscaled. On these alone the previous
+    basis's guess is tried (`_generator_guess_into`): M is built only where it fails."""
     body, ldof, nloc, Bl, G, p, Bt_nu, Jt_nu = scratch
     compliant = model.compliant
     c_pair, c_psi, c_slot, c_bias = contacts.pair, contacts.psi, contacts.slot, contacts.bias
     W_n, W_t, W_o = contacts.W_n, contacts.W_t, contacts.W_o
-    v_index, kp, kd, max_force = drives.v_index, drives.kp, drives.kd, drives.max_force
     nc = active.shape[0]
     d = model.friction_directions if spatial else 2
     nd = nf * d
     m = nc + nd + nl
-    _generators_into(spatial, active, fric, nf, lim, nl, v_index, pi, c_pair, W_n, W_t, W_o, dofs, count, body, ldof, nloc, Bl)
+    _generators_into(spatial, active, fric, nf, lim, nl, drives.v_index, pi, c_pair, W_n, W_t, W_o, dofs, count, body, ldof, nloc, Bl)
     _delassus_into(body, ldof, nloc, Bl, dofs, count, inv, Y, G)
     _combinations_into(spatial, d, nc, fric, nf, nl, gen, cf)
     n = m + nf + nl
     for r in range(n):
         qlcp[r] = 0.0
-        for c in range(n):
-            Mlcp[r, c] = 0.0
-    _fill_jacobian_block(Mlcp, G, gen, cf, spatial, d, nc, nf, nl, p)
     for g in range(nloc.shape[0]):  # B^T nu_free, over each generator's local DOFs
         s0 = 0.0
         for a in range(nloc[g]):
@@ -1105,10 +1130,28 @@ def contact_lcp_into(
         Bt_nu[g] = s0
     for r in range(m):  # J^T nu_free = C^T (B^T nu_free)
         Jt_nu[r] = cf[0, r] * Bt_nu[gen[0, r]] + cf[1, r] * Bt_nu[gen[1, r]]
-    _normal_rows(Mlcp, qlcp, compliant, h, active, pf, c_pair, c_psi, c_slot, c_bias, Jt_nu, delta_n, model.regularization)
-    _friction_rows(Mlcp, qlcp, compliant, h, d, m, active, fric, nf, cf, pf, c_pair, c_slot, c_bias, Jt_nu, delta_t)
+    _normal_q(qlcp, compliant, h, active, pf, c_pair, c_psi, c_slot, c_bias, Jt_nu, delta_n)
+    _friction_q(qlcp, compliant, h, d, active, fric, nf, cf, pf, c_pair, c_slot, c_bias, Jt_nu, delta_t)
+
+
+@numba.njit(cache=True, inline="always")
+def lcp_matrix_into(model, spatial, h, active, pf, c_pair, drives, drive_a, lim, nl, fric, nf, reg, scratch, Mlcp, qlcp, gen, cf):
+    """The second part of `contact_lcp_into`, after `lcp_generators_into`: M (unscaled), and the
+    force-limited drives' rows of M and q. reg: `_regularization`."""
+    G, p, Jt_nu = scratch[4], scratch[5], scratch[7]
+    nc = active.shape[0]
+    d = model.friction_directions if spatial else 2
+    nd = nf * d
+    m = nc + nd + nl
+    n = m + nf + nl
+    for r in range(n):
+        for c in range(n):
+            Mlcp[r, c] = 0.0
+    _fill_jacobian_block(Mlcp, G, gen, cf, spatial, d, nc, nf, nl, p)
+    _normal_diagonal(Mlcp, model.compliant, h, active, pf, c_pair, reg)
+    _friction_matrix(Mlcp, model.compliant, h, d, m, active, fric, nf, cf, pf, c_pair)
     _scale_gamma(Mlcp, d, m, nc, nf)
-    _drive_rows(Mlcp, qlcp, h, nc + nd, m + nf, lim, nl, kp, kd, max_force, drive_a, Jt_nu)
+    _drive_rows(Mlcp, qlcp, h, nc + nd, m + nf, lim, nl, drives.kp, drives.kd, drives.max_force, drive_a, Jt_nu)
 
 
 @numba.njit(cache=True, inline="always")
@@ -1297,50 +1340,82 @@ def _combinations_into(spatial, d, nc, fric, nf, nl, gen, cf):
 
 
 @numba.njit(cache=True, inline="always")
-def _normal_rows(Mlcp, qlcp, compliant, h, active, pf, c_pair, c_psi, c_slot, c_bias, Jt_nu, delta_n, regularization):
-    """Normal rows of the contact LCP, in place: q = psi / h + W_n^T nu_free + bias, and for
-    compliant contact 1 / (h (h K + C)) on the diagonal and the previous deformation in q; for
-    rigid contact `regularization` of the largest normal diagonal on each (`Model.regularization`)."""
-    reg = 0.0
-    if not compliant and regularization > 0.0:
-        for k in range(active.shape[0]):
-            reg = max(reg, regularization * Mlcp[k, k])
-    for k in range(active.shape[0]):
-        i = active[k]
-        qlcp[k] = c_psi[i] / h + Jt_nu[k] + c_bias[i, 0]
-        Mlcp[k, k] += reg
-        if compliant:
-            K, C = pf[c_pair[i], PF_K], pf[c_pair[i], PF_C]
-            comp = 1.0 / (h * (h * K + C))
-            Mlcp[k, k] += comp
-            qlcp[k] += comp * C * delta_n[c_slot[i]]
+def _compliance(h, K, C):
+    """A compliant contact's term on its rows' diagonal, 1 / (h (h K + C)) (stiffness K,
+    damping C, step h)."""
+    return 1.0 / (h * (h * K + C))
 
 
 @numba.njit(cache=True, inline="always")
-def _friction_rows(Mlcp, qlcp, compliant, h, d, m, active, fric, nf, cf, pf, c_pair, c_slot, c_bias, Jt_nu, delta_t):
-    """Friction rows of the contact LCP, in place: each friction contact's d direction rows
-    (q from nu_free and the bias; compliant: the friction block's 1 / (h (h K + C)) and the
-    previous tangential deformation) and its gamma row and column (mu, +-1), unscaled."""
+def _regularization(G, gen, cf, nc, compliant, regularization):
+    """The rigid contact rows' regularization: `Model.regularization` of the largest normal
+    diagonal of C^T G C (`_jacobian_entry`; 0 with compliance, which regularizes them already)."""
+    reg = 0.0
+    if not compliant and regularization > 0.0:
+        for k in range(nc):
+            reg = max(reg, regularization * _jacobian_entry(G, gen, cf, nc, k, k))
+    return reg
+
+
+@numba.njit(cache=True, inline="always")
+def _normal_q(qlcp, compliant, h, active, pf, c_pair, c_psi, c_slot, c_bias, Jt_nu, delta_n):
+    """Normal rows' q, in place: psi / h + W_n^T nu_free + bias and, for compliant contact, the
+    previous deformation's term (`_compliance` C delta_n)."""
+    for k in range(active.shape[0]):
+        i = active[k]
+        qlcp[k] = c_psi[i] / h + Jt_nu[k] + c_bias[i, 0]
+        if compliant:
+            K, C = pf[c_pair[i], PF_K], pf[c_pair[i], PF_C]
+            qlcp[k] += _compliance(h, K, C) * C * delta_n[c_slot[i]]
+
+
+@numba.njit(cache=True, inline="always")
+def _normal_diagonal(Mlcp, compliant, h, active, pf, c_pair, reg):
+    """Normal rows' diagonal, in place: reg (`_regularization`) and, for compliant contact,
+    `_compliance`."""
+    for k in range(active.shape[0]):
+        i = active[k]
+        Mlcp[k, k] += reg
+        if compliant:
+            Mlcp[k, k] += _compliance(h, pf[c_pair[i], PF_K], pf[c_pair[i], PF_C])
+
+
+@numba.njit(cache=True, inline="always")
+def _friction_q(qlcp, compliant, h, d, active, fric, nf, cf, pf, c_pair, c_slot, c_bias, Jt_nu, delta_t):
+    """Friction rows' q, in place: each friction contact's d direction rows from nu_free and the
+    bias and, compliant, the previous tangential deformation's term (gamma rows' q is 0)."""
     nc = active.shape[0]
     for f in range(nf):
-        k = fric[f]
-        i = active[k]
+        i = active[fric[f]]
         p = c_pair[i]
-        g = m + f
-        Mlcp[g, k] = pf[p, PF_MU]
         K, C = pf[p, PF_K], pf[p, PF_C]
         slot = c_slot[i]
         for j in range(d):
             r = nc + f * d + j
             qlcp[r] = Jt_nu[r] + cf[0, r] * c_bias[i, 1] + cf[1, r] * c_bias[i, 2]
+            if compliant:
+                qlcp[r] -= K / (h * K + C) * (cf[0, r] * delta_t[slot, 0] + cf[1, r] * delta_t[slot, 1])
+
+
+@numba.njit(cache=True, inline="always")
+def _friction_matrix(Mlcp, compliant, h, d, m, active, fric, nf, cf, pf, c_pair):
+    """Friction rows' part of M, in place: each friction contact's gamma row and column (mu,
+    +-1), unscaled, and with compliance its friction block's `_compliance`."""
+    nc = active.shape[0]
+    for f in range(nf):
+        k = fric[f]
+        p = c_pair[active[k]]
+        g = m + f
+        Mlcp[g, k] = pf[p, PF_MU]
+        for j in range(d):
+            r = nc + f * d + j
             Mlcp[r, g] = 1.0
             Mlcp[g, r] = -1.0
             if compliant:
-                comp = 1.0 / (h * (h * K + C))
+                comp = _compliance(h, pf[p, PF_K], pf[p, PF_C])
                 for j2 in range(d):
                     r2 = nc + f * d + j2
                     Mlcp[r, r2] += comp * (cf[0, r] * cf[0, r2] + cf[1, r] * cf[1, r2])
-                qlcp[r] -= K / (h * K + C) * (cf[0, r] * delta_t[slot, 0] + cf[1, r] * delta_t[slot, 1])
 
 
 @numba.njit(cache=True, inline="always")
@@ -1393,7 +1468,7 @@ def _planar_lcp(model, h, dofs, count, inv, nu_free, active, pi, pf, contacts, d
     operations in their order, a zero coefficient's products included (they decide a zero's sign
     as there), on two flat buffers (I: ints, F: floats) instead of contact_lcp's 15 arrays (the squeeze's
     contact steps 7% faster, docs/measurements.md). Returns what contact_lcp returns; M, q, Y,
-    gen and cf are views of F and I."""
+    gen, cf and G are views of F and I."""
     nc = active.shape[0]
     nv = nu_free.shape[0]
     n, m, ng = 4 * nc, 3 * nc, 2 * nc
@@ -1412,7 +1487,8 @@ def _planar_lcp(model, h, dofs, count, inv, nu_free, active, pi, pf, contacts, d
     gen = I[n_int : n_int + 2 * m].reshape(2, m)
     fric = I[n_int + 2 * m : n_int + 2 * m + nc]
     _planar_lcp_into(model, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, I, F, Mlcp, qlcp, Y, gen, cf, fric)
-    return Mlcp, qlcp, Y, gen, cf, fric, nc, fric[:0]
+    fG = ng * LOCAL_DOFS  # (`_planar_lcp_into`'s layout of F)
+    return Mlcp, qlcp, Y, gen, cf, fric, nc, fric[:0], F[fG : fG + ng * ng].reshape(ng, ng)
 
 
 @numba.njit(cache=True, inline="always")
@@ -1518,7 +1594,7 @@ def _planar_lcp_into(model, h, dofs, count, inv, nu_free, active, pi, pf, contac
             pt = F[fp + nc + f]
             M[r, nc + f * d] = pt * 1.0 + 0.0 * 0.0
             M[r, nc + f * d + 1] = pt * -1.0 + 0.0 * 0.0
-    # B^T nu_free, the rows (_normal_rows, _friction_rows), gamma (_scale_gamma)
+    # B^T nu_free, the rows (_normal_q, _normal_diagonal, _friction_q, _friction_matrix), gamma (_scale_gamma)
     for g in range(ng):
         s0 = 0.0
         for a in range(I[oN + g]):
@@ -1645,6 +1721,10 @@ class WarmLCP(NamedTuple):
     t: np.ndarray  # (ng,)
     p_t: np.ndarray  # (cap, 2) friction impulses of the active contacts
     lemke: LemkeWork  # Lemke's arrays, where the guess does not solve the LCP (`_warm_solve`)
+    u: np.ndarray  # (ng,) G t (`_generator_guess_into`)
+    comp: np.ndarray  # (cap,) each active contact's compliance (`_generator_scales_into`)
+    gs: np.ndarray  # (cap,) each friction contact's gamma scale
+    gmu: np.ndarray  # (cap,) and mu times it
 
 
 @numba.njit(cache=True)
@@ -1666,6 +1746,10 @@ def warm_lcp(cap, n, m, ng, nv):
         np.empty(ng),
         np.empty((cap, 2)),
         lemke_work(n),
+        np.empty(ng),
+        np.empty(cap),
+        np.empty(cap),
+        np.empty(cap),
     )
 
 
@@ -1889,22 +1973,39 @@ def spatial_warm_step(model, drives, tables, system, rotating, h, q, nu, q_ref, 
     n = m + nf
     lim = W.lim[:0]
     M, q_lcp, Y, gen, cf = _lcp_views(L, nv, n, m, ng)
-    scratch = (W.body[:ng], W.ldof[:ng], W.nloc[:ng], W.Bl[:ng], W.G[: ng * ng].reshape((ng, ng)), W.p[:ng], W.Bt_nu[:ng], W.Jt_nu[:m])
-    contact_lcp_into(
-        model, True, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, drives, R.drive_a, lim, 0, fric, nf,
-        scratch, M, q_lcp, Y, gen, cf,
+    G = W.G[: ng * ng].reshape((ng, ng))
+    scratch = (W.body[:ng], W.ldof[:ng], W.nloc[:ng], W.Bl[:ng], G, W.p[:ng], W.Bt_nu[:ng], W.Jt_nu[:m])
+    # all of the LCP but M (`lcp_generators_into`), scaled as the general step scales it
+    # (`_scale_contact_lcp` on the generators), and the previous basis's guess on G and C: M is
+    # built only where that fails (a period's first step, a contact made or broken)
+    lcp_generators_into(
+        model, True, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, drives, lim, 0, fric, nf, scratch, q_lcp, Y,
+        gen, cf,
     )  # fmt: skip
-    _scale_lcp(M, q_lcp, m)
+    compliant = model.compliant
+    comp, gs, gmu = L.comp[:n_act], L.gs[:nf], L.gmu[:nf]
+    reg = _regularization(G, gen, cf, n_act, compliant, model.regularization)
+    scale = _generator_scales_into(G, gen, cf, compliant, h, reg, active, fric, nf, d, pf, contacts.pair, comp, gs, gmu)
+    _scale_lcp_by(M[:0], q_lcp, scale)
     _fill_basis_guess(L.guess, basis, active, contacts.slot, fric, nf, d, lim, m, n)
     guess = L.guess[:n]
     if part == PART_ASSEMBLY:
         return WARM_DONE, n, 0.0, 0
-    solved, pivots, guess = _warm_solve(M, q_lcp, guess, L, n)
-    if not solved:
-        return WARM_NOT_TAKEN, n, 0.0, pivots
+    z, w = L.z[:n], L.w[:n]
+    pivots = 0
+    if not _generator_guess_into(
+        G, gen, cf, compliant, n_act, d, m, fric, nf, reg, comp, gs, gmu, q_lcp, scale, guess, WARM_TOLERANCE, L.J, L.lu, z, w, L.t[:ng],
+        L.u[:ng],
+    ):  # fmt: skip
+        # M, scaled as q is, and Lemke from scratch (`_warm_solve`'s after a failed guess); the
+        # final basis's flags replace the guess
+        lcp_matrix_into(model, True, h, active, pf, contacts.pair, drives, R.drive_a, lim, 0, fric, nf, reg, scratch, M, q_lcp, gen, cf)
+        _scale_lcp_by(M, q_lcp[:0], scale)
+        status, pivots = lemke_into(M, q_lcp, PIVOTS_PER_VARIABLE * (n + 1), L.lemke, z, w, guess)
+        if status != STATUS_SOLVED and status != STATUS_SOLVED_INACCURATE:
+            return WARM_NOT_TAKEN, n, 0.0, pivots
     if part == PART_CONTACT_SOLVE:
         return WARM_DONE, n, 0.0, pivots
-    z, w = L.z[:n], L.w[:n]
     residual = natural_map_residual(z, w, q_lcp)
     if not (residual <= LCP_TOLERANCE):
         return WARM_NOT_TAKEN, n, residual, pivots
@@ -2051,9 +2152,11 @@ def _contact_solve(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf,
     # the builder chosen here, not in a helper: one that took the build's arguments would count
     # their references each step, 2-3% of the squeeze's (docs/measurements.md)
     if _planar_case(spatial, drives.max_force, active, contacts.pair, pf, contacts.W_t):
-        Mlcp, qlcp, Y, gen, cf, fric, nf, lim = _planar_lcp(model, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t)
+        Mlcp, qlcp, Y, gen, cf, fric, nf, lim, G = _planar_lcp(
+            model, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t
+        )
     else:
-        Mlcp, qlcp, Y, gen, cf, fric, nf, lim = contact_lcp(
+        Mlcp, qlcp, Y, gen, cf, fric, nf, lim, G = contact_lcp(
             model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, drives, drive_a
         )
     nc = active.shape[0]
@@ -2061,10 +2164,17 @@ def _contact_solve(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf,
     nd = nf * d
     m = nc + nd + lim.shape[0]
     n = qlcp.shape[0]
-    _scale_lcp(Mlcp, qlcp, m)
+    on_generators = _on_generators(spatial, lim.shape[0])
+    comp, gs, gmu = np.empty(nc), np.empty(nf), np.empty(nf)
+    reg, scale = _scale_contact_lcp(model, on_generators, h, Mlcp, qlcp, G, gen, cf, active, fric, nf, pf, contacts.pair, m, comp, gs, gmu)
     slot = contacts.slot
     guess = _basis_guess(basis, active, slot, fric, nf, d, lim, m, n)
-    z, w, status, pivots, basic_z, _ = lemke_warm_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1), guess, WARM_TOLERANCE)
+    if on_generators:
+        z, w, status, pivots, basic_z = _guess_or_lemke(
+            G, gen, cf, model.compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, Mlcp, qlcp, scale, guess
+        )
+    else:
+        z, w, status, pivots, basic_z, _ = lemke_warm_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1), guess, WARM_TOLERANCE)
     residual = natural_map_residual(z, w, qlcp)  # w = M z + q, recomputed by the kernel
     added = 0.0
     for k in range(LCP_REGULARIZATION_STEPS):
@@ -2087,6 +2197,45 @@ def _contact_solve(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf,
     _impulses_into(spatial, nc, m, nf, fric, gen, cf, z, Y, nu_free, np.empty(Y.shape[1]), p_t, nu_new)
     basis_new = _basis_kept(basis, basic_z, active, slot, fric, nf, d, lim, m)
     return nu_new, p_n, p_t, StepStatus.OK.value, pivots, residual, n, basis_new
+
+
+@numba.njit(cache=True, inline="always")
+def _on_generators(spatial, nl):
+    """Whether a contact LCP's guess is tried on G and C (`_generator_guess_into`), M used only
+    where it fails: in space without force-limited drives (`spatial_warm_step`'s case; the
+    general step does the same there, for the same bits)."""
+    return spatial and nl == 0
+
+
+@numba.njit(cache=True, inline="always")
+def _scale_contact_lcp(model, on_generators, h, Mlcp, qlcp, G, gen, cf, active, fric, nf, pf, c_pair, m, comp, gs, gmu):
+    """Scale a built contact LCP (`_scale_lcp`): on the generators (`_on_generators`) by
+    `_generator_scales_into`'s max |M|, which fills comp, gs and gmu for the guess, else by M's
+    own. Returns (reg: `_regularization`, where on the generators, else 0; the scale)."""
+    if not on_generators:
+        scale = _largest_entry(Mlcp, m)
+        _scale_lcp_by(Mlcp, qlcp, scale)
+        return 0.0, scale
+    d = model.friction_directions
+    reg = _regularization(G, gen, cf, active.shape[0], model.compliant, model.regularization)
+    scale = _generator_scales_into(G, gen, cf, model.compliant, h, reg, active, fric, nf, d, pf, c_pair, comp, gs, gmu)
+    _scale_lcp_by(Mlcp, qlcp, scale)
+    return reg, scale
+
+
+@numba.njit(cache=True, inline="always")
+def _guess_or_lemke(G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, Mlcp, qlcp, scale, guess):
+    """`lemke_warm_kernel` with its guess on the generators (`_generator_guess_into`) and, where
+    that fails, Lemke from scratch on the scaled M, q. Returns (z, w, status, pivots, basic_z)."""
+    n = qlcp.shape[0]
+    ng = G.shape[0]
+    z, w = np.empty(n), np.empty(n)
+    J, A, t, u = np.empty(n, np.int64), np.empty((n + 1, n)), np.empty(ng), np.empty(ng)
+    if _generator_guess_into(
+        G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, qlcp, scale, guess, WARM_TOLERANCE, J, A, z, w, t, u
+    ):
+        return z, w, STATUS_SOLVED, 0, guess
+    return _lemke(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1))
 
 
 @numba.njit(cache=True, inline="always")
@@ -2117,12 +2266,20 @@ def _impulses_into(spatial, nc, m, nf, fric, gen, cf, z, Y, nu_free, t, p_t, nu_
 def _scale_lcp(Mlcp, qlcp, m):
     """LCP(s M, s q) has the solutions of LCP(M, q): scale both, in place, to max |M| = 1 for
     Lemke's pivot tolerances (quasistatic rungs make M ~ 1 / QUASISTATIC_INERTIA)."""
-    scale = _largest_entry(Mlcp, m)
+    _scale_lcp_by(Mlcp, qlcp, _largest_entry(Mlcp, m))
+
+
+@numba.njit(cache=True, inline="always")
+def _scale_lcp_by(Mlcp, qlcp, scale):
+    """`_scale_lcp` by a given max |M| (`_largest_entry`, `_generator_scales_into`): M and q
+    times 1 / scale, in place (not at all where scale is 0). Either may be empty (M built only
+    where the guess fails, `spatial_warm_step`)."""
     if scale > 0.0:
         inverse = 1.0 / scale  # a product per entry: divisions cost 0.5 us of box_push's 9.5 us solve
-        for r in range(qlcp.shape[0]):  # (loops: the array expressions cost more instructions)
+        for r in range(Mlcp.shape[0]):  # (loops: the array expressions cost more instructions)
             for c in range(Mlcp.shape[1]):
                 Mlcp[r, c] *= inverse
+        for r in range(qlcp.shape[0]):
             qlcp[r] *= inverse
 
 
@@ -2140,6 +2297,136 @@ def _largest_entry(Mlcp, m):
         for c in range(n):
             scale = max(scale, abs(Mlcp[r, c]))
     return scale
+
+
+@numba.njit(cache=True, inline="always")
+def _jacobian_entry(G, gen, cf, nc, r, c):
+    """(C^T G C)[r, c] (r, c < m) by `_fill_jacobian_block`'s operations: the same bits."""
+    a0, a1, x0, x1 = gen[0, r], gen[1, r], cf[0, r], cf[1, r]
+    if c < nc:
+        return x0 * G[a0, c] + x1 * G[a1, c]
+    b0, b1 = gen[0, c], gen[1, c]
+    return (x0 * G[a0, b0] + x1 * G[a1, b0]) * cf[0, c] + (x0 * G[a0, b1] + x1 * G[a1, b1]) * cf[1, c]
+
+
+@numba.njit(cache=True, inline="always")
+def _lcp_entry(G, gen, cf, compliant, nc, d, m, fric, reg, comp, gs, gmu, r, c):
+    """M[r, c] of a contact LCP without force-limited drives (`contact_lcp`, unscaled), from G
+    and C alone, by the build's operations (`lcp_matrix_into`: the same bits): C^T G C, the
+    normal diagonal's reg and compliance, the friction blocks' compliance, gamma's entries.
+    comp (nc): each active contact's `_compliance` (with compliance); gs, gmu (nf): each friction
+    contact's gamma scale (`_scale_gamma`; 1 where it does not scale) and mu times it
+    (`_generator_scales_into`)."""
+    if r < m and c < m:
+        v = _jacobian_entry(G, gen, cf, nc, r, c)
+        if r < nc:
+            if r == c:
+                v += reg
+                if compliant:
+                    v += comp[r]
+        elif c >= nc and compliant:
+            f = (r - nc) // d
+            if (c - nc) // d == f:
+                v += comp[fric[f]] * (cf[0, r] * cf[0, c] + cf[1, r] * cf[1, c])
+        return v
+    if r < m:  # gamma's column
+        f = c - m
+        return gs[f] if r >= nc and (r - nc) // d == f else 0.0
+    f = r - m  # gamma's row
+    if c == fric[f]:
+        return gmu[f]
+    if nc <= c < m and (c - nc) // d == f:
+        return -gs[f]
+    return 0.0
+
+
+@numba.njit(cache=True, inline="always")
+def _generator_scales_into(G, gen, cf, compliant, h, reg, active, fric, nf, d, pf, c_pair, comp, gs, gmu):
+    """What `_lcp_entry` needs besides G and C, into the caller's comp (nc), gs and gmu (nf):
+    each active contact's `_compliance` (0 without), each friction contact's gamma scale
+    (`_scale_gamma`'s: its block's largest diagonal entry, 1 where that is 0) and mu times it.
+    Returns max |M| (`_largest_entry`'s: the diagonal's largest, or gamma rows'), without M."""
+    nc = active.shape[0]
+    m = nc + nf * d
+    for k in range(nc):
+        p = c_pair[active[k]]
+        comp[k] = _compliance(h, pf[p, PF_K], pf[p, PF_C]) if compliant else 0.0
+    for f in range(nf):
+        gs[f], gmu[f] = 1.0, 0.0
+    scale = 0.0
+    for r in range(m):
+        scale = max(scale, abs(_lcp_entry(G, gen, cf, compliant, nc, d, m, fric, reg, comp, gs, gmu, r, r)))
+    for f in range(nf):
+        s = 0.0
+        for j in range(d):
+            r = nc + f * d + j
+            s = max(s, abs(_lcp_entry(G, gen, cf, compliant, nc, d, m, fric, reg, comp, gs, gmu, r, r)))
+        if s > 0.0:
+            gs[f] = s
+        gmu[f] = pf[c_pair[active[fric[f]]], PF_MU] * gs[f] if s > 0.0 else pf[c_pair[active[fric[f]]], PF_MU]
+        scale = max(scale, abs(gmu[f]))
+        scale = max(scale, gs[f])
+    return scale
+
+
+@numba.njit(cache=True, inline="always")
+def _generator_guess_into(G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, q, scale, guess, tol, J, A, z, w, t, u):
+    """The previous basis's guess (`warm_guess_into`) on an LCP without force-limited drives,
+    without M: z_J = -M[J, J]^-1 q_J with M[J, J]'s entries made by `_lcp_entry` (M's own
+    bits) and scaled by 1 / scale as `_scale_lcp_by` scales M (q: scaled already), z = 0
+    elsewhere, and w = M z + q through the generators: t = C z, G t, C^T (G t), and the
+    diagonal's, friction blocks' and gamma's terms (O(ng^2 + n), not O(n nj)). On the
+    caller's J (n), A ((n + 1, n) at least), z, w (n), t, u (ng). Returns whether that point's
+    natural-map residual is at most tol (False where M[J, J] is numerically singular)."""
+    n = q.shape[0]
+    inverse = 1.0 / scale if scale > 0.0 else 1.0
+    nj = np.int64(0)
+    for i in range(n):
+        if guess[i]:
+            J[nj] = i
+            nj += 1
+    for a in range(nj):
+        A[nj, a] = -q[J[a]]
+        for b in range(nj):
+            A[a, b] = _lcp_entry(G, gen, cf, compliant, nc, d, m, fric, reg, comp, gs, gmu, J[a], J[b]) * inverse
+    ok = _gauss_solve(A, nj)
+    for i in range(n):
+        z[i] = 0.0
+    if not ok:
+        return False
+    for a in range(nj):
+        z[J[a]] = A[nj, a]
+    ng = G.shape[0]
+    for g in range(ng):
+        t[g] = 0.0
+    for a in range(nj):
+        r = J[a]
+        if r < m:
+            t[gen[0, r]] += cf[0, r] * z[r]
+            t[gen[1, r]] += cf[1, r] * z[r]
+    for g in range(ng):
+        s = 0.0
+        for g2 in range(ng):
+            s += G[g, g2] * t[g2]
+        u[g] = s
+    for r in range(m):
+        v = cf[0, r] * u[gen[0, r]] + cf[1, r] * u[gen[1, r]]
+        if r < nc:
+            v += reg * z[r]
+            if compliant:
+                v += comp[r] * z[r]
+        else:
+            f = (r - nc) // d
+            if compliant:
+                v += comp[fric[f]] * (cf[0, r] * t[nc + f] + cf[1, r] * t[nc + nf + f])
+            v += gs[f] * z[m + f]
+        w[r] = v * inverse + q[r]
+    for f in range(nf):
+        s = 0.0
+        for j in range(d):
+            s += z[nc + f * d + j]
+        w[m + f] = (gmu[f] * z[fric[f]] - gs[f] * s) * inverse + q[m + f]
+    return _natural_map_residual(z, w, q) <= tol
 
 
 @numba.njit(cache=True, inline="always")
