@@ -2310,15 +2310,16 @@ def _jacobian_entry(G, gen, cf, nc, r, c):
 
 
 @numba.njit(cache=True, inline="always")
-def _lcp_entry(G, gen, cf, compliant, nc, d, m, fric, reg, comp, gs, gmu, r, c):
-    """M[r, c] of a contact LCP without force-limited drives (`contact_lcp`, unscaled), from G
-    and C alone, by the build's operations (`lcp_matrix_into`: the same bits): C^T G C, the
-    normal diagonal's reg and compliance, the friction blocks' compliance, gamma's entries.
-    comp (nc): each active contact's `_compliance` (with compliance); gs, gmu (nf): each friction
-    contact's gamma scale (`_scale_gamma`; 1 where it does not scale) and mu times it
-    (`_generator_scales_into`)."""
+def _lcp_entry(jac, cf, compliant, nc, d, m, fric, reg, comp, gs, gmu, r, c):
+    """M[r, c] of a contact LCP in space without force-limited drives (`contact_lcp`,
+    unscaled), from jac = (C^T G C)[r, c] (read where r, c < m: `_jacobian_entry`, or a row of
+    C^T G's `_fill_jacobian_block` way) by the build's operations (`lcp_matrix_into`: the same
+    bits): the normal diagonal's reg and compliance, the friction blocks' compliance, gamma's
+    entries. comp (nc): each active contact's `_compliance` (with compliance); gs, gmu (nf):
+    each friction contact's gamma scale (`_scale_gamma`; 1 where it does not scale) and mu
+    times it (`_generator_scales_into`)."""
     if r < m and c < m:
-        v = _jacobian_entry(G, gen, cf, nc, r, c)
+        v = jac
         if r < nc:
             if r == c:
                 v += reg
@@ -2342,7 +2343,7 @@ def _lcp_entry(G, gen, cf, compliant, nc, d, m, fric, reg, comp, gs, gmu, r, c):
 
 @numba.njit(cache=True, inline="always")
 def _generator_scales_into(G, gen, cf, compliant, h, reg, active, fric, nf, d, pf, c_pair, comp, gs, gmu):
-    """What `_lcp_entry` needs besides G and C, into the caller's comp (nc), gs and gmu (nf):
+    """What `_lcp_entry` needs besides C^T G C, into the caller's comp (nc), gs and gmu (nf):
     each active contact's `_compliance` (0 without), each friction contact's gamma scale
     (`_scale_gamma`'s: its block's largest diagonal entry, 1 where that is 0) and mu times it.
     Returns max |M| (`_largest_entry`'s: the diagonal's largest, or gamma rows'), without M."""
@@ -2351,19 +2352,20 @@ def _generator_scales_into(G, gen, cf, compliant, h, reg, active, fric, nf, d, p
     for k in range(nc):
         p = c_pair[active[k]]
         comp[k] = _compliance(h, pf[p, PF_K], pf[p, PF_C]) if compliant else 0.0
-    for f in range(nf):
-        gs[f], gmu[f] = 1.0, 0.0
     scale = 0.0
-    for r in range(m):
-        scale = max(scale, abs(_lcp_entry(G, gen, cf, compliant, nc, d, m, fric, reg, comp, gs, gmu, r, r)))
+    for k in range(nc):
+        jac = _jacobian_entry(G, gen, cf, nc, k, k)
+        scale = max(scale, abs(_lcp_entry(jac, cf, compliant, nc, d, m, fric, reg, comp, gs, gmu, k, k)))
     for f in range(nf):
         s = 0.0
         for j in range(d):
             r = nc + f * d + j
-            s = max(s, abs(_lcp_entry(G, gen, cf, compliant, nc, d, m, fric, reg, comp, gs, gmu, r, r)))
-        if s > 0.0:
-            gs[f] = s
-        gmu[f] = pf[c_pair[active[fric[f]]], PF_MU] * gs[f] if s > 0.0 else pf[c_pair[active[fric[f]]], PF_MU]
+            jac = _jacobian_entry(G, gen, cf, nc, r, r)
+            s = max(s, abs(_lcp_entry(jac, cf, compliant, nc, d, m, fric, reg, comp, gs, gmu, r, r)))
+        scale = max(scale, s)
+        mu = pf[c_pair[active[fric[f]]], PF_MU]
+        gs[f] = s if s > 0.0 else 1.0
+        gmu[f] = mu * s if s > 0.0 else mu
         scale = max(scale, abs(gmu[f]))
         scale = max(scale, gs[f])
     return scale
@@ -2385,10 +2387,20 @@ def _generator_guess_into(G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, 
         if guess[i]:
             J[nj] = i
             nj += 1
+    ng = G.shape[0]
     for a in range(nj):
-        A[nj, a] = -q[J[a]]
+        r = J[a]
+        A[nj, a] = -q[r]
+        if r < m:  # row r of C^T G, in u (`_fill_jacobian_block`'s p)
+            a0, a1, x0, x1 = gen[0, r], gen[1, r], cf[0, r], cf[1, r]
+            for g in range(ng):
+                u[g] = x0 * G[a0, g] + x1 * G[a1, g]
         for b in range(nj):
-            A[a, b] = _lcp_entry(G, gen, cf, compliant, nc, d, m, fric, reg, comp, gs, gmu, J[a], J[b]) * inverse
+            c = J[b]
+            jac = 0.0
+            if r < m and c < m:
+                jac = u[c] if c < nc else u[gen[0, c]] * cf[0, c] + u[gen[1, c]] * cf[1, c]
+            A[a, b] = _lcp_entry(jac, cf, compliant, nc, d, m, fric, reg, comp, gs, gmu, r, c) * inverse
     ok = _gauss_solve(A, nj)
     for i in range(n):
         z[i] = 0.0
@@ -2396,7 +2408,6 @@ def _generator_guess_into(G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, 
         return False
     for a in range(nj):
         z[J[a]] = A[nj, a]
-    ng = G.shape[0]
     for g in range(ng):
         t[g] = 0.0
     for a in range(nj):
