@@ -1720,7 +1720,7 @@ class WarmLCP(NamedTuple):
     w: np.ndarray  # (n,)
     t: np.ndarray  # (ng,)
     p_t: np.ndarray  # (cap, 2) friction impulses of the active contacts
-    lemke: LemkeWork  # Lemke's arrays, where the guess does not solve the LCP (`_warm_solve`)
+    lemke: LemkeWork  # Lemke's arrays, where the guess does not solve the LCP
     u: np.ndarray  # (ng,) G t (`_generator_guess_into`)
     comp: np.ndarray  # (cap,) each active contact's compliance (`_generator_scales_into`)
     gs: np.ndarray  # (cap,) each friction contact's gamma scale
@@ -1778,7 +1778,7 @@ WARM_DONE, WARM_NOT_TAKEN = 0, 1
 
 @numba.njit(cache=True, inline="always")
 def _warm_solve(M, q_lcp, guess, L, n):
-    """The warm steps' solve of their LCP (n unknowns, on `WarmLCP` L's arrays): the guessed
+    """The planar warm step's solve of its LCP (n unknowns, on `WarmLCP` L's arrays): the guessed
     basis (`warm_guess_into`), and where that does not solve it, Lemke from scratch
     (`lemke_into`), as `lemke_warm_kernel` goes on after a failed guess (a period's first step,
     a contact made or broken). Returns (solved, pivots, the final basis's flags); z and w in
@@ -1939,8 +1939,10 @@ def spatial_warm_buffers(cap, d, nb, out):
 def spatial_warm_step(model, drives, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, W, side, part):
     """A contact step of `_lemke_step` in space with no force-limited drive, compiled without
     numba's runtime: no reference counts, no allocation; every array is W's (`SpatialWarm`).
-    The LCP is solved on the previous step's basis and, where that guess does not solve it,
-    by Lemke from scratch (`_warm_solve`).
+    The LCP is solved on the previous step's basis, tried on G and C without building M
+    (`_generator_guess_into`), and where that guess does not solve it, M is built and Lemke
+    runs from scratch (as the general step in space without force-limited drives,
+    `_on_generators`).
     rotating: A depends on q (`has_rotations`), so A(q) and its body blocks are built here
     (`system_matrix`, `body_blocks`), where the general step has the rollout build them. Where
     there are no active contacts or more than W holds, a block of A is singular, Lemke does not

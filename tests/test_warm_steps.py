@@ -24,7 +24,8 @@ import numpy as np
 import pytest
 
 from models.contact import ContactSet, contact_buffers, contact_frames, place_scripted, scripted_bias
-from models.contact_pgs import _pgs_directions, pgs_work
+from models.contact_pgs import _pgs_directions, body_blocks, pgs_work
+from models.lcp import lemke_warm_kernel, warm_guess_into
 from models.rollout import _start_system
 from models.rungs import compiled, rung_for
 from models.scenario import load_scenario
@@ -37,9 +38,16 @@ from models.stepper import (
     SceneTables,
     StepStatus,
     _active_contacts,
+    _free_velocity,
+    _generator_guess_into,
+    _generator_scales_into,
+    _largest_entry,
     _planar_case,
+    _regularization,
+    _scale_lcp_by,
     any_limited,
     basis_table,
+    contact_lcp,
     dynamics_step,
     has_rotations,
     planar_warm_buffers,
@@ -293,3 +301,66 @@ def test_the_spatial_pgs_step_is_the_general_one_bit_for_bit(name, rung_name, ex
         return None if out is None else (*out, out[0].status == StepStatus.OK)
 
     _held_bit_for_bit(sampled_states(sc, rung, h, sum(map(ord, name + rung_name)) + 2), both, "PGS")
+
+
+@pytest.mark.parametrize("name, rung_name", [(name, rung) for name in SPATIAL_SCENES for rung in RUNGS])
+def test_the_guess_on_the_generators_is_the_lcp_s(name, rung_name):
+    """In space, the warm start's guess is tried on G and C (`_generator_guess_into`), M built
+    only where it fails. Against the LCP built whole (`contact_lcp`) at sampled states: the
+    scale is M's largest entry (`_largest_entry`) bit for bit; on the previous basis's guess
+    and on random guesses (z's basic set), z is the dense solve's on M[J, J] (`warm_guess_into`)
+    bit for bit, w is M z + q to round-off, and the guess is accepted exactly where the dense
+    one is."""
+    sc = load_scenario(SCENARIOS / f"{name}.toml")
+    rung = rung_for(sc, rung_name)
+    model = rung.model
+    h = sc.rung_settings(rung_name).h
+    d = model.friction_directions
+    rng = np.random.default_rng(sum(map(ord, name + rung_name)))
+    states = sampled_states(sc, rung, h, sum(map(ord, name + rung_name)) + 3)
+    compared, accepted, touching = 0, 0, None
+    while compared < STATES:
+        try:
+            state, u, t = states.send(touching)
+        except StopIteration:
+            break
+        at = _at(sc, model, state, h, t)
+        touching = at is not None
+        if not touching:
+            continue
+        S, D, system, tables, contacts, nc, cap, _ = at
+        dofs, count, inv, ok = body_blocks(S.bi, system.A, system.Ainv)
+        assert ok
+        u = np.asarray(u, dtype=float)
+        nu_free, _, drive_a = _free_velocity(model, D, tables, system, h, state.q, state.nu, state.q_ref, u, dofs, count, inv)
+        active = _active_contacts(contacts.W_n, nc)
+        if len(active) == 0:
+            continue
+        args = (h, dofs, count, inv, nu_free, active, S.pi, S.pf, contacts, state.delta_n, state.delta_t, D, drive_a)
+        M, q, Y, gen, cf, fric, nf, lim, G = contact_lcp(model, True, *args)
+        assert len(lim) == 0
+        n_act, m, n, ng = len(active), len(active) + nf * d, len(q), G.shape[0]
+        comp, gs, gmu = np.empty(n_act), np.empty(nf), np.empty(nf)
+        reg = _regularization(G, gen, cf, n_act, model.compliant, model.regularization)
+        scale = _generator_scales_into(G, gen, cf, model.compliant, h, reg, active, fric, nf, d, S.pf, contacts.pair, comp, gs, gmu)
+        assert scale == _largest_entry(M, m), f"t = {t}: scale {scale} against M's {_largest_entry(M, m)}"
+        _scale_lcp_by(M, q, scale)
+        # the basis Lemke ends on from scratch (the guess a persisting contact set makes), then random basic sets
+        _, _, _, _, basic, _ = lemke_warm_kernel(M, q, 10 * (n + 1), np.zeros(n, np.bool_), 1e-9)
+        for guess in (basic, *(rng.random(n) < 0.3 for _ in range(3))):
+            work = np.empty(n, np.int64), np.empty((n + 1, n)), np.empty(n), np.empty(n)
+            dense = warm_guess_into(M, q, guess, 1e-9, *work)
+            J, A, z, w = np.empty(n, np.int64), np.empty((n + 1, n)), np.empty(n), np.empty(n)
+            t_, u_ = np.empty(ng), np.empty(ng)
+            mine = _generator_guess_into(
+                G, gen, cf, model.compliant, n_act, d, m, fric, nf, reg, comp, gs, gmu, q, scale, guess, 1e-9, J, A, z, w, t_, u_
+            )
+            assert mine == dense, f"t = {t}: accepted {mine}, dense {dense}"
+            assert np.array_equal(z, work[2]), f"t = {t}: z differs by {np.max(np.abs(z - work[2]))}"
+            if np.all(np.isfinite(z)) and np.any(z != 0.0):
+                tol = 1e-12 * (1.0 + np.max(np.abs(q)) + np.sum(np.abs(z)))
+                assert np.allclose(w, M @ z + q, rtol=0.0, atol=tol), f"t = {t}: w is not M z + q ({np.max(np.abs(w - M @ z - q))})"
+            accepted += mine
+        compared += 1
+    assert compared == STATES, f"only {compared} states with contact"
+    assert accepted >= STATES // 2, f"the basis's guess accepted at {accepted} of {compared} states"
