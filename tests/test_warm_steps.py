@@ -318,7 +318,7 @@ def test_the_guess_on_the_generators_is_the_lcp_s(name, rung_name):
     d = model.friction_directions
     rng = np.random.default_rng(sum(map(ord, name + rung_name)))
     states = sampled_states(sc, rung, h, sum(map(ord, name + rung_name)) + 3)
-    compared, accepted, touching = 0, 0, None
+    compared, accepted, with_friction, touching = 0, 0, 0, None
     while compared < STATES:
         try:
             state, u, t = states.send(touching)
@@ -347,7 +347,17 @@ def test_the_guess_on_the_generators_is_the_lcp_s(name, rung_name):
         _scale_lcp_by(M, q, scale)
         # the basis Lemke ends on from scratch (the guess a persisting contact set makes), then random basic sets
         _, _, _, _, basic, _ = lemke_warm_kernel(M, q, 10 * (n + 1), np.zeros(n, np.bool_), 1e-9)
-        for guess in (basic, *(rng.random(n) < 0.3 for _ in range(3))):
+        # sliding guesses: the basis's normals (four coplanar rigid ones are redundant), one
+        # direction of each friction contact and its gamma (friction in z, so that the friction
+        # blocks' and gamma's terms of w are exercised)
+        sliding = []
+        for _ in range(2):
+            guess = np.zeros(n, np.bool_)
+            guess[:n_act] = basic[:n_act]
+            guess[m:] = True
+            guess[n_act + d * np.arange(nf) + rng.integers(0, d, nf)] = True
+            sliding.append(guess)
+        for guess in (basic, *sliding, rng.random(n) < 0.3):
             work = np.empty(n, np.int64), np.empty((n + 1, n)), np.empty(n), np.empty(n)
             dense = warm_guess_into(M, q, guess, 1e-9, *work)
             J, A, z, w = np.empty(n, np.int64), np.empty((n + 1, n)), np.empty(n), np.empty(n)
@@ -361,6 +371,8 @@ def test_the_guess_on_the_generators_is_the_lcp_s(name, rung_name):
                 tol = 1e-12 * (1.0 + np.max(np.abs(q)) + np.sum(np.abs(z)))
                 assert np.allclose(w, M @ z + q, rtol=0.0, atol=tol), f"t = {t}: w is not M z + q ({np.max(np.abs(w - M @ z - q))})"
             accepted += mine
+            with_friction += bool(np.any(z[n_act:m] != 0.0))
         compared += 1
     assert compared == STATES, f"only {compared} states with contact"
     assert accepted >= STATES // 2, f"the basis's guess accepted at {accepted} of {compared} states"
+    assert with_friction >= STATES // 2, f"friction impulses in only {with_friction} solves"
