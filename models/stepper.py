@@ -2215,9 +2215,7 @@ def _scale_contact_lcp(model, on_generators, h, Mlcp, qlcp, G, gen, cf, active, 
     `_generator_scales_into`'s max |M|, which fills comp, gs and gmu for the guess, else by M's
     own. Returns (reg: `_regularization`, where on the generators, else 0; the scale)."""
     if not on_generators:
-        scale = _largest_entry(Mlcp, m)
-        _scale_lcp_by(Mlcp, qlcp, scale)
-        return 0.0, scale
+        return 0.0, _scale_lcp(Mlcp, qlcp, m)
     d = model.friction_directions
     reg = _regularization(G, gen, cf, active.shape[0], model.compliant, model.regularization)
     scale = _generator_scales_into(G, gen, cf, model.compliant, h, reg, active, fric, nf, d, pf, c_pair, comp, gs, gmu)
@@ -2267,8 +2265,11 @@ def _impulses_into(spatial, nc, m, nf, fric, gen, cf, z, Y, nu_free, t, p_t, nu_
 @numba.njit(cache=True, inline="always")
 def _scale_lcp(Mlcp, qlcp, m):
     """LCP(s M, s q) has the solutions of LCP(M, q): scale both, in place, to max |M| = 1 for
-    Lemke's pivot tolerances (quasistatic rungs make M ~ 1 / QUASISTATIC_INERTIA)."""
-    _scale_lcp_by(Mlcp, qlcp, _largest_entry(Mlcp, m))
+    Lemke's pivot tolerances (quasistatic rungs make M ~ 1 / QUASISTATIC_INERTIA). Returns the
+    scale, max |M| before."""
+    scale = _largest_entry(Mlcp, m)
+    _scale_lcp_by(Mlcp, qlcp, scale)
+    return scale
 
 
 @numba.njit(cache=True, inline="always")
