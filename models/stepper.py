@@ -1285,18 +1285,24 @@ def _delassus_into(body, ldof, nloc, Bl, dofs, count, inv, Y, G):
 
 
 @numba.njit(cache=True, inline="always")
+def _ctg_row_into(G, gen, cf, r, p):
+    """Row r (< m) of C^T G into the caller's p (ng): cf[0, r] G[gen[0, r]] + cf[1, r]
+    G[gen[1, r]]."""
+    a0, a1, x0, x1 = gen[0, r], gen[1, r], cf[0, r], cf[1, r]
+    for g in range(G.shape[0]):
+        p[g] = x0 * G[a0, g] + x1 * G[a1, g]
+
+
+@numba.njit(cache=True, inline="always")
 def _fill_jacobian_block(Mlcp, G, gen, cf, spatial, d, nc, nf, nl, p):
     """M[:m, :m] = C^T G C, row by row: the row p = (C^T G)[r] (ng), then each column group
     from it (a normal's generator, a friction contact's d directions from its t and o
     generators, a drive's DOF), so the inner loops are contiguous. p: scratch (ng)."""
-    ng = G.shape[0]
     nt = 2 if spatial else 1
     nd = nf * d
     m = nc + nd + nl
     for r in range(m):
-        a0, a1, x0, x1 = gen[0, r], gen[1, r], cf[0, r], cf[1, r]
-        for g in range(ng):
-            p[g] = x0 * G[a0, g] + x1 * G[a1, g]
+        _ctg_row_into(G, gen, cf, r, p)
         for k in range(nc):
             Mlcp[r, k] = p[k]
         for f in range(nf):
@@ -1986,9 +1992,7 @@ def spatial_warm_step(model, drives, tables, system, rotating, h, q, nu, q_ref, 
     )  # fmt: skip
     compliant = model.compliant
     comp, gs, gmu = L.comp[:n_act], L.gs[:nf], L.gmu[:nf]
-    reg = _regularization(G, gen, cf, n_act, compliant, model.regularization)
-    scale = _generator_scales_into(G, gen, cf, compliant, h, reg, active, fric, nf, d, pf, contacts.pair, comp, gs, gmu)
-    _scale_lcp_by(M[:0], q_lcp, scale)
+    reg, scale = _scale_contact_lcp(model, True, h, M[:0], q_lcp, G, gen, cf, active, fric, nf, pf, contacts.pair, m, comp, gs, gmu)
     _fill_basis_guess(L.guess, basis, active, contacts.slot, fric, nf, d, lim, m, n)
     guess = L.guess[:n]
     if part == PART_ASSEMBLY:
@@ -2239,17 +2243,23 @@ def _guess_or_lemke(G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, gs, gm
 
 
 @numba.njit(cache=True, inline="always")
+def _generator_impulses_into(m, gen, cf, z, t):
+    """The generators' impulses t = C z (t: ng entries, set here) of the LCP's first m unknowns."""
+    for g in range(t.shape[0]):
+        t[g] = 0.0
+    for r in range(m):
+        t[gen[0, r]] += cf[0, r] * z[r]
+        t[gen[1, r]] += cf[1, r] * z[r]
+
+
+@numba.njit(cache=True, inline="always")
 def _impulses_into(spatial, nc, m, nf, fric, gen, cf, z, Y, nu_free, t, p_t, nu_new):
     """The contact LCP's solution z as impulses and velocity, on the caller's arrays: the
     generators' impulses t = C z (ng = Y.shape[1] entries), each friction contact's impulse
     along t and o in p_t (nc, 2; zeroed first), and nu+ = nu_free + Y t in nu_new, by
     add_product's loops, not numba's BLAS call: the same bits on every CPU (OpenBLAS picks its
     kernel by CPU), and 0.15-0.3 us less a contact step."""
-    for g in range(Y.shape[1]):
-        t[g] = 0.0
-    for r in range(m):
-        t[gen[0, r]] += cf[0, r] * z[r]
-        t[gen[1, r]] += cf[1, r] * z[r]
+    _generator_impulses_into(m, gen, cf, z, t)
     for k in range(nc):
         p_t[k, 0] = 0.0
         p_t[k, 1] = 0.0
@@ -2368,7 +2378,7 @@ def _generator_scales_into(G, gen, cf, compliant, h, reg, active, fric, nf, d, p
         scale = max(scale, s)
         mu = pf[c_pair[active[fric[f]]], PF_MU]
         gs[f] = s if s > 0.0 else 1.0
-        gmu[f] = mu * s if s > 0.0 else mu
+        gmu[f] = mu * gs[f]  # (mu itself where gs is 1)
         scale = max(scale, abs(gmu[f]))
         scale = max(scale, gs[f])
     return scale
@@ -2395,9 +2405,7 @@ def _generator_guess_into(G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, 
         r = J[a]
         A[nj, a] = -q[r]
         if r < m:  # row r of C^T G, in u (`_fill_jacobian_block`'s p)
-            a0, a1, x0, x1 = gen[0, r], gen[1, r], cf[0, r], cf[1, r]
-            for g in range(ng):
-                u[g] = x0 * G[a0, g] + x1 * G[a1, g]
+            _ctg_row_into(G, gen, cf, r, u)
         for b in range(nj):
             c = J[b]
             jac = 0.0
@@ -2411,13 +2419,7 @@ def _generator_guess_into(G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, 
         return False
     for a in range(nj):
         z[J[a]] = A[nj, a]
-    for g in range(ng):
-        t[g] = 0.0
-    for a in range(nj):
-        r = J[a]
-        if r < m:
-            t[gen[0, r]] += cf[0, r] * z[r]
-            t[gen[1, r]] += cf[1, r] * z[r]
+    _generator_impulses_into(m, gen, cf, z, t)
     for g in range(ng):
         s = 0.0
         for g2 in range(ng):
