@@ -1731,6 +1731,7 @@ class WarmLCP(NamedTuple):
     comp: np.ndarray  # (cap,) each active contact's compliance (`_generator_scales_into`)
     gs: np.ndarray  # (cap,) each friction contact's gamma scale
     gmu: np.ndarray  # (cap,) and mu times it
+    slide: np.ndarray  # (2 cap,) int: the sliding contacts the guess eliminates (`_generator_guess_into`)
 
 
 @numba.njit(cache=True)
@@ -1756,6 +1757,7 @@ def warm_lcp(cap, n, m, ng, nv):
         np.empty(cap),
         np.empty(cap),
         np.empty(cap),
+        np.empty(2 * cap, np.int64),
     )
 
 
@@ -2001,7 +2003,7 @@ def spatial_warm_step(model, drives, tables, system, rotating, h, q, nu, q_ref, 
     pivots = 0
     if not _generator_guess_into(
         G, gen, cf, compliant, n_act, d, m, fric, nf, reg, comp, gs, gmu, q_lcp, scale, guess, WARM_TOLERANCE, L.J, L.lu, z, w, L.t[:ng],
-        L.u[:ng],
+        L.u[:ng], L.slide[: 2 * nf],
     ):  # fmt: skip
         # M, scaled as q is, and Lemke from scratch (`_warm_solve`'s after a failed guess); the
         # final basis's flags replace the guess
@@ -2234,9 +2236,9 @@ def _guess_or_lemke(G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, gs, gm
     n = qlcp.shape[0]
     ng = G.shape[0]
     z, w = np.empty(n), np.empty(n)
-    J, A, t, u = np.empty(n, np.int64), np.empty((n + 1, n)), np.empty(ng), np.empty(ng)
+    J, A, t, u, slide = np.empty(n, np.int64), np.empty((n + 1, n)), np.empty(ng), np.empty(ng), np.empty(2 * nf, np.int64)
     if _generator_guess_into(
-        G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, qlcp, scale, guess, WARM_TOLERANCE, J, A, z, w, t, u
+        G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, qlcp, scale, guess, WARM_TOLERANCE, J, A, z, w, t, u, slide
     ):
         return z, w, STATUS_SOLVED, 0, guess
     return _lemke(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1))
@@ -2385,33 +2387,70 @@ def _generator_scales_into(G, gen, cf, compliant, h, reg, active, fric, nf, d, p
 
 
 @numba.njit(cache=True, inline="always")
-def _generator_guess_into(G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, q, scale, guess, tol, J, A, z, w, t, u):
+def _guess_entry(u, gen, cf, compliant, nc, d, m, fric, reg, comp, gs, gmu, r, c):
+    """M[r, c] (unscaled) by `_lcp_entry`, with u row r of C^T G where r < m (`_ctg_row_into`)."""
+    jac = 0.0
+    if r < m and c < m:
+        jac = u[c] if c < nc else u[gen[0, c]] * cf[0, c] + u[gen[1, c]] * cf[1, c]
+    return _lcp_entry(jac, cf, compliant, nc, d, m, fric, reg, comp, gs, gmu, r, c)
+
+
+@numba.njit(cache=True, inline="always")
+def _generator_guess_into(G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, q, scale, guess, tol, J, A, z, w, t, u, slide):
     """The previous basis's guess (`warm_guess_into`) on an LCP without force-limited drives,
     without M: z_J = -M[J, J]^-1 q_J with M[J, J]'s entries made by `_lcp_entry` (M's own
     bits) and scaled by 1 / scale as `_scale_lcp_by` scales M (q: scaled already), z = 0
     elsewhere, and w = M z + q through the generators: t = C z, G t, C^T (G t), and the
-    diagonal's, friction blocks' and gamma's terms (O(ng^2 + n), not O(n nj)). On the
-    caller's J (n), A ((n + 1, n) at least), z, w (n), t, u (ng). Returns whether that point's
-    natural-map residual is at most tol (False where M[J, J] is numerically singular)."""
+    diagonal's, friction blocks' and gamma's terms (O(ng^2 + n), not O(n nj)).
+
+    A sliding contact of the guess (its gamma and exactly one of its directions basic) is
+    eliminated from M[J, J] before the solve: gamma's row gives that direction's impulse, beta
+    = (gmu p_n + scale q_gamma) / gs (mu p_n), substituted into the other rows; gamma appears
+    in no basic row but that direction's, which gives gamma once the rest of z is known. At
+    box_push_3d's push that takes the solve from 15 unknowns to 7. The same z as the dense
+    solve's to round-off (not its bits: another elimination).
+
+    On the caller's J (n), A ((n + 1, n) at least), z, w (n), t, u (ng), slide (2 nf: each
+    friction contact's sliding direction row, -1 if not sliding, then its normal's position in
+    the solve, -1 if not basic). Returns whether that point's natural-map residual is at most
+    tol (False where the eliminated M[J, J] is numerically singular)."""
     n = q.shape[0]
     inverse = 1.0 / scale if scale > 0.0 else 1.0
+    for f in range(nf):
+        slide[f] = -1
+        if guess[m + f]:
+            basic = 0
+            for j in range(d):
+                if guess[nc + f * d + j]:
+                    slide[f] = nc + f * d + j
+                    basic += 1
+            if basic != 1:
+                slide[f] = -1
     nj = np.int64(0)
     for i in range(n):
-        if guess[i]:
+        if guess[i] and not (i >= m and slide[i - m] >= 0) and not (nc <= i < m and slide[(i - nc) // d] == i):
             J[nj] = i
             nj += 1
-    ng = G.shape[0]
+    for f in range(nf):
+        slide[nf + f] = -1
+        for a in range(nj):
+            if J[a] == fric[f]:
+                slide[nf + f] = a
     for a in range(nj):
         r = J[a]
-        A[nj, a] = -q[r]
         if r < m:  # row r of C^T G, in u (`_fill_jacobian_block`'s p)
             _ctg_row_into(G, gen, cf, r, u)
         for b in range(nj):
-            c = J[b]
-            jac = 0.0
-            if r < m and c < m:
-                jac = u[c] if c < nc else u[gen[0, c]] * cf[0, c] + u[gen[1, c]] * cf[1, c]
-            A[a, b] = _lcp_entry(jac, cf, compliant, nc, d, m, fric, reg, comp, gs, gmu, r, c) * inverse
+            A[a, b] = _guess_entry(u, gen, cf, compliant, nc, d, m, fric, reg, comp, gs, gmu, r, J[b]) * inverse
+        rhs = -q[r]
+        for f in range(nf):  # the sliding directions' impulses, substituted
+            if slide[f] >= 0:
+                e = _guess_entry(u, gen, cf, compliant, nc, d, m, fric, reg, comp, gs, gmu, r, slide[f]) * inverse
+                if e != 0.0:
+                    if slide[nf + f] >= 0:
+                        A[a, slide[nf + f]] += e * (gmu[f] / gs[f])
+                    rhs -= e * (q[m + f] / (gs[f] * inverse))
+        A[nj, a] = rhs
     ok = _gauss_solve(A, nj)
     for i in range(n):
         z[i] = 0.0
@@ -2419,6 +2458,19 @@ def _generator_guess_into(G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, 
         return False
     for a in range(nj):
         z[J[a]] = A[nj, a]
+    for f in range(nf):
+        if slide[f] >= 0:
+            z[slide[f]] = (gmu[f] / gs[f]) * z[fric[f]] + q[m + f] / (gs[f] * inverse)
+    for f in range(nf):  # gamma from its sliding direction's row
+        s = slide[f]
+        if s >= 0:
+            _ctg_row_into(G, gen, cf, s, u)
+            acc = q[s]
+            for c in range(m):
+                if z[c] != 0.0:
+                    acc += _guess_entry(u, gen, cf, compliant, nc, d, m, fric, reg, comp, gs, gmu, s, c) * inverse * z[c]
+            z[m + f] = -acc / (gs[f] * inverse)
+    ng = G.shape[0]
     _generator_impulses_into(m, gen, cf, z, t)
     for g in range(ng):
         s = 0.0
