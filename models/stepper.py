@@ -2456,7 +2456,7 @@ def _generator_guess_into(G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, 
     eliminated from M[J, J] before the solve: gamma's row gives that direction's impulse, beta
     = (gmu p_n + scale q_gamma) / gs (mu p_n), substituted into the other rows; gamma appears
     in no basic row but that direction's, which gives gamma once the rest of z is known. At
-    box_push_3d's push that takes the solve from 15 unknowns to 7. The same z as the dense
+    box_push_3d's push that takes the solve from 14 unknowns to 4. The same z as the dense
     solve's to round-off (not its bits: another elimination).
 
     On the caller's J (n), A ((n + 1, n) at least), z, w (n), t, u (ng), slide (2 nf: each
