@@ -352,19 +352,20 @@ class Rung:
         low, high, windup = (np.ascontiguousarray(a, dtype=float) for a in (low, high, windup))
         drive_q, h = np.ascontiguousarray(drive_q, dtype=np.int64), float(h)
 
-        def bind(scene):
-            return numba.typed.List(
-                [(scene, c.drives, self.model, self.solver, c.goal, c.unsafe, sizes, low, high, drive_q, windup, _no_basis())]
-            )
-
-        bound = bind(c.scene)
+        scene = c.scene
+        if c.scripted:
+            # the kernel moves scripted obstacles in the pose tables: this propagator's own copy,
+            # bound once (binding a typed List costs about 1 ms, a propagation's worth); every
+            # call places the obstacles at its start time (t0 = 0) before reading them, so
+            # what one call left there does not reach the next. One planner's propagator, not
+            # shared between threads.
+            scene = scene._replace(bf=scene.bf.copy(), base_pos=scene.base_pos.copy(), base_quat=scene.base_quat.copy())
+        bound = numba.typed.List(
+            [(scene, c.drives, self.model, self.solver, c.goal, c.unsafe, sizes, low, high, drive_q, windup, _no_basis())]
+        )
 
         def propagate(x: np.ndarray, u: np.ndarray, duration: float, y: np.ndarray) -> int:
-            here = bound
-            if c.scripted:  # the kernel moves scripted obstacles in the pose tables: its own copy
-                scene = c.scene
-                here = bind(scene._replace(bf=scene.bf.copy(), base_pos=scene.base_pos.copy(), base_quat=scene.base_quat.copy()))
-            return propagate_kernel(here, x, u, duration, h, y)
+            return propagate_kernel(bound, x, u, duration, h, y)
 
         return propagate
 

@@ -151,6 +151,36 @@ def test_scripted_obstacle_moves_with_time(tmp_path, rung):
     assert out.state.named(scenario)["puck.x"] == pytest.approx(0.0, abs=1e-9)
 
 
+def test_a_propagation_starts_from_the_scripted_poses_each_call(tmp_path):
+    """The planners' propagator (`Rung.propagator`) keeps one copy of a scripted scene's pose
+    tables, bound once: each call places the ram where it is at the propagation's start (t0 =
+    0), whatever the call before left there. The ram reaches the puck at 0.1 s; a propagation
+    of 0.3 s, again after one of 0.05 s and after one of 0.6 s, is the rollout's bit for bit,
+    and the puck has moved (a stale ram, at 0.3 or 0.6 s, would give another end)."""
+    from models.stepper import StepStatus
+    from planner.ompl_adapter import _layout, configuration_limits, flatten
+
+    text = scene(RAM, smooth=[("ram", "puck")]).replace('"floor_dummy" = [0.0, 1.0]', '"floor_dummy" = [5.0, 6.0]')
+    scenario = load(tmp_path, text, "puck.x")  # a goal out of reach: the propagation does not stop
+    rung = RUNGS["dynamic-rigid"]
+    state = rung.initial_state(scenario)
+    u = np.zeros(len(scenario.actuated))
+    h = STEP["dynamic-rigid"]
+    run = rung.rollout(scenario, state, u.reshape(1, -1), [0.3], h, stop_at_outcome=False)
+    assert run.state.named(scenario)["puck.x"] > 0.05
+    low, high = configuration_limits(scenario, state.q)
+    drive_q = np.array([scenario.coordinates.index(n) for n in scenario.actuated], dtype=np.int64)
+    step = rung.propagator(scenario, h, _layout(scenario, state)[:4], low, high, drive_q, np.ones(len(drive_q)))
+    x = flatten(state)
+    nq = len(state.q)
+    for before in (None, 0.05, 0.6):
+        if before is not None:
+            assert step(x, u, before, np.empty_like(x)) == StepStatus.OK
+        y = np.empty_like(x)
+        assert step(x, u, 0.3, y) == StepStatus.OK
+        np.testing.assert_array_equal(y[:nq], run.state.q)
+
+
 # ----------------------------------------------------------------------------- force-limited drives
 
 #: A 1 kg box (0.2 m x 0.1 m) resting on the floor: mu m g = 4.905 N.
