@@ -469,6 +469,16 @@ def _pgs_directions(model, spatial):
     return (0 if model.exact_cone else model.friction_directions) if spatial else 2
 
 
+@numba.njit(cache=True, inline="always")
+def cone_directions_into(cosines, sines):
+    """The polygonal friction cone's d = cosines.shape[0] directions in a contact's (t, o)
+    plane, evenly around it from t: cos and sin of 2 pi j / d, into the caller's arrays."""
+    d = cosines.shape[0]
+    for j in range(d):
+        cosines[j] = np.cos(2.0 * np.pi * j / d)
+        sines[j] = np.sin(2.0 * np.pi * j / d)
+
+
 @numba.njit(cache=True)
 def contact_pgs(
     model,
@@ -538,9 +548,7 @@ def contact_pgs_into(
     P.p_n[:n] and P.f[:n]."""
     d = _pgs_directions(model, spatial)
     cosines, sines = P.cosines[:d], P.sines[:d]
-    for j in range(d):
-        cosines[j] = np.cos(2.0 * np.pi * j / d)
-        sines[j] = np.sin(2.0 * np.pi * j / d)
+    cone_directions_into(cosines, sines)
     for i in range(nu_free.shape[0]):
         v[i] = nu_free[i]
     # each active contact's DOFs, Jacobian rows, A^-1 times them, Delassus blocks and terms

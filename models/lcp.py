@@ -255,7 +255,7 @@ def complementarity_residual(M, q, z):
 # Lemke.
 # --------------------------------------------------------------------------------------------
 @numba.njit(cache=True, error_model="numpy")
-def _lex_select(qbar, Binv, div, cand, ncand, tie_tol, zrow, qscale, hist):
+def _lex_select(qbar, Binv, div, cand, ncand, tie_tol, zrow, qscale, hist, marked):
     """Lexicographic minimum-ratio selection among rows ``cand[:ncand]``.
 
     Stage 0 compares qbar[i] / div[i]; stage k+1 compares Binv[i, k] / div[i] among the rows
@@ -264,12 +264,21 @@ def _lex_select(qbar, Binv, div, cand, ncand, tie_tol, zrow, qscale, hist):
     ``zrow >= 0`` (the row where the artificial z0 is basic) is tied in stage 0, it is chosen:
     letting z0 leave ends Lemke's method with a solution.  Ties are decided with the relative
     tolerance ``tie_tol`` against the magnitudes involved, with an absolute round-off floor
-    LEMKE_NOISE * hist_i (times ``qscale`` = ||q||_inf in stage 0).
+    LEMKE_NOISE * hist_i (times ``qscale`` = ||q||_inf in stage 0).  marked: 0 at the columns
+    of Binv still the identity's (`_entering_column`): such a column's stage is all zeros, and
+    skipped at once, unless one of the candidates is its row.
     """
     n = Binv.shape[0]
     for stage in range(-1, n):
         if ncand == 1:
             break
+        if stage >= 0 and marked[stage] == 0:
+            own = False
+            for c in range(ncand):
+                if cand[c] == stage:
+                    own = True
+            if not own:
+                continue
         rmin = np.inf
         allzero = True
         dcmax = 0.0
@@ -373,13 +382,33 @@ def _pivot(Binv, qbar, d, r, idx, hist):
         qbar[i] = v if v > 0.0 else 0.0
 
 
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _touch(touched, marked, nt, r):
+    """Row r pivoted on (`_entering_column`'s touched rows): into touched[:nt], kept
+    ascending, and marked, unless it is there. Returns the count."""
+    if marked[r] != 0:
+        return nt
+    marked[r] = 1
+    k = nt
+    while k > 0 and touched[k - 1] > r:
+        touched[k] = touched[k - 1]
+        k -= 1
+    touched[k] = r
+    return nt + 1
+
+
 @numba.njit(cache=True, error_model="numpy")
-def _entering_column(M, Binv, var, n, d, mag, col, idx):
+def _entering_column(M, Binv, var, n, d, mag, col, idx, touched, marked, nt):
     """d = Binv @ a_var for the system  I w - M z - e z0 = q  (var: w_i=i, z_j=n+j, z0=2n).
 
     Also mag = |Binv| @ |a_var|, the size of the terms summed into each d_i (its round-off
-    scale); returns max_k |a_k|.  Sparse columns of M (fewer than n/2 nonzeros) are
-    multiplied through their nonzeros only.
+    scale); returns max_k |a_k|.  Binv's columns outside the nt rows pivoted on so far
+    (touched, ascending; marked: 1 at each) are still the identity's, exactly (a pivot on row
+    r changes only the columns where row r is nonzero), so while they are fewer than the
+    column's nonzeros each d_i sums only over them and its own column; else sparse columns of
+    M (fewer than n/2 nonzeros) are multiplied through their nonzeros only.  Each way adds
+    the same nonzero terms in the same order (ascending columns) and leaves out exact zeros
+    only: the same bits as the dense sum.
     """
     amax = 1.0
     if var < n:
@@ -398,7 +427,26 @@ def _entering_column(M, Binv, var, n, d, mag, col, idx):
                 nnz += 1
                 if abs(v) > amax:
                     amax = abs(v)
-        if 2 * nnz > n:
+        if nt < nnz:
+            for i in range(n):
+                s = 0.0
+                m = 0.0
+                own = marked[i] == 0  # Binv[i, i] = 1, its only nonzero outside touched
+                for t in range(nt):
+                    k = touched[t]
+                    if own and i < k:
+                        s += col[i]
+                        m += abs(col[i])
+                        own = False
+                    u = Binv[i, k] * col[k]
+                    s += u
+                    m += abs(u)
+                if own:
+                    s += col[i]
+                    m += abs(col[i])
+                d[i] = -s
+                mag[i] = m
+        elif 2 * nnz > n:
             # four rows at a time: each row's sums add the same terms in the same order (the
             # same bits), as four independent chains the CPU overlaps
             i = 0
@@ -552,13 +600,13 @@ class LemkeWork(NamedTuple):
     its own size n (`lemke_views`)."""
 
     f: np.ndarray  # (N * N + 7 N + (N + 1) N,) floats
-    i: np.ndarray  # (3 N,) ints
+    i: np.ndarray  # (5 N,) ints
 
 
 @numba.njit(cache=True)
 def lemke_work(n):
     """`LemkeWork` for LCPs of up to n unknowns."""
-    return LemkeWork(np.empty(n * n + 7 * n + (n + 1) * n), np.empty(3 * n, np.int64))
+    return LemkeWork(np.empty(n * n + 7 * n + (n + 1) * n), np.empty(5 * n, np.int64))
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
@@ -567,15 +615,16 @@ def lemke_views(work, n):
     the basic variables' values; d, the entering column, and mag, its round-off scale; hist,
     each row's round-off scale; col (scratch); z2, w2, the polish's point; A (n + 1, n), its
     elimination; basis (ints), the basic variable of each row; cand, the ratio test's rows and
-    the polish's basic set; idx, a pivot row's nonzeros."""
+    the polish's basic set; idx, a pivot row's nonzeros; touched, the rows pivoted on so far,
+    ascending (`_touch`), and marked, 1 at each of them."""
     f, i = work.f, work.i
     Binv = f[: n * n].reshape((n, n))
     o = n * n
     qbar, d, mag, hist = f[o : o + n], f[o + n : o + 2 * n], f[o + 2 * n : o + 3 * n], f[o + 3 * n : o + 4 * n]
     col, z2, w2 = f[o + 4 * n : o + 5 * n], f[o + 5 * n : o + 6 * n], f[o + 6 * n : o + 7 * n]
     A = f[o + 7 * n : o + 7 * n + (n + 1) * n].reshape((n + 1, n))
-    basis, cand, idx = i[:n], i[n : 2 * n], i[2 * n : 3 * n]
-    return Binv, qbar, d, mag, hist, col, z2, w2, A, basis, cand, idx
+    basis, cand, idx, touched, marked = i[:n], i[n : 2 * n], i[2 * n : 3 * n], i[3 * n : 4 * n], i[4 * n : 5 * n]
+    return Binv, qbar, d, mag, hist, col, z2, w2, A, basis, cand, idx, touched, marked
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -606,7 +655,7 @@ def lemke_into(M, q, max_pivots, work, z, w, basic_z):
         _matvec_plus_into(M, z, q, w)
         return STATUS_SOLVED, 0
     qscale = _max_abs(q)
-    Binv, qbar, d, mag, hist, col, z2, w2, A, basis, cand, idx = lemke_views(work, n)
+    Binv, qbar, d, mag, hist, col, z2, w2, A, basis, cand, idx, touched, marked = lemke_views(work, n)
     for i in range(n):
         for j in range(n):
             Binv[i, j] = 0.0
@@ -614,8 +663,12 @@ def lemke_into(M, q, max_pivots, work, z, w, basic_z):
         qbar[i] = q[i]
         basis[i] = i  # basic variable of each row: w_i = i, z_j = n + j, z0 = 2n
         hist[i] = 1.0
-    entering, zrow = _lemke_first_pivot(Binv, qbar, basis, d, cand, idx, hist, qscale, mag)
-    status, pivots = _lemke_path(M, Binv, qbar, basis, d, mag, hist, col, cand, idx, entering, zrow, qscale, max_pivots)
+        marked[i] = 0
+    entering, zrow = _lemke_first_pivot(Binv, qbar, basis, d, cand, idx, hist, qscale, mag, marked)
+    nt = _touch(touched, marked, 0, zrow)
+    status, pivots = _lemke_path(
+        M, Binv, qbar, basis, d, mag, hist, col, cand, idx, touched, marked, nt, entering, zrow, qscale, max_pivots
+    )
     for i in range(n):
         v = basis[i]
         if n <= v < 2 * n:
@@ -691,10 +744,10 @@ def _max_abs(q):
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _lemke_first_pivot(Binv, qbar, basis, d, cand, idx, hist, qscale, ones):
+def _lemke_first_pivot(Binv, qbar, basis, d, cand, idx, hist, qscale, ones, marked):
     """Lemke's first pivot, in place: z0 enters (column -e) in the lexicographically smallest
     row of (q, I), i.e. (one of) the most negative q_i, which makes the basis feasible. ones:
-    scratch (n), the ratio test's divisors.
+    scratch (n), the ratio test's divisors; marked: all 0 (Binv = I).
 
     Returns (entering, zrow): the next entering variable (the complement of the w that left)
     and the row where z0 is basic.
@@ -704,7 +757,7 @@ def _lemke_first_pivot(Binv, qbar, basis, d, cand, idx, hist, qscale, ones):
         d[i] = -1.0
         cand[i] = i
         ones[i] = 1.0
-    r = _lex_select(qbar, Binv, ones, cand, n, LEMKE_TIE_TOL, np.int64(-1), qscale, hist)
+    r = _lex_select(qbar, Binv, ones, cand, n, LEMKE_TIE_TOL, np.int64(-1), qscale, hist, marked)
     leaving = basis[r]
     _pivot(Binv, qbar, d, r, idx, hist)
     basis[r] = 2 * n
@@ -712,9 +765,10 @@ def _lemke_first_pivot(Binv, qbar, basis, d, cand, idx, hist, qscale, ones):
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _lemke_path(M, Binv, qbar, basis, d, mag, hist, col, cand, idx, entering, zrow, qscale, max_pivots):
+def _lemke_path(M, Binv, qbar, basis, d, mag, hist, col, cand, idx, touched, marked, nt, entering, zrow, qscale, max_pivots):
     """Follow Lemke's complementary path from the first pivot, in place on the tableau
     (Binv, qbar, basis): entering column, lexicographic ratio test, pivot, until z0 leaves.
+    touched, marked, nt: the rows pivoted on so far (`_touch`: the first pivot's row).
 
     Returns (status, pivots): STATUS_SOLVED (z0 left), STATUS_RAY_TERMINATION (no pivot row),
     STATUS_NON_FINITE_OUTPUT or STATUS_MAX_ITERATIONS; pivots counts the first one too.
@@ -724,7 +778,7 @@ def _lemke_path(M, Binv, qbar, basis, d, mag, hist, col, cand, idx, entering, zr
     pivots = 1
     status = STATUS_MAX_ITERATIONS
     while pivots < max_pivots:
-        amax = _entering_column(M, Binv, entering, n, d, mag, col, idx)
+        amax = _entering_column(M, Binv, entering, n, d, mag, col, idx, touched, marked, nt)
         dmax = 0.0
         for i in range(n):
             if abs(d[i]) > dmax:
@@ -740,9 +794,10 @@ def _lemke_path(M, Binv, qbar, basis, d, mag, hist, col, cand, idx, entering, zr
         if ncand == 0:
             status = STATUS_RAY_TERMINATION
             break
-        r = _lex_select(qbar, Binv, d, cand, ncand, LEMKE_TIE_TOL, zrow, qscale, hist)
+        r = _lex_select(qbar, Binv, d, cand, ncand, LEMKE_TIE_TOL, zrow, qscale, hist, marked)
         leaving = basis[r]
         _pivot(Binv, qbar, d, r, idx, hist)
+        nt = _touch(touched, marked, nt, r)
         basis[r] = entering
         pivots += 1
         if leaving == z0:  # complementary basis reached: a solution

@@ -59,6 +59,7 @@ from models.contact_pgs import (
     block_solve_into,
     body_blocks,
     body_blocks_into,
+    cone_directions_into,
     contact_pgs,
     contact_pgs_into,
 )
@@ -1073,9 +1074,11 @@ def contact_lcp(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, co
     Bl = np.empty((ng, LOCAL_DOFS))
     G, p, Bt_nu, Jt_nu = np.empty((ng, ng)), np.empty(ng), np.empty(ng), np.empty(m)
     scratch = (body, ldof, nloc, Bl, G, p, Bt_nu, Jt_nu, np.empty((ng, BODY_DOFS)), np.empty((ng, BODY_DOFS)), np.empty(ng, np.int64))
+    dirs = np.empty((2, d if spatial else 0))
+    cone_directions_into(dirs[0], dirs[1])
     contact_lcp_into(
         model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, drives, drive_a, lim, nl, fric, nf,
-        scratch, Mlcp, qlcp, Y, gen, cf,
+        scratch, Mlcp, qlcp, Y, gen, cf, dirs,
     )  # fmt: skip
     return Mlcp, qlcp, Y, gen, cf, fric, nf, lim[:nl], G
 
@@ -1083,7 +1086,7 @@ def contact_lcp(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, co
 @numba.njit(cache=True, inline="always")
 def contact_lcp_into(
     model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, drives, drive_a, lim, nl, fric, nf,
-    scratch, Mlcp, qlcp, Y, gen, cf,
+    scratch, Mlcp, qlcp, Y, gen, cf, dirs,
 ):  # fmt: skip
     """`contact_lcp` on the caller's arrays, given the force-limited drives (lim, nl:
     `_limited_into`) and the friction contacts (fric, nf: `_friction_into`), each array shaped
@@ -1091,10 +1094,11 @@ def contact_lcp_into(
     nl): the scratch (body (ng, 2), ldof (ng, LOCAL_DOFS), nloc (ng,), Bl (ng, LOCAL_DOFS), G
     (ng, ng), p, Bt_nu (ng each), Jt_nu (m), `_delassus_into`'s Bb, Yb (ng, BODY_DOFS) and gl
     (ng,); a tuple: an inlined function takes at most 30 arguments), and the LCP's M (n, n), q
-    (n), Y (nv, ng), gen and cf (2, m), all set here."""
+    (n), Y (nv, ng), gen and cf (2, m), all set here; dirs: the cone's directions in space
+    (`_combinations_into`)."""
     lcp_generators_into(
         model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, drives, lim, nl, fric, nf, scratch, qlcp,
-        Y, gen, cf,
+        Y, gen, cf, dirs,
     )  # fmt: skip
     G = scratch[4]
     reg = _regularization(G, gen, cf, active.shape[0], model.compliant, model.regularization)
@@ -1104,12 +1108,13 @@ def contact_lcp_into(
 @numba.njit(cache=True, inline="always")
 def lcp_generators_into(
     model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, drives, lim, nl, fric, nf, scratch, qlcp, Y,
-    gen, cf,
+    gen, cf, dirs,
 ):  # fmt: skip
     """The first part of `contact_lcp_into`, all the LCP but M: the generators (`_generators_into`),
     G and Y (`_delassus_into`, G in scratch[4]), C (gen, cf) and q (the normal and friction rows';
     the drives' rows are M's part, `lcp_matrix_into`), unscaled. On these alone the previous
-    basis's guess is tried (`_generator_guess_into`): M is built only where it fails."""
+    basis's guess is tried (`_generator_guess_into`): M is built only where it fails. dirs: the
+    cone's directions in space (`_combinations_into`)."""
     body, ldof, nloc, Bl, G, p, Bt_nu, Jt_nu, Bb, Yb, gl = scratch
     compliant = model.compliant
     c_pair, c_psi, c_slot, c_bias = contacts.pair, contacts.psi, contacts.slot, contacts.bias
@@ -1120,7 +1125,7 @@ def lcp_generators_into(
     m = nc + nd + nl
     _generators_into(spatial, active, fric, nf, lim, nl, drives.v_index, pi, c_pair, W_n, W_t, W_o, dofs, count, body, ldof, nloc, Bl)
     _delassus_into(body, ldof, nloc, Bl, dofs, count, inv, Y, G, Bb, Yb, gl)
-    _combinations_into(spatial, d, nc, fric, nf, nl, gen, cf)
+    _combinations_into(spatial, d, nc, fric, nf, nl, gen, cf, dirs)
     n = m + nf + nl
     for r in range(n):
         qlcp[r] = 0.0
@@ -1196,20 +1201,16 @@ def _generators_into(spatial, active, fric, nf, lim, nl, v_index, pi, c_pair, W_
     (nc + nf + f), each force-limited drive's unit DOF (last). Into the caller's arrays, shaped
     for the ng generators and set here: body (ng, 2): the bodies with DOFs each touches, -1
     padded; ldof (ng, LOCAL_DOFS): those bodies' DOFs, body by body; nloc (ng,): how many; Bl
-    (ng, LOCAL_DOFS): the column's entries there."""
+    (ng, LOCAL_DOFS): the column's entries there (ldof and Bl set only on each row's first
+    nloc entries, all that is read)."""
     nc = active.shape[0]
     nt = 2 if spatial else 1
-    ng = nc + nt * nf + nl
-    for g in range(ng):
-        body[g, 0], body[g, 1], nloc[g] = -1, -1, 0
-        for a in range(LOCAL_DOFS):
-            ldof[g, a] = 0
-            Bl[g, a] = 0.0
     # each contact's normal (g < nc), then its friction generators t and o (the gather written
     # out here: a helper's array arguments would be reference-counted per generator)
     for g in range(nc + nt * nf):
         if g < nc:
-            k, which = g, 0
+            k, src = g, W_n
+            body[k, 0], body[k, 1] = -1, -1
             s = 0
             for side in range(2):
                 b = pi[c_pair[active[k]], side]
@@ -1217,8 +1218,7 @@ def _generators_into(spatial, active, fric, nf, lim, nl, v_index, pi, c_pair, W_
                     body[k, s] = b
                     s += 1
         else:
-            which, f = 1 + (g - nc) // nf, (g - nc) % nf
-            k = fric[f]
+            k, src = fric[(g - nc) % nf], W_t if g < nc + nf else W_o
             body[g, 0], body[g, 1] = body[k, 0], body[k, 1]
         i = active[k]
         a = 0
@@ -1229,11 +1229,12 @@ def _generators_into(spatial, active, fric, nf, lim, nl, v_index, pi, c_pair, W_
             for r in range(count[b]):
                 v = dofs[b, r]
                 ldof[g, a] = v
-                Bl[g, a] = W_n[v, i] if which == 0 else (W_t[v, i] if which == 1 else W_o[v, i])
+                Bl[g, a] = src[v, i]
                 a += 1
         nloc[g] = a
     for e in range(nl):
         g = nc + nt * nf + e
+        body[g, 0], body[g, 1], nloc[g] = -1, -1, 0
         v = v_index[lim[e]]
         for b in range(count.shape[0]):
             for r in range(count[b]):
@@ -1359,12 +1360,13 @@ def _fill_jacobian_block(Mlcp, G, gen, cf, spatial, d, nc, nf, nl, p):
 
 
 @numba.njit(cache=True, inline="always")
-def _combinations_into(spatial, d, nc, fric, nf, nl, gen, cf):
+def _combinations_into(spatial, d, nc, fric, nf, nl, gen, cf, dirs):
     """C of J = B C, as (gen (2, m), cf (2, m)): LCP column r < m is cf[0, r] B[:, gen[0, r]] +
     cf[1, r] B[:, gen[1, r]] (cf[1, r] = 0 for a single generator). A friction row's
-    (cf[0, r], cf[1, r]) is its direction in the (t, o) basis: the d directions around the cone
-    in space, +t and -t in the plane, the same for every friction contact (computed for the
-    first, copied for the others), into the caller's gen and cf (2, m each)."""
+    (cf[0, r], cf[1, r]) is its direction in the (t, o) basis: in space the d directions around
+    the cone, dirs (2, d: `cone_directions_into`'s cosines and sines, made once by the caller),
+    +t and -t in the plane (dirs unused), the same for every friction contact, into the
+    caller's gen and cf (2, m each)."""
     nt = 2 if spatial else 1
     nd = nf * d
     for k in range(nc):
@@ -1373,11 +1375,8 @@ def _combinations_into(spatial, d, nc, fric, nf, nl, gen, cf):
     for f in range(nf):
         for j in range(d):
             r = nc + f * d + j
-            if f > 0:
-                cf[0, r], cf[1, r] = cf[0, nc + j], cf[1, nc + j]
-            elif spatial:
-                ang = 2.0 * np.pi * j / d
-                cf[0, r], cf[1, r] = np.cos(ang), np.sin(ang)
+            if spatial:
+                cf[0, r], cf[1, r] = dirs[0, j], dirs[1, j]
             else:
                 cf[0, r], cf[1, r] = (1.0 if j == 0 else -1.0), 0.0
             gen[0, r] = nc + f
@@ -1954,6 +1953,7 @@ class SpatialWarm(NamedTuple):
     Bb: np.ndarray  # (ng, BODY_DOFS) scratch of `_delassus_into`
     Yb: np.ndarray  # (ng, BODY_DOFS)
     gl: np.ndarray  # (ng,) int
+    dirs: np.ndarray  # (2, d) the cone's directions (`cone_directions_into`)
     lcp: WarmLCP
     out: WarmResults
 
@@ -1964,6 +1964,8 @@ def spatial_warm_buffers(cap, d, nb, out):
     directions and nb bodies, writing into out (`warm_results`)."""
     ng, m, n = 3 * cap, (1 + d) * cap, (2 + d) * cap
     nv = out.rhs.shape[0]
+    dirs = np.empty((2, d))
+    cone_directions_into(dirs[0], dirs[1])
     return SpatialWarm(
         np.empty(0, np.int64),
         np.empty((nv, nv)),
@@ -1987,6 +1989,7 @@ def spatial_warm_buffers(cap, d, nb, out):
         np.empty((ng, BODY_DOFS)),
         np.empty((ng, BODY_DOFS)),
         np.empty(ng, np.int64),
+        dirs,
         warm_lcp(cap, n, m, ng, nv),
         out,
     )
@@ -2039,7 +2042,7 @@ def spatial_warm_step(model, drives, tables, system, rotating, h, q, nu, q_ref, 
     # built only where that fails (a period's first step, a contact made or broken)
     lcp_generators_into(
         model, True, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, drives, lim, 0, fric, nf, scratch, q_lcp, Y,
-        gen, cf,
+        gen, cf, W.dirs,
     )  # fmt: skip
     compliant = model.compliant
     comp, gs, gmu = L.comp[:n_act], L.gs[:nf], L.gmu[:nf]
