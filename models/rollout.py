@@ -30,6 +30,7 @@ from models.contact import (
     detect_planar,
     detect_planar_into,
     detect_spatial,
+    detect_spatial_into,
     has_script,
     jacobian_at,
     place_scripted,
@@ -493,7 +494,9 @@ def rollout_kernel(
             # stage detect (SceneData crosses a call only in space, where detection needs it)
             n_unsupported = 0
             if dimension == 3:
-                nc, n_unsupported = detect_spatial(S, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported)
+                nc, n_unsupported = detect_spatial_into(
+                    S, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pos, speed, reach
+                )
             else:
                 nc = detect_planar_into(
                     bi, bf, verts, pi, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, pos, poses, speed, reach, axis
@@ -755,7 +758,7 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
     for k in range(repeats + 1):
         if k == 0 or stage == STAGE_DETECT:
             if dimension == 3:
-                nc, _ = detect_spatial(S, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported)
+                nc, _ = detect_spatial_into(S, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pos, speed, reach)
             else:
                 nc = detect_planar_into(
                     bi, bf, verts, pi, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, pos, poses, speed, reach, axis
