@@ -939,7 +939,9 @@ def _face_clip(hR, i, sg, cI, M, hI, clip):
     return count, cur
 
 
-@numba.njit(cache=True)
+# allocates its clipping buffers: compiled with numba's runtime even where its caller is not
+# (`models.contact.detect_spatial_into`; a callee left unset inherits the caller's flag)
+@numba.njit(cache=True, _nrt=True)
 def _box_box(pA, RA, hA, pB, RB, hB, margin, flip, c_psi, c_n, c_pa, c_pb, start, limit):
     """Box A (body 1) vs box B (body 2). Separating axes in A's frame, then contacts."""
     C = _mat_t_mul(RA, RB)  # C[i][j] = a_i . b_j: B's axes in A's frame are the columns
@@ -1345,7 +1347,9 @@ def _hull_closest(h1, h2, C, D, verts, planes, face_verts, edges):
     return best, pa, pb, n
 
 
-@numba.njit(cache=True)
+# allocates its clipping buffers: compiled with numba's runtime even where its caller is not
+# (`models.contact.detect_spatial_into`; a callee left unset inherits the caller's flag)
+@numba.njit(cache=True, _nrt=True)
 def _hull_hull(p1, R1, h1, s1, p2, R2, h2, s2, verts, planes, face_verts, edges, dirs, margin, flip, c_psi, c_n, c_pa, c_pb, start, limit):
     """Polytope 1 vs polytope 2 (s1, s2: their sizes, for tolerances). Separating axes in frame 1
     over the faces of both and the crossings of their edge directions, then contacts: a face
