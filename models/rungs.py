@@ -190,6 +190,12 @@ CACHE_SIZE = 16
 _CACHE: OrderedDict[int, tuple[Scenario, Compiled]] = OrderedDict()
 
 
+def own_poses(scene: SceneData) -> SceneData:
+    """The scene with its own copy of the pose tables the kernels move scripted obstacles in
+    (`models.contact.place_scripted`: bf, base_pos, base_quat), the rest shared."""
+    return scene._replace(bf=scene.bf.copy(), base_pos=scene.base_pos.copy(), base_quat=scene.base_quat.copy())
+
+
 def compiled(scenario: Scenario) -> Compiled:
     """What `scenario` compiles to, computed once and kept for the CACHE_SIZE scenarios used
     most recently (keyed by identity: the entry holds the scenario, so its id is not reused
@@ -359,7 +365,7 @@ class Rung:
             # call places the obstacles at its start time (t0 = 0) before reading them, so
             # what one call left there does not reach the next. One planner's propagator, not
             # shared between threads.
-            scene = scene._replace(bf=scene.bf.copy(), base_pos=scene.base_pos.copy(), base_quat=scene.base_quat.copy())
+            scene = own_poses(scene)
         bound = numba.typed.List(
             [(scene, c.drives, self.model, self.solver, c.goal, c.unsafe, sizes, low, high, drive_q, windup, _no_basis())]
         )
@@ -377,7 +383,7 @@ class Rung:
         c = compiled(scenario)
         scene = c.scene
         if c.scripted:  # the kernel moves scripted obstacles in the pose tables: its own copy
-            scene = scene._replace(bf=scene.bf.copy(), base_pos=scene.base_pos.copy(), base_quat=scene.base_quat.copy())
+            scene = own_poses(scene)
         return rollout_kernel(
             scene,
             c.policy_drives if laws else c.drives,

@@ -40,7 +40,7 @@ import pytest
 from models.contact import ContactSet, contact_buffers, contact_frames, place_scripted, scripted_bias
 from models.contact_pgs import body_blocks
 from models.rollout import _start_system
-from models.rungs import compiled, rung_for
+from models.rungs import compiled, own_poses, rung_for
 from models.scenario import load_scenario
 from models.stepper import SceneTables, _free_velocity, contact_lcp
 
@@ -179,7 +179,7 @@ def test_our_contact_problem_is_the_papers_mlcp(tmp_path, case):
     t0 = before * H
     q, nu = state.q.copy(), state.nu.copy()
     c = compiled(sc)
-    S = c.scene._replace(bf=c.scene.bf.copy(), base_pos=c.scene.base_pos.copy(), base_quat=c.scene.base_quat.copy())
+    S = own_poses(c.scene)
     place_scripted(S.bf, S.base_pos, S.base_quat, t0)
     frames = contact_frames(S, q, nu, H)
     finger = [1 if "finger1" in (sc.pairs[p].body_a, sc.pairs[p].body_b) else 2 for p in frames.pair]

@@ -17,7 +17,7 @@ import pytest
 from models.contact import ContactSet, contact_buffers, contact_frames, place_scripted, scripted_bias
 from models.contact_pgs import body_blocks
 from models.rollout import _start_system
-from models.rungs import compiled, rung_for
+from models.rungs import compiled, own_poses, rung_for
 from models.scenario import load_scenario
 from models.stepper import SceneTables, _active_contacts, _free_velocity, _planar_case, _planar_lcp, contact_lcp
 from planner.bench import SCENARIOS
@@ -37,7 +37,7 @@ def _both_builds(sc, rung, state, u, h, t):
     """(general, planar, covered, contacts) at the state: both builders' outputs from the same
     inputs, built as the step builds them (A's blocks, the free velocity, the active contacts)."""
     c = compiled(sc)
-    S = c.scene._replace(bf=c.scene.bf.copy(), base_pos=c.scene.base_pos.copy(), base_quat=c.scene.base_quat.copy())
+    S = own_poses(c.scene)
     place_scripted(S.bf, S.base_pos, S.base_quat, t)
     frames = contact_frames(S, state.q, state.nu, h)
     nc = len(frames.pair)

@@ -27,7 +27,7 @@ from models.contact import ContactSet, contact_buffers, contact_frames, place_sc
 from models.contact_pgs import _pgs_directions, body_blocks, pgs_work
 from models.lcp import lemke_warm_kernel, warm_guess_into
 from models.rollout import _start_system
-from models.rungs import compiled, rung_for
+from models.rungs import compiled, own_poses, rung_for
 from models.scenario import load_scenario
 from models.stepper import (
     PART_STEP,
@@ -82,7 +82,7 @@ class At(NamedTuple):
 def _at(sc, model, state, h, t):
     """The contact step's inputs at the state (`At`), or None where no contact is detected."""
     c = compiled(sc)
-    S = c.scene._replace(bf=c.scene.bf.copy(), base_pos=c.scene.base_pos.copy(), base_quat=c.scene.base_quat.copy())
+    S = own_poses(c.scene)
     place_scripted(S.bf, S.base_pos, S.base_quat, t)
     frames = contact_frames(S, state.q, state.nu, h)
     nc = len(frames.pair)
