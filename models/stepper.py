@@ -564,7 +564,7 @@ def _integrate_translations_into(bi, q, nu, h, out):
 # ----------------------------------------------------------------------------- the step
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _column_norm(W, i):
     s = 0.0
     for r in range(W.shape[0]):
@@ -2456,6 +2456,17 @@ def _sliding_impulse(gmu, gs, q, m, f, inverse):
 
 
 @numba.njit(cache=True, inline="always")
+def _friction_row(compliant, nc, nf, fric, comp, gen, cf, t, u, f, r):
+    """(M z)[r] of friction contact f's direction row r (unscaled, gamma's term aside) from t = C
+    z and u = G t (`_generator_guess_into`): (C^T G C z)[r] and, with compliance, its friction
+    block's term."""
+    v = cf[0, r] * u[gen[0, r]] + cf[1, r] * u[gen[1, r]]
+    if compliant:
+        v += comp[fric[f]] * (cf[0, r] * t[nc + f] + cf[1, r] * t[nc + nf + f])
+    return v
+
+
+@numba.njit(cache=True, inline="always")
 def _generator_guess_into(G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, q, scale, guess, tol, J, A, z, w, t, u, slide):
     """The previous basis's guess (`warm_guess_into`) on an LCP without force-limited drives,
     without M: z_J = -M[J, J]^-1 q_J with M[J, J]'s entries made by `_lcp_entry` (M's own
@@ -2466,7 +2477,8 @@ def _generator_guess_into(G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, 
     A sliding contact of the guess (its gamma and exactly one of its directions basic) is
     eliminated from M[J, J] before the solve: gamma's row gives that direction's impulse, beta
     = (gmu p_n + scale q_gamma) / gs (mu p_n), substituted into the other rows; gamma appears
-    in no basic row but that direction's, which gives gamma once the rest of z is known. At
+    in no basic row but that direction's, which gives gamma once the rest of z is known (from
+    G t, which w takes too, not row by row from M's entries: 15% of the guess at the push). At
     box_push_3d's push that takes the solve from 14 unknowns to 4. The same z as the dense
     solve's to round-off (not its bits: another elimination).
 
@@ -2496,6 +2508,9 @@ def _generator_guess_into(G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, 
         for a in range(nj):
             if J[a] == fric[f]:
                 slide[nf + f] = a
+    for f in range(nf):  # each sliding direction's impulse (`_sliding_impulse`) in t, until t is C z
+        if slide[f] >= 0:
+            t[f], t[nf + f] = _sliding_impulse(gmu, gs, q, m, f, inverse)
     for a in range(nj):
         r = J[a]
         if r < m:  # row r of C^T G, in u (`_fill_jacobian_block`'s p)
@@ -2507,10 +2522,9 @@ def _generator_guess_into(G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, 
             if slide[f] >= 0:
                 e = _guess_entry(u, gen, cf, compliant, nc, d, m, fric, reg, comp, gs, gmu, r, slide[f]) * inverse
                 if e != 0.0:
-                    per_normal, constant = _sliding_impulse(gmu, gs, q, m, f, inverse)
                     if slide[nf + f] >= 0:
-                        A[a, slide[nf + f]] += e * per_normal
-                    rhs -= e * constant
+                        A[a, slide[nf + f]] += e * t[f]
+                    rhs -= e * t[nf + f]
         A[nj, a] = rhs
     ok = _gauss_solve(A, nj)
     for i in range(n):
@@ -2521,17 +2535,10 @@ def _generator_guess_into(G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, 
         z[J[a]] = A[nj, a]
     for f in range(nf):
         if slide[f] >= 0:
-            per_normal, constant = _sliding_impulse(gmu, gs, q, m, f, inverse)
-            z[slide[f]] = per_normal * z[fric[f]] + constant
-    for f in range(nf):  # gamma from its sliding direction's row
-        s = slide[f]
-        if s >= 0:
-            _ctg_row_into(G, gen, cf, s, u)
-            acc = q[s]
-            for c in range(m):
-                if z[c] != 0.0:
-                    acc += _guess_entry(u, gen, cf, compliant, nc, d, m, fric, reg, comp, gs, gmu, s, c) * inverse * z[c]
-            z[m + f] = -acc / (gs[f] * inverse)
+            z[slide[f]] = t[f] * z[fric[f]] + t[nf + f]
+    # z[:m] is whole (gamma is no column of C): t = C z, u = G t, and each row's (M z)[r] but
+    # gamma's term (`_friction_row`), which gives a sliding contact's gamma (its direction's w
+    # is 0) and then every w
     ng = G.shape[0]
     _generator_impulses_into(m, gen, cf, z, t)
     for g in range(ng):
@@ -2539,16 +2546,20 @@ def _generator_guess_into(G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, 
         for g2 in range(ng):
             s += G[g, g2] * t[g2]
         u[g] = s
+    for f in range(nf):
+        s = slide[f]
+        if s >= 0:
+            v = _friction_row(compliant, nc, nf, fric, comp, gen, cf, t, u, f, s)
+            z[m + f] = -(v * inverse + q[s]) / (gs[f] * inverse)
     for r in range(m):
-        v = cf[0, r] * u[gen[0, r]] + cf[1, r] * u[gen[1, r]]
         if r < nc:
+            v = cf[0, r] * u[gen[0, r]] + cf[1, r] * u[gen[1, r]]
             v += reg * z[r]
             if compliant:
                 v += comp[r] * z[r]
         else:
             f = (r - nc) // d
-            if compliant:
-                v += comp[fric[f]] * (cf[0, r] * t[nc + f] + cf[1, r] * t[nc + nf + f])
+            v = _friction_row(compliant, nc, nf, fric, comp, gen, cf, t, u, f, r)
             v += gs[f] * z[m + f]
         w[r] = v * inverse + q[r]
     for f in range(nf):
