@@ -59,10 +59,10 @@ from models.stepper import (
     SceneTables,
     Solver,
     StepStatus,
-    System,
     _may_take_planar_warm,
     _may_take_spatial_pgs,
     _may_take_spatial_warm,
+    _system_matrix_into,
     any_limited,
     basis_table,
     contact_stage,
@@ -175,6 +175,12 @@ def _assemble(bi, bf, pi, dimension, q, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, W
         jacobian_at(bi, pi, pos, nc, c_pair, c_t, c_pa, c_pb, W_t)
         if dimension == 3:
             jacobian_at(bi, pi, pos, nc, c_pair, c_o, c_pa, c_pb, W_o)
+
+
+@numba.njit(cache=True, _nrt=False)  # a call without numba's runtime: no array argument reference-counted
+def _system_matrix_at(bi, bf, q, eps, h, v_index, kp, kd, max_force, A, R, I):
+    """A at q (`models.stepper.system_matrix`) into the rollout's A; R, I (3, 3) scratch."""
+    _system_matrix_into(bi, bf, q, eps, h, v_index, kp, kd, max_force, A, R, I)
 
 
 @numba.njit(cache=True, _nrt=False)  # a call without numba's runtime: no array argument reference-counted
@@ -457,6 +463,7 @@ def rollout_kernel(
     warm_every = int(np.round(model.warm_period / h)) if model.warm_period > 0.0 else 0
     system = _start_system(S, D, model, h, q)
     A, Ainv, M_const, rhs_const = system.A, system.Ainv, system.M_const, system.rhs_const
+    R3, I3 = np.empty((3, 3)), np.empty((3, 3))  # scratch of A's rebuild where it changes with q
     constant_A, limited = not has_rotations(bi), any_limited(max_force)
     kinematic, eps, compliant, theta = model.kinematic, model.eps, model.compliant, model.theta
     # the warm steps' arrays (planar, spatial; their results R, which the free step's scratch is
@@ -559,9 +566,8 @@ def rollout_kernel(
                         model, D, tables, system, not constant_A, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, W, side,
                         whole,
                     )  # fmt: skip
-                if not constant_A and warm != WARM_DONE:
-                    A = system_matrix(bi, bf, q, nv, eps_eff, h, v_index, kp, kd, max_force)
-                    system = System(A, Ainv, M_const, rhs_const, system.dofs, system.count, system.inv)  # (no blocks: A changes)
+                if not constant_A and warm != WARM_DONE:  # A at q, in place: the system's own (no blocks: A changes)
+                    _system_matrix_at(bi, bf, q, eps_eff, h, v_index, kp, kd, max_force, A, R3, I3)
                 if warm != WARM_DONE and _may_take_planar_warm(dimension == 2, constant_A, limited, model, step_solver, nc):
                     warm, size, res, warm_pivots = planar_warm_step(
                         model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, side, whole
@@ -743,6 +749,7 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
     rotating = has_rotations(bi)
     eps_eff = model.quasistatic_inertia if model.eps == 0.0 else model.eps
     nc, pivots, sweeps = 0, 0, 0
+    R3, I3 = np.empty((3, 3)), np.empty((3, 3))  # scratch of A's rebuild (as rollout_kernel)
     limited = any_limited(D.max_force)
     planar_cap = c_psi.shape[0] if dimension == 2 else 0
     spatial_cap = min(c_psi.shape[0], SPATIAL_WARM_CONTACTS) if dimension == 3 else 0
@@ -770,8 +777,7 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
             _assemble(bi, bf, pi, dimension, q, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, W_n, W_t, W_o, c_bias, scripted, with_friction, pos)
         if k == 0 or stage >= STAGE_SOLVE:
             if rotating and not (warm3 or warm_pgs):  # as rollout_kernel: A depends on q (the spatial steps build their own)
-                A = system_matrix(bi, bf, q, nv, eps_eff, h, D.v_index, D.kp, D.kd, D.max_force)
-                system = System(A, system.Ainv, system.M_const, system.rhs_const, system.dofs, system.count, system.inv)
+                _system_matrix_at(bi, bf, q, eps_eff, h, D.v_index, D.kp, D.kd, D.max_force, system.A, R3, I3)
         if k > 0 and stage > STAGE_SOLVE:
             part = PART_ASSEMBLY if stage == STAGE_ASSEMBLY else PART_CONTACT_SOLVE
             if warm:
