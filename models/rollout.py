@@ -650,6 +650,20 @@ def rollout_kernel(
     )
 
 
+@numba.njit(cache=True)
+def rollout_bound(bound, q, nu, q_ref, delta_n, delta_t, basis, controls, durations, h, record_every, max_records, stop_at_outcome, t0):
+    """`rollout_kernel` on a scene bound once: bound, a typed List holding one tuple (S, D,
+    model, solver, goal, unsafe), crosses into the kernel as one pointer, where the scene's
+    30-odd arrays would be unboxed one by one on every call (about 12 us of a call, measured;
+    `propagate_kernel` binds its scene the same way). Not for scenes with scripted obstacles,
+    whose pose tables the kernel writes (`Rung.rollout` passes those a copy per call)."""
+    S, D, model, solver, goal, unsafe = bound[0]
+    return rollout_kernel(
+        S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, delta_t, basis, controls, durations, h, record_every, max_records,
+        stop_at_outcome, t0,
+    )  # fmt: skip
+
+
 # ----------------------------------------------------------------------------- the planners' propagation
 
 #: How the rollout that made a planner's state ended, held as its last entry (see

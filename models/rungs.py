@@ -27,7 +27,7 @@ from models.contact import has_script, pair_min_distances
 from models.family import FAMILY
 from models.kinematics import PI_INERT, SceneData, compile_scene, kernel_array
 from models.predicates import OP_TOUCH, Program, compile_predicate, evaluate_with
-from models.rollout import propagate_kernel, rollout_kernel
+from models.rollout import propagate_kernel, rollout_bound, rollout_kernel
 from models.scenario import Scenario
 from models.stepper import (
     LAW_ACTIVE,
@@ -182,6 +182,8 @@ class Compiled:
     unsafe: Program
     capacity: int
     scripted: bool  # some obstacle moves on a script (rollouts then work on a copy of the scene's pose tables)
+    # the typed Lists `Rung.rollout` binds (`models.rollout.rollout_bound`), by (model, solver, laws)
+    bound: dict = field(default_factory=dict)
 
 
 #: Scenarios whose compiled data `compiled` keeps (the most recently used). A sweep worker
@@ -381,30 +383,18 @@ class Rung:
         if self.model is None:
             raise ValueError("the geometric rung has no dynamics to roll out; use valid()")
         c = compiled(scenario)
-        scene = c.scene
-        if c.scripted:  # the kernel moves scripted obstacles in the pose tables: its own copy
-            scene = own_poses(scene)
-        return rollout_kernel(
-            scene,
-            c.policy_drives if laws else c.drives,
-            self.model,
-            self.solver,
-            c.goal,
-            c.unsafe,
-            state.q.copy(),
-            state.nu.copy(),
-            state.q_ref.copy(),
-            state.delta_n.copy(),
-            state.delta_t.copy(),
-            _basis_of(state),
-            controls,
-            durations,
-            float(h),
-            int(record_every),
-            int(max_records),
-            bool(stop_at_outcome),
-            float(t0),
-        )
+        drives = c.policy_drives if laws else c.drives
+        state_args = (state.q.copy(), state.nu.copy(), state.q_ref.copy(), state.delta_n.copy(), state.delta_t.copy(), _basis_of(state))
+        run_args = (controls, durations, float(h), int(record_every), int(max_records), bool(stop_at_outcome), float(t0))
+        if c.scripted:  # the kernel moves scripted obstacles in the pose tables: its own copy, every call
+            return rollout_kernel(own_poses(c.scene), drives, self.model, self.solver, c.goal, c.unsafe, *state_args, *run_args)
+        # the scene bound once in a typed List (about 1 ms) and kept with the compiled scenario:
+        # one pointer crosses into the kernel per call, not the scene's 30-odd arrays one by one
+        key = (self.model, self.solver, laws)
+        bound = c.bound.get(key)
+        if bound is None:
+            bound = c.bound[key] = numba.typed.List([(c.scene, drives, self.model, self.solver, c.goal, c.unsafe)])
+        return rollout_bound(bound, *state_args, *run_args)
 
     def rollout_chunked(
         self,
