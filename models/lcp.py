@@ -212,7 +212,9 @@ def _matvec_on_into(M, z, q, J, nj, w):
             w[i] += M[i, c] * x
 
 
-@numba.njit(cache=True, error_model="numpy")
+# in line: a step's hot path calls it twice (a call with the runtime counted its three
+# arguments' references each time, also from the warm steps, which have none of their own)
+@numba.njit(cache=True, error_model="numpy", inline="always")
 def _natural_map_residual(z, w, q):
     """||min(z, w)||_inf / (1 + ||q||_inf); +inf if anything is non-finite."""
     n = q.shape[0]

@@ -2053,10 +2053,12 @@ def spatial_warm_step(model, drives, tables, system, rotating, h, q, nu, q_ref, 
         return WARM_DONE, n, 0.0, 0
     z, w = L.z[:n], L.w[:n]
     pivots = 0
-    if not _generator_guess_into(
-        G, gen, cf, compliant, n_act, d, m, fric, nf, reg, comp, gs, gmu, q_lcp, scale, guess, WARM_TOLERANCE, L.J, L.lu, z, w, L.t[:ng],
-        L.u[:ng], L.slide[: 2 * nf],
-    ):  # fmt: skip
+    residual = _generator_guess_into(
+        G, gen, cf, compliant, n_act, d, m, fric, nf, reg, comp, gs, gmu, q_lcp, scale, guess, L.J, L.lu, z, w, L.t[:ng], L.u[:ng],
+        L.slide[: 2 * nf],
+    )  # fmt: skip
+    guessed = residual <= WARM_TOLERANCE
+    if not guessed:
         # M, scaled as q is, and Lemke from scratch (`_warm_solve`'s after a failed guess); the
         # final basis's flags replace the guess
         lcp_matrix_into(model, True, h, active, pf, contacts.pair, drives, R.drive_a, lim, 0, fric, nf, reg, scratch, M, q_lcp, gen, cf)
@@ -2066,7 +2068,8 @@ def spatial_warm_step(model, drives, tables, system, rotating, h, q, nu, q_ref, 
             return WARM_NOT_TAKEN, n, 0.0, pivots
     if part == PART_CONTACT_SOLVE:
         return WARM_DONE, n, 0.0, pivots
-    residual = natural_map_residual(z, w, q_lcp)
+    if not guessed:  # (the guess's residual is its point's, computed there)
+        residual = natural_map_residual(z, w, q_lcp)
     if not (residual <= LCP_TOLERANCE):
         return WARM_NOT_TAKEN, n, residual, pivots
     nu_new, p_t = R.nu[side], L.p_t[:n_act]
@@ -2289,8 +2292,9 @@ def _guess_or_lemke(G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, gs, gm
     ng = G.shape[0]
     z, w = np.empty(n), np.empty(n)
     J, A, t, u, slide = np.empty(n, np.int64), np.empty((n + 1, n)), np.empty(ng), np.empty(ng), np.empty(2 * nf, np.int64)
-    if _generator_guess_into(
-        G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, qlcp, scale, guess, WARM_TOLERANCE, J, A, z, w, t, u, slide
+    if (
+        _generator_guess_into(G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, qlcp, scale, guess, J, A, z, w, t, u, slide)
+        <= WARM_TOLERANCE
     ):
         return z, w, STATUS_SOLVED, 0, guess
     return _lemke(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1))
@@ -2467,7 +2471,7 @@ def _friction_row(compliant, nc, nf, fric, comp, gen, cf, t, u, f, r):
 
 
 @numba.njit(cache=True, inline="always")
-def _generator_guess_into(G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, q, scale, guess, tol, J, A, z, w, t, u, slide):
+def _generator_guess_into(G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, q, scale, guess, J, A, z, w, t, u, slide):
     """The previous basis's guess (`warm_guess_into`) on an LCP without force-limited drives,
     without M: z_J = -M[J, J]^-1 q_J with M[J, J]'s entries made by `_lcp_entry` (M's own
     bits) and scaled by 1 / scale as `_scale_lcp_by` scales M (q: scaled already), z = 0
@@ -2484,8 +2488,9 @@ def _generator_guess_into(G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, 
 
     On the caller's J (n), A ((n + 1, n) at least), z, w (n), t, u (ng), slide (2 nf: each
     friction contact's sliding direction row, -1 if not sliding, then its normal's position in
-    the solve, -1 if not basic). Returns whether that point's natural-map residual is at most
-    tol (False where the eliminated M[J, J] is numerically singular)."""
+    the solve, -1 if not basic). Returns that point's natural-map residual (+inf where the
+    eliminated M[J, J] is numerically singular): the callers accept it at their tolerance and
+    keep it as the step's residual, not computing it again."""
     n = q.shape[0]
     inverse = 1.0 / scale if scale > 0.0 else 1.0
     for f in range(nf):
@@ -2530,7 +2535,7 @@ def _generator_guess_into(G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, 
     for i in range(n):
         z[i] = 0.0
     if not ok:
-        return False
+        return np.inf
     for a in range(nj):
         z[J[a]] = A[nj, a]
     for f in range(nf):
@@ -2567,7 +2572,7 @@ def _generator_guess_into(G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, 
         for j in range(d):
             s += z[nc + f * d + j]
         w[m + f] = (gmu[f] * z[fric[f]] - gs[f] * s) * inverse + q[m + f]
-    return _natural_map_residual(z, w, q) <= tol
+    return _natural_map_residual(z, w, q)
 
 
 @numba.njit(cache=True, inline="always")

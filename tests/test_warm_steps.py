@@ -363,9 +363,10 @@ def test_the_guess_on_the_generators_is_the_lcp_s(name, rung_name):
             dense = warm_guess_into(M, q, guess, 1e-9, *work)
             J, A, z, w = np.empty(n, np.int64), np.empty((n + 1, n)), np.empty(n), np.empty(n)
             t_, u_, slide = np.empty(ng), np.empty(ng), np.empty(2 * nf, np.int64)
-            mine = _generator_guess_into(
-                G, gen, cf, model.compliant, n_act, d, m, fric, nf, reg, comp, gs, gmu, q, scale, guess, 1e-9, J, A, z, w, t_, u_, slide
+            residual = _generator_guess_into(
+                G, gen, cf, model.compliant, n_act, d, m, fric, nf, reg, comp, gs, gmu, q, scale, guess, J, A, z, w, t_, u_, slide
             )
+            mine = bool(residual <= 1e-9)
             assert mine == dense, f"t = {t}: accepted {mine}, dense {dense}"
             if dense:  # the same solution, to the guessed system's conditioning (coplanar rigid normals: about 1e-9)
                 gap = np.max(np.abs(z - work[2]))
