@@ -702,18 +702,19 @@ def lemke_warm_kernel(M, q, max_pivots, guess, tol):
     if n > 0:
         z = np.empty(n)
         w = np.empty(n)
-        if warm_guess_into(M, q, guess, tol, np.empty(n, np.int64), np.empty((n + 1, n)), z, w):
+        if warm_guess_into(M, q, guess, np.empty(n, np.int64), np.empty((n + 1, n)), z, w) <= tol:
             return z, w, STATUS_SOLVED, 0, guess, True
     z, w, status, pivots, basic_z = _lemke(M, q, max_pivots)
     return z, w, status, pivots, basic_z, False
 
 
 @numba.njit(cache=True, error_model="numpy")
-def warm_guess_into(M, q, guess, tol, J, A, z, w):
+def warm_guess_into(M, q, guess, J, A, z, w):
     """`lemke_warm_kernel`'s guess, on the caller's arrays (J: n ints, A: (n + 1, n), z and w:
     n each, or larger): z_J = -M[J, J]^-1 q_J on the guessed basic set, z = 0 elsewhere, w = M z
-    + q. Returns whether that point's natural-map residual is at most tol (False where M[J, J]
-    is numerically singular)."""
+    + q. Returns that point's natural-map residual (+inf where M[J, J] is numerically
+    singular): the callers accept the guess at their tolerance and keep it as the solve's
+    residual, not computing it again."""
     n = q.shape[0]
     nj = np.int64(0)
     for i in range(n):
@@ -721,9 +722,9 @@ def warm_guess_into(M, q, guess, tol, J, A, z, w):
             J[nj] = i
             nj += 1
     if not _solve_on_into(M, q, J, nj, A, z):
-        return False
+        return np.inf
     _matvec_on_into(M, z, q, J, nj, w)
-    return _natural_map_residual(z, w, q) <= tol
+    return _natural_map_residual(z, w, q)
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")

@@ -1831,14 +1831,17 @@ def _warm_solve(M, q_lcp, guess, L, n):
     """The planar warm step's solve of its LCP (n unknowns, on `WarmLCP` L's arrays): the guessed
     basis (`warm_guess_into`), and where that does not solve it, Lemke from scratch
     (`lemke_into`), as `lemke_warm_kernel` goes on after a failed guess (a period's first step,
-    a contact made or broken). Returns (solved, pivots, the final basis's flags); z and w in
-    L.z[:n], L.w[:n]. Where Lemke fails, the general path regularizes the LCP."""
+    a contact made or broken). Returns (solved, pivots, the final basis's flags, the natural-map
+    residual: the guess's own, computed there, else Lemke's solution's); z and w in L.z[:n],
+    L.w[:n]. Where Lemke fails, the general path regularizes the LCP."""
     z, w = L.z[:n], L.w[:n]
-    if warm_guess_into(M, q_lcp, guess, WARM_TOLERANCE, L.J, L.lu, z, w):
-        return True, 0, guess
+    residual = warm_guess_into(M, q_lcp, guess, L.J, L.lu, z, w)
+    if residual <= WARM_TOLERANCE:
+        return True, 0, guess, residual
     # the final basis's flags replace the guess (read no more)
     status, pivots = lemke_into(M, q_lcp, PIVOTS_PER_VARIABLE * (n + 1), L.lemke, z, w, guess)
-    return status == STATUS_SOLVED or status == STATUS_SOLVED_INACCURATE, pivots, guess
+    solved = status == STATUS_SOLVED or status == STATUS_SOLVED_INACCURATE
+    return solved, pivots, guess, natural_map_residual(z, w, q_lcp) if solved else np.inf
 
 
 @numba.njit(cache=True, _nrt=False)
@@ -1881,13 +1884,12 @@ def planar_warm_step(model, drives, tables, system, h, q, nu, q_ref, u, contacts
     guess = L.guess[:n]
     if part == PART_ASSEMBLY:
         return WARM_DONE, n, 0.0, 0
-    solved, pivots, guess = _warm_solve(M, q_lcp, guess, L, n)
+    solved, pivots, guess, residual = _warm_solve(M, q_lcp, guess, L, n)
     if not solved:
         return WARM_NOT_TAKEN, n, 0.0, pivots
     if part == PART_CONTACT_SOLVE:
         return WARM_DONE, n, 0.0, pivots
-    z, w = L.z[:n], L.w[:n]
-    residual = natural_map_residual(z, w, q_lcp)
+    z = L.z[:n]
     if not (residual <= LCP_TOLERANCE):
         return WARM_NOT_TAKEN, n, residual, pivots
     nu_new, p_t = R.nu[side], L.p_t[:n_act]
@@ -2232,13 +2234,13 @@ def _contact_solve(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf,
     reg, scale = _scale_contact_lcp(model, on_generators, h, Mlcp, qlcp, G, gen, cf, active, fric, nf, pf, contacts.pair, m, comp, gs, gmu)
     slot = contacts.slot
     guess = _basis_guess(basis, active, slot, fric, nf, d, lim, m, n)
-    if on_generators:
-        z, w, status, pivots, basic_z = _guess_or_lemke(
+    if on_generators:  # (the residual: the guess's own, computed there, or Lemke's solution's)
+        z, w, status, pivots, basic_z, residual = _guess_or_lemke(
             G, gen, cf, model.compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, Mlcp, qlcp, scale, guess
         )
     else:
         z, w, status, pivots, basic_z, _ = lemke_warm_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1), guess, WARM_TOLERANCE)
-    residual = natural_map_residual(z, w, qlcp)  # w = M z + q, recomputed by the kernel
+        residual = natural_map_residual(z, w, qlcp)  # w = M z + q, recomputed by the kernel
     added = 0.0
     for k in range(LCP_REGULARIZATION_STEPS):
         if (status == STATUS_SOLVED or status == STATUS_SOLVED_INACCURATE) and residual <= LCP_TOLERANCE:
@@ -2287,17 +2289,19 @@ def _scale_contact_lcp(model, on_generators, h, Mlcp, qlcp, G, gen, cf, active, 
 @numba.njit(cache=True, inline="always")
 def _guess_or_lemke(G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, Mlcp, qlcp, scale, guess):
     """`lemke_warm_kernel` with its guess on the generators (`_generator_guess_into`) and, where
-    that fails, Lemke from scratch on the scaled M, q. Returns (z, w, status, pivots, basic_z)."""
+    that fails, Lemke from scratch on the scaled M, q. Returns (z, w, status, pivots, basic_z,
+    the natural-map residual: the guess's own, computed there, else Lemke's solution's)."""
     n = qlcp.shape[0]
     ng = G.shape[0]
     z, w = np.empty(n), np.empty(n)
     J, A, t, u, slide = np.empty(n, np.int64), np.empty((n + 1, n)), np.empty(ng), np.empty(ng), np.empty(2 * nf, np.int64)
-    if (
-        _generator_guess_into(G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, qlcp, scale, guess, J, A, z, w, t, u, slide)
-        <= WARM_TOLERANCE
-    ):
-        return z, w, STATUS_SOLVED, 0, guess
-    return _lemke(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1))
+    residual = _generator_guess_into(
+        G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, qlcp, scale, guess, J, A, z, w, t, u, slide
+    )
+    if residual <= WARM_TOLERANCE:
+        return z, w, STATUS_SOLVED, 0, guess, residual
+    z, w, status, pivots, basic_z = _lemke(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1))
+    return z, w, status, pivots, basic_z, natural_map_residual(z, w, qlcp)
 
 
 @numba.njit(cache=True, inline="always")
@@ -2443,11 +2447,20 @@ def _generator_scales_into(G, gen, cf, compliant, h, reg, active, fric, nf, d, p
 
 
 @numba.njit(cache=True, inline="always")
+def _combined(gen, cf, x, r):
+    """Entry r (< m) of C^T x for x on the generators (ng entries; C: `_combinations_into`'s gen
+    and cf): cf[0, r] x[gen[0, r]] + cf[1, r] x[gen[1, r]]. For the runtime-free steps' helpers
+    (`lcp_generators_into`, which the general step compiled with numba's runtime shares, writes
+    it out: there a helper's array arguments would be reference-counted per row)."""
+    return cf[0, r] * x[gen[0, r]] + cf[1, r] * x[gen[1, r]]
+
+
+@numba.njit(cache=True, inline="always")
 def _guess_entry(u, gen, cf, compliant, nc, d, m, fric, reg, comp, gs, gmu, r, c):
     """M[r, c] (unscaled) by `_lcp_entry`, with u row r of C^T G where r < m (`_ctg_row_into`)."""
     jac = 0.0
     if r < m and c < m:
-        jac = u[c] if c < nc else u[gen[0, c]] * cf[0, c] + u[gen[1, c]] * cf[1, c]
+        jac = u[c] if c < nc else _combined(gen, cf, u, c)
     return _lcp_entry(jac, cf, compliant, nc, d, m, fric, reg, comp, gs, gmu, r, c)
 
 
@@ -2464,9 +2477,9 @@ def _friction_row(compliant, nc, nf, fric, comp, gen, cf, t, u, f, r):
     """(M z)[r] of friction contact f's direction row r (unscaled, gamma's term aside) from t = C
     z and u = G t (`_generator_guess_into`): (C^T G C z)[r] and, with compliance, its friction
     block's term."""
-    v = cf[0, r] * u[gen[0, r]] + cf[1, r] * u[gen[1, r]]
-    if compliant:
-        v += comp[fric[f]] * (cf[0, r] * t[nc + f] + cf[1, r] * t[nc + nf + f])
+    v = _combined(gen, cf, u, r)
+    if compliant:  # (gen[:, r] = nc + f, nc + nf + f: its t and o generators)
+        v += comp[fric[f]] * _combined(gen, cf, t, r)
     return v
 
 
@@ -2558,7 +2571,7 @@ def _generator_guess_into(G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, 
             z[m + f] = -(v * inverse + q[s]) / (gs[f] * inverse)
     for r in range(m):
         if r < nc:
-            v = cf[0, r] * u[gen[0, r]] + cf[1, r] * u[gen[1, r]]
+            v = _combined(gen, cf, u, r)
             v += reg * z[r]
             if compliant:
                 v += comp[r] * z[r]

@@ -360,7 +360,7 @@ def test_the_guess_on_the_generators_is_the_lcp_s(name, rung_name):
             sliding.append(guess)
         for guess in (basic, *sliding, rng.random(n) < 0.3):
             work = np.empty(n, np.int64), np.empty((n + 1, n)), np.empty(n), np.empty(n)
-            dense = warm_guess_into(M, q, guess, 1e-9, *work)
+            dense = bool(warm_guess_into(M, q, guess, *work) <= 1e-9)
             J, A, z, w = np.empty(n, np.int64), np.empty((n + 1, n)), np.empty(n), np.empty(n)
             t_, u_, slide = np.empty(ng), np.empty(ng), np.empty(2 * nf, np.int64)
             residual = _generator_guess_into(
