@@ -212,7 +212,7 @@ def _matvec_on_into(M, z, q, J, nj, w):
             w[i] += M[i, c] * x
 
 
-# in line: a step's hot path calls it twice (a call with the runtime counted its three
+# in line: every contact step's guess calls it (a call with the runtime counted its three
 # arguments' references each time, also from the warm steps, which have none of their own)
 @numba.njit(cache=True, error_model="numpy", inline="always")
 def _natural_map_residual(z, w, q):
