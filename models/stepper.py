@@ -2449,9 +2449,9 @@ def _generator_scales_into(G, gen, cf, compliant, h, reg, active, fric, nf, d, p
 @numba.njit(cache=True, inline="always")
 def _combined(gen, cf, x, r):
     """Entry r (< m) of C^T x for x on the generators (ng entries; C: `_combinations_into`'s gen
-    and cf): cf[0, r] x[gen[0, r]] + cf[1, r] x[gen[1, r]]. For the runtime-free steps' helpers
-    (`lcp_generators_into`, which the general step compiled with numba's runtime shares, writes
-    it out: there a helper's array arguments would be reference-counted per row)."""
+    and cf): cf[0, r] x[gen[0, r]] + cf[1, r] x[gen[1, r]]. `lcp_generators_into` writes the
+    same sum out: the general step, compiled with numba's runtime, shares it, and there a
+    helper's array arguments would be reference-counted on every row."""
     return cf[0, r] * x[gen[0, r]] + cf[1, r] * x[gen[1, r]]
 
 
