@@ -2059,19 +2059,18 @@ def spatial_warm_step(model, drives, tables, system, rotating, h, q, nu, q_ref, 
         G, gen, cf, compliant, n_act, d, m, fric, nf, reg, comp, gs, gmu, q_lcp, scale, guess, L.J, L.lu, z, w, L.t[:ng], L.u[:ng],
         L.slide[: 2 * nf],
     )  # fmt: skip
-    guessed = residual <= WARM_TOLERANCE
-    if not guessed:
+    if not (residual <= WARM_TOLERANCE):
         # M, scaled as q is, and Lemke from scratch (`_warm_solve`'s after a failed guess); the
-        # final basis's flags replace the guess
+        # final basis's flags replace the guess, and the residual is its solution's (the
+        # guess's is its own point's, computed there)
         lcp_matrix_into(model, True, h, active, pf, contacts.pair, drives, R.drive_a, lim, 0, fric, nf, reg, scratch, M, q_lcp, gen, cf)
         _scale_lcp_by(M, q_lcp[:0], scale)
         status, pivots = lemke_into(M, q_lcp, PIVOTS_PER_VARIABLE * (n + 1), L.lemke, z, w, guess)
         if status != STATUS_SOLVED and status != STATUS_SOLVED_INACCURATE:
             return WARM_NOT_TAKEN, n, 0.0, pivots
+        residual = natural_map_residual(z, w, q_lcp)
     if part == PART_CONTACT_SOLVE:
         return WARM_DONE, n, 0.0, pivots
-    if not guessed:  # (the guess's residual is its point's, computed there)
-        residual = natural_map_residual(z, w, q_lcp)
     if not (residual <= LCP_TOLERANCE):
         return WARM_NOT_TAKEN, n, residual, pivots
     nu_new, p_t = R.nu[side], L.p_t[:n_act]
