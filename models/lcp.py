@@ -694,18 +694,21 @@ def lemke_warm_kernel(M, q, max_pivots, guess, tol):
     (`complementarity_residual`: z >= 0, w >= 0 and z^T w = 0 at once) is at most tol. Else
     (or when M[J, J] is numerically singular) `lemke_kernel` runs from scratch.
 
-    Returns (z, w, status, pivots, basic_z, warm): as `lemke_kernel`, plus the final basis as
-    flags (basic_z, the next guess; the guess itself when it was accepted) and whether the
-    guess was accepted (then pivots = 0 and status = STATUS_SOLVED).
+    Returns (z, w, status, pivots, basic_z, warm, residual): as `lemke_kernel`, plus the final
+    basis as flags (basic_z, the next guess; the guess itself when it was accepted), whether
+    the guess was accepted (then pivots = 0 and status = STATUS_SOLVED) and the returned
+    point's natural-map residual (`natural_map_residual` of z and w: the guess's, computed
+    once, or Lemke's solution's).
     """
     n = q.shape[0]
     if n > 0:
         z = np.empty(n)
         w = np.empty(n)
-        if warm_guess_into(M, q, guess, np.empty(n, np.int64), np.empty((n + 1, n)), z, w) <= tol:
-            return z, w, STATUS_SOLVED, 0, guess, True
+        residual = warm_guess_into(M, q, guess, np.empty(n, np.int64), np.empty((n + 1, n)), z, w)
+        if residual <= tol:
+            return z, w, STATUS_SOLVED, 0, guess, True, residual
     z, w, status, pivots, basic_z = _lemke(M, q, max_pivots)
-    return z, w, status, pivots, basic_z, False
+    return z, w, status, pivots, basic_z, False, _natural_map_residual(z, w, q)
 
 
 @numba.njit(cache=True, error_model="numpy")

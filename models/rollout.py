@@ -118,9 +118,16 @@ class RolloutOutput(NamedTuple):
 # the named tuples holding them: numba increfs and decrefs every array of a tuple argument on
 # each call, which measurably slowed the cheap rungs (about a microsecond a step); the small
 # ones are inlined (numba IR inlining: no call, no reference counting of their arguments).
+#
+# The stages, the rollout and the step kernels (`models.stepper`) use numpy's error model: a
+# float division by zero gives inf or NaN, which the steps' finiteness checks return as a
+# status, with no zero-division branch to raise from in the per-step loops (about 1% of the
+# box push, docs/measurements.md). Every integer // and % they reach divides by a count that
+# is positive where it is reached (friction directions, friction contacts, a polygon's
+# vertices, 2 or 3, record_every and warm_every behind their > 0 tests).
 
 
-@numba.njit(cache=True, _nrt=False)  # a call without numba's runtime: no array argument reference-counted
+@numba.njit(cache=True, _nrt=False, error_model="numpy")  # a call without numba's runtime: no array argument reference-counted
 def _distances(nc, c_pair, c_psi, c_slot, first_slot, pair_psi):
     """Stage detect (after `models.contact`'s detection into the buffers): each contact's
     slot, each pair's smallest psi. Returns the
@@ -149,7 +156,7 @@ def _classify(goal, unsafe, q, pair_psi):
     return outcome
 
 
-@numba.njit(cache=True, _nrt=False)  # a call without numba's runtime: no array argument reference-counted
+@numba.njit(cache=True, _nrt=False, error_model="numpy")  # a call without numba's runtime: no array argument reference-counted
 def _classify_with(g_op, g_index, g_lo, g_hi, u_op, u_index, u_lo, u_hi, q, pair_psi, stack):
     """Stage classify on the rollout's stack: unsafe first, then goal."""
     outcome = Outcome.NONE.value
@@ -160,7 +167,7 @@ def _classify_with(g_op, g_index, g_lo, g_hi, u_op, u_index, u_lo, u_hi, q, pair
     return outcome
 
 
-@numba.njit(cache=True, _nrt=False)  # a call without numba's runtime: no array argument reference-counted
+@numba.njit(cache=True, _nrt=False, error_model="numpy")  # a call without numba's runtime: no array argument reference-counted
 def _assemble(bi, bf, pi, dimension, q, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, W_n, W_t, W_o, c_bias, scripted, with_friction, pos):
     """Stage assemble: W_n of the first nc (> 0) contacts at q; with scripted obstacles the frames
     and their velocity bias; with friction (every rung with forces) t, o and W_t, W_o. pos: the
@@ -177,13 +184,13 @@ def _assemble(bi, bf, pi, dimension, q, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, W
             jacobian_at(bi, pi, pos, nc, c_pair, c_o, c_pa, c_pb, W_o)
 
 
-@numba.njit(cache=True, _nrt=False)  # a call without numba's runtime: no array argument reference-counted
+@numba.njit(cache=True, _nrt=False, error_model="numpy")  # a call without numba's runtime: no array argument reference-counted
 def _system_matrix_at(bi, bf, q, eps, h, v_index, kp, kd, max_force, A, R, I):
     """A at q (`models.stepper.system_matrix`) into the rollout's A; R, I (3, 3) scratch."""
     _system_matrix_into(bi, bf, q, eps, h, v_index, kp, kd, max_force, A, R, I)
 
 
-@numba.njit(cache=True, _nrt=False)  # a call without numba's runtime: no array argument reference-counted
+@numba.njit(cache=True, _nrt=False, error_model="numpy")  # a call without numba's runtime: no array argument reference-counted
 def _keep_warm(spatial, nc, c_slot, p_n, p_t, c_t, c_o, warm_n, warm_t, warm_w, warm_slots, n_warm):
     """PGS warm start for the next step: this step's impulses by slot (the previous step's
     slots reset, not all of them); in space the friction also in world coordinates (warm_w,
@@ -206,7 +213,7 @@ def _keep_warm(spatial, nc, c_slot, p_n, p_t, c_t, c_o, warm_n, warm_t, warm_w, 
     return nc
 
 
-@numba.njit(cache=True, _nrt=False)
+@numba.njit(cache=True, _nrt=False, error_model="numpy")
 def _warm_in_frames(nc, c_slot, c_t, c_o, warm_w, warm_t):
     """In space, the PGS warm start's friction impulses in this step's contact frames: the kept
     world impulses (`_keep_warm`) on each contact's t and o. The tangent basis follows the
@@ -219,7 +226,7 @@ def _warm_in_frames(nc, c_slot, c_t, c_o, warm_w, warm_t):
         warm_t[s, 1] = warm_w[s, 0] * c_o[i, 0] + warm_w[s, 1] * c_o[i, 1] + warm_w[s, 2] * c_o[i, 2]
 
 
-@numba.njit(cache=True, _nrt=False)  # a call without numba's runtime: no array argument reference-counted
+@numba.njit(cache=True, _nrt=False, error_model="numpy")  # a call without numba's runtime: no array argument reference-counted
 def _record_forces(c_pair, c_n, c_t, c_o, p_n, p_t, h, pair_force, pair_wrench):
     """Stage record: each pair's normal force and world-frame force on its body B over the
     step. Returns whether some contact carried a positive normal impulse."""
@@ -399,7 +406,7 @@ def law_speeds(S, law, q, q_index, u, out):
 # ----------------------------------------------------------------------------- the rollout
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def rollout_kernel(
     S,
     D,

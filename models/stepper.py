@@ -627,7 +627,7 @@ def free_step(eps, theta, h, bi, Ainv, M_const, rhs_const, q, nu, q_ref, u, q_in
     return q, nu, q_ref, status
 
 
-@numba.njit(cache=True, _nrt=False)
+@numba.njit(cache=True, _nrt=False, error_model="numpy")
 def free_step_into(
     eps, theta, h, bi, Ainv, M_const, rhs_const, q, nu, q_ref, u, q_index, v_index, kp, kd, lower, upper, rhs, blend, q_new, nu_new, q_ref_new  # noqa: E501
 ):  # fmt: skip
@@ -1844,7 +1844,7 @@ def _warm_solve(M, q_lcp, guess, L, n):
     return solved, pivots, guess, natural_map_residual(z, w, q_lcp) if solved else np.inf
 
 
-@numba.njit(cache=True, _nrt=False)
+@numba.njit(cache=True, _nrt=False, error_model="numpy")
 def planar_warm_step(model, drives, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, side, part):
     """A contact step of `_lemke_step` in the plane with A constant and no force-limited drive,
     compiled without numba's runtime: no reference counts, no allocation; every array is B's
@@ -1997,7 +1997,7 @@ def spatial_warm_buffers(cap, d, nb, out):
     )
 
 
-@numba.njit(cache=True, _nrt=False)
+@numba.njit(cache=True, _nrt=False, error_model="numpy")
 def spatial_warm_step(model, drives, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, W, side, part):
     """A contact step of `_lemke_step` in space with no force-limited drive, compiled without
     numba's runtime: no reference counts, no allocation; every array is W's (`SpatialWarm`).
@@ -2148,7 +2148,7 @@ def _free_velocity_by_body_into(
         block_solve_into(dofs, count, inv, rhs, nu_free)
 
 
-@numba.njit(cache=True, _nrt=False)
+@numba.njit(cache=True, _nrt=False, error_model="numpy")
 def spatial_pgs_step(
     model, solver, drives, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, warm_n, warm_t, W, P, side,
     part,
@@ -2233,13 +2233,12 @@ def _contact_solve(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf,
     reg, scale = _scale_contact_lcp(model, on_generators, h, Mlcp, qlcp, G, gen, cf, active, fric, nf, pf, contacts.pair, m, comp, gs, gmu)
     slot = contacts.slot
     guess = _basis_guess(basis, active, slot, fric, nf, d, lim, m, n)
-    if on_generators:  # (the residual: the guess's own, computed there, or Lemke's solution's)
+    if on_generators:  # (the residual, as from lemke_warm_kernel: the guess's own, computed there, or Lemke's solution's)
         z, w, status, pivots, basic_z, residual = _guess_or_lemke(
             G, gen, cf, model.compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, Mlcp, qlcp, scale, guess
         )
     else:
-        z, w, status, pivots, basic_z, _ = lemke_warm_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1), guess, WARM_TOLERANCE)
-        residual = natural_map_residual(z, w, qlcp)  # w = M z + q, recomputed by the kernel
+        z, w, status, pivots, basic_z, _, residual = lemke_warm_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1), guess, WARM_TOLERANCE)
     added = 0.0
     for k in range(LCP_REGULARIZATION_STEPS):
         if (status == STATUS_SOLVED or status == STATUS_SOLVED_INACCURATE) and residual <= LCP_TOLERANCE:
@@ -2250,9 +2249,8 @@ def _contact_solve(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf,
         for r in range(nc + nd):
             Mlcp[r, r] += target - added
         added = target
-        z, w, status, more, basic_z, _ = lemke_warm_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1), guess, WARM_TOLERANCE)
+        z, w, status, more, basic_z, _, residual = lemke_warm_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1), guess, WARM_TOLERANCE)
         pivots += more
-        residual = natural_map_residual(z, w, qlcp)
     p_n = z[:nc]  # (a view: z is not written again)
     p_t = np.zeros((nc, 2))
     if (status != STATUS_SOLVED and status != STATUS_SOLVED_INACCURATE) or not (residual <= LCP_TOLERANCE):

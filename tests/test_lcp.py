@@ -362,20 +362,23 @@ def test_lemke_warm_start_on_the_right_basis_takes_no_pivot():
     M = np.array([[2.0, 1.0], [1.0, 2.0]])
     q = np.array([-5.0, -6.0])
     z_cold, _, _, pivots = lemke_kernel(M, q, 100)
-    z, w, code, pivots, basic_z, warm = lemke_warm_kernel(M, q, 100, np.array([True, True]), 1e-12)
+    z, w, code, pivots, basic_z, warm, residual = lemke_warm_kernel(M, q, 100, np.array([True, True]), 1e-12)
     assert warm and pivots == 0 and code == lcp.STATUS_SOLVED
+    assert residual == pytest.approx(natural_residual(M, q, z), abs=1e-15) and residual <= 1e-12
     np.testing.assert_allclose(z, z_cold, rtol=1e-15)
     np.testing.assert_allclose(w, M @ z + q, atol=1e-14)
     assert basic_z.tolist() == [True, True]
     for guess in ([False, False], [True, False], [False, True]):  # z = 0 or a negative z / w
-        z, w, code, pivots, basic_z, warm = lemke_warm_kernel(M, q, 100, np.array(guess), 1e-12)
+        z, w, code, pivots, basic_z, warm, residual = lemke_warm_kernel(M, q, 100, np.array(guess), 1e-12)
         assert not warm and pivots == 3 and code == lcp.STATUS_SOLVED
+        assert residual == pytest.approx(natural_residual(M, q, z), abs=1e-15)
         np.testing.assert_allclose(z, z_cold, rtol=1e-14)
         assert basic_z.tolist() == [True, True]
     # a singular guess: M[J, J] = 0
     S = np.array([[0.0, 1.0], [-1.0, 1.0]])
-    z, w, code, pivots, basic_z, warm = lemke_warm_kernel(S, np.array([-1.0, 1.0]), 100, np.array([True, False]), 1e-12)
+    z, w, code, pivots, basic_z, warm, residual = lemke_warm_kernel(S, np.array([-1.0, 1.0]), 100, np.array([True, False]), 1e-12)
     assert not warm and code == lcp.STATUS_SOLVED and natural_residual(S, [-1.0, 1.0], z) < 1e-14
+    assert residual == pytest.approx(natural_residual(S, [-1.0, 1.0], z), abs=1e-15)
     # contact-like problems (as `random_fc2d`, whose solvability holds for any free velocity):
     # the basis of one solves its neighbour, a slightly different free velocity, without a pivot
     rng = np.random.default_rng(3)
@@ -388,11 +391,12 @@ def test_lemke_warm_start_on_the_right_basis_takes_no_pivot():
         gap[0::2] = rng.integers(0, 5, nc) / 4.0 * (rng.random(nc) < 0.5)
         mu = rng.integers(1, 9, nc) / 8.0
         base = contact_lcp_from_fc2d(W, J @ v + gap, mu)
-        _, _, code, _, basic_z, _ = lemke_warm_kernel(base.M, base.q, 1000, np.zeros(base.q.size, np.bool_), 1e-12)
+        _, _, code, _, basic_z, _, _ = lemke_warm_kernel(base.M, base.q, 1000, np.zeros(base.q.size, np.bool_), 1e-12)
         assert code == lcp.STATUS_SOLVED
         near = contact_lcp_from_fc2d(W, J @ (v + 1e-7 * rng.standard_normal(ndof)) + gap, mu)
-        z, w, code, pivots, _, warm = lemke_warm_kernel(near.M, near.q, 1000, basic_z, 1e-12)
+        z, w, code, pivots, _, warm, residual = lemke_warm_kernel(near.M, near.q, 1000, basic_z, 1e-12)
         assert code == lcp.STATUS_SOLVED and natural_residual(near.M, near.q, z) <= 1e-12
+        assert residual == pytest.approx(natural_residual(near.M, near.q, z), rel=1e-9, abs=1e-15)
         warm_count += warm
         assert not warm or pivots == 0
     assert warm_count >= 15

@@ -347,7 +347,7 @@ def test_the_guess_on_the_generators_is_the_lcp_s(name, rung_name):
         assert scale == _largest_entry(M, m), f"t = {t}: scale {scale} against M's {_largest_entry(M, m)}"
         _scale_lcp_by(M, q, scale)
         # the basis Lemke ends on from scratch (the guess a persisting contact set makes), then random basic sets
-        _, _, _, _, basic, _ = lemke_warm_kernel(M, q, 10 * (n + 1), np.zeros(n, np.bool_), 1e-9)
+        _, _, _, _, basic, _, _ = lemke_warm_kernel(M, q, 10 * (n + 1), np.zeros(n, np.bool_), 1e-9)
         # sliding guesses: the basis's normals (four coplanar rigid ones are redundant), one
         # direction of each friction contact and its gamma (friction in z, so that the friction
         # blocks' and gamma's terms of w are exercised)
