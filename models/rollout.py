@@ -119,12 +119,14 @@ class RolloutOutput(NamedTuple):
 # each call, which measurably slowed the cheap rungs (about a microsecond a step); the small
 # ones are inlined (numba IR inlining: no call, no reference counting of their arguments).
 #
-# The stages, the rollout and the step kernels (`models.stepper`) use numpy's error model: a
-# float division by zero gives inf or NaN, which the steps' finiteness checks return as a
-# status, where Python's model raises ZeroDivisionError out of the kernel. The speed is the
-# same (docs/measurements.md). Every integer // and % they reach divides by a count that is
-# positive where it is reached (friction directions, friction contacts, a polygon's vertices,
-# 2 or 3, record_every and warm_every behind their > 0 tests).
+# Every kernel here and in `models.stepper` (the step kernels, the general step's and the
+# warm steps') uses numpy's error model, as `models.lcp` does: a float division by zero gives
+# inf or NaN, which the steps' finiteness checks return as a status, where Python's model
+# raises ZeroDivisionError out of the kernel. The speed is the same (docs/measurements.md).
+# Every integer // and % they reach divides by a count that is positive where it is reached
+# (friction directions and friction contacts, whose rows exist only then, the friction
+# polygon's sides, 2 or 3, record_every and warm_every behind their > 0 tests). The collision
+# kernels (`models.contact2d`, `models.contact3d`) are called, not inlined, and keep Python's.
 
 
 @numba.njit(cache=True, _nrt=False, error_model="numpy")  # a call without numba's runtime: no array argument reference-counted
@@ -145,7 +147,7 @@ def _distances(nc, c_pair, c_psi, c_slot, first_slot, pair_psi):
     return smallest
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _classify(goal, unsafe, q, pair_psi):
     """Stage classify (allocating its own stack): the Outcome value of q."""
     outcome = Outcome.NONE.value
@@ -255,7 +257,7 @@ def _record_state(rec_t, rec_q, rec_nu, n_rec, t, q, nu):
     return n_rec + 1
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _final_outcome(S, goal, unsafe, q, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pair_psi):
     """Classify the state a run ended in (contacts at rest: no broadphase widening)."""
     zero = np.zeros(S.nv)
@@ -270,7 +272,7 @@ def _final_outcome(S, goal, unsafe, q, c_pair, c_psi, c_n, c_pa, c_pb, unsupport
     return _classify(goal, unsafe, q, pair_psi)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _inverse_or_empty(A):
     """A^-1 when A is safely invertible, else an empty matrix (the step reports singularity)."""
     out = np.zeros((0, 0))
@@ -283,7 +285,7 @@ def _inverse_or_empty(A):
     return out
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _start_system(S, D, model, h, q):
     """The System at the start of a rollout: A, and A^-1 and M when they never change."""
     bi, bf, nv = S.bi, S.bf, S.nv
@@ -298,7 +300,7 @@ def _start_system(S, D, model, h, q):
     return make_system(bi, A, Ainv, M_const, h * gravity_force(bi, bf, D.gravity, nv))
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _contact_frames(cap):
     """Per-contact buffers of a rollout, allocated once: frames n, t, o and points pa, pb
     (cap, 3), and the PGS warm start by slot (warm_n, warm_t, in space warm_w: `_keep_warm`;
@@ -308,7 +310,7 @@ def _contact_frames(cap):
     return c_n, c_t, c_o, c_pa, c_pb, warm_n, warm_t, warm_w, warm_slots
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _pair_buffers(n_pairs, nb):
     """Per-pair buffers of a rollout, allocated once (at least one pair): unsupported flags,
     smallest psi, normal force, world force; and the planar detection's scratch (`planar_scratch`)."""
@@ -333,7 +335,7 @@ def _tally(sweeps, lcp_solves, max_size, pivots, max_residual, sw, size, piv, re
     return sweeps, lcp_solves, max_size, pivots, max_residual
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _start_records(max_records, q, nu):
     """The record buffers (at least two records: start and end) with the start state at t = 0
     as record 0. Returns (max_records, rec_t, rec_q, rec_nu, next record's index). Not zeroed:
@@ -345,7 +347,7 @@ def _start_records(max_records, q, nu):
     return max_records, rec_t, rec_q, rec_nu, n_rec
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _finish(
     S,
     goal,
@@ -381,7 +383,7 @@ def _finish(
     return outcome, n_rec
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def law_speeds(S, law, q, q_index, u, out):
     """The commanded speeds of a step under feedback laws (`models.stepper.Drives.law`): out[j]
     = u[j] for a drive without a law, else the law's desired speed (kp / kd) (target - q_j),
@@ -657,7 +659,7 @@ def rollout_kernel(
     )
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def rollout_bound(bound, q, nu, q_ref, delta_n, delta_t, basis, controls, durations, h, record_every, max_records, stop_at_outcome, t0):
     """`rollout_kernel` on a scene bound once: bound, a typed List holding one tuple (S, D,
     model, solver, goal, unsafe), crosses into the kernel as one pointer, where the scene's
@@ -679,7 +681,7 @@ def rollout_bound(bound, q, nu, q_ref, delta_n, delta_t, basis, controls, durati
 FLAG_RUNNING, FLAG_GOAL, FLAG_UNSAFE, FLAG_FAILED, FLAG_INVALID = 0.0, 1.0, 2.0, 3.0, 4.0
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def propagate_kernel(bound, x, u, duration, h, y):
     """One propagation of a sampling planner, with nothing crossing into Python but two flat
     vectors: the state x = [q, nu, q_ref, delta_n, delta_t, flag] runs control u for
@@ -738,7 +740,7 @@ def propagate_kernel(bound, x, u, duration, h, y):
 STAGE_SETUP, STAGE_DETECT, STAGE_CLASSIFY, STAGE_JACOBIANS, STAGE_SOLVE, STAGE_ASSEMBLY, STAGE_CONTACT_SOLVE = -1, 0, 1, 2, 3, 4, 5
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, delta_t, u, h, repeats):
     """One stage of a dynamics step of `rollout_kernel`, `repeats` times at the state (q, nu,
     q_ref, delta_n, delta_t) under command u: STAGE_DETECT the contacts (broadphase, narrowphase),

@@ -291,7 +291,7 @@ class System(NamedTuple):
     inv: np.ndarray
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def make_system(bi, A, Ainv, M_const, rhs_const):
     """The `System` of A (Ainv: A^-1 when A never changes, else (0, 0)), with A^-1's body
     blocks read once when Ainv is given: they are the same every step, and building them costs
@@ -339,7 +339,7 @@ BASIS_GAMMA = 2  # a contact's gamma; a drive's slack s
 BASIS_DIRECTIONS = 3  # a contact's friction directions beta_j
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def basis_table(slots, drives, directions):
     """An empty basis table (no row present): the warm start of a step that has none.
 
@@ -353,7 +353,7 @@ def basis_table(slots, drives, directions):
 # ----------------------------------------------------------------------------- mass and forces
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def mass_matrix(bi, bf, q, nv):
     """M(q) in velocity coordinates: m on translations, I_zz on planar/yaw angles, R I R^T on rotations."""
     M = np.empty((nv, nv))
@@ -380,7 +380,7 @@ def _mass_matrix_into(bi, bf, q, M, R, I):
                     M[bi[b, BI_VMAP + V_WX + r], bi[b, BI_VMAP + V_WX + c]] = I[r, c]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def body_rotation(bi, q, b):
     """Body b's rotation matrix from its (normalised) quaternion coordinates in q."""
     R = np.empty((3, 3))
@@ -396,7 +396,7 @@ def _rotation_into(bi, q, b, R):
     quat_matrix_into(w / norm, x / norm, y / norm, z / norm, R)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def world_inertia(bi, bf, q, b):
     """Body b's inertia about its centre in world axes: R diag(I) R^T."""
     I = np.empty((3, 3))
@@ -437,7 +437,7 @@ def _mass_times_into(bi, bf, q, nu, out, R, I):
                 out[bi[b, BI_VMAP + V_WX + r]] = s
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def has_rotations(bi):
     """True when M depends on q (a free spatial rotation)."""
     for b in range(bi.shape[0]):
@@ -446,7 +446,7 @@ def has_rotations(bi):
     return False
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def gravity_force(bi, bf, gravity, nv):
     f = np.zeros(nv)
     for b in range(bi.shape[0]):
@@ -479,7 +479,7 @@ def _gyroscopic_into(bi, bf, q, nu, f, R):
         f[bi[b, BI_VMAP + V_WX + 2]] -= w0 * L1 - w1 * L0
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def system_matrix(bi, bf, q, nv, eps, h, v_index, kp, kd, max_force):
     """A = eps M + h (h kp + kd) on the DOFs of unlimited drives (a force-limited drive's
     impulse is an unknown of the contact problem instead; see `contact_lcp`)."""
@@ -500,7 +500,7 @@ def _system_matrix_into(bi, bf, q, eps, h, v_index, kp, kd, max_force, A, R, I):
             A[v_index[j], v_index[j]] += h * (h * kp[j] + kd[j])
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def any_limited(max_force):
     """True when some drive has a finite force limit."""
     for j in range(max_force.shape[0]):
@@ -523,7 +523,7 @@ def drive_reference(h, q_ref, u, lower, upper):
     return new, (new - q_ref) / h
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def integrate_positions(bi, q, nu, h):
     """q + h G(q) nu, renormalising quaternions (the paper's q^{l+1} = q^l + h G nu^{l+1})."""
     out = np.empty(q.shape[0])
@@ -605,7 +605,7 @@ def add_product(out, A, x, scale):
         out[i] += scale * acc
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def free_step(eps, theta, h, bi, Ainv, M_const, rhs_const, q, nu, q_ref, u, q_index, v_index, kp, kd, lower, upper):
     """dynamics_step without contacts and with a constant system matrix: the cheap path.
 
@@ -656,7 +656,7 @@ def free_step_into(
     return _finite_and_bounded(q_new) and _finite_and_bounded(nu_new)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def dynamics_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis):
     """One step of eq. (3) given the contacts at q. Pure: returns a new StepResult.
 
@@ -733,7 +733,7 @@ def _uses_pgs(model, solver, nc, limited):
 PART_ASSEMBLY, PART_CONTACT_SOLVE, PART_STEP = 0, 1, 2
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def contact_stage(part, model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis):
     """The first part of `dynamics_step`, for the cost split: PART_ASSEMBLY the free velocity
     (A's blocks, nu_free) and, on the Lemke path, the contact LCP built, scaled and its warm
@@ -1039,7 +1039,7 @@ def _pgs_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, d
 # called, not inlined (as `_planar_lcp`): numba compiles an inlined function anew at each call
 # site, and the step's compile grows about as its size squared; once a general step, its call's
 # reference counts are not seen beside the build
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def contact_lcp(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, drives, drive_a):
     """Assemble the contact LCP of the active contacts and the force-limited drives.
 
@@ -1507,7 +1507,7 @@ def _drive_rows(Mlcp, qlcp, h, first_row, first_slack, lim, nl, kp, kd, max_forc
         qlcp[sx] = 2.0 * P * scale
 
 
-@numba.njit(cache=True)  # called, not inlined (see `contact_lcp`)
+@numba.njit(cache=True, error_model="numpy")  # called, not inlined (see `contact_lcp`)
 def _planar_lcp(model, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t):
     """`contact_lcp` for the planar case (`_planar_case`): every active contact with friction
     rows (its normal generator k, its tangent nc + k, the directions +t and -t), no force-limited
@@ -1726,7 +1726,7 @@ class WarmResults(NamedTuple):
     delta_t: np.ndarray  # (2, slots, 2) delta_t+
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def warm_results(cap, nv, nq, drives, basis, slots):
     """`WarmResults` for up to cap contacts, basis tables shaped as basis and deformations of
     `slots` contact slots."""
@@ -1776,7 +1776,7 @@ class WarmLCP(NamedTuple):
     slide: np.ndarray  # (2 cap,) int: the sliding contacts the guess eliminates (`_generator_guess_into`)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def warm_lcp(cap, n, m, ng, nv):
     """`WarmLCP` for up to cap contacts, n unknowns, m generators, ng directions, nv DOFs."""
     return WarmLCP(
@@ -1813,7 +1813,7 @@ class PlanarWarm(NamedTuple):
     out: WarmResults
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def planar_warm_buffers(cap, out):
     """`PlanarWarm` for up to cap contacts (a `models.contact.ContactSet`'s capacity; 0: none,
     the step then is never taken), writing into out (`warm_results`)."""
@@ -1960,7 +1960,7 @@ class SpatialWarm(NamedTuple):
     out: WarmResults
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def spatial_warm_buffers(cap, d, nb, out):
     """`SpatialWarm` for up to cap contacts (0: none; the step then is never taken), d friction
     directions and nb bodies, writing into out (`warm_results`)."""
@@ -2663,7 +2663,7 @@ def _fill_basis_kept(out, basis, basic_z, active, slot, fric, nf, d, lim, m):
             out[r, BASIS_GAMMA] = basic_z[m + nf + e]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _min_norm_passive(Wp, MWp, psi_h, Wa_u, alpha, nc):
     """Passive speeds of eq. (8) with the actuated motion scaled by alpha (see kinematic_step);
     MWp = M_p^-1 W_p (the metric's inverse times the passive Jacobian)."""
@@ -2677,7 +2677,7 @@ def _min_norm_passive(Wp, MWp, psi_h, Wa_u, alpha, nc):
     return MWp @ lam, ok, pivots, residual
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def passive_metric_inverse(bi, bf, q, nv, actuated):
     """The kinematic rung's metric on the passive DOFs, inverted: M(q)^-1 restricted to them
     (the identity on actuated DOFs, which W_p does not reach). M is block diagonal by body."""
@@ -2695,7 +2695,7 @@ def passive_metric_inverse(bi, bf, q, nv, actuated):
 BLOCKED_BISECTIONS = 30
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _passive_problem(nc, h, c_psi, c_bias, W_n, u_eff, actuated, nv):
     """Eq. (8)'s data: (W_p: W_n on the passive DOFs, psi / h + bias, W_a^T u)."""
     Wp = np.zeros((nv, nc))
@@ -2711,7 +2711,7 @@ def _passive_problem(nc, h, c_psi, c_bias, W_n, u_eff, actuated, nv):
     return Wp, psi_h, Wa_u
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _largest_feasible(Wp, MWp, psi_h, Wa_u, nc, residual):
     """A blocked kinematic command: the largest feasible fraction alpha of it, by bisection.
     Returns (alpha, passive speeds, feasible: standing still is, pivots, residual: the last
@@ -2731,7 +2731,7 @@ def _largest_feasible(Wp, MWp, psi_h, Wa_u, nc, residual):
     return lo, v_lo, True, pivots, residual
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def kinematic_step(bi, bf, h, q, q_ref, u, q_index, v_index, lower, upper, nc, c_psi, c_bias, W_n, nv):
     """The paper's eq. (8) given the contacts at q. Returns (q+, nu+, q_ref+, status: a
     StepStatus value, pivots, residual). Plain arrays, as `free_step` (a cheap step).
