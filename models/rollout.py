@@ -198,11 +198,7 @@ def _keep_warm(spatial, nc, c_slot, p_n, p_t, c_t, c_o, warm_n, warm_t, warm_w, 
     slots reset, not all of them); in space the friction also in world coordinates (warm_w,
     (slots, 3), from the step's frames c_t, c_o), which `_warm_in_frames` puts in the next
     step's frames. Returns the number of slots written."""
-    for i in range(n_warm):
-        s = warm_slots[i]
-        warm_n[s] = 0.0
-        warm_t[s, 0] = warm_t[s, 1] = 0.0
-        warm_w[s, 0] = warm_w[s, 1] = warm_w[s, 2] = 0.0
+    _drop_warm(n_warm, warm_slots, warm_n, warm_t, warm_w)
     for i in range(nc):
         s = c_slot[i]
         warm_slots[i] = s
@@ -213,6 +209,18 @@ def _keep_warm(spatial, nc, c_slot, p_n, p_t, c_t, c_o, warm_n, warm_t, warm_w, 
             for a in range(3):
                 warm_w[s, a] = p_t[i, 0] * c_t[i, a] + p_t[i, 1] * c_o[i, a]
     return nc
+
+
+@numba.njit(cache=True, inline="always")
+def _drop_warm(n_warm, warm_slots, warm_n, warm_t, warm_w):
+    """The PGS warm start's n_warm slots kept (`_keep_warm`) reset to zero: no warm start.
+    Returns 0, the slots now kept."""
+    for i in range(n_warm):
+        s = warm_slots[i]
+        warm_n[s] = 0.0
+        warm_t[s, 0] = warm_t[s, 1] = 0.0
+        warm_w[s, 0] = warm_w[s, 1] = warm_w[s, 2] = 0.0
+    return 0
 
 
 @numba.njit(cache=True, _nrt=False, error_model="numpy")
@@ -438,7 +446,8 @@ def rollout_kernel(
     are (their poses are written into S's pose tables as time goes on: pass a scene copy of
     the caller's own when the scene has one). PGS warm starts travel from step to step within the call
     (by contact slot; in space their friction in world coordinates, `_keep_warm`) and start
-    cold in every call, so a rollout depends only on its inputs.
+    cold in every call, so a rollout depends only on its inputs; like Lemke's basis they are
+    dropped at every period of `Model.warm_period`.
     Returns a `RolloutOutput`.
     """
     bi, bf, pi, verts, nv, dimension = S.bi, S.bf, S.pi, S.verts, S.nv, S.dimension
@@ -468,7 +477,7 @@ def rollout_kernel(
     cold = basis_table(slots, v_index.shape[0], directions)
     if basis.shape[0] != slots + v_index.shape[0] or basis.shape[1] != 3 + directions:
         basis = cold
-    # the warm start is dropped at the steps that start a period of model.warm_period (Model)
+    # the warm starts are dropped at the steps that start a period of model.warm_period (Model)
     warm_every = int(np.round(model.warm_period / h)) if model.warm_period > 0.0 else 0
     system = _start_system(S, D, model, h, q)
     A, Ainv, M_const, rhs_const = system.A, system.Ainv, system.M_const, system.rhs_const
@@ -504,7 +513,10 @@ def rollout_kernel(
             u = u.copy()  # the laws' speeds, step by step
         for _ in range(int(np.round(durations[k] / h))):
             if warm_every > 0 and int(np.round((t0 + t) / h)) % warm_every == 0:
-                basis = cold
+                # every warm start the call carries, as a call starts: Lemke's basis, PGS's
+                # impulses by slot, auto's switch to Lemke
+                basis, step_solver = cold, solver
+                n_warm = _drop_warm(n_warm, warm_slots, warm_n, warm_t, warm_w)
             if scripted:  # obstacles where they are at this time
                 place_scripted(bf, S.base_pos, S.base_quat, t0 + t)
             # stage detect (SceneData crosses a call only in space, where detection needs it)

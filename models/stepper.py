@@ -167,10 +167,12 @@ class Model(NamedTuple):
     # eps = 0 (quasistatic): the inertia scale the memoryless step keeps; QUASISTATIC_INERTIA
     # stands in for the limit eps -> 0, 1 is a quasi-dynamic step with full inertia
     quasistatic_inertia: float = QUASISTATIC_INERTIA
-    # s: Lemke's warm start (`basis_table`) is dropped at every multiple of this time (0: it
-    # never is). A planner's control period: a planner propagates a plan one control period
-    # per call, each starting cold from a state vector, and its one-call replay must solve the
-    # same contact problems (at a degenerate LCP another basis is another exact solution)
+    # s: the contact solver's warm starts (Lemke's basis table, `basis_table`; PGS's impulses
+    # by slot; auto's switch to Lemke) are dropped at every multiple of this time (0: never).
+    # A planner's control period: a planner propagates a plan one control period per call, each
+    # starting cold from a state vector, and its one-call replay must solve the same contact
+    # problems (at a degenerate LCP another basis is another exact solution; PGS stops within
+    # its tolerance of the solution its start leads it to)
     warm_period: float = 0.0
     # in space, friction in the exact circular Coulomb cone (eq. 4: mu p_n in every direction of
     # sliding) instead of the polygon of friction_directions sides: PGS solves it
