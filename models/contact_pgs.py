@@ -857,7 +857,7 @@ def _sweeps(
         residual = residual / big if big > 0.0 else residual
         if not np.isfinite(residual):
             status = PgsStatus.NON_FINITE.value
-        elif residual <= tolerance:  # the last sweep's, unchecked: it decides as a check would
+        elif status == PgsStatus.NOT_CONVERGED.value and residual <= tolerance:  # the last sweep's, as a check would
             status = PgsStatus.CONVERGED.value
     return status, sweeps, residual
 
