@@ -684,7 +684,7 @@ def lemke_into(M, q, max_pivots, work, z, w, basic_z):
 
 
 @numba.njit(cache=True, error_model="numpy")
-def lemke_warm_kernel(M, q, max_pivots, guess, tol):
+def lemke_warm_kernel(M, q, max_pivots, guess, tol, droppable=0):
     """Lemke's method started from a guessed complementary basis: exact, and free when the
     guess is right (e.g. the previous time step's basis while the contacts persist).
 
@@ -692,7 +692,9 @@ def lemke_warm_kernel(M, q, max_pivots, guess, tol):
     first: z_J = -M[J, J]^-1 q_J on J = {i : guess[i]}, z = 0 elsewhere, and w = M z + q
     recomputed; it is accepted when that point's natural-map residual
     (`complementarity_residual`: z >= 0, w >= 0 and z^T w = 0 at once) is at most tol. Else
-    (or when M[J, J] is numerically singular) `lemke_kernel` runs from scratch.
+    (or when M[J, J] is numerically singular) `lemke_kernel` runs from scratch. droppable: where
+    M[J, J] is singular, the guess is tried again without one of its basic rows among the first
+    droppable (`warm_guess_dropping_into`; the contact step passes its normals' count).
 
     Returns (z, w, status, pivots, basic_z, warm, residual): as `lemke_kernel`, plus the final
     basis as flags (basic_z, the next guess; the guess itself when it was accepted), whether
@@ -704,7 +706,7 @@ def lemke_warm_kernel(M, q, max_pivots, guess, tol):
     if n > 0:
         z = np.empty(n)
         w = np.empty(n)
-        residual = warm_guess_into(M, q, guess, np.empty(n, np.int64), np.empty((n + 1, n)), z, w)
+        residual = warm_guess_dropping_into(M, q, guess, np.empty(n, np.int64), np.empty((n + 1, n)), z, w, droppable, tol)
         if residual <= tol:
             return z, w, STATUS_SOLVED, 0, guess, True, residual
     z, w, status, pivots, basic_z = _lemke(M, q, max_pivots)
@@ -728,6 +730,29 @@ def warm_guess_into(M, q, guess, J, A, z, w):
         return np.inf
     _matvec_on_into(M, z, q, J, nj, w)
     return _natural_map_residual(z, w, q)
+
+
+@numba.njit(cache=True, error_model="numpy")
+def warm_guess_dropping_into(M, q, guess, J, A, z, w, droppable, tol):
+    """`warm_guess_into`, and where M[J, J] is numerically singular, the guess again without one
+    of its basic rows among the first droppable, in order; the first whose point's residual is
+    at most tol is kept, and guess is changed to it. Redundant rows guessed basic are what makes
+    M[J, J] singular: a rigid box's four coplanar corners on a table, whose normals span three
+    of its DOFs, all guessed to push (a cold guess, `models.stepper._fill_basis_guess`), where
+    the LCP's solutions load three of them. Returns the residual of the point left in z and w:
+    the guess's, or the kept drop's; +inf where M[J, J] is singular and no drop solves the LCP
+    (guess then as given)."""
+    residual = warm_guess_into(M, q, guess, J, A, z, w)
+    if residual != np.inf:
+        return residual
+    for k in range(min(droppable, q.shape[0])):
+        if guess[k]:
+            guess[k] = False
+            residual = warm_guess_into(M, q, guess, J, A, z, w)
+            if residual <= tol:
+                return residual
+            guess[k] = True
+    return np.inf
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")

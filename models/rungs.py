@@ -580,6 +580,13 @@ def pair_signed_distances(scenario: Scenario, q: np.ndarray) -> np.ndarray:
     return out[: len(scenario.pairs)]
 
 
+def pgs_rung(rung: Rung, exact_cone: bool = False) -> Rung:
+    """The rung with its contacts solved by PGS: in space on the exact circular Coulomb cone
+    where exact_cone (`models.stepper.Model.exact_cone`: Lemke's LCP is the polygon's only),
+    else on the rung's polygon of friction directions."""
+    return replace(rung, solver=contact_solver("pgs"), model=rung.model._replace(exact_cone=exact_cone))
+
+
 def rung_for(scenario: Scenario, name: str) -> Rung:
     """The registry's rung with the scenario's settings for it (`Scenario.rung_settings`:
     theta, friction directions, contact solver; its control period drops Lemke's warm start,

@@ -90,7 +90,7 @@ from models.lcp import (
     lemke_warm_kernel,
     lemke_work,
     natural_map_residual,
-    warm_guess_into,
+    warm_guess_dropping_into,
 )
 
 #: Quasistatic rungs: inertia scale standing in for eps -> 0 (times the mass matrix).
@@ -791,13 +791,13 @@ def contact_stage(part, model, solver, drives, tables, system, h, q, nu, q_ref, 
     reg, scale = _scale_contact_lcp(
         model, on_generators, h, Mlcp, qlcp, G, gen, cf, active, fric, nf, tables.pf, contacts.pair, m, comp, gs, gmu
     )
-    guess = _basis_guess(basis, active, contacts.slot, fric, nf, d, lim, m, n)
+    guess = _basis_guess(basis, active, contacts.slot, fric, nf, d, lim, m, n, qlcp)
     if part == PART_ASSEMBLY:
         return n
     if on_generators:
         status = _guess_or_lemke(G, gen, cf, model.compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, Mlcp, qlcp, scale, guess)[2]
     else:
-        status = lemke_warm_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1), guess, WARM_TOLERANCE)[2]
+        status = lemke_warm_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1), guess, WARM_TOLERANCE, nc)[2]
     return n if status == STATUS_SOLVED or status == STATUS_SOLVED_INACCURATE else 0
 
 
@@ -1829,15 +1829,15 @@ WARM_DONE, WARM_NOT_TAKEN = 0, 1
 
 
 @numba.njit(cache=True, inline="always")
-def _warm_solve(M, q_lcp, guess, L, n):
-    """The planar warm step's solve of its LCP (n unknowns, on `WarmLCP` L's arrays): the guessed
-    basis (`warm_guess_into`), and where that does not solve it, Lemke from scratch
+def _warm_solve(M, q_lcp, guess, L, n, nc):
+    """The planar warm step's solve of its LCP (n unknowns, nc contacts, on `WarmLCP` L's arrays):
+    the guessed basis (`warm_guess_dropping_into`, as `lemke_warm_kernel` tries it), and where that does not solve it, Lemke from scratch
     (`lemke_into`), as `lemke_warm_kernel` goes on after a failed guess (a period's first step,
     a contact made or broken). Returns (solved, pivots, the final basis's flags, the natural-map
     residual: the guess's own, computed there, else Lemke's solution's); z and w in L.z[:n],
     L.w[:n]. Where Lemke fails, the general path regularizes the LCP."""
     z, w = L.z[:n], L.w[:n]
-    residual = warm_guess_into(M, q_lcp, guess, L.J, L.lu, z, w)
+    residual = warm_guess_dropping_into(M, q_lcp, guess, L.J, L.lu, z, w, nc, WARM_TOLERANCE)
     if residual <= WARM_TOLERANCE:
         return True, 0, guess, residual
     # the final basis's flags replace the guess (read no more)
@@ -1882,11 +1882,11 @@ def planar_warm_step(model, drives, tables, system, h, q, nu, q_ref, u, contacts
     )
     _scale_lcp(M, q_lcp, m)
     lim = fric[:0]
-    _fill_basis_guess(L.guess, basis, active, contacts.slot, fric, n_act, 2, lim, m, n)
+    _fill_basis_guess(L.guess, basis, active, contacts.slot, fric, n_act, 2, lim, m, n, q_lcp)
     guess = L.guess[:n]
     if part == PART_ASSEMBLY:
         return WARM_DONE, n, 0.0, 0
-    solved, pivots, guess, residual = _warm_solve(M, q_lcp, guess, L, n)
+    solved, pivots, guess, residual = _warm_solve(M, q_lcp, guess, L, n, n_act)
     if not solved:
         return WARM_NOT_TAKEN, n, 0.0, pivots
     if part == PART_CONTACT_SOLVE:
@@ -2051,13 +2051,13 @@ def spatial_warm_step(model, drives, tables, system, rotating, h, q, nu, q_ref, 
     compliant = model.compliant
     comp, gs, gmu = L.comp[:n_act], L.gs[:nf], L.gmu[:nf]
     reg, scale = _scale_contact_lcp(model, True, h, M[:0], q_lcp, G, gen, cf, active, fric, nf, pf, contacts.pair, m, comp, gs, gmu)
-    _fill_basis_guess(L.guess, basis, active, contacts.slot, fric, nf, d, lim, m, n)
+    _fill_basis_guess(L.guess, basis, active, contacts.slot, fric, nf, d, lim, m, n, q_lcp)
     guess = L.guess[:n]
     if part == PART_ASSEMBLY:
         return WARM_DONE, n, 0.0, 0
     z, w = L.z[:n], L.w[:n]
     pivots = 0
-    residual = _generator_guess_into(
+    residual = _generator_guess_dropping_into(
         G, gen, cf, compliant, n_act, d, m, fric, nf, reg, comp, gs, gmu, q_lcp, scale, guess, L.J, L.lu, z, w, L.t[:ng], L.u[:ng],
         L.slide[: 2 * nf],
     )  # fmt: skip
@@ -2234,13 +2234,13 @@ def _contact_solve(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf,
     comp, gs, gmu = np.empty(nc), np.empty(nf), np.empty(nf)
     reg, scale = _scale_contact_lcp(model, on_generators, h, Mlcp, qlcp, G, gen, cf, active, fric, nf, pf, contacts.pair, m, comp, gs, gmu)
     slot = contacts.slot
-    guess = _basis_guess(basis, active, slot, fric, nf, d, lim, m, n)
+    guess = _basis_guess(basis, active, slot, fric, nf, d, lim, m, n, qlcp)
     if on_generators:  # (the residual, as from lemke_warm_kernel: the guess's own, computed there, or Lemke's solution's)
         z, w, status, pivots, basic_z, residual = _guess_or_lemke(
             G, gen, cf, model.compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, Mlcp, qlcp, scale, guess
         )
     else:
-        z, w, status, pivots, basic_z, _, residual = lemke_warm_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1), guess, WARM_TOLERANCE)
+        z, w, status, pivots, basic_z, _, residual = lemke_warm_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1), guess, WARM_TOLERANCE, nc)
     added = 0.0
     for k in range(LCP_REGULARIZATION_STEPS):
         if (status == STATUS_SOLVED or status == STATUS_SOLVED_INACCURATE) and residual <= LCP_TOLERANCE:
@@ -2294,7 +2294,7 @@ def _guess_or_lemke(G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, gs, gm
     ng = G.shape[0]
     z, w = np.empty(n), np.empty(n)
     J, A, t, u, slide = np.empty(n, np.int64), np.empty((n + 1, n)), np.empty(ng), np.empty(ng), np.empty(2 * nf, np.int64)
-    residual = _generator_guess_into(
+    residual = _generator_guess_dropping_into(
         G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, qlcp, scale, guess, J, A, z, w, t, u, slide
     )
     if residual <= WARM_TOLERANCE:
@@ -2588,37 +2588,80 @@ def _generator_guess_into(G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, 
 
 
 @numba.njit(cache=True, inline="always")
-def _basis_guess(basis, active, slot, fric, nf, d, lim, m, n):
+def _generator_guess_dropping_into(G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, q, scale, guess, J, A, z, w, t, u, slide):
+    """`_generator_guess_into`, and where its system is singular, the guess again without one of
+    its basic normals, in order, as `warm_guess_dropping_into` drops them on M: the first whose
+    point's residual is at most WARM_TOLERANCE is kept, and guess is changed to it. Returns the
+    residual of the point left in z and w (+inf where none solves, guess then as given)."""
+    # one call site (the guess is inlined): k = -1 the guess as given, then each basic normal k dropped
+    k = -1
+    while True:
+        residual = _generator_guess_into(
+            G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, q, scale, guess, J, A, z, w, t, u, slide
+        )
+        if k < 0 and residual != np.inf:
+            return residual
+        if k >= 0:
+            if residual <= WARM_TOLERANCE:
+                return residual
+            guess[k] = True
+        k += 1
+        while k < nc and not guess[k]:
+            k += 1
+        if k >= nc:
+            return np.inf
+        guess[k] = False
+
+
+@numba.njit(cache=True, inline="always")
+def _basis_guess(basis, active, slot, fric, nf, d, lim, m, n, q):
     """The LCP's first guess of a complementary basis (True: z_i basic) from the previous
     step's table (`basis_table`; rows: the contact slots, slot.shape[0] of them, then the
-    drives): each contact's and force-limited drive's flags; one that was not in the previous
-    LCP, or a table of another shape, guesses w basic (no force) on its rows."""
+    drives): each contact's and force-limited drive's flags. A contact that was not in the
+    previous LCP (all of them at a period's first step, or with a table of another shape) is
+    guessed from q, the LCP's (scaled) q, what its rows would be with no impulse: it pushes
+    where its normal's q < 0, and where it pushes and some friction direction's q < 0, it slides
+    against the most negative (that direction and gamma basic); else w is basic on its rows. A
+    force-limited drive not in the table guesses w basic. Exact either way: a guess is kept only
+    where it solves the LCP to WARM_TOLERANCE (then, where its rigid normals are redundant,
+    without one of them: `_generator_guess_dropping_into`), else Lemke runs from scratch."""
     guess = np.empty(n, np.bool_)
-    _fill_basis_guess(guess, basis, active, slot, fric, nf, d, lim, m, n)
+    _fill_basis_guess(guess, basis, active, slot, fric, nf, d, lim, m, n, q)
     return guess
 
 
 @numba.njit(cache=True, inline="always")
-def _fill_basis_guess(guess, basis, active, slot, fric, nf, d, lim, m, n):
+def _fill_basis_guess(guess, basis, active, slot, fric, nf, d, lim, m, n, q):
     """`_basis_guess` into the caller's guess (at least n entries)."""
     for r in range(n):
         guess[r] = False
     nc = active.shape[0]
     nl = lim.shape[0]
     slots = slot.shape[0]
-    if basis.shape[1] != BASIS_DIRECTIONS + d or basis.shape[0] < slots:
-        return
+    fits = basis.shape[1] == BASIS_DIRECTIONS + d and basis.shape[0] >= slots
     nd = nf * d
     for k in range(nc):
         s = slot[active[k]]
-        if basis[s, BASIS_PRESENT] != 0:
+        if fits and basis[s, BASIS_PRESENT] != 0:
             guess[k] = basis[s, BASIS_NORMAL] != 0
+        else:
+            guess[k] = q[k] < 0.0
     for f in range(nf):
         s = slot[active[fric[f]]]
-        if basis[s, BASIS_PRESENT] != 0:
+        if fits and basis[s, BASIS_PRESENT] != 0:
             guess[m + f] = basis[s, BASIS_GAMMA] != 0
             for j in range(d):
                 guess[nc + f * d + j] = basis[s, BASIS_DIRECTIONS + j] != 0
+        elif guess[fric[f]]:
+            first, least = nc + f * d, 0.0
+            for j in range(d):
+                if q[nc + f * d + j] < least:
+                    first, least = nc + f * d + j, q[nc + f * d + j]
+            if least < 0.0:
+                guess[first] = True
+                guess[m + f] = True
+    if not fits:
+        return
     for e in range(nl):
         r = slots + lim[e]
         if r < basis.shape[0] and basis[r, BASIS_PRESENT] != 0:

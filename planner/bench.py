@@ -292,9 +292,8 @@ def contact_steps(quick: bool = False) -> dict:
     timed in turns with ours (`in_turns`): the paper's scene in its fastest mapping
     (`direct`, the inert palm-triangle pair left out), box_push_3d with MuJoCo's own contact
     model (`peers.build_spatial`), stepped in the same calls."""
-    from models.rungs import rung_for
+    from models.rungs import pgs_rung, rung_for
     from models.scenario import load_scenario
-    from models.stepper import contact_solver
 
     try:
         from planner import peers
@@ -343,7 +342,7 @@ def contact_steps(quick: bool = False) -> dict:
     skip = int(round(first / h))
     theirs = [] if spatial is None else [lambda: peers.timed_run(spatial, u[0], calls * per_call, after=skip, per_call=per_call)]
     polygon = f"dynamic-rigid ({settings.friction_directions}-sided cone, {settings.contact_solver})"
-    exact = replace(rung, solver=contact_solver("pgs"), model=rung.model._replace(exact_cone=True))
+    exact = pgs_rung(rung, exact_cone=True)
     for label, stepper in ((polygon, rung), ("dynamic-rigid (exact cone, pgs)", exact)):
         walls, (taken, pushed, pivots, sweeps), _ = in_turns(lambda stepper=stepper: push(stepper), theirs, repeat)
         row = _contact_row(
@@ -664,8 +663,6 @@ def box_scene(folder: Path, arrangement: str, n: int):
 
 
 def _per_step(scene, rung_name: str, solver: str, steps: int) -> dict:
-    from dataclasses import replace
-
     from models.rungs import rung_for
     from models.stepper import contact_solver
 

@@ -27,6 +27,7 @@ from models.lcp import (
     lemke_warm_kernel,
     pgs_kernel,
     solve_lcp,
+    warm_guess_dropping_into,
 )
 
 METHODS = ("lemke", "pgs")
@@ -400,6 +401,39 @@ def test_lemke_warm_start_on_the_right_basis_takes_no_pivot():
         warm_count += warm
         assert not warm or pivots == 0
     assert warm_count >= 15
+
+
+def test_a_singular_guess_is_tried_again_without_a_redundant_row():
+    """A rigid plate on four coplanar corners: their normals span three DOFs (height, roll,
+    pitch), so the guess that all four push is singular. `warm_guess_dropping_into` tries it
+    again without each of its first `droppable` basic rows in turn and keeps the first that
+    solves the LCP: without corner 0, corners 1 and 2 (a diagonal) carry the plate's weight.
+    Lemke's warm kernel does the same when told how many rows it may drop, and still pivots
+    from scratch when none does."""
+    a, b = 0.1, 0.05
+    corners = np.array([[a, b], [a, -b], [-a, b], [-a, -b]])
+    N = np.column_stack([np.ones(4), corners[:, 1], -corners[:, 0]])  # normal velocity = N v
+    M = N @ np.diag([2.0, 50.0, 20.0]) @ N.T  # rank 3: N A^-1 N^T
+    q = N @ np.array([-1.0, 0.0, 0.0])  # falling: every corner approaching at 1
+    n = 4
+    work = np.empty(n, np.int64), np.empty((n + 1, n)), np.empty(n), np.empty(n)
+    assert lcp.warm_guess_into(M, q, np.ones(n, np.bool_), *work) == np.inf  # singular
+    guess = np.ones(n, np.bool_)
+    residual = warm_guess_dropping_into(M, q, guess, *work, n, 1e-12)
+    z = work[2]
+    assert guess.tolist() == [False, True, True, True]
+    assert residual <= 1e-12 and natural_residual(M, q, z) <= 1e-12
+    np.testing.assert_allclose(N.T @ z, [0.5, 0.0, 0.0], atol=1e-14)  # the plate's momentum stopped
+    np.testing.assert_allclose(z, [0.0, 0.25, 0.25, 0.0], atol=1e-14)
+    z, w, code, pivots, basic_z, warm, residual = lemke_warm_kernel(M, q, 100, np.ones(n, np.bool_), 1e-12, n)
+    assert warm and pivots == 0 and code == lcp.STATUS_SOLVED and natural_residual(M, q, z) <= 1e-12
+    z, w, code, pivots, basic_z, warm, residual = lemke_warm_kernel(M, q, 100, np.ones(n, np.bool_), 1e-12)
+    assert not warm and pivots > 0 and code == lcp.STATUS_SOLVED and natural_residual(M, q, z) <= 1e-12
+    # no drop solves it (the only basic row dropped leaves w = q < 0): +inf, the guess as given
+    S = np.array([[0.0, 1.0], [-1.0, 1.0]])
+    guess = np.array([True, False])
+    assert warm_guess_dropping_into(S, np.array([-1.0, 1.0]), guess, *work, 2, 1e-12) == np.inf
+    assert guess.tolist() == [True, False]
 
 
 # ------------------------------------------------------------------------------------------

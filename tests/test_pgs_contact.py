@@ -19,7 +19,7 @@ import pytest
 from models.contact import CONTACT_MARGIN, ContactSet, contact_frames
 from models.contact_pgs import disk_minimiser, polygon_minimiser
 from models.rollout import _keep_warm, _warm_in_frames
-from models.rungs import RUNGS, compiled, rung_for
+from models.rungs import RUNGS, compiled, pgs_rung, rung_for
 from models.scenario import ScenarioError, load_scenario
 from models.schema import CONTACT_SOLVERS
 from models.stepper import (
@@ -253,7 +253,7 @@ def test_the_push_warm_starts_pgs_although_the_pushers_tangent_basis_flips(exact
     2 sweeps over and over (4.67 a step over the push, the box's speed swinging with them)."""
     sc = load_scenario(SCENARIOS / "box_push_3d.toml")
     base = rung_for(sc, "dynamic-rigid")
-    rung = replace(base, solver=contact_solver("pgs"), model=base.model._replace(exact_cone=exact))
+    rung = pgs_rung(base, exact_cone=exact)
     u = np.array([[sc.spec.task.policy.speeds.get(name, 0.0) for name in sc.actuated]])
     start = base.rollout(sc, base.initial_state(sc), u, [0.4], H, stop_at_outcome=False).state
     out = rung.rollout(sc, start, u, [0.5], H, stop_at_outcome=False)
@@ -307,8 +307,7 @@ def test_exact_cone_box_slides_at_any_angle_decelerating_at_mu_g_along_its_veloc
     mu, steps, speed = 0.4, 50, 0.5
     angle = math.radians(angle_deg)
     ix, iy = sc.velocities.index("box.x"), sc.velocities.index("box.y")
-    exact = replace(rung_for(sc, "dynamic-rigid"), solver=contact_solver("pgs"))
-    exact = replace(exact, model=exact.model._replace(exact_cone=True))
+    exact = pgs_rung(rung_for(sc, "dynamic-rigid"), exact_cone=True)
     polygon = rung_for(sc, "dynamic-rigid")
     errors = {}
     for name, rung in (("exact", exact), ("polygon", polygon)):
