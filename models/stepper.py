@@ -172,7 +172,8 @@ class Model(NamedTuple):
     # A planner's control period: a planner propagates a plan one control period per call, each
     # starting cold from a state vector, and its one-call replay must solve the same contact
     # problems (at a degenerate LCP another basis is another exact solution; PGS stops within
-    # its tolerance of the solution its start leads it to)
+    # its tolerance of the solution its start leads it to). Lemke's first step of a period
+    # guesses its basis from its own LCP's q (`_basis_guess`), not from the steps before
     warm_period: float = 0.0
     # in space, friction in the exact circular Coulomb cone (eq. 4: mu p_n in every direction of
     # sliding) instead of the polygon of friction_directions sides: PGS solves it
@@ -1831,11 +1832,12 @@ WARM_DONE, WARM_NOT_TAKEN = 0, 1
 @numba.njit(cache=True, inline="always")
 def _warm_solve(M, q_lcp, guess, L, n, nc):
     """The planar warm step's solve of its LCP (n unknowns, nc contacts, on `WarmLCP` L's arrays):
-    the guessed basis (`warm_guess_dropping_into`, as `lemke_warm_kernel` tries it), and where that does not solve it, Lemke from scratch
-    (`lemke_into`), as `lemke_warm_kernel` goes on after a failed guess (a period's first step,
-    a contact made or broken). Returns (solved, pivots, the final basis's flags, the natural-map
-    residual: the guess's own, computed there, else Lemke's solution's); z and w in L.z[:n],
-    L.w[:n]. Where Lemke fails, the general path regularizes the LCP."""
+    the guessed basis (`warm_guess_dropping_into`, as `lemke_warm_kernel` tries it), and where
+    that does not solve it, Lemke from scratch (`lemke_into`), as `lemke_warm_kernel` goes on
+    after a failed guess (a contact made or broken that q does not predict). Returns (solved,
+    pivots, the final basis's flags, the natural-map residual: the guess's own, computed there,
+    else Lemke's solution's); z and w in L.z[:n], L.w[:n]. Where Lemke fails, the general path
+    regularizes the LCP."""
     z, w = L.z[:n], L.w[:n]
     residual = warm_guess_dropping_into(M, q_lcp, guess, L.J, L.lu, z, w, nc, WARM_TOLERANCE)
     if residual <= WARM_TOLERANCE:
@@ -1851,8 +1853,8 @@ def planar_warm_step(model, drives, tables, system, h, q, nu, q_ref, u, contacts
     """A contact step of `_lemke_step` in the plane with A constant and no force-limited drive,
     compiled without numba's runtime: no reference counts, no allocation; every array is B's
     (`PlanarWarm`). The LCP is solved on the previous step's basis (the usual step while
-    contacts persist) or, where that guess does not solve it, by Lemke from scratch
-    (`_warm_solve`). Where the LCP is not `_planar_case`, Lemke does not solve it to
+    contacts persist; a contact not in it guessed from q, `_basis_guess`) or, where that guess
+    does not solve it, by Lemke from scratch (`_warm_solve`). Where the LCP is not `_planar_case`, Lemke does not solve it to
     LCP_TOLERANCE (the general path then regularizes it) or the state leaves the finite range,
     it returns WARM_NOT_TAKEN and the caller takes the general path, which solves the step again
     from the start. Else (WARM_DONE): q+, nu+, q_ref+, the next basis table and, with
@@ -2003,8 +2005,9 @@ def spatial_warm_buffers(cap, d, nb, out):
 def spatial_warm_step(model, drives, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, W, side, part):
     """A contact step of `_lemke_step` in space with no force-limited drive, compiled without
     numba's runtime: no reference counts, no allocation; every array is W's (`SpatialWarm`).
-    The LCP is solved on the previous step's basis, tried on G and C without building M
-    (`_generator_guess_into`), and where that guess does not solve it, M is built and Lemke
+    The LCP is solved on the previous step's basis (a contact not in it guessed from q,
+    `_basis_guess`), tried on G and C without building M (`_generator_guess_dropping_into`), and
+    where that guess does not solve it, M is built and Lemke
     runs from scratch (as the general step in space without force-limited drives,
     `_on_generators`).
     rotating: A depends on q (`has_rotations`), so A(q) and its body blocks are built here
@@ -2042,8 +2045,9 @@ def spatial_warm_step(model, drives, tables, system, rotating, h, q, nu, q_ref, 
     G = W.G[: ng * ng].reshape((ng, ng))
     scratch = (W.body[:ng], W.ldof[:ng], W.nloc[:ng], W.Bl[:ng], G, W.p[:ng], W.Bt_nu[:ng], W.Jt_nu[:m], W.Bb[:ng], W.Yb[:ng], W.gl[:ng])
     # all of the LCP but M (`lcp_generators_into`), scaled as the general step scales it
-    # (`_scale_contact_lcp` on the generators), and the previous basis's guess on G and C: M is
-    # built only where that fails (a period's first step, a contact made or broken)
+    # (`_scale_contact_lcp` on the generators), and the previous basis's guess on G and C (from q
+    # where a contact is not in it): M is built only where that fails (a contact made or broken
+    # that q does not predict)
     lcp_generators_into(
         model, True, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, drives, lim, 0, fric, nf, scratch, q_lcp, Y,
         gen, cf, W.dirs,
@@ -2287,8 +2291,8 @@ def _scale_contact_lcp(model, on_generators, h, Mlcp, qlcp, G, gen, cf, active, 
 
 @numba.njit(cache=True, inline="always")
 def _guess_or_lemke(G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, Mlcp, qlcp, scale, guess):
-    """`lemke_warm_kernel` with its guess on the generators (`_generator_guess_into`) and, where
-    that fails, Lemke from scratch on the scaled M, q. Returns (z, w, status, pivots, basic_z,
+    """`lemke_warm_kernel` with its guess on the generators (`_generator_guess_dropping_into`)
+    and, where that fails, Lemke from scratch on the scaled M, q. Returns (z, w, status, pivots, basic_z,
     the natural-map residual: the guess's own, computed there, else Lemke's solution's)."""
     n = qlcp.shape[0]
     ng = G.shape[0]
