@@ -416,6 +416,74 @@ def law_speeds(S, law, q, q_index, u, out):
 # ----------------------------------------------------------------------------- the rollout
 
 
+#: Why `_free_run` returned: the control's steps are done; a contact or an unsupported pair
+#: detected at its next step, or its free step failed (the caller takes that step, whole);
+#: the outcome met with stop_at_outcome (the caller stops, that step not taken).
+FREE_DONE, FREE_HANDED_BACK, FREE_OUTCOME = 0, 1, 2
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _free_run(
+    S, dimension, g_op, g_index, g_lo, g_hi, u_op, u_index, u_lo, u_hi, stack, eps, theta, h, Ainv, M_const, rhs_const, q, nu,
+    q_ref, u, q_index, v_index, kp, kd, lower, upper, rhs, blend, free_q, free_nu, free_q_ref, free_side, c_pair, c_psi, c_n,
+    c_pa, c_pb, c_t, c_o, c_slot, first_slot, unsupported, pos, poses, speed, reach, axis, pair_psi, no_impulse, no_friction,
+    pair_force, pair_wrench, rec_t, rec_q, rec_nu, n_rec, record_every, max_records, steps, t, t0, outcome, stop_at_outcome,
+    warm_every, n_left,
+):  # fmt: skip
+    """Up to n_left of `rollout_kernel`'s steps while no contact is detected, in one call: the
+    same stages in the same order as the kernel's loop
+    (detection, distances, classification, `free_step_into`, the forces' record, the state's
+    record), the same bits, without most of the reference counts that the kernel's loop pays on
+    its arrays at every step (a third of a free step, profiled). (With numba's runtime: the
+    planar detection allocates.) For a scene with A constant, no
+    force-limited drive, no scripted obstacle and no speed law, outside the kinematic rung and
+    with no compliant deformation left (`rollout_kernel` checks). Each step writes its state
+    on side free_side of free_q, free_nu, free_q_ref and flips it, as the kernel's free step does.
+    Returns (why it returned: FREE_DONE, FREE_HANDED_BACK, FREE_OUTCOME; the steps taken,
+    whose last state is on side 1 - free_side; t, steps, the records kept, the outcome,
+    free_side, whether a step of a new warm period (`Model.warm_period`) was taken or met the
+    outcome, whose warm starts the caller drops: a free step reads and writes none of them; and
+    the contacts and unsupported pairs detected at the step handed back, whose detection the
+    buffers hold: the caller does not detect them again)."""
+    bi, bf, verts, pi = S.bi, S.bf, S.verts, S.pi
+    cq, cnu, cq_ref = q, nu, q_ref
+    taken, crossed = 0, False
+    while taken < n_left:
+        period = warm_every > 0 and int(np.round((t0 + t) / h)) % warm_every == 0
+        if dimension == 3:
+            nc, n_unsupported = detect_spatial_into(
+                S, cq, cnu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pos, speed, reach
+            )
+        else:
+            nc = detect_planar_into(
+                bi, bf, verts, pi, cq, cnu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, pos, poses, speed, reach, axis
+            )
+            n_unsupported = 0
+        if nc > 0 or n_unsupported > 0:
+            return FREE_HANDED_BACK, taken, t, steps, n_rec, outcome, free_side, crossed, nc, n_unsupported
+        _distances(nc, c_pair, c_psi, c_slot, first_slot, pair_psi)
+        if outcome == Outcome.NONE or stop_at_outcome:
+            outcome = _classify_with(g_op, g_index, g_lo, g_hi, u_op, u_index, u_lo, u_hi, cq, pair_psi, stack)
+            if outcome != Outcome.NONE and stop_at_outcome:  # (the kernel drops at a period's step before it stops)
+                return FREE_OUTCOME, taken, t, steps, n_rec, outcome, free_side, crossed or period, nc, n_unsupported
+        f_q, f_nu, f_q_ref = free_q[free_side], free_nu[free_side], free_q_ref[free_side]
+        if not free_step_into(
+            eps, theta, h, bi, Ainv, M_const, rhs_const, cq, cnu, cq_ref, u, q_index, v_index, kp, kd, lower, upper, rhs, blend, f_q,
+            f_nu, f_q_ref,
+        ):  # fmt: skip
+            return FREE_HANDED_BACK, taken, t, steps, n_rec, outcome, free_side, crossed, nc, n_unsupported
+        free_side = 1 - free_side
+        cq, cnu, cq_ref = f_q, f_nu, f_q_ref
+        crossed = crossed or period
+        _record_forces(c_pair, c_n, c_t, c_o, no_impulse, no_friction, h, pair_force, pair_wrench)
+        t += h
+        steps += 1
+        taken += 1
+        if record_every > 0 and steps % record_every == 0 and n_rec < max_records - 1:
+            n_rec = _record_state(rec_t, rec_q, rec_nu, n_rec, t, cq, cnu)
+    return FREE_DONE, taken, t, steps, n_rec, outcome, free_side, crossed, 0, 0
+
+
 @numba.njit(cache=True, error_model="numpy")
 def rollout_kernel(
     S,
@@ -501,6 +569,10 @@ def rollout_kernel(
     free_q, free_nu, free_q_ref, free_side = np.empty((2, q.shape[0])), np.empty((2, nv)), np.empty((2, q_ref.shape[0])), 0
     eps_eff = model.quasistatic_inertia if eps == 0.0 else eps
     max_records, rec_t, rec_q, rec_nu, n_rec = _start_records(max_records, q, nu)
+    # runs of free steps in one call (`_free_run`), where they take the free step: tried from the
+    # start and after each free step the loop takes, not while contacts persist
+    free_runs = not kinematic and constant_A and not limited and not scripted and not has_law
+    try_free, detected, nc_back, unsupported_back = free_runs, False, 0, 0
     t, steps, lcp_solves, pivots, max_residual, max_size, min_psi, force_steps, sweeps = 0.0, 0, 0, 0, 0.0, 0, np.inf, 0, 0
     no_impulse, no_friction = np.zeros(0), np.zeros((0, 2))  # a step without contact problem (no allocation a step)
     outcome = Outcome.NONE.value
@@ -511,7 +583,27 @@ def rollout_kernel(
         u = controls[k]
         if has_law:
             u = u.copy()  # the laws' speeds, step by step
-        for _ in range(int(np.round(durations[k] / h))):
+        n_steps, i = int(np.round(durations[k] / h)), 0
+        while i < n_steps:
+            detected = False
+            if try_free and not (compliant and (delta_n.any() or delta_t.any())):
+                why, taken, t, steps, n_rec, outcome, free_side, crossed, nc_back, unsupported_back = _free_run(
+                    S, dimension, g_op, g_index, g_lo, g_hi, u_op, u_index, u_lo, u_hi, stack, eps, theta, h, Ainv, M_const, rhs_const,
+                    q, nu, q_ref, u, q_index, v_index, kp, kd, lower, upper, R.rhs, R.blend, free_q, free_nu, free_q_ref, free_side,
+                    c_pair, c_psi, c_n, c_pa, c_pb, c_t, c_o, c_slot, first_slot, unsupported, pos, poses, speed, reach, axis, pair_psi,
+                    no_impulse, no_friction, pair_force, pair_wrench, rec_t, rec_q, rec_nu, n_rec, record_every, max_records, steps, t,
+                    t0, outcome, stop_at_outcome, warm_every, n_steps - i,
+                )  # fmt: skip
+                if taken > 0:
+                    last = 1 - free_side
+                    q, nu, q_ref = free_q[last], free_nu[last], free_q_ref[last]
+                    i += taken
+                if crossed:
+                    basis, step_solver = cold, solver
+                    n_warm = _drop_warm(n_warm, warm_slots, warm_n, warm_t, warm_w)
+                if why != FREE_HANDED_BACK:
+                    break
+                detected, try_free = True, False
             if warm_every > 0 and int(np.round((t0 + t) / h)) % warm_every == 0:
                 # every warm start the call carries, as a call starts: Lemke's basis, PGS's
                 # impulses by slot, auto's switch to Lemke
@@ -521,7 +613,9 @@ def rollout_kernel(
                 place_scripted(bf, S.base_pos, S.base_quat, t0 + t)
             # stage detect (SceneData crosses a call only in space, where detection needs it)
             n_unsupported = 0
-            if dimension == 3:
+            if detected:  # by `_free_run`, at this state: its buffers hold it
+                nc, n_unsupported = nc_back, unsupported_back
+            elif dimension == 3:
                 nc, n_unsupported = detect_spatial_into(
                     S, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pos, speed, reach
                 )
@@ -555,6 +649,7 @@ def rollout_kernel(
                 )
                 size, p_n = nc, np.zeros(nc)
             elif nc == 0 and constant_A and not limited:  # the cheap path: no contact problem
+                try_free = free_runs
                 f_q, f_nu, f_q_ref = free_q[free_side], free_nu[free_side], free_q_ref[free_side]
                 if free_step_into(
                     eps, theta, h, bi, Ainv, M_const, rhs_const, q, nu, q_ref, u, q_index, v_index, kp, kd, lower, upper, R.rhs, R.blend,
@@ -622,6 +717,7 @@ def rollout_kernel(
             steps += 1
             if record_every > 0 and steps % record_every == 0 and n_rec < max_records - 1:
                 n_rec = _record_state(rec_t, rec_q, rec_nu, n_rec, t, q, nu)
+            i += 1
     outcome, n_rec = _finish(
         S,
         goal,
