@@ -431,14 +431,14 @@ def _free_run(
     warm_every, n_left,
 ):  # fmt: skip
     """Up to n_left of `rollout_kernel`'s steps while no contact is detected, in one call: the
-    same stages in the same order as the kernel's loop
-    (detection, distances, classification, `free_step_into`, the forces' record, the state's
-    record), the same bits, without most of the reference counts that the kernel's loop pays on
-    its arrays at every step (a third of a free step, profiled). (With numba's runtime: the
-    planar detection allocates.) For a scene with A constant, no
-    force-limited drive, no scripted obstacle and no speed law, outside the kinematic rung and
-    with no compliant deformation left (`rollout_kernel` checks). Each step writes its state
-    on side free_side of free_q, free_nu, free_q_ref and flips it, as the kernel's free step does.
+    same stages in the same order as the kernel's loop (detection, distances, classification,
+    `free_step_into`, the forces' record, the state's record), the same bits, without most of
+    the reference counts that the kernel's loop pays on its arrays at every step (a third of a
+    free step, profiled). Compiled with numba's runtime: the planar detection allocates. For a
+    scene with A constant, no force-limited drive, no scripted obstacle and no speed law,
+    outside the kinematic rung and with no compliant deformation left (`rollout_kernel`
+    checks). Each step writes its state on side free_side of free_q, free_nu, free_q_ref and
+    flips it, as the kernel's free step does.
     Returns (why it returned: FREE_DONE, FREE_HANDED_BACK, FREE_OUTCOME; the steps taken,
     whose last state is on side 1 - free_side; t, steps, the records kept, the outcome,
     free_side, whether a step of a new warm period (`Model.warm_period`) was taken or met the
