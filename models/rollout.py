@@ -768,6 +768,19 @@ def rollout_kernel(
 
 
 @numba.njit(cache=True, error_model="numpy")
+def bind(items):
+    """A typed List holding the one tuple `items`, what `rollout_bound` and `propagate_kernel`
+    take as `bound`. Made here, in a cached kernel, not by numba.typed.List in Python: there
+    numba compiles the List's own methods for each new tuple type, in every process (about 1 s
+    a type, measured: the first `ladder simulate` call paid it, `ladder plan` twice), and each
+    binding took about 1.4 ms; from here, 0.1 ms and nothing compiled after the cache's first
+    run."""
+    bound = numba.typed.List()
+    bound.append(items)
+    return bound
+
+
+@numba.njit(cache=True, error_model="numpy")
 def rollout_bound(bound, q, nu, q_ref, delta_n, delta_t, basis, controls, durations, h, record_every, max_records, stop_at_outcome, t0):
     """`rollout_kernel` on a scene bound once: bound, a typed List holding one tuple (S, D,
     model, solver, goal, unsafe), crosses into the kernel as one pointer, where the scene's
