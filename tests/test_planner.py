@@ -329,6 +329,37 @@ def test_goal_states_made_by_projection_are_in_the_goal_and_valid():
     assert all(valid(q) for q in path.states)
 
 
+@pytest.mark.parametrize("name", ["two_finger_triangle", "four_finger_grasp", "box_push_3d"])
+def test_the_geometric_check_on_its_bound_buffers_answers_as_a_fresh_one(name):
+    """`geometric_checker` binds its scene and the distances' buffers once and reuses them
+    check after check: every answer is the one a checker made for that q alone gives, and
+    the distances on shared buffers are `pair_min_distances`' own, bit for bit."""
+    from models.contact import pair_distance_buffers, pair_min_distances, pair_min_distances_into
+    from models.rungs import compiled, geometric_checker
+    from planner.ompl_adapter import sampling_limits
+
+    scenario = load_scenario(SCENARIOS / f"{name}.toml")
+    low, high = sampling_limits(scenario, scenario.start)
+    valid = geometric_checker(scenario, low, high)
+    S = compiled(scenario).scene
+    buffers = pair_distance_buffers(S)
+    rng = np.random.default_rng(3)
+    answers = set()
+    sampled = high > low
+    for k in range(60):
+        if k % 2:  # anywhere in the sampling limits
+            q = np.where(sampled, low + rng.random(len(low)) * (high - low), scenario.start)
+        else:  # near the start
+            q = np.clip(scenario.start + 0.02 * rng.standard_normal(len(low)) * sampled, low, high)
+        answers.add(valid(q))
+        assert valid(q) == geometric_checker(scenario, low, high)(q)
+        fresh, shared = np.empty(len(S.pi)), np.empty(len(S.pi))
+        pair_min_distances(S, q, 1e9, fresh)
+        pair_min_distances_into(S, q, 1e9, shared, buffers)
+        assert np.array_equal(fresh, shared, equal_nan=True)
+    assert answers == {True, False}  # the states drawn reach both answers
+
+
 def test_a_rung_that_cannot_express_the_task_does_not_end_the_ladder():
     """tests/data/strike.toml: the pusher may not pass x = 0, the puck must reach x >= 0.5, so
     only momentum gets it there. The kinematic rung cannot (no inertia: the puck stops with
