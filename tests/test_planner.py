@@ -330,12 +330,13 @@ def test_goal_states_made_by_projection_are_in_the_goal_and_valid():
 
 
 @pytest.mark.parametrize("name", ["two_finger_triangle", "four_finger_grasp", "box_push_3d"])
-def test_the_geometric_check_on_its_bound_buffers_answers_as_a_fresh_one(name):
+def test_the_geometric_check_and_the_distances_on_bound_buffers_answer_as_fresh_ones(name):
     """`geometric_checker` binds its scene and the distances' buffers once and reuses them
     check after check: every answer is the one a checker made for that q alone gives, and
-    the distances on shared buffers are `pair_min_distances`' own, bit for bit."""
+    the distances on shared buffers, and `pair_signed_distances`' on the bound scene, are
+    `pair_min_distances`' own, bit for bit."""
     from models.contact import pair_distance_buffers, pair_min_distances, pair_min_distances_into
-    from models.rungs import compiled, geometric_checker
+    from models.rungs import compiled, geometric_checker, pair_signed_distances
     from planner.ompl_adapter import sampling_limits
 
     scenario = load_scenario(SCENARIOS / f"{name}.toml")
@@ -357,6 +358,8 @@ def test_the_geometric_check_on_its_bound_buffers_answers_as_a_fresh_one(name):
         pair_min_distances(S, q, 1e9, fresh)
         pair_min_distances_into(S, q, 1e9, shared, buffers)
         assert np.array_equal(fresh, shared, equal_nan=True)
+        measured = ~np.isnan(fresh[: len(scenario.pairs)])  # (python-fcl measures the others)
+        assert np.array_equal(pair_signed_distances(scenario, q)[measured], fresh[: len(scenario.pairs)][measured])
     assert answers == {True, False}  # the states drawn reach both answers
 
 
