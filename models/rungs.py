@@ -584,13 +584,34 @@ def pair_signed_distances(scenario: Scenario, q: np.ndarray) -> np.ndarray:
     out = np.empty(max(n, 1))
     _pair_distances_bound(compiled(scenario).scene_bound, kernel_array(q), out)
     if np.isnan(out[:n]).any():
+        _measure_missing(scenario, q, out[:n])
+    return out[:n]
+
+
+def pair_signed_distances_many(scenario: Scenario, Q: np.ndarray) -> np.ndarray:
+    """`pair_signed_distances` at each row of Q (k, nq), in one compiled call: (k, n_pairs), each
+    row the same numbers as one call at that q gives (the goal sampler's finite differences)."""
+    n = len(scenario.pairs)
+    Q = kernel_array(np.atleast_2d(Q))
+    out = np.empty((len(Q), max(n, 1)))
+    _pair_distances_many_bound(compiled(scenario).scene_bound, Q, out)
+    if np.isnan(out[:, :n]).any():
+        for k in range(len(Q)):
+            _measure_missing(scenario, Q[k], out[k, :n])
+    return out[:, :n]
+
+
+def _measure_missing(scenario: Scenario, q: np.ndarray, d: np.ndarray) -> None:
+    """d's NaN entries (the pairs the compiled kernels cannot measure) measured by the reference
+    geometry at q, in place."""
+    missing = np.flatnonzero(np.isnan(d))
+    if len(missing):
         placements = scenario.placements(q)
-        for k in np.flatnonzero(np.isnan(out[:n])):
+        for k in missing:
             pair = scenario.pairs[k]
-            out[k] = geo.signed_distance(
+            d[k] = geo.signed_distance(
                 scenario.geometries[pair.body_a], placements[pair.body_a], scenario.geometries[pair.body_b], placements[pair.body_b]
             )
-    return out[:n]
 
 
 @numba.njit(cache=True)
@@ -599,6 +620,15 @@ def _pair_distances_bound(bound, q, out):
     typed List crosses into the kernel, not the scene's 30-odd arrays one by one (about 4 us of
     `pair_signed_distances`' 13, measured; the goal sampler calls it thousands of times a plan)."""
     pair_min_distances(bound[0][0], q, 1e9, out)
+
+
+@numba.njit(cache=True)
+def _pair_distances_many_bound(bound, Q, out):
+    """`_pair_distances_bound` at each row of Q into the same row of out, on one set of buffers."""
+    S = bound[0][0]
+    buffers = pair_distance_buffers(S)
+    for k in range(Q.shape[0]):
+        pair_min_distances_into(S, Q[k], 1e9, out[k], buffers)
 
 
 def pgs_rung(rung: Rung, exact_cone: bool = False) -> Rung:

@@ -753,7 +753,7 @@ class GoalSampler:
             self._constraints(node.any[int(self.rng.integers(len(node.any)))], boxes, touches)
 
     def draw(self) -> np.ndarray | None:
-        from models.rungs import pair_signed_distances
+        from models.rungs import pair_signed_distances, pair_signed_distances_many
 
         scenario, rng, low, high, movable = self.scenario, self.rng, self.low, self.high, self.movable
         goal = scenario.spec.task.goal
@@ -775,13 +775,13 @@ class GoalSampler:
                 if np.all(np.abs(r) <= np.array([target for _, target in touches])):
                     break
                 r = np.where(np.isfinite(r), r, 1.0)
-                J = np.zeros((len(touches), len(movable)))
                 step = 1e-6
-                for j, i in enumerate(movable):
-                    qe = q.copy()
-                    qe[i] += step
-                    de = pair_signed_distances(scenario, qe)
-                    J[:, j] = [(de[p] - d[p]) / step if np.isfinite(de[p]) and np.isfinite(d[p]) else 0.0 for p, _ in touches]
+                Q = np.repeat(q[None, :], len(movable), axis=0)  # row j: q with coordinate movable[j] moved by step
+                Q[np.arange(len(movable)), movable] += step
+                pairs = [p for p, _ in touches]
+                de, dp = pair_signed_distances_many(scenario, Q)[:, pairs], d[pairs]
+                finite = np.isfinite(de) & np.isfinite(dp)
+                J = np.where(finite, (de - dp) / step, 0.0).T  # (touches, movable)
                 q[movable] -= J.T @ np.linalg.solve(J @ J.T + 1e-12 * np.eye(len(touches)), r)
                 q = np.clip(q, low, high)
             if goal_distance(scenario, q) == 0.0 and self.valid(q):

@@ -334,9 +334,9 @@ def test_the_geometric_check_and_the_distances_on_bound_buffers_answer_as_fresh_
     """`geometric_checker` binds its scene and the distances' buffers once and reuses them
     check after check: every answer is the one a checker made for that q alone gives, and
     the distances on shared buffers, and `pair_signed_distances`' on the bound scene, are
-    `pair_min_distances`' own, bit for bit."""
+    `pair_min_distances`' own, bit for bit, as are `pair_signed_distances_many`'s rows."""
     from models.contact import pair_distance_buffers, pair_min_distances, pair_min_distances_into
-    from models.rungs import compiled, geometric_checker, pair_signed_distances
+    from models.rungs import compiled, geometric_checker, pair_signed_distances, pair_signed_distances_many
     from planner.ompl_adapter import sampling_limits
 
     scenario = load_scenario(SCENARIOS / f"{name}.toml")
@@ -347,11 +347,13 @@ def test_the_geometric_check_and_the_distances_on_bound_buffers_answer_as_fresh_
     rng = np.random.default_rng(3)
     answers = set()
     sampled = high > low
+    drawn = []
     for k in range(60):
         if k % 2:  # anywhere in the sampling limits
             q = np.where(sampled, low + rng.random(len(low)) * (high - low), scenario.start)
         else:  # near the start
             q = np.clip(scenario.start + 0.02 * rng.standard_normal(len(low)) * sampled, low, high)
+        drawn.append(q)
         answers.add(valid(q))
         assert valid(q) == geometric_checker(scenario, low, high)(q)
         fresh, shared = np.empty(len(S.pi)), np.empty(len(S.pi))
@@ -361,6 +363,7 @@ def test_the_geometric_check_and_the_distances_on_bound_buffers_answer_as_fresh_
         measured = ~np.isnan(fresh[: len(scenario.pairs)])  # (python-fcl measures the others)
         assert np.array_equal(pair_signed_distances(scenario, q)[measured], fresh[: len(scenario.pairs)][measured])
     assert answers == {True, False}  # the states drawn reach both answers
+    assert np.array_equal(pair_signed_distances_many(scenario, drawn), [pair_signed_distances(scenario, q) for q in drawn])
 
 
 def test_a_rung_that_cannot_express_the_task_does_not_end_the_ladder():
