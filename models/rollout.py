@@ -71,6 +71,7 @@ from models.stepper import (
     free_step_into,
     gravity_force,
     has_rotations,
+    kinematic_free_step_into,
     kinematic_step,
     make_system,
     mass_matrix,
@@ -428,17 +429,17 @@ def _free_run(
     q_ref, u, q_index, v_index, kp, kd, lower, upper, rhs, blend, free_q, free_nu, free_q_ref, free_side, c_pair, c_psi, c_n,
     c_pa, c_pb, c_t, c_o, c_slot, first_slot, unsupported, pos, poses, speed, reach, axis, pair_psi, no_impulse, no_friction,
     pair_force, pair_wrench, rec_t, rec_q, rec_nu, n_rec, record_every, max_records, steps, t, t0, outcome, stop_at_outcome,
-    warm_every, n_left,
+    warm_every, n_left, kinematic,
 ):  # fmt: skip
     """Up to n_left of `rollout_kernel`'s steps while no contact is detected, in one call: the
     same stages in the same order as the kernel's loop (detection, distances, classification,
     `free_step_into`, the forces' record, the state's record), the same bits, without most of
     the reference counts that the kernel's loop pays on its arrays at every step (a third of a
     free step, profiled). Compiled with numba's runtime: the planar detection allocates. For a
-    scene with A constant, no force-limited drive, no scripted obstacle and no speed law,
-    outside the kinematic rung and with no compliant deformation left (`rollout_kernel`
-    checks). Each step writes its state on side free_side of free_q, free_nu, free_q_ref and
-    flips it, as the kernel's free step does.
+    scene with no scripted obstacle and no speed law, in the kinematic rung (its free step,
+    `kinematic_free_step_into`: kinematic True) or with A constant, no force-limited drive and
+    no compliant deformation left (`rollout_kernel` checks). Each step writes its state on side
+    free_side of free_q, free_nu, free_q_ref and flips it, as the kernel's free step does.
     Returns (why it returned: FREE_DONE, FREE_HANDED_BACK, FREE_OUTCOME; the steps taken,
     whose last state is on side 1 - free_side; t, steps, the records kept, the outcome,
     free_side, whether a step of a new warm period (`Model.warm_period`) was taken or met the
@@ -467,10 +468,14 @@ def _free_run(
             if outcome != Outcome.NONE and stop_at_outcome:  # (the kernel drops at a period's step before it stops)
                 return FREE_OUTCOME, taken, t, steps, n_rec, outcome, free_side, crossed or period, nc, n_unsupported
         f_q, f_nu, f_q_ref = free_q[free_side], free_nu[free_side], free_q_ref[free_side]
-        if not free_step_into(
-            eps, theta, h, bi, Ainv, M_const, rhs_const, cq, cnu, cq_ref, u, q_index, v_index, kp, kd, lower, upper, rhs, blend, f_q,
-            f_nu, f_q_ref,
-        ):  # fmt: skip
+        if kinematic:
+            ok = kinematic_free_step_into(bi, h, cq, cq_ref, u, q_index, v_index, lower, upper, f_q, f_nu, f_q_ref)
+        else:
+            ok = free_step_into(
+                eps, theta, h, bi, Ainv, M_const, rhs_const, cq, cnu, cq_ref, u, q_index, v_index, kp, kd, lower, upper, rhs, blend, f_q,
+                f_nu, f_q_ref,
+            )  # fmt: skip
+        if not ok:
             return FREE_HANDED_BACK, taken, t, steps, n_rec, outcome, free_side, crossed, nc, n_unsupported
         free_side = 1 - free_side
         cq, cnu, cq_ref = f_q, f_nu, f_q_ref
@@ -571,7 +576,7 @@ def rollout_kernel(
     max_records, rec_t, rec_q, rec_nu, n_rec = _start_records(max_records, q, nu)
     # runs of free steps in one call (`_free_run`), where they take the free step: tried from the
     # start and after each free step the loop takes, not while contacts persist
-    free_runs = not kinematic and constant_A and not limited and not scripted and not has_law
+    free_runs = (kinematic or (constant_A and not limited)) and not scripted and not has_law
     try_free, detected, nc_back, unsupported_back = free_runs, False, 0, 0
     t, steps, lcp_solves, pivots, max_residual, max_size, min_psi, force_steps, sweeps = 0.0, 0, 0, 0, 0.0, 0, np.inf, 0, 0
     no_impulse, no_friction = np.zeros(0), np.zeros((0, 2))  # a step without contact problem (no allocation a step)
@@ -592,7 +597,7 @@ def rollout_kernel(
                     q, nu, q_ref, u, q_index, v_index, kp, kd, lower, upper, R.rhs, R.blend, free_q, free_nu, free_q_ref, free_side,
                     c_pair, c_psi, c_n, c_pa, c_pb, c_t, c_o, c_slot, first_slot, unsupported, pos, poses, speed, reach, axis, pair_psi,
                     no_impulse, no_friction, pair_force, pair_wrench, rec_t, rec_q, rec_nu, n_rec, record_every, max_records, steps, t,
-                    t0, outcome, stop_at_outcome, warm_every, n_steps - i,
+                    t0, outcome, stop_at_outcome, warm_every, n_steps - i, kinematic,
                 )  # fmt: skip
                 if taken > 0:
                     last = 1 - free_side
@@ -648,6 +653,8 @@ def rollout_kernel(
                     bi, bf, h, q, q_ref, u, q_index, v_index, lower, upper, nc, c_psi, c_bias, W_n, nv
                 )
                 size, p_n = nc, np.zeros(nc)
+                if nc == 0:  # a free step: runs of them tried again from here
+                    try_free = free_runs
             elif nc == 0 and constant_A and not limited:  # the cheap path: no contact problem
                 try_free = free_runs
                 f_q, f_nu, f_q_ref = free_q[free_side], free_nu[free_side], free_q_ref[free_side]

@@ -449,6 +449,38 @@ def test_cheap_free_step_equals_the_full_step_without_contacts(eps):
     assert fast[3] == full.status == 0
 
 
+@pytest.mark.parametrize("name", ["free_transfer", "two_finger_triangle", "box_push_3d"])
+def test_the_kinematic_free_step_is_the_kinematic_step_without_contacts(name):
+    """`kinematic_free_step_into` (the rollout's runs of free steps in the kinematic rung) gives
+    `kinematic_step`'s q+, nu+ and q_ref+ with no contact, bit for bit, at random states and
+    commands, position limits reached included (box_push_3d: a resting body's quaternion is
+    renormalised by both)."""
+    from models.rungs import compiled
+    from models.stepper import kinematic_free_step_into, kinematic_step
+
+    scenario = load_scenario(SCENARIOS / f"{name}.toml")
+    c = compiled(scenario)
+    S, D = c.scene, c.drives
+    rng = np.random.default_rng(7)
+    nq, na = len(scenario.start), len(D.v_index)
+    lower = np.where(np.isfinite(D.lower), D.lower, -0.5)  # limits the commands reach
+    upper = np.where(np.isfinite(D.upper), D.upper, 0.5)
+    for h in (1e-2, 1e-3, 1e-4):
+        for _ in range(20):
+            q = np.array(scenario.start, float)
+            q[D.q_index] += 0.3 * rng.standard_normal(na)
+            q_ref = q[D.q_index] + 1e-3 * rng.standard_normal(na)
+            u = 50.0 * rng.standard_normal(na)  # some past a limit within the step
+            full = kinematic_step(
+                S.bi, S.bf, h, q, q_ref, u, D.q_index, D.v_index, lower, upper, 0, np.zeros(0), np.zeros((0, 3)), np.zeros((S.nv, 0)), S.nv
+            )
+            q_new, nu_new, q_ref_new = np.empty(nq), np.empty(S.nv), np.empty(na)
+            ok = kinematic_free_step_into(S.bi, h, q, q_ref, u, D.q_index, D.v_index, lower, upper, q_new, nu_new, q_ref_new)
+            assert ok and full[3] == 0
+            for a, b in zip((q_new, nu_new, q_ref_new), full[:3]):
+                assert np.array_equal(a, b)
+
+
 def test_a_rollout_and_the_planners_propagation_run_one_compiled_rollout():
     """The planners' propagation (`propagate_kernel`) calls `rollout_kernel` with the argument
     types a Python rollout passes, so both run one compile of it, and the same physics. (It once
