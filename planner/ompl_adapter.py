@@ -781,7 +781,8 @@ class GoalSampler:
                 pairs = [p for p, _ in touches]
                 de, dp = pair_signed_distances_many(scenario, Q)[:, pairs], d[pairs]
                 finite = np.isfinite(de) & np.isfinite(dp)
-                J = np.where(finite, (de - dp) / step, 0.0).T  # (touches, movable)
+                with np.errstate(invalid="ignore"):  # (inf - inf where a distance is not finite: not used)
+                    J = np.where(finite, (de - dp) / step, 0.0).T  # (touches, movable)
                 q[movable] -= J.T @ np.linalg.solve(J @ J.T + 1e-12 * np.eye(len(touches)), r)
                 q = np.clip(q, low, high)
             if goal_distance(scenario, q) == 0.0 and self.valid(q):
