@@ -169,9 +169,20 @@ def detect_contacts(S, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsuppo
     handle are listed in ``unsupported``: since convex meshes are compiled (against every
     spatial shape), only a mesh or box without hull tables in `SceneData` would be.
     """
+    pos, poses, speed, reach, axis = planar_scratch(S.bi.shape[0], S.pi.shape[0])
+    return detect_contacts_into(S, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pos, poses, speed, reach, axis)
+
+
+@numba.njit(cache=True, inline="always")
+def detect_contacts_into(S, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pos, poses, speed, reach, axis):
+    """`detect_contacts` on the caller's scratch (`planar_scratch`; in space poses and axis are
+    unused). The rollout's loops dispatch on the dimension themselves, on the scene's arrays
+    unpacked: an inlined helper taking the scene would count its 30-odd arrays' references
+    every step."""
     if S.dimension == 2:
-        return detect_planar(S.bi, S.bf, S.verts, S.pi, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb), 0
-    return detect_spatial(S, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsupported)
+        bi, bf, verts, pi = S.bi, S.bf, S.verts, S.pi
+        return detect_planar_into(bi, bf, verts, pi, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, pos, poses, speed, reach, axis), 0
+    return detect_spatial_into(S, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pos, speed, reach)
 
 
 @numba.njit(cache=True)
@@ -506,13 +517,10 @@ def pair_min_distances_into(S, q, margin, out, buffers):
     0.7-1 us of the distances' 2.3-6.5 us, measured). The planar separating axes start at zero on
     every call, so a pair's distance does not depend on the calls before it."""
     c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pos, poses, speed, reach, axis, nu = buffers
-    if S.dimension == 2:
-        axis[:] = 0.0
-        bi, bf, verts, pi = S.bi, S.bf, S.verts, S.pi
-        nc = detect_planar_into(bi, bf, verts, pi, q, nu, 0.0, margin, c_pair, c_psi, c_n, c_pa, c_pb, pos, poses, speed, reach, axis)
-        n_unsupported = 0
-    else:
-        nc, n_unsupported = detect_spatial_into(S, q, nu, 0.0, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pos, speed, reach)
+    axis[:] = 0.0
+    nc, n_unsupported = detect_contacts_into(
+        S, q, nu, 0.0, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pos, poses, speed, reach, axis
+    )
     out[:] = np.inf
     for i in range(nc):
         if c_psi[i] < out[c_pair[i]]:

@@ -469,7 +469,7 @@ def _free_run(
                 return FREE_OUTCOME, taken, t, steps, n_rec, outcome, free_side, crossed or period, nc, n_unsupported
         f_q, f_nu, f_q_ref = free_q[free_side], free_nu[free_side], free_q_ref[free_side]
         if kinematic:
-            ok = kinematic_free_step_into(bi, h, cq, cq_ref, u, q_index, v_index, lower, upper, f_q, f_nu, f_q_ref)
+            ok = kinematic_free_step_into(bi, h, cq, u, q_index, v_index, lower, upper, f_q, f_nu, f_q_ref)
         else:
             ok = free_step_into(
                 eps, theta, h, bi, Ainv, M_const, rhs_const, cq, cnu, cq_ref, u, q_index, v_index, kp, kd, lower, upper, rhs, blend, f_q,

@@ -2781,7 +2781,7 @@ def _largest_feasible(Wp, MWp, psi_h, Wa_u, nc, residual):
 
 
 @numba.njit(cache=True, _nrt=False, error_model="numpy")
-def kinematic_free_step_into(bi, h, q, q_ref, u, q_index, v_index, lower, upper, q_new, nu_new, q_ref_new):
+def kinematic_free_step_into(bi, h, q, u, q_index, v_index, lower, upper, q_new, nu_new, q_ref_new):
     """`kinematic_step` without contacts (nc = 0: nothing to solve, the passive DOFs rest) into
     the caller's q_new, nu_new, q_ref_new, compiled without numba's runtime (the rollout's runs
     of free steps, `models.rollout._free_run`): the same operations in the same order, the same
@@ -2789,12 +2789,9 @@ def kinematic_free_step_into(bi, h, q, q_ref, u, q_index, v_index, lower, upper,
     the caller takes `kinematic_step` for the status)."""
     for v in range(nu_new.shape[0]):
         nu_new[v] = 0.0
-    for j in range(v_index.shape[0]):
+    for j in range(v_index.shape[0]):  # (q_ref_new: one reference a drive, each written here)
         target = min(max(q[q_index[j]] + h * u[j], lower[j]), upper[j])
         nu_new[v_index[j]] = 1.0 * ((target - q[q_index[j]]) / h)  # alpha u_eff, alpha = 1
-    for j in range(q_ref.shape[0]):
-        q_ref_new[j] = q_ref[j]
-    for j in range(v_index.shape[0]):
         q_ref_new[j] = q[q_index[j]] + h * 1.0 * nu_new[v_index[j]]
     _integrate_positions_into(bi, q, nu_new, h, q_new)
     return _finite_and_bounded(q_new) and _finite_and_bounded(nu_new)

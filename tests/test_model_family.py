@@ -475,7 +475,7 @@ def test_the_kinematic_free_step_is_the_kinematic_step_without_contacts(name):
                 S.bi, S.bf, h, q, q_ref, u, D.q_index, D.v_index, lower, upper, 0, np.zeros(0), np.zeros((0, 3)), np.zeros((S.nv, 0)), S.nv
             )
             q_new, nu_new, q_ref_new = np.empty(nq), np.empty(S.nv), np.empty(na)
-            ok = kinematic_free_step_into(S.bi, h, q, q_ref, u, D.q_index, D.v_index, lower, upper, q_new, nu_new, q_ref_new)
+            ok = kinematic_free_step_into(S.bi, h, q, u, D.q_index, D.v_index, lower, upper, q_new, nu_new, q_ref_new)
             assert ok and full[3] == 0
             for a, b in zip((q_new, nu_new, q_ref_new), full[:3]):
                 assert np.array_equal(a, b)
