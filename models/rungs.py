@@ -551,29 +551,87 @@ def _geometric_check_bound(bound, q):
     return _geometric_check(S, op, index, lo, hi, q, low, high, tolerance, psi, stack, buffers)
 
 
-def geometric_checker(scenario: Scenario, low: np.ndarray, high: np.ndarray, tolerance: float = GEOMETRIC_TOLERANCE):
-    """A function q -> bool: the geometric rung's validity (bounds, eq. (9) non-penetration,
-    not unsafe), compiled, with python-fcl only for the pairs the kernels cannot measure."""
-    from models.task import Outcome, classify
+@numba.njit(cache=True)
+def _geometric_motion_bound(bound, x, steered, a, b, nd, trace):
+    """OMPL's discrete motion check (`ompl::base::DiscreteMotionValidator::checkMotion(s1, s2)`)
+    from a to b over the coordinates `steered` of x (the others as x holds them), in one
+    compiled call: b first, then the nd - 1 states a + (b - a) * (j / nd) in OMPL's order (the
+    middle of each interval, its halves queued), stopping at the first that `_geometric_check`
+    does not pass. The same states, in the same order, with the same arithmetic as OMPL's
+    interpolation, so the same answer and the same count. Returns (1 valid, 0 not, -1 a pair
+    needs python-fcl; the states checked). trace (k, nq): the states checked are written into
+    its rows while they fit (tests; a (0, nq) array for none). x is scratch."""
+    S, op, index, lo, hi, low, high, tolerance, psi, stack, buffers = bound[0]
+    for k in range(steered.shape[0]):
+        x[steered[k]] = b[k]
+    checks = 1
+    if trace.shape[0] > 0:
+        trace[0, :] = x
+    r = _geometric_check(S, op, index, lo, hi, x, low, high, tolerance, psi, stack, buffers)
+    if r != 1 or nd < 2:
+        return r, checks
+    queue = np.empty((nd, 2), np.int64)  # each interval queued once, each holds a state: at most nd - 1
+    queue[0, 0], queue[0, 1] = 1, nd - 1
+    head, tail = 0, 1
+    while head < tail:
+        first, second = queue[head, 0], queue[head, 1]
+        mid = (first + second) // 2
+        t = mid / nd
+        for k in range(steered.shape[0]):
+            x[steered[k]] = a[k] + (b[k] - a[k]) * t
+        if checks < trace.shape[0]:
+            trace[checks, :] = x
+        checks += 1
+        r = _geometric_check(S, op, index, lo, hi, x, low, high, tolerance, psi, stack, buffers)
+        if r != 1:
+            return r, checks
+        head += 1
+        if first < mid:
+            queue[tail, 0], queue[tail, 1] = first, mid - 1
+            tail += 1
+        if second > mid:
+            queue[tail, 0], queue[tail, 1] = mid + 1, second
+            tail += 1
+    return 1, checks
 
-    c = compiled(scenario)
-    unsafe = c.unsafe
-    psi = np.empty(max(c.scene.pi.shape[0], 1))
-    stack = np.zeros(unsafe.op.shape[0] + 1, np.bool_)
-    low, high = np.ascontiguousarray(low, float), np.ascontiguousarray(high, float)
-    buffers = pair_distance_buffers(c.scene)
-    bound = bind((c.scene, unsafe.op, unsafe.index, unsafe.lo, unsafe.hi, low, high, float(tolerance), psi, stack, buffers))
 
-    def check(q: np.ndarray) -> bool:
-        ok = _geometric_check_bound(bound, q)
+class GeometricChecker:
+    """The geometric rung's validity (bounds, eq. (9) non-penetration, not unsafe), compiled,
+    with python-fcl only for the pairs the kernels cannot measure: called with q, a bool;
+    `motion` checks a straight motion in one compiled call."""
+
+    def __init__(self, scenario: Scenario, low: np.ndarray, high: np.ndarray, tolerance: float = GEOMETRIC_TOLERANCE) -> None:
+        c = compiled(scenario)
+        unsafe = c.unsafe
+        psi = np.empty(max(c.scene.pi.shape[0], 1))
+        stack = np.zeros(unsafe.op.shape[0] + 1, np.bool_)
+        low, high = np.ascontiguousarray(low, float), np.ascontiguousarray(high, float)
+        buffers = pair_distance_buffers(c.scene)
+        self.scenario, self.tolerance = scenario, float(tolerance)
+        self.bound = bind((c.scene, unsafe.op, unsafe.index, unsafe.lo, unsafe.hi, low, high, self.tolerance, psi, stack, buffers))
+        self._no_trace = np.zeros((0, len(scenario.start)))
+
+    def __call__(self, q: np.ndarray) -> bool:
+        ok = _geometric_check_bound(self.bound, q)
         if ok >= 0:
             return ok == 1
-        d = pair_signed_distances(scenario, q)
-        if np.any(d < -tolerance):
-            return False
-        return classify(scenario, q, d) is not Outcome.UNSAFE
+        from models.task import Outcome, classify
 
-    return check
+        d = pair_signed_distances(self.scenario, q)
+        if np.any(d < -self.tolerance):
+            return False
+        return classify(self.scenario, q, d) is not Outcome.UNSAFE
+
+    def motion(self, x: np.ndarray, steered: np.ndarray, a: np.ndarray, b: np.ndarray, nd: int, trace=None) -> tuple[int, int]:
+        """`_geometric_motion_bound`: (1 valid, 0 not, -1 a pair needs python-fcl: ask the
+        states one by one; the states checked). x: the full configuration, scratch (float,
+        contiguous); steered (int64): the coordinates a and b move; nd: OMPL's segment count."""
+        return _geometric_motion_bound(self.bound, x, steered, a, b, int(nd), self._no_trace if trace is None else trace)
+
+
+def geometric_checker(scenario: Scenario, low: np.ndarray, high: np.ndarray, tolerance: float = GEOMETRIC_TOLERANCE) -> GeometricChecker:
+    """The geometric rung's checker (`GeometricChecker`): q -> bool, and straight motions."""
+    return GeometricChecker(scenario, low, high, tolerance)
 
 
 def pair_signed_distances(scenario: Scenario, q: np.ndarray) -> np.ndarray:

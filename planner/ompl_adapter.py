@@ -620,13 +620,48 @@ def plan_geometric(
     else:
         chosen = og.RRT(si) if planner == "RRTConnect" else getattr(og, planner)(si)
     ss.setPlanner(chosen)
+    motions = _compiled_motions(si, space, valid_q, steered, x, counter)
+    if chosen.getName() in _SIMPLE_MOTION_PLANNERS:
+        si.setMotionValidator(motions)
     stop_now, done = _termination(ss, iterations, time_limit, stop=stop)
     ss.solve(ob.PlannerTerminationCondition(stop_now))
     status = _search_status(bool(ss.haveExactSolutionPath()), done)
+    si.setMotionValidator(motions)  # the simplifier asks only whether a motion is valid
     states = _geometric_path(ss, si, scenario, steered, status)
     result = GeometricPlan(states, status, done["iterations"], counter["checks"], len(pool))
     del ss, si, space
     return result
+
+
+#: Geometric planners whose motion checks ask only whether a motion is valid, not where it
+#: stops being valid (OMPL's checkMotion(s1, s2, lastValid), which KPIECE1 asks and a motion
+#: validator written in Python cannot answer): `_compiled_motions` checks their motions.
+_SIMPLE_MOTION_PLANNERS = ("RRTConnect", "RRT")
+
+
+def _compiled_motions(si, space, checker, steered: list[int], x: np.ndarray, counter: dict):
+    """An OMPL motion validator that checks a straight motion in one compiled call
+    (`GeometricChecker.motion`: the states, order and answer of OMPL's default
+    DiscreteMotionValidator, whose every state was a call into Python), counting its states in
+    counter["checks"]. A motion through a pair only python-fcl measures goes to OMPL's default
+    validator, state by state."""
+    from ompl import base as ob
+
+    default = si.getMotionValidator()
+    index = np.array(steered, np.int64)
+    a, b = np.empty(len(steered)), np.empty(len(steered))
+
+    class CompiledMotions(ob.MotionValidator):
+        def checkMotion(self, s1, s2):
+            for k in range(len(index)):
+                a[k], b[k] = s1[k], s2[k]
+            ok, checks = checker.motion(x, index, a, b, space.validSegmentCount(s1, s2))
+            if ok < 0:
+                return default.checkMotion(s1, s2)
+            counter["checks"] += checks
+            return ok == 1
+
+    return CompiledMotions(si)
 
 
 def _q_of(scenario: Scenario, steered: list[int], s) -> np.ndarray:

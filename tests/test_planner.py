@@ -366,6 +366,70 @@ def test_the_geometric_check_and_the_distances_on_bound_buffers_answer_as_fresh_
     assert np.array_equal(pair_signed_distances_many(scenario, drawn), [pair_signed_distances(scenario, q) for q in drawn])
 
 
+@pytest.mark.parametrize("name", ["two_finger_triangle", "four_finger_grasp", "box_push_3d"])
+def test_a_compiled_motion_check_asks_ompls_states_in_ompls_order(name):
+    """`GeometricChecker.motion` checks a straight motion in one compiled call where OMPL's
+    default motion validator asks Python for each state: over 120 motions between random
+    states (many blocked), the answer, the number of states checked and the states themselves,
+    in order and bit for bit, are the ones OMPL's validator asks of a recording checker; and
+    `plan_geometric` with it (its default) plans the same paths with the same checks as with
+    OMPL's validator."""
+    from ompl import base as ob
+
+    import planner.ompl_adapter as oa
+    from models.rungs import geometric_checker
+
+    scenario = load_scenario(SCENARIOS / f"{name}.toml")
+    steered = oa.steered_coordinates(scenario)
+    space, low, high = oa._geometric_space(scenario, steered)
+    checker = geometric_checker(scenario, low, high)
+    x, asked = np.array(scenario.start, float), []
+
+    def recording(s):
+        q = oa._q_of(scenario, steered, s)
+        asked.append(q)
+        return checker(q)
+
+    si = ob.SpaceInformation(space)
+    si.setStateValidityChecker(recording)
+    si.setStateValidityCheckingResolution(oa.GEOMETRIC_RESOLUTION)
+    si.setup()
+    rng = np.random.default_rng(5)
+    index = np.array(steered, np.int64)
+    s1, s2 = space.allocState(), space.allocState()
+    answers, longest = set(), 0
+    for k in range(120):
+        a = low[index] + rng.random(len(index)) * (high[index] - low[index])
+        b = a + (0.05 if k % 2 else 0.5) * rng.standard_normal(len(index)) * (high[index] - low[index])
+        b = np.clip(b, low[index], high[index])
+        for i in range(len(index)):
+            s1[i], s2[i] = float(a[i]), float(b[i])
+        asked.clear()
+        expected = si.checkMotion(s1, s2)
+        nd = space.validSegmentCount(s1, s2)
+        trace = np.full((nd + 1, len(x)), np.nan)
+        ok, checks = checker.motion(x, index, a, b, nd, trace)
+        assert ok >= 0  # (no pair of these scenes needs python-fcl)
+        assert (ok == 1) == expected and checks == len(asked)
+        assert np.array_equal(trace[:checks], np.array(asked))
+        answers.add(expected)
+        longest = max(longest, checks)
+    assert answers == {True, False} and longest > 20
+
+    made_by = oa._compiled_motions
+    paths = []
+    try:
+        for motions in (made_by, lambda si_, *rest: si_.getMotionValidator()):
+            oa._compiled_motions = motions
+            plans = [oa.plan_geometric(scenario, seed=seed, iterations=2000) for seed in (1, 2)]
+            paths.append([(p.states, p.checks, p.status) for p in plans])
+    finally:
+        oa._compiled_motions = made_by
+    for (states, checks, status), (states_o, checks_o, status_o) in zip(*paths):
+        assert np.array_equal(states, states_o) and checks == checks_o and status == status_o
+    assert any(status.name == "EXACT" for _, _, status in paths[0])
+
+
 def test_a_rung_that_cannot_express_the_task_does_not_end_the_ladder():
     """tests/data/strike.toml: the pusher may not pass x = 0, the puck must reach x >= 0.5, so
     only momentum gets it there. The kinematic rung cannot (no inertia: the puck stops with
