@@ -578,10 +578,11 @@ def plan_geometric(
     height and orientation stay at their start values (steered_coordinates): it rests.
 
     The goal set is thin (touching within a tolerance), so a tree rarely lands in it by
-    chance: goal states are made by projection (`goal_samples`), and the planner (RRTConnect
-    by default) grows a tree from them too. The path is then shortened with OMPL's
-    simplifier, which keeps its end points. Without any goal sample (none found), RRTConnect
-    falls back to RRT toward the goal region."""
+    chance: goal states are made by projection (`goal_samples`), and the planner grows toward
+    them too (RRTConnect, the default, a tree from them; RRT, RRTstar and KPIECE1 by their goal
+    bias). The path is then shortened with OMPL's simplifier, which keeps its end points.
+    Without any goal sample (none found), RRTConnect falls back to RRT toward the goal region.
+    Motions are checked in compiled calls (`_compiled_motions`)."""
     from ompl import base as ob
     from ompl import geometric as og
     from ompl import util as ou
@@ -607,8 +608,7 @@ def plan_geometric(
     si = ss.getSpaceInformation()
     si.setStateValidityCheckingResolution(GEOMETRIC_RESOLUTION)
     sampler = GoalSampler(scenario, np.random.default_rng(int(seed)), low, high, valid_q)
-    pool = [sampler.draw()] if planner == "RRTConnect" else []
-    pool = [q for q in pool if q is not None]
+    pool = [q for q in [sampler.draw()] if q is not None]
 
     start = space.allocState()
     for k, i in enumerate(steered):

@@ -46,6 +46,8 @@ FILES = [
     "unknown_rung",
     "unknown_shape",
     "wrong_type",
+    "geometric_planner_est",
+    "geometric_planner_prm",
 ]
 
 
