@@ -502,7 +502,13 @@ def test_a_rollout_and_the_planners_propagation_run_one_compiled_rollout():
     y = np.empty_like(x)
     assert step(x, u, 0.01, y) == StepStatus.OK
     np.testing.assert_array_equal(y[: len(state.q)], run.state.q)
-    assert len(rollout_kernel.signatures) == 1, rollout_kernel.signatures
+    # Both calls reach rollout_kernel from compiled code (`rollout_bound`, `propagate_kernel`):
+    # loaded from numba's cache, they leave its dispatcher's own signatures empty, so the
+    # compiles are counted in its cache index, which lists every signature compiled from this
+    # source for this machine (as callee too)
+    magic = rollout_kernel.targetctx.codegen().magic_tuple()
+    compiled = {key[0] for key in rollout_kernel._cache._cache_file._load_index() if key[1] == magic}
+    assert len(compiled) == 1 and set(rollout_kernel.signatures) <= compiled, compiled
 
 
 @pytest.mark.parametrize("rung_name", ["dynamic-rigid", "dynamic-compliant"])
