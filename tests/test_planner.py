@@ -42,7 +42,10 @@ def test_same_seed_gives_the_same_plan_different_seed_may_differ():
 
 def test_free_transfer_higher_rungs_are_accepted_by_replay_without_search():
     scenario = load_scenario(SCENARIOS / "free_transfer.toml")
-    result = run_ladder(scenario, rungs=["kinematic", "quasistatic-rigid", "dynamic-rigid", "dynamic-compliant"], seed=3, iterations=3000)
+    # the iterations are the budget; the scenario's 10 s cap per rung could end a search whose
+    # kernels compile in this test (a subset run), so it is lifted
+    rungs = ["kinematic", "quasistatic-rigid", "dynamic-rigid", "dynamic-compliant"]
+    result = run_ladder(scenario, rungs=rungs, seed=3, iterations=3000, time_limit=600.0)
     assert result.rungs[0].ended is PlanStatus.EXACT
     for report in result.rungs[1:]:
         assert report.ended in (PlanStatus.REPLAYED, PlanStatus.SKIPPED) and report.propagations == 0
