@@ -689,6 +689,52 @@ def _pair_distances_many_bound(bound, Q, out):
         pair_min_distances_into(S, Q[k], 1e9, out[k], buffers)
 
 
+@numba.njit(cache=True)
+def _projection_terms_bound(bound, q, movable, pairs, targets, step, r, Jt):
+    """One Gauss-Newton iteration's terms of the goal sampler's projection
+    (`planner.ompl_adapter.GoalSampler`) at q, on the scene bound alone, in one call: the touch
+    pairs' residuals r[k] = d[pairs[k]] - targets[k] and their finite-difference Jacobian,
+    transposed: Jt[j, k] = (d at q with q[movable[j]] moved by step, less d) / step, 0 where
+    either distance is not finite (the sampler's J is Jt.T, the layout its NumPy J has); then
+    each residual that is not finite reads 1. The same operations, in the
+    same order, as the sampler's own NumPy terms (`pair_signed_distances`,
+    `pair_signed_distances_many`), so the same bits. Returns -1 if a touch pair's distance is
+    NaN at some state (python-fcl measures it: the caller computes the terms itself), 1 if
+    every |r[k]| <= targets[k] (converged: Jt not computed), else 0."""
+    S = bound[0][0]
+    buffers = pair_distance_buffers(S)
+    n = max(S.pi.shape[0], 1)
+    d, de = np.empty(n), np.empty(n)
+    pair_min_distances_into(S, q, 1e9, d, buffers)
+    converged = True
+    for k in range(pairs.shape[0]):
+        if np.isnan(d[pairs[k]]):
+            return -1
+        r[k] = d[pairs[k]] - targets[k]
+        converged = converged and abs(r[k]) <= targets[k]
+    if converged:
+        return 1
+    x = np.empty(q.shape[0])
+    for j in range(movable.shape[0]):
+        x[:] = q
+        x[movable[j]] += step
+        pair_min_distances_into(S, x, 1e9, de, buffers)
+        for k in range(pairs.shape[0]):
+            a, b = de[pairs[k]], d[pairs[k]]
+            if np.isnan(a):
+                return -1
+            Jt[j, k] = (a - b) / step if np.isfinite(a) and np.isfinite(b) else 0.0
+    for k in range(pairs.shape[0]):
+        if not np.isfinite(r[k]):
+            r[k] = 1.0
+    return 0
+
+
+def projection_terms(scenario: Scenario, q: np.ndarray, movable: np.ndarray, pairs: np.ndarray, targets: np.ndarray, step: float, r, Jt):
+    """`_projection_terms_bound` on the compiled scenario (r, Jt: the caller's, written)."""
+    return _projection_terms_bound(compiled(scenario).scene_bound, kernel_array(q), movable, pairs, targets, float(step), r, Jt)
+
+
 def pgs_rung(rung: Rung, exact_cone: bool = False) -> Rung:
     """The rung with its contacts solved by PGS: in space on the exact circular Coulomb cone
     where exact_cone (`models.stepper.Model.exact_cone`: Lemke's LCP is the polygon's only),

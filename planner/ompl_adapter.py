@@ -752,8 +752,8 @@ def _geometric_path(ss, si, scenario: Scenario, steered: list[int], status: Plan
 
 #: Motion checks of the geometric rung: states this fraction of the space's extent apart.
 GEOMETRIC_RESOLUTION = 0.002
-#: Attempts and Newton iterations of the goal-state projection.
-GOAL_ATTEMPTS, GOAL_POOL, PROJECTION_ITERATIONS = 50, 24, 25
+#: Attempts and Newton iterations of the goal-state projection, and its finite-difference step.
+GOAL_ATTEMPTS, GOAL_POOL, PROJECTION_ITERATIONS, PROJECTION_STEP = 50, 24, 25, 1e-6
 
 
 class GoalSampler:
@@ -770,6 +770,7 @@ class GoalSampler:
         self.movable = [
             i for i, n in enumerate(scenario.coordinates) if i in steered and n.rsplit(".", 1)[1] in ("x", "y", "z", "theta", "yaw")
         ]
+        self._movable = np.array(self.movable, np.int64)
 
     def _constraints(self, node, boxes, touches) -> None:
         from models.predicates import _pair_index
@@ -787,8 +788,26 @@ class GoalSampler:
         elif kind == "AnyPredicate":
             self._constraints(node.any[int(self.rng.integers(len(node.any)))], boxes, touches)
 
-    def draw(self) -> np.ndarray | None:
+    def _terms(self, q: np.ndarray, pairs: np.ndarray, targets: np.ndarray) -> tuple[int, np.ndarray, np.ndarray]:
+        """`models.rungs.projection_terms` in NumPy, on the distances python-fcl completes:
+        (1 converged, else 0; the residuals r; their Jacobian transposed, (movable, touches))."""
         from models.rungs import pair_signed_distances, pair_signed_distances_many
+
+        movable, step = self.movable, PROJECTION_STEP
+        d = pair_signed_distances(self.scenario, q)
+        r = d[pairs] - targets
+        if np.all(np.abs(r) <= targets):
+            return 1, r, np.zeros((len(movable), len(pairs)))
+        r = np.where(np.isfinite(r), r, 1.0)
+        Q = np.repeat(q[None, :], len(movable), axis=0)  # row j: q with coordinate movable[j] moved by step
+        Q[np.arange(len(movable)), movable] += step
+        de, dp = pair_signed_distances_many(self.scenario, Q)[:, pairs], d[pairs]
+        finite = np.isfinite(de) & np.isfinite(dp)
+        with np.errstate(invalid="ignore"):  # (inf - inf where a distance is not finite: not used)
+            return 0, r, np.where(finite, (de - dp) / step, 0.0)
+
+    def draw(self) -> np.ndarray | None:
+        from models.rungs import projection_terms
 
         scenario, rng, low, high, movable = self.scenario, self.rng, self.low, self.high, self.movable
         goal = scenario.spec.task.goal
@@ -800,24 +819,21 @@ class GoalSampler:
             for i, a, b in boxes:  # box coordinates start inside their interval, not on its edge
                 lo[i], hi[i] = max(lo[i], a), min(hi[i], b)
             q[movable] = lo[movable] + rng.random(len(movable)) * (hi[movable] - lo[movable])
+            pairs = np.array([p for p, _ in touches], np.int64)
+            targets = np.array([target for _, target in touches])
+            r, Jt = np.empty(len(touches)), np.empty((len(movable), len(touches)))
+            J = Jt.T  # (touches, movable), laid out as the NumPy terms' J is
             for _ in range(PROJECTION_ITERATIONS):
                 for i, a, b in boxes:
                     q[i] = min(max(q[i], a), b)
                 if not touches:
                     break
-                d = pair_signed_distances(scenario, q)
-                r = np.array([d[p] - target for p, target in touches])
-                if np.all(np.abs(r) <= np.array([target for _, target in touches])):
+                # the terms in one compiled call; in NumPy where python-fcl measures a touch pair
+                terms = projection_terms(scenario, q, self._movable, pairs, targets, PROJECTION_STEP, r, Jt)
+                if terms < 0:
+                    terms, r[:], Jt[:] = self._terms(q, pairs, targets)
+                if terms == 1:
                     break
-                r = np.where(np.isfinite(r), r, 1.0)
-                step = 1e-6
-                Q = np.repeat(q[None, :], len(movable), axis=0)  # row j: q with coordinate movable[j] moved by step
-                Q[np.arange(len(movable)), movable] += step
-                pairs = [p for p, _ in touches]
-                de, dp = pair_signed_distances_many(scenario, Q)[:, pairs], d[pairs]
-                finite = np.isfinite(de) & np.isfinite(dp)
-                with np.errstate(invalid="ignore"):  # (inf - inf where a distance is not finite: not used)
-                    J = np.where(finite, (de - dp) / step, 0.0).T  # (touches, movable)
                 q[movable] -= J.T @ np.linalg.solve(J @ J.T + 1e-12 * np.eye(len(touches)), r)
                 q = np.clip(q, low, high)
             if goal_distance(scenario, q) == 0.0 and self.valid(q):

@@ -369,6 +369,40 @@ def test_the_geometric_check_and_the_distances_on_bound_buffers_answer_as_fresh_
     assert np.array_equal(pair_signed_distances_many(scenario, drawn), [pair_signed_distances(scenario, q) for q in drawn])
 
 
+@pytest.mark.parametrize("name", ["two_finger_triangle", "four_finger_grasp"])  # (the scenes whose goals have touch pairs)
+def test_the_goal_projections_terms_in_one_compiled_call_are_the_numpy_terms(name):
+    """The goal sampler's Gauss-Newton terms (residuals and finite-difference Jacobian of the
+    touch pairs' distances) come from one compiled call (`models.rungs.projection_terms`); its
+    NumPy version (`GoalSampler._terms`, on distances python-fcl completes) stays for pairs the
+    kernels cannot measure. At 40 states a scene, from the projection's own start states to the
+    goal states it makes, both give the same answer and the same bits."""
+    from models.rungs import geometric_checker, projection_terms
+    from planner.ompl_adapter import PROJECTION_STEP, GoalSampler, sampling_limits
+
+    scenario = load_scenario(SCENARIOS / f"{name}.toml")
+    low, high = sampling_limits(scenario, scenario.start)
+    sampler = GoalSampler(scenario, np.random.default_rng(4), low, high, geometric_checker(scenario, low, high))
+    boxes, touches = [], []
+    sampler._constraints(scenario.spec.task.goal, boxes, touches)
+    pairs = np.array([p for p, _ in touches], np.int64)
+    targets = np.array([t for _, t in touches])
+    movable = np.array(sampler.movable, np.int64)
+    rng = np.random.default_rng(6)
+    goal_states = [q for q in (sampler.draw() for _ in range(4)) if q is not None]
+    states = goal_states + [np.where(high > low, low + rng.random(len(low)) * (high - low), scenario.start) for _ in range(36)]
+    answers = set()
+    for q in states:
+        r, Jt = np.full(len(pairs), np.nan), np.full((len(movable), len(pairs)), np.nan)
+        got = projection_terms(scenario, q, movable, pairs, targets, PROJECTION_STEP, r, Jt)
+        expected, r_numpy, Jt_numpy = sampler._terms(q, pairs, targets)
+        assert got == expected
+        answers.add(got)
+        assert np.array_equal(r, r_numpy)
+        if got == 0:
+            assert np.array_equal(Jt, Jt_numpy) and np.all(np.isfinite(Jt))
+    assert answers == {0, 1}
+
+
 @pytest.mark.parametrize("name", ["two_finger_triangle", "four_finger_grasp", "box_push_3d"])
 def test_a_compiled_motion_check_asks_ompls_states_in_ompls_order(name):
     """`GeometricChecker.motion` checks a straight motion in one compiled call where OMPL's
