@@ -690,17 +690,17 @@ def _pair_distances_many_bound(bound, Q, out):
 
 
 @numba.njit(cache=True)
-def _projection_terms_bound(bound, q, movable, pairs, targets, step, r, Jt):
+def _projection_terms_bound(bound, q, movable, pairs, targets, step, r, J):
     """One Gauss-Newton iteration's terms of the goal sampler's projection
     (`planner.ompl_adapter.GoalSampler`) at q, on the scene bound alone, in one call: the touch
-    pairs' residuals r[k] = d[pairs[k]] - targets[k] and their finite-difference Jacobian,
-    transposed: Jt[j, k] = (d at q with q[movable[j]] moved by step, less d) / step, 0 where
-    either distance is not finite (the sampler's J is Jt.T, the layout its NumPy J has); then
-    each residual that is not finite reads 1. The same operations, in the
+    pairs' residuals r[k] = d[pairs[k]] - targets[k] and their finite-difference Jacobian
+    J[k, j] = (d at q with q[movable[j]] moved by step, less d) / step (C-contiguous, as the
+    NumPy terms' J is: the sampler's step J.T @ x then sums in the same order), 0 where either
+    distance is not finite; then each residual that is not finite reads 1. The same operations, in the
     same order, as the sampler's own NumPy terms (`pair_signed_distances`,
     `pair_signed_distances_many`), so the same bits. Returns -1 if a touch pair's distance is
     NaN at some state (python-fcl measures it: the caller computes the terms itself), 1 if
-    every |r[k]| <= targets[k] (converged: Jt not computed), else 0."""
+    every |r[k]| <= targets[k] (converged: J not computed), else 0."""
     S = bound[0][0]
     buffers = pair_distance_buffers(S)
     n = max(S.pi.shape[0], 1)
@@ -723,16 +723,16 @@ def _projection_terms_bound(bound, q, movable, pairs, targets, step, r, Jt):
             a, b = de[pairs[k]], d[pairs[k]]
             if np.isnan(a):
                 return -1
-            Jt[j, k] = (a - b) / step if np.isfinite(a) and np.isfinite(b) else 0.0
+            J[k, j] = (a - b) / step if np.isfinite(a) and np.isfinite(b) else 0.0
     for k in range(pairs.shape[0]):
         if not np.isfinite(r[k]):
             r[k] = 1.0
     return 0
 
 
-def projection_terms(scenario: Scenario, q: np.ndarray, movable: np.ndarray, pairs: np.ndarray, targets: np.ndarray, step: float, r, Jt):
-    """`_projection_terms_bound` on the compiled scenario (r, Jt: the caller's, written)."""
-    return _projection_terms_bound(compiled(scenario).scene_bound, kernel_array(q), movable, pairs, targets, float(step), r, Jt)
+def projection_terms(scenario: Scenario, q: np.ndarray, movable: np.ndarray, pairs: np.ndarray, targets: np.ndarray, step: float, r, J):
+    """`_projection_terms_bound` on the compiled scenario (r, J: the caller's, written)."""
+    return _projection_terms_bound(compiled(scenario).scene_bound, kernel_array(q), movable, pairs, targets, float(step), r, J)
 
 
 def pgs_rung(rung: Rung, exact_cone: bool = False) -> Rung:

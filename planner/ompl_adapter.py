@@ -620,13 +620,11 @@ def plan_geometric(
     else:
         chosen = og.RRT(si) if planner == "RRTConnect" else getattr(og, planner)(si)
     ss.setPlanner(chosen)
-    motions = _compiled_motions(si, space, valid_q, steered, x, counter)
-    if chosen.getName() in _SIMPLE_MOTION_PLANNERS:
-        si.setMotionValidator(motions)
+    if chosen.getName() in _SIMPLE_MOTION_PLANNERS:  # for the search and the simplifier
+        si.setMotionValidator(_compiled_motions(si, space, valid_q, steered, x, counter))
     stop_now, done = _termination(ss, iterations, time_limit, stop=stop)
     ss.solve(ob.PlannerTerminationCondition(stop_now))
     status = _search_status(bool(ss.haveExactSolutionPath()), done)
-    si.setMotionValidator(motions)  # the simplifier asks only whether a motion is valid
     states = _geometric_path(ss, si, scenario, steered, status)
     result = GeometricPlan(states, status, done["iterations"], counter["checks"], len(pool))
     del ss, si, space
@@ -635,7 +633,10 @@ def plan_geometric(
 
 #: Geometric planners whose motion checks ask only whether a motion is valid, not where it
 #: stops being valid (OMPL's checkMotion(s1, s2, lastValid), which KPIECE1 asks and a motion
-#: validator written in Python cannot answer): `_compiled_motions` checks their motions.
+#: validator written in Python cannot answer): `_compiled_motions` checks their motions, in the
+#: search and the simplifier. It is set before the search: set again after it (for the others'
+#: simplifier), even as the same validator, the simplified paths changed on box_push_3d (seed
+#: 4 of 20), where set before the search every path is the one OMPL's own validator gives.
 _SIMPLE_MOTION_PLANNERS = ("RRTConnect", "RRT")
 
 
@@ -790,21 +791,21 @@ class GoalSampler:
 
     def _terms(self, q: np.ndarray, pairs: np.ndarray, targets: np.ndarray) -> tuple[int, np.ndarray, np.ndarray]:
         """`models.rungs.projection_terms` in NumPy, on the distances python-fcl completes:
-        (1 converged, else 0; the residuals r; their Jacobian transposed, (movable, touches))."""
+        (1 converged, else 0; the residuals r; their Jacobian J, (touches, movable))."""
         from models.rungs import pair_signed_distances, pair_signed_distances_many
 
         movable, step = self.movable, PROJECTION_STEP
         d = pair_signed_distances(self.scenario, q)
         r = d[pairs] - targets
         if np.all(np.abs(r) <= targets):
-            return 1, r, np.zeros((len(movable), len(pairs)))
+            return 1, r, np.zeros((len(pairs), len(movable)))
         r = np.where(np.isfinite(r), r, 1.0)
         Q = np.repeat(q[None, :], len(movable), axis=0)  # row j: q with coordinate movable[j] moved by step
         Q[np.arange(len(movable)), movable] += step
         de, dp = pair_signed_distances_many(self.scenario, Q)[:, pairs], d[pairs]
         finite = np.isfinite(de) & np.isfinite(dp)
         with np.errstate(invalid="ignore"):  # (inf - inf where a distance is not finite: not used)
-            return 0, r, np.where(finite, (de - dp) / step, 0.0)
+            return 0, r, np.where(finite, (de - dp) / step, 0.0).T
 
     def draw(self) -> np.ndarray | None:
         from models.rungs import projection_terms
@@ -821,17 +822,16 @@ class GoalSampler:
             q[movable] = lo[movable] + rng.random(len(movable)) * (hi[movable] - lo[movable])
             pairs = np.array([p for p, _ in touches], np.int64)
             targets = np.array([target for _, target in touches])
-            r, Jt = np.empty(len(touches)), np.empty((len(movable), len(touches)))
-            J = Jt.T  # (touches, movable), laid out as the NumPy terms' J is
+            r, J = np.empty(len(touches)), np.empty((len(touches), len(movable)))  # (J C-contiguous: see projection_terms)
             for _ in range(PROJECTION_ITERATIONS):
                 for i, a, b in boxes:
                     q[i] = min(max(q[i], a), b)
                 if not touches:
                     break
                 # the terms in one compiled call; in NumPy where python-fcl measures a touch pair
-                terms = projection_terms(scenario, q, self._movable, pairs, targets, PROJECTION_STEP, r, Jt)
+                terms = projection_terms(scenario, q, self._movable, pairs, targets, PROJECTION_STEP, r, J)
                 if terms < 0:
-                    terms, r[:], Jt[:] = self._terms(q, pairs, targets)
+                    terms, r[:], J[:] = self._terms(q, pairs, targets)
                 if terms == 1:
                     break
                 q[movable] -= J.T @ np.linalg.solve(J @ J.T + 1e-12 * np.eye(len(touches)), r)
