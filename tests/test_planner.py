@@ -411,7 +411,8 @@ def test_a_compiled_motion_check_asks_ompls_states_in_ompls_order(name):
     in order and bit for bit, are the ones OMPL's validator asks of a recording checker; and
     `plan_geometric` with it (its default) plans the same paths with the same checks as with
     OMPL's validator alone (seeds 1-4: on box_push_3d seed 4 a validator set again after the
-    search changed the path)."""
+    search changed the path), also where every motion goes to OMPL's validator (as one
+    through a pair only python-fcl measures does)."""
     from ompl import base as ob
 
     import planner.ompl_adapter as oa
@@ -466,6 +467,18 @@ def test_a_compiled_motion_check_asks_ompls_states_in_ompls_order(name):
     for (states, checks, status), (states_o, checks_o, status_o) in zip(*paths):
         assert np.array_equal(states, states_o) and checks == checks_o and status == status_o
     assert any(status.name == "EXACT" for _, _, status in paths[0])
+
+    # a motion through a pair only python-fcl measures (-1) goes to OMPL's own validator: the same plans
+    from models.rungs import GeometricChecker
+
+    motion = GeometricChecker.motion
+    try:
+        GeometricChecker.motion = lambda self, *args, **kwargs: (-1, 1)
+        plans = [oa.plan_geometric(scenario, seed=seed, iterations=2000) for seed in (1, 2)]
+    finally:
+        GeometricChecker.motion = motion
+    for p, (states_o, checks_o, status_o) in zip(plans, paths[1]):
+        assert np.array_equal(p.states, states_o) and p.checks == checks_o and p.status == status_o
 
 
 def test_every_planner_a_scenario_may_name_exists_and_the_geometric_ones_reach_the_goal_set():
