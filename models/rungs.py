@@ -543,7 +543,7 @@ def _geometric_check(S, op, index, lo, hi, q, low, high, tolerance, psi, stack, 
 
 @numba.njit(cache=True)
 def _geometric_check_bound(bound, q):
-    """`_geometric_check` on what `geometric_checker` bound once (`models.rollout.bind`): one
+    """`_geometric_check` on what `GeometricChecker` bound once (`models.rollout.bind`): one
     typed List crosses into the kernel per check, where the scene's 30-odd arrays were unboxed
     one by one (about 4 us of a check's 9-14, measured; the check's own work is 3.4 us on
     two_finger_triangle, 8 on box_push_3d)."""
@@ -627,11 +627,6 @@ class GeometricChecker:
         states one by one; the states checked). x: the full configuration, scratch (float,
         contiguous); steered (int64): the coordinates a and b move; nd: OMPL's segment count."""
         return _geometric_motion_bound(self.bound, x, steered, a, b, int(nd), self._no_trace if trace is None else trace)
-
-
-def geometric_checker(scenario: Scenario, low: np.ndarray, high: np.ndarray, tolerance: float = GEOMETRIC_TOLERANCE) -> GeometricChecker:
-    """The geometric rung's checker (`GeometricChecker`): q -> bool, and straight motions."""
-    return GeometricChecker(scenario, low, high, tolerance)
 
 
 def pair_signed_distances(scenario: Scenario, q: np.ndarray) -> np.ndarray:

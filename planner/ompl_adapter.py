@@ -587,7 +587,7 @@ def plan_geometric(
     from ompl import geometric as og
     from ompl import util as ou
 
-    from models.rungs import geometric_checker
+    from models.rungs import GeometricChecker
 
     ou.setLogLevel(ou.LOG_NONE)
     ou.RNG.setSeed(int(seed) + 1)
@@ -595,7 +595,7 @@ def plan_geometric(
     space, low, high = _geometric_space(scenario, steered)
     counter = {"checks": 0}
     x = np.array(scenario.start, float)
-    valid_q = geometric_checker(scenario, low, high)
+    valid_q = GeometricChecker(scenario, low, high)
 
     def valid(s) -> bool:
         counter["checks"] += 1
@@ -768,10 +768,10 @@ class GoalSampler:
     def __init__(self, scenario: Scenario, rng: np.random.Generator, low: np.ndarray, high: np.ndarray, valid) -> None:
         self.scenario, self.rng, self.low, self.high, self.valid = scenario, rng, low, high, valid
         steered = set(steered_coordinates(scenario))
-        self.movable = [
-            i for i, n in enumerate(scenario.coordinates) if i in steered and n.rsplit(".", 1)[1] in ("x", "y", "z", "theta", "yaw")
-        ]
-        self._movable = np.array(self.movable, np.int64)
+        self.movable = np.array(
+            [i for i, n in enumerate(scenario.coordinates) if i in steered and n.rsplit(".", 1)[1] in ("x", "y", "z", "theta", "yaw")],
+            np.int64,
+        )
 
     def _constraints(self, node, boxes, touches) -> None:
         from models.predicates import _pair_index
@@ -829,7 +829,7 @@ class GoalSampler:
                 if not touches:
                     break
                 # the terms in one compiled call; in NumPy where python-fcl measures a touch pair
-                terms = projection_terms(scenario, q, self._movable, pairs, targets, PROJECTION_STEP, r, J)
+                terms = projection_terms(scenario, q, movable, pairs, targets, PROJECTION_STEP, r, J)
                 if terms < 0:
                     terms, r[:], J[:] = self._terms(q, pairs, targets)
                 if terms == 1:

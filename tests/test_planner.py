@@ -314,12 +314,12 @@ def test_reports_carry_goal_distance_penetration_and_failures():
 
 def test_goal_states_made_by_projection_are_in_the_goal_and_valid():
     from models.predicates import predicate_distance
-    from models.rungs import geometric_checker, pair_signed_distances
+    from models.rungs import GeometricChecker, pair_signed_distances
     from planner.ompl_adapter import GoalSampler, configuration_limits, plan_geometric
 
     scenario = load_scenario(TRIANGLE)
     low, high = configuration_limits(scenario, scenario.start)
-    valid = geometric_checker(scenario, low, high)
+    valid = GeometricChecker(scenario, low, high)
     sampler = GoalSampler(scenario, np.random.default_rng(0), low, high, valid)
     samples = [sampler.draw() for _ in range(10)]
     assert all(q is not None for q in samples)
@@ -334,17 +334,17 @@ def test_goal_states_made_by_projection_are_in_the_goal_and_valid():
 
 @pytest.mark.parametrize("name", ["two_finger_triangle", "four_finger_grasp", "box_push_3d"])
 def test_the_geometric_check_and_the_distances_on_bound_buffers_answer_as_fresh_ones(name):
-    """`geometric_checker` binds its scene and the distances' buffers once and reuses them
+    """`GeometricChecker` binds its scene and the distances' buffers once and reuses them
     check after check: every answer is the one a checker made for that q alone gives, and
     the distances on shared buffers, and `pair_signed_distances`' on the bound scene, are
     `pair_min_distances`' own, bit for bit, as are `pair_signed_distances_many`'s rows."""
     from models.contact import pair_distance_buffers, pair_min_distances, pair_min_distances_into
-    from models.rungs import compiled, geometric_checker, pair_signed_distances, pair_signed_distances_many
+    from models.rungs import GeometricChecker, compiled, pair_signed_distances, pair_signed_distances_many
     from planner.ompl_adapter import sampling_limits
 
     scenario = load_scenario(SCENARIOS / f"{name}.toml")
     low, high = sampling_limits(scenario, scenario.start)
-    valid = geometric_checker(scenario, low, high)
+    valid = GeometricChecker(scenario, low, high)
     S = compiled(scenario).scene
     buffers = pair_distance_buffers(S)
     rng = np.random.default_rng(3)
@@ -358,7 +358,7 @@ def test_the_geometric_check_and_the_distances_on_bound_buffers_answer_as_fresh_
             q = np.clip(scenario.start + 0.02 * rng.standard_normal(len(low)) * sampled, low, high)
         drawn.append(q)
         answers.add(valid(q))
-        assert valid(q) == geometric_checker(scenario, low, high)(q)
+        assert valid(q) == GeometricChecker(scenario, low, high)(q)
         fresh, shared = np.empty(len(S.pi)), np.empty(len(S.pi))
         pair_min_distances(S, q, 1e9, fresh)
         pair_min_distances_into(S, q, 1e9, shared, buffers)
@@ -376,17 +376,17 @@ def test_the_goal_projections_terms_in_one_compiled_call_are_the_numpy_terms(nam
     NumPy version (`GoalSampler._terms`, on distances python-fcl completes) stays for pairs the
     kernels cannot measure. At 40 states a scene, from the projection's own start states to the
     goal states it makes, both give the same answer and the same bits."""
-    from models.rungs import geometric_checker, projection_terms
+    from models.rungs import GeometricChecker, projection_terms
     from planner.ompl_adapter import PROJECTION_STEP, GoalSampler, sampling_limits
 
     scenario = load_scenario(SCENARIOS / f"{name}.toml")
     low, high = sampling_limits(scenario, scenario.start)
-    sampler = GoalSampler(scenario, np.random.default_rng(4), low, high, geometric_checker(scenario, low, high))
+    sampler = GoalSampler(scenario, np.random.default_rng(4), low, high, GeometricChecker(scenario, low, high))
     boxes, touches = [], []
     sampler._constraints(scenario.spec.task.goal, boxes, touches)
     pairs = np.array([p for p, _ in touches], np.int64)
     targets = np.array([t for _, t in touches])
-    movable = np.array(sampler.movable, np.int64)
+    movable = sampler.movable
     rng = np.random.default_rng(6)
     goal_states = [q for q in (sampler.draw() for _ in range(4)) if q is not None]
     states = goal_states + [np.where(high > low, low + rng.random(len(low)) * (high - low), scenario.start) for _ in range(36)]
@@ -416,12 +416,12 @@ def test_a_compiled_motion_check_asks_ompls_states_in_ompls_order(name):
     from ompl import base as ob
 
     import planner.ompl_adapter as oa
-    from models.rungs import geometric_checker
+    from models.rungs import GeometricChecker
 
     scenario = load_scenario(SCENARIOS / f"{name}.toml")
     steered = oa.steered_coordinates(scenario)
     space, low, high = oa._geometric_space(scenario, steered)
-    checker = geometric_checker(scenario, low, high)
+    checker = GeometricChecker(scenario, low, high)
     x, asked = np.array(scenario.start, float), []
 
     def recording(s):
@@ -469,8 +469,6 @@ def test_a_compiled_motion_check_asks_ompls_states_in_ompls_order(name):
     assert any(status.name == "EXACT" for _, _, status in paths[0])
 
     # a motion through a pair only python-fcl measures (-1) goes to OMPL's own validator: the same plans
-    from models.rungs import GeometricChecker
-
     motion = GeometricChecker.motion
     try:
         GeometricChecker.motion = lambda self, *args, **kwargs: (-1, 1)
