@@ -337,10 +337,19 @@ def test_the_geometric_check_and_the_distances_on_bound_buffers_answer_as_fresh_
     """`GeometricChecker` binds its scene and the distances' buffers once and reuses them
     check after check: every answer is the one a checker made for that q alone gives, and
     the distances on shared buffers, and `pair_signed_distances`' on the bound scene, are
-    `pair_min_distances`' own, bit for bit, as are `pair_signed_distances_many`'s rows."""
-    from models.contact import pair_distance_buffers, pair_min_distances, pair_min_distances_into
-    from models.rungs import GeometricChecker, compiled, pair_signed_distances, pair_signed_distances_many
+    `pair_min_distances`' own, bit for bit, as are `pair_signed_distances_many`'s rows. The
+    check measures pairs within CONTACT_MARGIN only: its answer is the one every pair's exact
+    distance gives (bounds, no penetration beyond the tolerance, not unsafe), and the pairs
+    within the margin read the same bits as at any margin, the others more than it."""
+    from models.contact import CONTACT_MARGIN, pair_distance_buffers, pair_min_distances, pair_min_distances_into
+    from models.rungs import GEOMETRIC_TOLERANCE, GeometricChecker, compiled, pair_signed_distances, pair_signed_distances_many
+    from models.task import Outcome, classify
     from planner.ompl_adapter import sampling_limits
+
+    def exact(q):  # every pair measured, whatever its distance
+        d = pair_signed_distances(scenario, q)
+        inside = bool(np.all(q >= low) and np.all(q <= high))
+        return inside and not np.any(d < -GEOMETRIC_TOLERANCE) and classify(scenario, q, d) is not Outcome.UNSAFE
 
     scenario = load_scenario(SCENARIOS / f"{name}.toml")
     low, high = sampling_limits(scenario, scenario.start)
@@ -351,6 +360,7 @@ def test_the_geometric_check_and_the_distances_on_bound_buffers_answer_as_fresh_
     answers = set()
     sampled = high > low
     drawn = []
+    close = 0
     for k in range(60):
         if k % 2:  # anywhere in the sampling limits
             q = np.where(sampled, low + rng.random(len(low)) * (high - low), scenario.start)
@@ -358,14 +368,19 @@ def test_the_geometric_check_and_the_distances_on_bound_buffers_answer_as_fresh_
             q = np.clip(scenario.start + 0.02 * rng.standard_normal(len(low)) * sampled, low, high)
         drawn.append(q)
         answers.add(valid(q))
-        assert valid(q) == GeometricChecker(scenario, low, high)(q)
-        fresh, shared = np.empty(len(S.pi)), np.empty(len(S.pi))
+        assert valid(q) == GeometricChecker(scenario, low, high)(q) == exact(q)
+        fresh, shared, near = np.empty(len(S.pi)), np.empty(len(S.pi)), np.empty(len(S.pi))
         pair_min_distances(S, q, 1e9, fresh)
         pair_min_distances_into(S, q, 1e9, shared, buffers)
         assert np.array_equal(fresh, shared, equal_nan=True)
+        pair_min_distances_into(S, q, CONTACT_MARGIN, near, buffers)
+        within = fresh <= CONTACT_MARGIN
+        close += int(within.sum())
+        assert np.array_equal(near[within], fresh[within]) and np.all(near[fresh > CONTACT_MARGIN] > CONTACT_MARGIN)
         measured = ~np.isnan(fresh[: len(scenario.pairs)])  # (python-fcl measures the others)
         assert np.array_equal(pair_signed_distances(scenario, q)[measured], fresh[: len(scenario.pairs)][measured])
     assert answers == {True, False}  # the states drawn reach both answers
+    assert close > 0  # and pairs within the margin
     assert np.array_equal(pair_signed_distances_many(scenario, drawn), [pair_signed_distances(scenario, q) for q in drawn])
 
 
