@@ -601,14 +601,14 @@ class LemkeWork(NamedTuple):
     passes on is reference-counted at each call), viewed per solve as C-contiguous arrays of
     its own size n (`lemke_views`)."""
 
-    f: np.ndarray  # (N * N + 7 N + (N + 1) N,) floats
-    i: np.ndarray  # (5 N,) ints
+    f: np.ndarray  # (2 N * N + 9 N + (N + 1) N,) floats
+    i: np.ndarray  # (8 N,) ints
 
 
 @numba.njit(cache=True)
 def lemke_work(n):
     """`LemkeWork` for LCPs of up to n unknowns."""
-    return LemkeWork(np.empty(n * n + 7 * n + (n + 1) * n), np.empty(5 * n, np.int64))
+    return LemkeWork(np.empty(2 * n * n + 9 * n + (n + 1) * n), np.empty(8 * n, np.int64))
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
@@ -627,6 +627,166 @@ def lemke_views(work, n):
     A = f[o + 7 * n : o + 7 * n + (n + 1) * n].reshape((n + 1, n))
     basis, cand, idx, touched, marked = i[:n], i[n : 2 * n], i[2 * n : 3 * n], i[3 * n : 4 * n], i[4 * n : 5 * n]
     return Binv, qbar, d, mag, hist, col, z2, w2, A, basis, cand, idx, touched, marked
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _transform_views(work, n):
+    """work's arrays for `lemke_from_guess_into`, after `lemke_views`' (which its path uses):
+    Mp (n, n), the columns of the LCP principally pivoted on the guess's basic set that the
+    path has asked for; qp (n), its q; x (n), scratch; pos (n ints), each index's place in the
+    basic set (-1: not in it); perm (n ints), the LU's row order; filled (n ints), 1 at each
+    column of Mp made."""
+    f, i = work.f, work.i
+    o = n * n + 7 * n + (n + 1) * n
+    Mp = f[o : o + n * n].reshape((n, n))
+    qp, x = f[o + n * n : o + n * n + n], f[o + n * n + n : o + n * n + 2 * n]
+    return Mp, qp, x, i[5 * n : 6 * n], i[6 * n : 7 * n], i[7 * n : 8 * n]
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _lu_into(A, perm, m):
+    """A[:m, :m] = P L U in place (Gaussian elimination with partial pivoting, `_gauss_solve`'s
+    rule and singularity test): the multipliers below the diagonal, U on and above it, perm[k]
+    the row swapped into row k at step k. Returns ok: False if A[:m, :m] is numerically
+    singular."""
+    amax = 0.0
+    for i in range(m):
+        for j in range(m):
+            if abs(A[i, j]) > amax:
+                amax = abs(A[i, j])
+    if not (amax > 0.0) or not np.isfinite(amax):
+        return False
+    for k in range(m):
+        p = k
+        best = abs(A[k, k])
+        for i in range(k + 1, m):
+            if abs(A[i, k]) > best:
+                best = abs(A[i, k])
+                p = i
+        if best <= 1e-14 * amax:
+            return False
+        perm[k] = p
+        if p != k:
+            for j in range(m):
+                t = A[k, j]
+                A[k, j] = A[p, j]
+                A[p, j] = t
+        for i in range(k + 1, m):
+            f = A[i, k] / A[k, k]
+            A[i, k] = f
+            if f != 0.0:
+                for j in range(k + 1, m):
+                    A[i, j] -= f * A[k, j]
+    return True
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _lu_solve_into(A, perm, m, x):
+    """x[:m] = A^-1 x[:m] in place, A factored by `_lu_into` (its row swaps first, as LAPACK's
+    getrs: the factorization swapped whole rows, multipliers included)."""
+    for k in range(m):
+        p = perm[k]
+        if p != k:
+            t = x[k]
+            x[k] = x[p]
+            x[p] = t
+    for k in range(m):
+        for i in range(k + 1, m):
+            x[i] -= A[i, k] * x[k]
+    for k in range(m - 1, -1, -1):
+        s = x[k]
+        for j in range(k + 1, m):
+            s -= A[k, j] * x[j]
+        x[k] = s / A[k, k]
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _transformed_column(M, J, nj, A, perm, pos, x, Mp, j):
+    """Column j of M principally pivoted on J[:nj] (Cottle-Pang-Stone, sec. 2.3: z_J and w_J
+    trade places), into Mp[:, j], from the LU of M[J, J] in A (`_lu_into`): with X = M[J, J]^-1,
+    for j in J, X e_j on J and M[N, J] X e_j on N; else -X M[J, j] on J and M[N, j] - M[N, J] X
+    M[J, j] on N."""
+    n = M.shape[0]
+    inside = pos[j] >= 0
+    for a in range(nj):
+        x[a] = 0.0 if inside else M[J[a], j]
+    if inside:
+        x[pos[j]] = 1.0
+    _lu_solve_into(A, perm, nj, x)
+    sign = 1.0 if inside else -1.0
+    for i in range(n):
+        if pos[i] >= 0:
+            Mp[i, j] = sign * x[pos[i]]
+        else:
+            s = 0.0
+            for a in range(nj):
+                s += M[i, J[a]] * x[a]
+            Mp[i, j] = s if inside else M[i, j] - s
+
+
+@numba.njit(cache=True, error_model="numpy")
+def lemke_from_guess_into(M, q, guess, max_pivots, work, z, w, basic_z, J, A, tol):
+    """Lemke's method started from a guessed complementary basis that does not solve the LCP
+    (a warm start's guess after a contact was made, broken or changed from sticking to
+    sliding), on the caller's arrays. The LCP principally pivoted on the guess's basic set J
+    (z_J and w_J trade places: M' = the principal pivot transform, q' = the guess's point, (z_J,
+    w_N)) has the guess as its standard basis; Lemke's method with its covering vector e and
+    its lexicographic rule (`_lemke_path`) follows the path from there, building only the
+    columns of M' that enter (`_transformed_column`, from the LU of M[J, J]). Its final basis,
+    mapped back, is solved on M itself (`warm_guess_into`, as a guess is): the point returned
+    is M's and its residual recomputed. Kept where that residual is at most tol; else (M[J, J]
+    singular, the path not ending within n + 1 pivots, or the point not that accurate) Lemke
+    from scratch on M (`lemke_into`).
+
+    work: `LemkeWork` for at least n unknowns; z, w, basic_z: n each, set here (basic_z the
+    final basis's flags; it may be guess itself, which is read first); J: n ints and A: (n +
+    1, n), scratch. Returns (status, pivots: both paths', the residual of z and w: +inf where
+    not solved)."""
+    n = q.shape[0]
+    Mp, qp, x, pos, perm, filled = _transform_views(work, n)
+    nj = np.int64(0)
+    for i in range(n):
+        pos[i] = -1
+        filled[i] = 0
+        if guess[i]:
+            J[nj] = i
+            pos[i] = nj
+            nj += 1
+    pivots = 0
+    for a in range(nj):
+        for c in range(nj):
+            A[a, c] = M[J[a], J[c]]
+    lu = nj > 0 and n > 0 and _lu_into(A, perm, nj)
+    if lu:
+        for a in range(nj):  # q' = (z_J, w_N) of the guess: -X q_J on J, q_N + M[N, J] (-X q_J) on N
+            x[a] = -q[J[a]]
+        _lu_solve_into(A, perm, nj, x)
+        for i in range(n):
+            if pos[i] >= 0:
+                qp[i] = x[pos[i]]
+            else:
+                s = q[i]
+                for a in range(nj):
+                    s += M[i, J[a]] * x[a]
+                qp[i] = s
+    if nj > 0 and n > 0 and lu and not _nonnegative(qp):
+        status, pivots = _lemke_start_and_path(Mp, qp, n + 1, work, (nj > 0, M, J, nj, A, perm, pos, x, filled))
+        if status == STATUS_SOLVED:
+            basis = lemke_views(work, n)[9]
+            for i in range(n):
+                basic_z[i] = False
+            for i in range(n):
+                if n <= basis[i] < 2 * n:
+                    basic_z[basis[i] - n] = True
+            for i in range(n):  # back to M's variables: z_i basic where w'_i is, for i in J
+                if pos[i] >= 0:
+                    basic_z[i] = not basic_z[i]
+            residual = warm_guess_into(M, q, basic_z, J, A, z, w)
+            if residual <= tol:
+                return STATUS_SOLVED, pivots, residual
+    status, more = lemke_into(M, q, max_pivots, work, z, w, basic_z)
+    solved = status == STATUS_SOLVED or status == STATUS_SOLVED_INACCURATE
+    return status, pivots + more, natural_map_residual(z, w, q) if solved else np.inf
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -656,21 +816,9 @@ def lemke_into(M, q, max_pivots, work, z, w, basic_z):
     if n == 0 or _nonnegative(q):
         _matvec_plus_into(M, z, q, w)
         return STATUS_SOLVED, 0
-    qscale = _max_abs(q)
     Binv, qbar, d, mag, hist, col, z2, w2, A, basis, cand, idx, touched, marked = lemke_views(work, n)
-    for i in range(n):
-        for j in range(n):
-            Binv[i, j] = 0.0
-        Binv[i, i] = 1.0
-        qbar[i] = q[i]
-        basis[i] = i  # basic variable of each row: w_i = i, z_j = n + j, z0 = 2n
-        hist[i] = 1.0
-        marked[i] = 0
-    entering, zrow = _lemke_first_pivot(Binv, qbar, basis, d, cand, idx, hist, qscale, mag, marked)
-    nt = _touch(touched, marked, 0, zrow)
-    status, pivots = _lemke_path(
-        M, Binv, qbar, basis, d, mag, hist, col, cand, idx, touched, marked, nt, entering, zrow, qscale, max_pivots
-    )
+    # (no column made on demand: the path reads M's own)
+    status, pivots = _lemke_start_and_path(M, q, max_pivots, work, (n < 0, M, idx, np.int64(0), A, cand, touched, col, marked))
     for i in range(n):
         v = basis[i]
         if n <= v < 2 * n:
@@ -683,6 +831,27 @@ def lemke_into(M, q, max_pivots, work, z, w, basic_z):
     return status, pivots
 
 
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _lemke_start_and_path(M, q, max_pivots, work, lazy):
+    """Lemke's tableau on work (`lemke_views`: Binv = I, qbar = q, the w's basic), its first
+    pivot and its path (`_lemke_path`; lazy: as there). Some q_i < 0. Returns (status,
+    pivots); the final basis and its values are work's basis and qbar."""
+    n = q.shape[0]
+    qscale = _max_abs(q)
+    Binv, qbar, d, mag, hist, col, z2, w2, A, basis, cand, idx, touched, marked = lemke_views(work, n)
+    for i in range(n):
+        for j in range(n):
+            Binv[i, j] = 0.0
+        Binv[i, i] = 1.0
+        qbar[i] = q[i]
+        basis[i] = i  # basic variable of each row: w_i = i, z_j = n + j, z0 = 2n
+        hist[i] = 1.0
+        marked[i] = 0
+    entering, zrow = _lemke_first_pivot(Binv, qbar, basis, d, cand, idx, hist, qscale, mag, marked)
+    nt = _touch(touched, marked, 0, zrow)
+    return _lemke_path(M, Binv, qbar, basis, d, mag, hist, col, cand, idx, touched, marked, nt, entering, zrow, qscale, max_pivots, lazy)
+
+
 @numba.njit(cache=True, error_model="numpy")
 def lemke_warm_kernel(M, q, max_pivots, guess, tol, droppable=0):
     """Lemke's method started from a guessed complementary basis: exact, and free when the
@@ -692,7 +861,8 @@ def lemke_warm_kernel(M, q, max_pivots, guess, tol, droppable=0):
     first: z_J = -M[J, J]^-1 q_J on J = {i : guess[i]}, z = 0 elsewhere, and w = M z + q
     recomputed; it is accepted when that point's natural-map residual
     (`complementarity_residual`: z >= 0, w >= 0 and z^T w = 0 at once) is at most tol. Else
-    (or when M[J, J] is numerically singular) `lemke_kernel` runs from scratch. droppable: where
+    Lemke's method runs from the guessed basis (`lemke_from_guess_into`), and from scratch
+    where that does not end on a point solving the LCP to tol (or M[J, J] is singular). droppable: where
     M[J, J] is singular, the guess is tried again without one of its basic rows among the first
     droppable (`warm_guess_dropping_into`; the contact step passes its normals' count).
 
@@ -706,9 +876,13 @@ def lemke_warm_kernel(M, q, max_pivots, guess, tol, droppable=0):
     if n > 0:
         z = np.empty(n)
         w = np.empty(n)
-        residual = warm_guess_dropping_into(M, q, guess, np.empty(n, np.int64), np.empty((n + 1, n)), z, w, droppable, tol)
+        J, A = np.empty(n, np.int64), np.empty((n + 1, n))
+        residual = warm_guess_dropping_into(M, q, guess, J, A, z, w, droppable, tol)
         if residual <= tol:
             return z, w, STATUS_SOLVED, 0, guess, True, residual
+        basic_z = np.empty(n, np.bool_)
+        status, pivots, residual = lemke_from_guess_into(M, q, guess, max_pivots, lemke_work(n), z, w, basic_z, J, A, tol)
+        return z, w, status, pivots, basic_z, False, residual
     z, w, status, pivots, basic_z = _lemke(M, q, max_pivots)
     return z, w, status, pivots, basic_z, False, _natural_map_residual(z, w, q)
 
@@ -796,10 +970,12 @@ def _lemke_first_pivot(Binv, qbar, basis, d, cand, idx, hist, qscale, ones, mark
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _lemke_path(M, Binv, qbar, basis, d, mag, hist, col, cand, idx, touched, marked, nt, entering, zrow, qscale, max_pivots):
+def _lemke_path(M, Binv, qbar, basis, d, mag, hist, col, cand, idx, touched, marked, nt, entering, zrow, qscale, max_pivots, lazy):
     """Follow Lemke's complementary path from the first pivot, in place on the tableau
     (Binv, qbar, basis): entering column, lexicographic ratio test, pivot, until z0 leaves.
-    touched, marked, nt: the rows pivoted on so far (`_touch`: the first pivot's row).
+    touched, marked, nt: the rows pivoted on so far (`_touch`: the first pivot's row). lazy:
+    (on, M0, J, nj, A, perm, pos, x, filled); where on, M is a principal pivot transform of M0
+    whose columns are made as they enter (`_transformed_column`; filled: 1 at each made).
 
     Returns (status, pivots): STATUS_SOLVED (z0 left), STATUS_RAY_TERMINATION (no pivot row),
     STATUS_NON_FINITE_OUTPUT or STATUS_MAX_ITERATIONS; pivots counts the first one too.
@@ -808,7 +984,11 @@ def _lemke_path(M, Binv, qbar, basis, d, mag, hist, col, cand, idx, touched, mar
     z0 = 2 * n
     pivots = 1
     status = STATUS_MAX_ITERATIONS
+    on, M0, J, nj, A, perm, pos, x, filled = lazy
     while pivots < max_pivots:
+        if on and n <= entering < 2 * n and filled[entering - n] == 0:
+            _transformed_column(M0, J, nj, A, perm, pos, x, M, entering - n)
+            filled[entering - n] = 1
         amax = _entering_column(M, Binv, entering, n, d, mag, col, idx, touched, marked, nt)
         dmax = 0.0
         for i in range(n):

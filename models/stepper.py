@@ -82,14 +82,12 @@ from models.lcp import (
     STATUS_SOLVED_INACCURATE,
     LemkeWork,
     _gauss_solve,
-    _lemke,
     _natural_map_residual,
     complementarity_residual,
-    lemke_into,
+    lemke_from_guess_into,
     lemke_kernel,
     lemke_warm_kernel,
     lemke_work,
-    natural_map_residual,
     warm_guess_dropping_into,
 )
 
@@ -1833,8 +1831,9 @@ WARM_DONE, WARM_NOT_TAKEN = 0, 1
 def _warm_solve(M, q_lcp, guess, L, n, nc):
     """The planar warm step's solve of its LCP (n unknowns, nc contacts, on `WarmLCP` L's arrays):
     the guessed basis (`warm_guess_dropping_into`, as `lemke_warm_kernel` tries it), and where
-    that does not solve it, Lemke from scratch (`lemke_into`), as `lemke_warm_kernel` goes on
-    after a failed guess (a contact made or broken that q does not predict). Returns (solved,
+    that does not solve it, Lemke from the guess's basis (`_lemke_after_guess`), as
+    `lemke_warm_kernel` goes on after a failed guess (a contact made or broken that q does not
+    predict). Returns (solved,
     pivots, the final basis's flags, the natural-map residual: the guess's own, computed there,
     else Lemke's solution's); z and w in L.z[:n], L.w[:n]. Where Lemke fails, the general path
     regularizes the LCP."""
@@ -1842,10 +1841,20 @@ def _warm_solve(M, q_lcp, guess, L, n, nc):
     residual = warm_guess_dropping_into(M, q_lcp, guess, L.J, L.lu, z, w, nc, WARM_TOLERANCE)
     if residual <= WARM_TOLERANCE:
         return True, 0, guess, residual
-    # the final basis's flags replace the guess (read no more)
-    status, pivots = lemke_into(M, q_lcp, PIVOTS_PER_VARIABLE * (n + 1), L.lemke, z, w, guess)
-    solved = status == STATUS_SOLVED or status == STATUS_SOLVED_INACCURATE
-    return solved, pivots, guess, natural_map_residual(z, w, q_lcp) if solved else np.inf
+    # the final basis's flags replace the guess
+    status, pivots, residual = _lemke_after_guess(M, q_lcp, guess, L.lemke, z, w, L.J, L.lu)
+    return status == STATUS_SOLVED or status == STATUS_SOLVED_INACCURATE, pivots, guess, residual
+
+
+@numba.njit(cache=True, inline="always")
+def _lemke_after_guess(M, q_lcp, guess, work, z, w, J, A):
+    """Where a step's guessed basis does not solve its LCP: Lemke's method from that basis
+    (`lemke_from_guess_into`: its point kept at WARM_TOLERANCE, as a guess's is), else from
+    scratch, with the step's pivot limit; guess becomes the final basis's flags. Every step
+    (warm or general) that fails its guess goes on here: the same bits either way. Returns
+    (status, pivots, the natural-map residual: +inf where not solved)."""
+    n = q_lcp.shape[0]
+    return lemke_from_guess_into(M, q_lcp, guess, PIVOTS_PER_VARIABLE * (n + 1), work, z, w, guess, J, A, WARM_TOLERANCE)
 
 
 @numba.njit(cache=True, _nrt=False, error_model="numpy")
@@ -1854,7 +1863,7 @@ def planar_warm_step(model, drives, tables, system, h, q, nu, q_ref, u, contacts
     compiled without numba's runtime: no reference counts, no allocation; every array is B's
     (`PlanarWarm`). The LCP is solved on the previous step's basis (the usual step while
     contacts persist; a contact not in it guessed from q, `_basis_guess`) or, where that guess
-    does not solve it, by Lemke from scratch (`_warm_solve`). Where the LCP is not `_planar_case`, Lemke does not solve it to
+    does not solve it, by Lemke from that basis (`_warm_solve`). Where the LCP is not `_planar_case`, Lemke does not solve it to
     LCP_TOLERANCE (the general path then regularizes it) or the state leaves the finite range,
     it returns WARM_NOT_TAKEN and the caller takes the general path, which solves the step again
     from the start. Else (WARM_DONE): q+, nu+, q_ref+, the next basis table and, with
@@ -2008,8 +2017,8 @@ def spatial_warm_step(model, drives, tables, system, rotating, h, q, nu, q_ref, 
     The LCP is solved on the previous step's basis (a contact not in it guessed from q,
     `_basis_guess`), tried on G and C without building M (`_generator_guess_dropping_into`), and
     where that guess does not solve it, M is built and Lemke
-    runs from scratch (as the general step in space without force-limited drives,
-    `_on_generators`).
+    runs from the guess's basis (`_lemke_after_guess`, as the general step in space without
+    force-limited drives, `_on_generators`).
     rotating: A depends on q (`has_rotations`), so A(q) and its body blocks are built here
     (`system_matrix`, `body_blocks`), where the general step has the rollout build them. Where
     there are no active contacts or more than W holds, a block of A is singular, Lemke does not
@@ -2066,15 +2075,14 @@ def spatial_warm_step(model, drives, tables, system, rotating, h, q, nu, q_ref, 
         L.slide[: 2 * nf],
     )  # fmt: skip
     if not (residual <= WARM_TOLERANCE):
-        # M, scaled as q is, and Lemke from scratch (`_warm_solve`'s after a failed guess); the
+        # M, scaled as q is, and Lemke from the failed guess's basis (`_warm_solve`'s); the
         # final basis's flags replace the guess, and the residual is its solution's (the
         # guess's is its own point's, computed there)
         lcp_matrix_into(model, True, h, active, pf, contacts.pair, drives, R.drive_a, lim, 0, fric, nf, reg, scratch, M, q_lcp, gen, cf)
         _scale_lcp_by(M, q_lcp[:0], scale)
-        status, pivots = lemke_into(M, q_lcp, PIVOTS_PER_VARIABLE * (n + 1), L.lemke, z, w, guess)
+        status, pivots, residual = _lemke_after_guess(M, q_lcp, guess, L.lemke, z, w, L.J, L.lu)
         if status != STATUS_SOLVED and status != STATUS_SOLVED_INACCURATE:
             return WARM_NOT_TAKEN, n, 0.0, pivots
-        residual = natural_map_residual(z, w, q_lcp)
     if part == PART_CONTACT_SOLVE:
         return WARM_DONE, n, 0.0, pivots
     if not (residual <= LCP_TOLERANCE):
@@ -2292,7 +2300,8 @@ def _scale_contact_lcp(model, on_generators, h, Mlcp, qlcp, G, gen, cf, active, 
 @numba.njit(cache=True, inline="always")
 def _guess_or_lemke(G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, Mlcp, qlcp, scale, guess):
     """`lemke_warm_kernel` with its guess on the generators (`_generator_guess_dropping_into`)
-    and, where that fails, Lemke from scratch on the scaled M, q. Returns (z, w, status, pivots, basic_z,
+    and, where that fails, Lemke from the guess's basis on the scaled M, q (`_lemke_after_guess`).
+    Returns (z, w, status, pivots, basic_z,
     the natural-map residual: the guess's own, computed there, else Lemke's solution's)."""
     n = qlcp.shape[0]
     ng = G.shape[0]
@@ -2303,8 +2312,8 @@ def _guess_or_lemke(G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, gs, gm
     )
     if residual <= WARM_TOLERANCE:
         return z, w, STATUS_SOLVED, 0, guess, residual
-    z, w, status, pivots, basic_z = _lemke(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1))
-    return z, w, status, pivots, basic_z, natural_map_residual(z, w, qlcp)
+    status, pivots, residual = _lemke_after_guess(Mlcp, qlcp, guess, lemke_work(n), z, w, J, A)
+    return z, w, status, pivots, guess, residual
 
 
 @numba.njit(cache=True, inline="always")
@@ -2628,7 +2637,8 @@ def _basis_guess(basis, active, slot, fric, nf, d, lim, m, n, q):
     against the most negative (that direction and gamma basic); else w is basic on its rows. A
     force-limited drive not in the table guesses w basic. Exact either way: a guess is kept only
     where it solves the LCP to WARM_TOLERANCE (then, where its rigid normals are redundant,
-    without one of them: `_generator_guess_dropping_into`), else Lemke runs from scratch."""
+    without one of them: `_generator_guess_dropping_into`), else Lemke runs from its basis
+    (`_lemke_after_guess`)."""
     guess = np.empty(n, np.bool_)
     _fill_basis_guess(guess, basis, active, slot, fric, nf, d, lim, m, n, q)
     return guess

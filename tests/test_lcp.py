@@ -6,6 +6,7 @@ import dataclasses
 import itertools
 import warnings
 from fractions import Fraction
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -359,7 +360,8 @@ def test_lemke_kernel_direct_call_contract():
 def test_lemke_warm_start_on_the_right_basis_takes_no_pivot():
     """A guess of the solution's basis is verified, not trusted: the right one is accepted with
     0 pivots and the cold solution; a wrong one, a singular one and a neighbouring problem's
-    fall back to pivoting and still solve exactly, returning the basis they ended on."""
+    fall back to pivoting and still solve exactly, returning the basis they ended on (from the
+    wrong guess's basis, one pivot fewer than from scratch)."""
     M = np.array([[2.0, 1.0], [1.0, 2.0]])
     q = np.array([-5.0, -6.0])
     z_cold, _, _, pivots = lemke_kernel(M, q, 100)
@@ -371,7 +373,7 @@ def test_lemke_warm_start_on_the_right_basis_takes_no_pivot():
     assert basic_z.tolist() == [True, True]
     for guess in ([False, False], [True, False], [False, True]):  # z = 0 or a negative z / w
         z, w, code, pivots, basic_z, warm, residual = lemke_warm_kernel(M, q, 100, np.array(guess), 1e-12)
-        assert not warm and pivots == 3 and code == lcp.STATUS_SOLVED
+        assert not warm and pivots == (2 if any(guess) else 3) and code == lcp.STATUS_SOLVED
         assert residual == pytest.approx(natural_residual(M, q, z), abs=1e-15)
         np.testing.assert_allclose(z, z_cold, rtol=1e-14)
         assert basic_z.tolist() == [True, True]
@@ -401,6 +403,58 @@ def test_lemke_warm_start_on_the_right_basis_takes_no_pivot():
         warm_count += warm
         assert not warm or pivots == 0
     assert warm_count >= 15
+
+
+def test_lemke_from_a_failed_guess_solves_exactly_in_fewer_pivots():
+    """`lemke_from_guess_into` follows Lemke's path from a guessed basis that does not solve
+    the LCP (on the principal pivot transform that makes it the standard basis, its columns
+    made as they enter) and solves the final basis on M itself: on contact-like LCPs (as
+    `random_fc2d`) from the basis of a neighbouring problem (another free velocity), of a
+    random one and of none, every solve ends on a point of M whose natural-map residual is
+    recomputed and at most the tolerance, and on the P-matrix problems (no friction: a unique
+    solution) it is the solution from scratch. From the neighbour's basis the paths are shorter
+    than from scratch."""
+    rng = np.random.default_rng(11)
+    warm_pivots, cold_pivots, neighbours = 0, 0, 0
+    for trial in range(60):
+        nc, ndof = 4, 6
+        J = rng.integers(-3, 4, size=(2 * nc, ndof)).astype(float)
+        W = J @ np.diag(rng.choice([0.5, 1.0, 2.0], ndof)) @ J.T + 1e-3 * np.eye(2 * nc)
+        v, gap = rng.integers(-8, 9, ndof) / 4.0, np.zeros(2 * nc)
+        gap[0::2] = rng.integers(0, 5, nc) / 4.0 * (rng.random(nc) < 0.5)
+        frictionless = trial % 3 == 0
+        if frictionless:  # the normals' LCP alone: W's normal block, positive definite
+            Wn = W[0::2, 0::2]
+            base = SimpleNamespace(M=Wn, q=(J @ v + gap)[0::2])
+            near_q = (J @ (v + 0.3 * rng.standard_normal(ndof)) + gap)[0::2]
+            near = SimpleNamespace(M=Wn, q=near_q)
+        else:
+            mu = rng.integers(1, 9, nc) / 8.0
+            base = contact_lcp_from_fc2d(W, J @ v + gap, mu)
+            near = contact_lcp_from_fc2d(W, J @ (v + 0.3 * rng.standard_normal(ndof)) + gap, mu)
+        n = near.q.size
+        _, _, code, _, basic = lcp.lemke_warm_kernel(base.M, base.q, 1000, np.zeros(n, np.bool_), 1e-12)[:5]
+        assert code == lcp.STATUS_SOLVED
+        z_cold, _, code, cold = lemke_kernel(near.M, near.q, 1000)
+        assert code == lcp.STATUS_SOLVED
+        for guess in (basic, rng.random(n) < 0.4, np.zeros(n, np.bool_)):
+            z, w, basic_z = np.empty(n), np.empty(n), np.empty(n, np.bool_)
+            J_, A = np.empty(n, np.int64), np.empty((n + 1, n))
+            status, pivots, residual = lcp.lemke_from_guess_into(
+                near.M, near.q, guess.copy(), 1000, lcp.lemke_work(n), z, w, basic_z, J_, A, 1e-12
+            )
+            assert status == lcp.STATUS_SOLVED
+            assert residual == pytest.approx(natural_residual(near.M, near.q, z), abs=1e-15) and residual <= 1e-12
+            np.testing.assert_allclose(w, near.M @ z + near.q, atol=1e-12)
+            assert np.all(z[~basic_z] == 0.0)
+            if frictionless:
+                np.testing.assert_allclose(z, z_cold, rtol=1e-9, atol=1e-12)
+            if guess is basic and lcp.warm_guess_into(near.M, near.q, guess, J_, A, np.empty(n), np.empty(n)) > 1e-12:
+                neighbours += 1
+                warm_pivots += pivots
+                cold_pivots += cold
+    assert neighbours >= 20
+    assert warm_pivots < 0.7 * cold_pivots
 
 
 def test_a_singular_guess_is_tried_again_without_a_redundant_row():
@@ -722,7 +776,12 @@ def test_property_never_raises_never_false_success(data, method):
         assert res.status in (LCPStatus.INVALID_INPUT, LCPStatus.NON_FINITE_INPUT)
     if res.success:
         assert res.residual <= DEFAULT_TOL
-        assert natural_residual(M, q, res.z) <= DEFAULT_TOL * (1 + 1e-9)
+        # recomputed independently (NumPy's M @ z): equal to the solver's up to the product's
+        # round-off, n eps |M| |z| (found by this test: M entries of 2e8 and 4e7 whose terms
+        # cancel to 1e-9, read 0 by one sum and 1.4e-9 by the other)
+        terms = float(np.max(np.abs(M) @ np.abs(res.z), initial=0.0))
+        roundoff = q.size * np.finfo(float).eps * terms / (1.0 + np.max(np.abs(q), initial=0.0))
+        assert natural_residual(M, q, res.z) <= DEFAULT_TOL * (1 + 1e-9) + roundoff
         assert res.z.shape == q.shape
     if res.status is LCPStatus.SOLVED_INACCURATE:
         assert DEFAULT_TOL < res.residual <= INACCURATE_TOL

@@ -178,19 +178,24 @@ def test_the_warm_started_contact_solve_is_the_cold_one_and_nearly_free(offset):
 
     The warm run pivots on few steps only: it starts cold, and pivots where the contacts change
     (the pusher arriving) or, as the box turns, where its sliding friction moves to another side
-    of the polyhedral cone. Measured: 32 pivots over the 1850 steps central, 162 turning (250
-    with the velocity update's BLAS product: round-off picks the vertices). The one-step calls
+    of the polyhedral cone; where the previous basis fails, Lemke follows its path from that
+    basis (`models.lcp.lemke_from_guess_into`). Measured: 10 pivots over the 1850 steps central,
+    41 turning (28 and 292 when a failed basis sent Lemke back to scratch). The one-step calls
     guess each step's basis from its LCP's q (`models.stepper._basis_guess`): central, that
     guess solves the steps (13 pivots in all, where Lemke from scratch took 15 a step); turning,
     it does not (the corners' friction on two sides of the cone at once, the pusher sticking),
-    and Lemke pivots about 15 times a step. The
+    and Lemke pivots about 13 times a step from it (15 from scratch). The
     states agree up to the push's indeterminacy: a rigid box on four corners, pushed by a rigid
     sphere with friction, has a continuum of contact forces (the pusher's
     vertical friction anywhere in +-mu N: the table's normal force, so its friction, and the
-    pushing force move by up to 0.3 N, the pusher's lag behind its reference by 3e-5 m); Lemke
-    returns a vertex, and which one (from scratch or from the last basis) is round-off's choice.
-    Measured: 3.2e-5 m apart central, 9.5e-6 turning; every solve exact (residual <= 1e-12).
-    The warm start here runs through the whole call (no `Model.warm_period`)."""
+    pushing force move by up to 0.3 N, the pusher's velocity in a step by up to 3e-4 m/s; the
+    four corners' share of the box's weight, so the friction torque that turns it); Lemke
+    returns a vertex, and which one is decided by where its path starts (from scratch, from
+    the last basis or from the guess) and by round-off. Measured: 1.5e-5 m apart central; turning
+    1.5e-4 in the box's orientation (2.5e-4 rad of yaw) and 3.1e-3 rad/s in its yaw rate at the
+    end, 3e-4 m/s in the pusher's velocity (before paths started from failed guesses: 3.2e-5 m
+    and 9.5e-6 m, 1e-5 rad/s); every solve exact (residual <= 1e-12). The warm start here runs
+    through the whole call (no `Model.warm_period`)."""
     scenario = load_scenario(PUSH)
     r = rung(scenario, "dynamic-rigid")
     r = replace(r, model=r.model._replace(warm_period=0.0))
@@ -206,8 +211,9 @@ def test_the_warm_started_contact_solve_is_the_cold_one_and_nearly_free(offset):
         state, pivots, residual = out.state, pivots + out.pivots, max(residual, out.max_residual)
         assert out.status == "ok"
     assert warm.status == "ok" and warm.force_steps > 1000
-    np.testing.assert_allclose(warm.state.q, state.q, rtol=0, atol=1e-4)
-    np.testing.assert_allclose(warm.state.nu, state.nu, rtol=0, atol=1e-3)
+    np.testing.assert_allclose(warm.state.q, state.q, rtol=0, atol=5e-4)
+    np.testing.assert_allclose(warm.state.nu, state.nu, rtol=0, atol=1e-2)
+    assert residual <= 1e-12 and warm.max_residual <= 1e-12
     if offset == 0.0:  # cold: the guess from q solves nearly every step
         assert pivots < 0.05 * warm.force_steps
     else:  # cold: the guess from q fails, and Lemke pivots about 15 times a step
