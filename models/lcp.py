@@ -501,29 +501,46 @@ def _entering_column(M, Binv, var, n, d, mag, col, idx, touched, marked, nt):
     return amax
 
 
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _largest_in_block(A, m):
+    """max |A[i, j]| over A[:m, :m] (0 for m = 0; NaN entries ignored)."""
+    amax = 0.0
+    for i in range(m):
+        for j in range(m):
+            if abs(A[i, j]) > amax:
+                amax = abs(A[i, j])
+    return amax
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _pivot_row(A, k, m, amax):
+    """Partial pivoting's row at step k of an elimination on A[:m, :m]: the first row i >= k of
+    largest |A[i, k]|, or -1 where that is at most 1e-14 amax (numerically singular)."""
+    p = k
+    best = abs(A[k, k])
+    for i in range(k + 1, m):
+        if abs(A[i, k]) > best:
+            best = abs(A[i, k])
+            p = i
+    if best <= 1e-14 * amax:
+        return -1
+    return p
+
+
 @numba.njit(cache=True, error_model="numpy")
 def _gauss_solve(A, m):
     """Solve A[:m] x = A[m] (the right-hand side in row m) by Gaussian elimination with
     partial pivoting, in place: x ends in row m (one array, no allocation: this runs every
     step on the warm-started basis). Returns ok: False if A[:m] is numerically singular or x
     is non-finite."""
-    amax = 0.0
     if m == 0:
         return True
-    for i in range(m):
-        for j in range(m):
-            if abs(A[i, j]) > amax:
-                amax = abs(A[i, j])
+    amax = _largest_in_block(A, m)
     if not (amax > 0.0) or not np.isfinite(amax):
         return False
     for k in range(m):
-        p = k
-        best = abs(A[k, k])
-        for i in range(k + 1, m):
-            if abs(A[i, k]) > best:
-                best = abs(A[i, k])
-                p = i
-        if best <= 1e-14 * amax:
+        p = _pivot_row(A, k, m, amax)
+        if p < 0:
             return False
         if p != k:
             for j in range(m):
@@ -646,24 +663,15 @@ def _transform_views(work, n):
 @numba.njit(cache=True, error_model="numpy")
 def _lu_into(A, perm, m):
     """A[:m, :m] = P L U in place (Gaussian elimination with partial pivoting, `_gauss_solve`'s
-    rule and singularity test): the multipliers below the diagonal, U on and above it, perm[k]
+    rule and singularity test: `_pivot_row`): the multipliers below the diagonal, U on and above it, perm[k]
     the row swapped into row k at step k. Returns ok: False if A[:m, :m] is numerically
     singular."""
-    amax = 0.0
-    for i in range(m):
-        for j in range(m):
-            if abs(A[i, j]) > amax:
-                amax = abs(A[i, j])
+    amax = _largest_in_block(A, m)
     if not (amax > 0.0) or not np.isfinite(amax):
         return False
     for k in range(m):
-        p = k
-        best = abs(A[k, k])
-        for i in range(k + 1, m):
-            if abs(A[i, k]) > best:
-                best = abs(A[i, k])
-                p = i
-        if best <= 1e-14 * amax:
+        p = _pivot_row(A, k, m, amax)
+        if p < 0:
             return False
         perm[k] = p
         if p != k:
