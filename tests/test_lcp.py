@@ -10,7 +10,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
@@ -912,3 +912,34 @@ def test_fc2d_lcp_solution_matches_hand_solution():
     prob2 = contact_lcp_from_fc2d(W, q2, mu)
     r2 = fc2d_reactions_from_lcp(prob2, solve_lcp(prob2.M, prob2.q).z)
     np.testing.assert_allclose(r2, [1.0, -0.2], atol=1e-12)
+
+
+@settings(max_examples=300, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
+@given(data=lcp_inputs(), seed=st.integers(0, 2**32 - 1))
+def test_property_lemke_from_any_guess_never_false_success(data, seed):
+    """Lemke's method from any guessed basis (`lemke_warm_kernel`: the guess, then
+    `lemke_from_guess_into`, then from scratch): on any finite square LCP and any guess it
+    returns, never raises, and where it reports a solution, its residual is the point's own,
+    recomputed independently (to the product's round-off), and a guess it accepts is exact to
+    the tolerance asked. (Lemke's paths are checked against known solutions above.)"""
+    M, q = data
+    assume(M.ndim == 2 and q.ndim == 1 and M.shape == (q.size, q.size) and q.size > 0)
+    assume(np.isfinite(M).all() and np.isfinite(q).all())
+    guess = np.random.default_rng(seed).random(q.size) < 0.5
+    M, q = np.ascontiguousarray(M, float), np.ascontiguousarray(q, float)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        z, w, code, pivots, basic_z, warm, residual = lcp.lemke_warm_kernel(M, q, 500, guess.copy(), 1e-12)
+    assert code in (
+        lcp.STATUS_SOLVED,
+        lcp.STATUS_SOLVED_INACCURATE,
+        lcp.STATUS_RAY_TERMINATION,
+        lcp.STATUS_MAX_ITERATIONS,
+        lcp.STATUS_NON_FINITE_OUTPUT,
+    )
+    if code == lcp.STATUS_SOLVED and np.isfinite(residual):
+        terms = float(np.max(np.abs(M) @ np.abs(z), initial=0.0))
+        roundoff = q.size * np.finfo(float).eps * terms / (1.0 + np.max(np.abs(q), initial=0.0))
+        assert abs(natural_residual(M, q, z) - residual) <= roundoff + 1e-15
+        if warm:
+            assert residual <= 1e-12
