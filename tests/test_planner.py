@@ -284,19 +284,22 @@ def test_every_rungs_plan_holds_at_a_tenth_of_its_step(name):
 def test_box_push_plans_mostly_hold_at_a_tenth_of_their_step():
     """Pushing is unstable and the goal is reached past a wall within a 1e-6 m touch tolerance,
     so a plan found at one step need not hold at a finer one. The dynamic plans (h = 1e-3)
-    hold at 1e-4 in 10 of 10 seeds (1-10). The quasistatic rung's step is part of its model
-    (a memoryless quasi-dynamic step of 0.1 s, one per control period; at 0.01 s it is a
-    different model that turns a pushed box more: 2 of 10 of its plans hold there), so it is
-    not checked here: its plans carry upward by tracking (`planner.tracking`)."""
+    hold at 1e-4 in most seeds: 23 of seeds 1-30 (26 before Lemke started from failed guesses'
+    bases, which changed the pushes' contact forces where they are not unique; 8 and 6 of seeds
+    1-10, so 10 seeds were too few for a 7-of-10 bound), asserted at 70% of 30. The quasistatic
+    rung's step is part of its model (a memoryless quasi-dynamic step of 0.1 s, one per control
+    period; at 0.01 s it is a different model that turns a pushed box more: 2 of 10 of its plans
+    hold there), so it is not checked here: its plans carry upward by tracking
+    (`planner.tracking`)."""
     scenario = load_scenario(SCENARIOS / "box_push_3d.toml")
     fine = 0
-    for seed in range(1, 11):
+    for seed in range(1, 31):
         result = run_ladder(scenario, seed=seed)
         assert result.top_holds
         top = result.rungs[-1]
         assert top.rung == "dynamic-rigid"
         fine += _holds_at_a_tenth_of_the_step(scenario, top)
-    assert fine >= 7
+    assert fine >= 21
 
 
 def test_reports_carry_goal_distance_penetration_and_failures():
