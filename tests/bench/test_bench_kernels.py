@@ -92,6 +92,7 @@ def paper_scene_lcp():
         inv,
         nu_free,
         fingers.astype(np.int64),
+        S.pi,
         S.pf,
         contacts,
         np.zeros(len(slots)),
