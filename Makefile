@@ -56,7 +56,7 @@ paper: $(VENV)/.installed
 	$(PY) -m planner.paper --out docs/paper --doc docs/paper-reproduction.md
 
 bench: $(VENV)/.installed-test
-	$(PY) -m pytest -m slow tests/bench --benchmark-enable -s
+	$(PY) -m pytest -m slow --benchmark-enable -s
 
 # ladder bench: work-precision, throughput, scaling, ladder vs flat over 20 seeds -> docs/benchmarks.md
 # (about twenty minutes, mostly the spatial scenes' flat runs; PLANNING=two_finger_triangle,four_finger_grasp:
