@@ -777,15 +777,12 @@ def lemke_from_guess_into(M, q, guess, max_pivots, work, z, w, basic_z, J, A, to
                 for a in range(nj):
                     s += M[i, J[a]] * x[a]
                 qp[i] = s
-    if nj > 0 and n > 0 and lu and not _nonnegative(qp):
-        status, pivots = _lemke_start_and_path(Mp, qp, n + 1, work, (nj > 0, M, J, nj, A, perm, pos, x, filled))
+    if lu and not _nonnegative(qp):
+        status, pivots = _lemke_start_and_path(Mp, qp, n + 1, work, (lu, M, J, nj, A, perm, pos, x, filled))
         if status == STATUS_SOLVED:
-            basis = lemke_views(work, n)[9]
             for i in range(n):
                 basic_z[i] = False
-            for i in range(n):
-                if n <= basis[i] < 2 * n:
-                    basic_z[basis[i] - n] = True
+            _mark_basic_z(lemke_views(work, n)[9], n, basic_z)
             for i in range(n):  # back to M's variables: z_i basic where w'_i is, for i in J
                 if pos[i] >= 0:
                     basic_z[i] = not basic_z[i]
@@ -833,10 +830,17 @@ def lemke_into(M, q, max_pivots, work, z, w, basic_z):
             z[v - n] = qbar[i]
     _matvec_plus_into(M, z, q, w)
     status = _lemke_polish(M, q, basis, cand, z2, w2, A, z, w, status)
+    _mark_basic_z(basis, n, basic_z)
+    return status, pivots
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _mark_basic_z(basis, n, basic_z):
+    """basic_z[j] = True for each z_j basic in a Lemke tableau's basis (w_i = i, z_j = n + j, z0
+    = 2n); the other flags are left as they are."""
     for i in range(n):
         if n <= basis[i] < 2 * n:
             basic_z[basis[i] - n] = True
-    return status, pivots
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
