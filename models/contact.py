@@ -36,6 +36,7 @@ from models.kinematics import (
     BI_KIND,
     BI_QMAP,
     BI_VMAP,
+    KEPT_POSE_COLUMNS,
     PI_A,
     PI_B,
     PI_INERT,
@@ -45,7 +46,7 @@ from models.kinematics import (
     V_WX,
     SceneData,
     kernel_array,
-    planar_poses,
+    planar_poses_kept,
     positions,
 )
 
@@ -195,11 +196,13 @@ def detect_planar(bi, bf, verts, pi, q, nu, h, margin, c_pair, c_psi, c_n, c_pa,
 @numba.njit(cache=True, inline="always")
 def planar_scratch(nb, n_pairs):
     """The planar detection's scratch (`detect_planar_into`): per body its position (nb, 3),
-    pose (nb, 4) and speed margin (nb,), per pair its reach (n_pairs,) and last separating axis
-    (n_pairs, 2; zero: none yet), which carries over from step to step. C-contiguous arrays,
-    not views of one table: a strided view compiled the narrowphase kernels a second time,
-    beside the C-contiguous arrays Python passes them."""
-    return np.empty((nb, 3)), np.empty((nb, 4)), np.empty(nb), np.empty(n_pairs), np.zeros((n_pairs, 2))
+    pose (nb, KEPT_POSE_COLUMNS: `planar_poses_kept`, which carries over from step to step)
+    and speed margin (nb,), per pair its reach (n_pairs,) and last separating axis (n_pairs,
+    2; zero: none yet), which carries over too. C-contiguous arrays, not views of one table: a
+    strided view compiled the narrowphase kernels a second time, beside the C-contiguous
+    arrays Python passes them."""
+    poses = np.full((nb, KEPT_POSE_COLUMNS), np.nan)
+    return np.empty((nb, 3)), poses, np.empty(nb), np.empty(n_pairs), np.zeros((n_pairs, 2))
 
 
 @numba.njit(cache=True)
@@ -211,7 +214,7 @@ def detect_planar_into(bi, bf, verts, pi, q, nu, h, margin, c_pair, c_psi, c_n, 
     that last ran its narrowphase) exceeds its reach by APART_SLACK: the narrowphase would find
     it apart too, so the contacts are the same, without its allocations and distance search."""
     positions(bi, bf, q, pos)
-    planar_poses(bi, bf, q, poses)
+    planar_poses_kept(bi, bf, q, poses)
     _speed_margins(bi, bf, nu, MARGIN_SAFETY * h, speed)
     _broadphase(bi, bf, q, pi, pos, speed, margin, reach)
     # np.int64: a counter started at a literal 0 and passed to a compiled function compiles

@@ -90,7 +90,7 @@ def _inside(px, py, P):
     if k < 3:
         return False
     for i in range(k):
-        j = (i + 1) % k
+        j = i + 1 if i + 1 < k else 0
         ex, ey = P[j, 0] - P[i, 0], P[j, 1] - P[i, 1]
         if ex * (py - P[i, 1]) - ey * (px - P[i, 0]) < 0.0:
             return False
@@ -147,7 +147,7 @@ def _closest_features(P, Q):
         for i in range(ka):
             ax, ay = A[i, 0], A[i, 1]
             for e in range(max(ne, 1)):  # a single point is a zero-length segment
-                j = (e + 1) % kb
+                j = e + 1 if e + 1 < kb else 0
                 cx, cy = _closest_on_segment(ax, ay, B[e, 0], B[e, 1], B[j, 0], B[j, 1])
                 best, best2, closer = _closer(ax - cx, ay - cy, best, best2)
                 if closer:
@@ -171,7 +171,7 @@ def _overlap(P, Q, dist):
     nep, neq = _n_edges(P.shape[0]), _n_edges(Q.shape[0])
     for e in range(nep):
         for f in range(neq):
-            if _segments_cross(P, e, (e + 1) % P.shape[0], Q, f, (f + 1) % Q.shape[0]):
+            if _segments_cross(P, e, e + 1 if e + 1 < P.shape[0] else 0, Q, f, f + 1 if f + 1 < Q.shape[0] else 0):
                 return True
     return False
 
@@ -208,7 +208,7 @@ def _penetration(P, Q):
         A = P if which == 0 else Q
         k = A.shape[0]
         for e in range(_n_edges(k)):
-            j = (e + 1) % k
+            j = e + 1 if e + 1 < k else 0
             dx, dy = A[j, 0] - A[e, 0], A[j, 1] - A[e, 1]
             L = np.hypot(dx, dy)
             depth, nx, ny = _sat_axis(P, Q, depth, nx, ny, dy / L, -dx / L)
@@ -265,7 +265,7 @@ def _best_face(A, nx, ny):
     k = A.shape[0]
     best, index, sign = -np.inf, -1, 1.0
     for e in range(_n_edges(k)):
-        j = (e + 1) % k
+        j = e + 1 if e + 1 < k else 0
         dx, dy = A[j, 0] - A[e, 0], A[j, 1] - A[e, 1]
         L = np.hypot(dx, dy)
         mx, my = dy / L, -dx / L
@@ -358,10 +358,13 @@ def _point_vs_polygon(bi, bf, verts, poses, a, b, margin, c_psi, c_n, c_pa, c_pb
                         cpx, cpy, cqx, cqy = cx, cy, ax, ay
                     else:
                         cpx, cpy, cqx, cqy = ax, ay, cx, cy
-        else:  # the point against the polygon's edges
+        else:  # the point against the polygon's edges (each vertex transformed once, the
+            # first kept for the last edge: the values of `_world_core`'s, without a modulo)
+            fx, fy = _world_vertex(verts, gx, gy, gc, gs, g0)
+            e1x, e1y = fx, fy
             for e in range(k):
-                e0x, e0y = _world_vertex(verts, gx, gy, gc, gs, g0 + e)
-                e1x, e1y = _world_vertex(verts, gx, gy, gc, gs, g0 + (e + 1) % k)
+                e0x, e0y = e1x, e1y
+                e1x, e1y = (fx, fy) if e + 1 == k else _world_vertex(verts, gx, gy, gc, gs, g0 + e + 1)
                 cx, cy = _closest_on_segment(X, Y, e0x, e0y, e1x, e1y)
                 best, best2, closer = _closer(X - cx, Y - cy, best, best2)
                 if closer:
@@ -371,10 +374,12 @@ def _point_vs_polygon(bi, bf, verts, poses, a, b, margin, c_psi, c_n, c_pa, c_pb
                         cpx, cpy, cqx, cqy = cx, cy, X, Y
     if best <= NEAR_TOUCH:  # (also _overlap's dist <= TINY)
         return -1
-    inside = True  # _inside(point, polygon)
+    inside = True  # _inside(point, polygon), its vertices as the edges' loop takes them
+    fx, fy = _world_vertex(verts, gx, gy, gc, gs, g0)
+    jx, jy = fx, fy
     for i in range(k):
-        ix, iy = _world_vertex(verts, gx, gy, gc, gs, g0 + i)
-        jx, jy = _world_vertex(verts, gx, gy, gc, gs, g0 + (i + 1) % k)
+        ix, iy = jx, jy
+        jx, jy = (fx, fy) if i + 1 == k else _world_vertex(verts, gx, gy, gc, gs, g0 + i + 1)
         ex, ey = jx - ix, jy - iy
         if ex * (Y - iy) - ey * (X - ix) < 0.0:
             inside = False
@@ -418,7 +423,8 @@ def _core_vs_core(bi, bf, verts, poses, a, b, margin, c_psi, c_n, c_pa, c_pb, st
     r_inc = rb if ref_is_a else ra
     kr = R.shape[0]
     r0x, r0y = R[f, 0], R[f, 1]
-    r1x, r1y = R[(f + 1) % kr, 0], R[(f + 1) % kr, 1]
+    f1 = f + 1 if f + 1 < kr else 0
+    r1x, r1y = R[f1, 0], R[f1, 1]
     ux, uy = r1x - r0x, r1y - r0y
     L = np.hypot(ux, uy)
     ux, uy = ux / L, uy / L
@@ -427,7 +433,8 @@ def _core_vs_core(bi, bf, verts, poses, a, b, margin, c_psi, c_n, c_pa, c_pb, st
     g, _, _ = _best_face(I, -mx, -my)
     ki = I.shape[0]
     i0x, i0y = I[g, 0], I[g, 1]
-    i1x, i1y = I[(g + 1) % ki, 0], I[(g + 1) % ki, 1]
+    g1 = g + 1 if g + 1 < ki else 0
+    i1x, i1y = I[g1, 0], I[g1, 1]
     # clip the incident segment to the reference face's extent [0, L] along u
     t0 = (i0x - r0x) * ux + (i0y - r0y) * uy
     t1 = (i1x - r0x) * ux + (i1y - r0y) * uy

@@ -1110,7 +1110,7 @@ def _in_face(y, n, verts, face_verts, f, slack):
     k = face_verts[f, 0]
     for j in range(k):
         a = _vert(verts, face_verts[f, 1 + j])
-        b = _vert(verts, face_verts[f, 1 + (j + 1) % k])
+        b = _vert(verts, face_verts[f, 1 + (j + 1 if j + 1 < k else 0)])
         if _dot(_cross(_sub(b, a), n), _sub(y, a)) > slack:
             return False
     return True
@@ -1275,7 +1275,7 @@ def _capsule_hull(a0w, a1w, r, p1, R1, hb, verts, planes, face_verts, edges, dir
             k = face_verts[face, 0]
             for j in range(k):
                 A = _vert(verts, face_verts[face, 1 + j])
-                B = _vert(verts, face_verts[face, 1 + (j + 1) % k])
+                B = _vert(verts, face_verts[face, 1 + (j + 1 if j + 1 < k else 0)])
                 side = _cross(_sub(B, A), nn)
                 sa = _dot(side, _sub(a, A))
                 sb = _dot(side, _sub(b, A))
@@ -1448,7 +1448,7 @@ def _hull_hull(p1, R1, h1, s1, p2, R2, h2, s2, verts, planes, face_verts, edges,
         if count == 0:
             break
         A = _vert(verts, face_verts[idx, 1 + j])
-        B = _vert(verts, face_verts[idx, 1 + (j + 1) % kr])
+        B = _vert(verts, face_verts[idx, 1 + (j + 1 if j + 1 < kr else 0)])
         side = _cross(_sub(B, A), nref)
         so = _dot(side, A)
         nxt = 1 - cur

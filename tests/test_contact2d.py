@@ -240,6 +240,54 @@ def test_detection_skips_pairs_apart_along_their_last_axis_and_finds_the_same_co
     assert skipped > 200 and narrowphase > 200 and touching > 100
 
 
+def test_kept_poses_are_planar_poses_bit_for_bit_and_skip_what_did_not_turn(tmp_path):
+    """The detection's poses carry over from step to step (`planar_poses_kept`): a body's cos
+    and sin are computed again only where its angle coordinate (or, for a body without one, its
+    base quaternion, which a script moves) changed. Along states that keep, change and flip
+    the sign of a zero angle, and a fixed body's quaternion moved as a script would, they are
+    `planar_poses`' bit for bit (zeros' signs included); a value planted in a kept cos survives
+    exactly where nothing turned (no trigonometry ran there) and is replaced elsewhere."""
+    from models.contact import planar_scratch
+    from models.kinematics import BF_QUAT, BI_QMAP, Q_ANGLE, planar_poses, planar_poses_kept
+
+    def bits(x):
+        return np.ascontiguousarray(x).view(np.int64)
+
+    _, S = pair_scene(tmp_path, "box", "triangle")
+    bi, bf = S.bi, S.bf.copy()
+    nb = bi.shape[0]
+    angle = [int(bi[b, BI_QMAP + Q_ANGLE]) for b in range(nb)]
+    assert sorted(angle) == [-1, 2, 5]  # the floor (its quaternion), a and b (theta in q)
+    kept = planar_scratch(nb, S.pi.shape[0])[1]
+    fresh = np.zeros((nb, 4))
+    rng = np.random.default_rng(7)
+    a_angles = [0.0, 0.0, -0.0, -0.0, 0.3, 0.3, -1.2, np.pi, np.pi]
+    b_angles = [1.0, 1.0, 1.0, -0.0, 0.0, 0.0, 2.5, 2.5, -2.5]
+    quats = {5: (np.cos(0.2), 0.0, 0.0, np.sin(0.2)), 6: (1.0, 0.0, 0.0, -0.0), 7: (1.0, 0.0, 0.0, 0.0)}
+    kept_somewhere, replaced, previous = 0, 0, []
+    for k, (ta, tb) in enumerate(zip(a_angles, b_angles)):
+        q = random_q(rng)
+        q[2], q[5] = ta, tb
+        if k in quats:  # the floor turned by a script
+            bf[angle.index(-1), BF_QUAT : BF_QUAT + 4] = quats[k]
+        source = [bits(q[a : a + 1]) if a >= 0 else bits(bf[b, [BF_QUAT + 3, BF_QUAT]]) for b, a in enumerate(angle)]
+        probe = kept.copy()
+        probe[:, 2] = 7.0
+        planar_poses(bi, bf, q, fresh)
+        planar_poses_kept(bi, bf, q, kept)
+        planar_poses_kept(bi, bf, q, probe)
+        assert np.array_equal(bits(kept[:, :4]), bits(fresh)), k
+        for b in range(nb):
+            if previous and np.array_equal(source[b], previous[b]):
+                assert probe[b, 2] == 7.0, (k, b)
+                kept_somewhere += 1
+            else:
+                assert np.array_equal(bits(probe[b, :4]), bits(fresh[b])), (k, b)
+                replaced += 1
+        previous = source
+    assert kept_somewhere >= 8 and replaced >= 10
+
+
 @pytest.mark.parametrize("polygon", ["triangle", "box", "hexagon"])
 @pytest.mark.parametrize("disc_first", [True, False], ids=["disc-polygon", "polygon-disc"])
 def test_the_disc_polygon_path_gives_the_general_paths_contact_bit_for_bit(tmp_path, polygon, disc_first):
