@@ -521,22 +521,27 @@ def G_matrix(S: SceneData, q: np.ndarray) -> np.ndarray:
     return G
 
 
+@numba.njit(cache=True, inline="always")
+def _planar_position(bi, bf, q, b):
+    """Body b's (x, y) at q: its coordinates where free, else its base position's."""
+    x = bf[b, BF_POS]
+    y = bf[b, BF_POS + 1]
+    if bi[b, BI_QMAP + Q_X] >= 0:
+        x = q[bi[b, BI_QMAP + Q_X]]
+    if bi[b, BI_QMAP + Q_Y] >= 0:
+        y = q[bi[b, BI_QMAP + Q_Y]]
+    return x, y
+
+
 # without numba's runtime: a per-step call whose array arguments are not reference-counted
 @numba.njit(cache=True, _nrt=False)
 def planar_poses(bi, bf, q, poses):
     """Fill poses (nb, 4) with (x, y, cos theta, sin theta) of every planar body at q."""
     for b in range(bi.shape[0]):
-        x = bf[b, BF_POS]
-        y = bf[b, BF_POS + 1]
         theta = 2.0 * np.arctan2(bf[b, BF_QUAT + 3], bf[b, BF_QUAT])
-        if bi[b, BI_QMAP + Q_X] >= 0:
-            x = q[bi[b, BI_QMAP + Q_X]]
-        if bi[b, BI_QMAP + Q_Y] >= 0:
-            y = q[bi[b, BI_QMAP + Q_Y]]
         if bi[b, BI_QMAP + Q_ANGLE] >= 0:
             theta = q[bi[b, BI_QMAP + Q_ANGLE]]
-        poses[b, 0] = x
-        poses[b, 1] = y
+        poses[b, 0], poses[b, 1] = _planar_position(bi, bf, q, b)
         poses[b, 2] = np.cos(theta)
         poses[b, 3] = np.sin(theta)
 
@@ -564,14 +569,7 @@ def planar_poses_kept(bi, bf, q, poses):
     trigonometry, where the paper's scene spent about 70 ns a step on four bodies that never
     turn; the same values as `planar_poses`, bit for bit."""
     for b in range(bi.shape[0]):
-        x = bf[b, BF_POS]
-        y = bf[b, BF_POS + 1]
-        if bi[b, BI_QMAP + Q_X] >= 0:
-            x = q[bi[b, BI_QMAP + Q_X]]
-        if bi[b, BI_QMAP + Q_Y] >= 0:
-            y = q[bi[b, BI_QMAP + Q_Y]]
-        poses[b, 0] = x
-        poses[b, 1] = y
+        poses[b, 0], poses[b, 1] = _planar_position(bi, bf, q, b)
         turning = bi[b, BI_QMAP + Q_ANGLE] >= 0
         k0, k1 = 0.0, 0.0
         if turning:
