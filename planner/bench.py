@@ -286,14 +286,19 @@ def contact_steps(quick: bool = False) -> dict:
     until the grasp: the paper's scene (v1 = v2 = 1) run on through the squeeze that follows
     the grasp, one call of CONTACT_SQUEEZE_STEPS; and box_push_3d's straight push
     (dynamic-rigid at the scenario's h and friction directions) timed from its first contact in
-    calls of one control period each, as a planner calls it, with the scenario's polygonal
-    cone (Lemke) and with the exact cone (PGS). Each row: steps, steps with a
+    calls of one control period each, with the scenario's polygonal cone (Lemke) and with the
+    exact cone (PGS), each two ways in turns: as a planner calls it (`planner_propagation`:
+    flattened states, the call's fixed cost about a third of `Rung.rollout`'s) and through
+    `Rung.rollout` (the pipeline's replays; its state and basis table carried from call to
+    call); the two take the same steps (`same_end`: their end states equal, bit for bit, so
+    the propagations' step counts are the rollout's). Each row: steps, steps with a
     contact force, median wall and us per step (`repeat` rounds), and MuJoCo on the same run
     timed in turns with ours (`in_turns`): the paper's scene in its fastest mapping
     (`direct`, the inert palm-triangle pair left out), box_push_3d with MuJoCo's own contact
     model (`peers.build_spatial`), stepped in the same calls."""
     from models.rungs import pgs_rung, rung_for
     from models.scenario import load_scenario
+    from planner.ompl_adapter import flatten, planner_propagation
 
     try:
         from planner import peers
@@ -329,13 +334,28 @@ def contact_steps(quick: bool = False) -> dict:
     start = rung.rollout(box, rung.initial_state(box), u, [first], h, stop_at_outcome=False).state
     calls = int(round(span / period)) // (5 if quick else 1)
 
-    def push(stepper):
+    def push(stepper):  # `Rung.rollout`'s calls, the state (with its basis table) carried from call to call
         state, taken, pushed, pivots, sweeps = start, 0, 0, 0, 0
         for _ in range(calls):
             out = stepper.rollout(box, state, u, [period], h)
             state, taken, pushed = out.state, taken + out.steps, pushed + out.force_steps
             pivots, sweeps = pivots + out.pivots, sweeps + out.sweeps
-        return taken, pushed, pivots, sweeps
+        return taken, pushed, pivots, sweeps, state
+
+    def propagate(step):  # a planner's calls (`planner_propagation`): flattened states, no basis table
+        x, y = flatten(start), np.empty(len(flatten(start)))
+        for _ in range(calls):
+            step(x, u[0], period, y)
+            x, y = y, x
+        return x
+
+    def timed(run):
+        def wall_and_end():
+            t0 = time.perf_counter()
+            end = run()
+            return time.perf_counter() - t0, end
+
+        return wall_and_end
 
     per_call = int(round(period / h))
     spatial = None if peers is None else peers.build_spatial(box, h)
@@ -343,12 +363,19 @@ def contact_steps(quick: bool = False) -> dict:
     theirs = [] if spatial is None else [lambda: peers.timed_run(spatial, u[0], calls * per_call, after=skip, per_call=per_call)]
     polygon = f"dynamic-rigid ({settings.friction_directions}-sided cone, {settings.contact_solver})"
     exact = pgs_rung(rung, exact_cone=True)
+    nq = len(start.q)
     for label, stepper in ((polygon, rung), ("dynamic-rigid (exact cone, pgs)", exact)):
-        walls, (taken, pushed, pivots, sweeps), _ = in_turns(lambda stepper=stepper: push(stepper), theirs, repeat)
-        row = _contact_row(
-            f"box_push_3d, pushing (calls of {period:g} s)", label, h, taken, pushed, float(np.median(walls[:, 0])), pivots, sweeps
-        )
-        rows.append(row | _peer_columns(walls, calls * per_call))
+        # the two ways in turns (and MuJoCo between them): column 0 the planners' calls, then
+        # MuJoCo's, then `Rung.rollout`'s
+        step = planner_propagation(box, stepper, start, h, period)
+        walls, x, ends = in_turns(lambda step=step: propagate(step), [*theirs, timed(lambda stepper=stepper: push(stepper))], repeat)
+        taken, pushed, pivots, sweeps, state = ends[-1]
+        # the same steps both ways: the propagations' counts are the rollout's where their ends are the same
+        same_end = bool(np.array_equal(x[:nq], state.q) and np.array_equal(x[nq : nq + len(state.nu)], state.nu))
+        for how, col in ((f"the planners' propagation, calls of {period:g} s", 0), (f"`Rung.rollout`, calls of {period:g} s", -1)):
+            cols = [col] + ([1] if theirs else [])
+            row = _contact_row(f"box_push_3d, pushing ({how})", label, h, taken, pushed, float(np.median(walls[:, col])), pivots, sweeps)
+            rows.append(row | _peer_columns(walls[:, cols], calls * per_call) | {"same_end": same_end})
     squeezed = _rollout(tri, "dynamic-rigid", 1e-4, 2.0, squeeze, records=2).state  # 0.5 s into the squeeze
     split = [
         _cost_split("two_finger_triangle, squeezing", tri, rung_for(tri, "dynamic-rigid"), squeezed, squeeze[0], 1e-4, quick),
@@ -1011,6 +1038,7 @@ def contact_markdown(contact: dict | None) -> list[str]:
     """The throughput section's contact-dominated runs (`contact_steps`)."""
     if not contact:
         return []
+    same = all(row.get("same_end", True) for row in contact["rows"])
     lines = [
         "### Steps with contact",
         "",
@@ -1018,8 +1046,12 @@ def contact_markdown(contact: dict | None) -> list[str]:
         f"steps where contacts push: medians of {contact['repeat']} rounds, each ours then "
         f"{contact.get('peer') or 'MuJoCo (not installed: not timed)'} on the same run (the paper's scene: the `direct` "
         "mapping, palm-triangle left out; box_push_3d: MuJoCo's own contact model, `peers.build_spatial`, "
-        "stepped in the same calls from the same first contact). Speed: ours / MuJoCo in steps per second, "
-        "the median of the rounds' ratios.",
+        "stepped in the same calls from the same first contact). box_push_3d's push is timed two ways in the same "
+        "rounds, in calls of one control period each: as a planner calls it (`planner.ompl_adapter.planner_propagation`: "
+        "flattened states in and out) and through `Rung.rollout` (as the pipeline replays a plan: a result with "
+        "records, the state and its basis table carried from call to call); the two take the same steps "
+        f"({'their ends equal, bit for bit' if same else 'NOT the same ends: see same_end in the JSON'}), "
+        "against the same MuJoCo rounds. Speed: ours / MuJoCo in steps per second, the median of the rounds' ratios.",
         "",
         "| scene | rung | h | steps | with contact force | contact solve per step | median wall (s) | us/step | MuJoCo us/step "
         "| speed vs MuJoCo |",

@@ -435,6 +435,19 @@ class _Limits:
         return flag if inside and not wound else FLAG_INVALID
 
 
+def _bound_propagation(scenario: Scenario, rung: Rung, sizes, limits: _Limits, h: float):
+    """The planners' compiled propagation (`Rung.propagator`) of the flattened layout `sizes`,
+    its states flagged against `limits`."""
+    return rung.propagator(scenario, h, sizes[:4], limits.low, limits.high, limits.drive_q, limits.windup)
+
+
+def planner_propagation(scenario: Scenario, rung: Rung, start: State, h: float, control_period: float):
+    """What a planner calls once per control (`_Propagator`'s compiled call), built as `plan`
+    builds it from start: (x, u, duration, y) -> the run's `StepStatus` value, x and y
+    flattened states (`flatten`). For timing propagation as planning pays it."""
+    return _bound_propagation(scenario, rung, _layout(scenario, start), _Limits(scenario, start, control_period), h)
+
+
 class _Propagator:
     """OMPL's state propagator: one compiled propagation of the rung per control
     (`Rung.propagator`: the rollout, its outcome and the limits, `_Limits`, as the flag of the
@@ -444,7 +457,7 @@ class _Propagator:
     def __init__(self, scenario: Scenario, rung: Rung, layout: _ControlLayout, limits: _Limits, h: float, reached=None):
         self.layout, self.reached = layout, reached
         self.na = len(scenario.actuated)
-        self.step = rung.propagator(scenario, h, layout.sizes[:4], limits.low, limits.high, limits.drive_q, limits.windup)
+        self.step = _bound_propagation(scenario, rung, layout.sizes, limits, h)
         self.propagations = 0
         self.failures = 0
 

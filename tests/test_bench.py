@@ -49,15 +49,19 @@ def test_throughput_and_scaling_report_every_rung(quick):
     # the runs until the grasp are free flight; the contact rows are steps that push
     assert all(row["contact_steps"] == 0 for row in r["throughput"]["rows"] if row["rung"].startswith("dynamic"))
     contact = r["throughput"]["contact"]["rows"]
-    assert len(contact) == 5 and all(row["contact_steps"] > 0.5 * row["steps"] and row["us_per_step"] > 0 for row in contact)
+    assert len(contact) == 7 and all(row["contact_steps"] > 0.5 * row["steps"] and row["us_per_step"] > 0 for row in contact)
     # each row's contact-solve work: Lemke's rows pivot less than once a step (the warm start holds on most
     # steps) and do not sweep; the push, in calls of one period, not at all (each call's first step guessed
     # from its LCP's q, `models.stepper._basis_guess`); the exact cone's PGS sweeps at least once on every
     # step with contact, and has no pivots
-    *squeeze, push, exact = contact
+    *squeeze, push, push_rollout, exact, exact_rollout = contact
     assert all(row["sweeps_per_step"] == 0 and row["pivots_per_step"] < 1 for row in squeeze)
     assert push["sweeps_per_step"] == 0 and push["pivots_per_step"] == 0
     assert exact["rung"].endswith("(exact cone, pgs)") and exact["pivots_per_step"] == 0 and exact["sweeps_per_step"] >= 1
+    # each push timed two ways, as a planner calls it and through Rung.rollout: the same steps (the same end)
+    for planners, rollout in ((push, push_rollout), (exact, exact_rollout)):
+        assert "the planners' propagation" in planners["scene"] and "`Rung.rollout`" in rollout["scene"]
+        assert planners["same_end"] and rollout["same_end"] and planners["rung"] == rollout["rung"]
     # the cost split of a contact step, at a squeezing and two pushing states: every stage timed, the dynamics
     # step in its three parts (differences of timed runs, floored at 0), which together cost the most
     split = r["throughput"]["contact"]["split"]
