@@ -533,12 +533,19 @@ def _planar_position(bi, bf, q, b):
     return x, y
 
 
+@numba.njit(cache=True, inline="always")
+def _quaternion_angle(z, w):
+    """The angle about z of a base quaternion (w, 0, 0, z): a planar body's theta where it has
+    no angle coordinate."""
+    return 2.0 * np.arctan2(z, w)
+
+
 # without numba's runtime: a per-step call whose array arguments are not reference-counted
 @numba.njit(cache=True, _nrt=False)
 def planar_poses(bi, bf, q, poses):
     """Fill poses (nb, 4) with (x, y, cos theta, sin theta) of every planar body at q."""
     for b in range(bi.shape[0]):
-        theta = 2.0 * np.arctan2(bf[b, BF_QUAT + 3], bf[b, BF_QUAT])
+        theta = _quaternion_angle(bf[b, BF_QUAT + 3], bf[b, BF_QUAT])
         if bi[b, BI_QMAP + Q_ANGLE] >= 0:
             theta = q[bi[b, BI_QMAP + Q_ANGLE]]
         poses[b, 0], poses[b, 1] = _planar_position(bi, bf, q, b)
@@ -577,7 +584,7 @@ def planar_poses_kept(bi, bf, q, poses):
         else:
             k0, k1 = bf[b, BF_QUAT + 3], bf[b, BF_QUAT]
         if not (_same_number(poses[b, 4], k0) and _same_number(poses[b, 5], k1)):
-            theta = k0 if turning else 2.0 * np.arctan2(k0, k1)
+            theta = k0 if turning else _quaternion_angle(k0, k1)
             poses[b, 2] = np.cos(theta)
             poses[b, 3] = np.sin(theta)
             poses[b, 4], poses[b, 5] = k0, k1
