@@ -133,8 +133,9 @@ def _add_plan_parser(sub: argparse._SubParsersAction) -> None:
     plan.add_argument(
         "--time-limit",
         type=float,
-        help="wall-clock cap per rung in seconds (default: the scenario's time_limit); a safety net on top of "
-        "the iteration budget: a plan is reproducible unless a cap ends a search",
+        help="wall-clock cap per rung in seconds, time spent compiling kernels not counted (default: the "
+        "scenario's time_limit); a safety net on top of the iteration budget: a plan is reproducible unless a "
+        "cap ends a search",
     )
     plan.add_argument("--flat", action="store_true", help="plan directly at the top rung with the same budget (the baseline)")
     plan.add_argument("--no-seed-roots", action="store_true", help="replan without rooting trees at the previous plan's states")

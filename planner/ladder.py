@@ -57,6 +57,7 @@ import numpy as np
 from models.rungs import State, rung_for
 from models.scenario import Problem, Scenario, ScenarioError
 from models.task import Outcome, classify, goal_distance
+from planner.clock import planning_clock
 from planner.ompl_adapter import plan_control, plan_geometric, steered_coordinates
 from planner.plan_status import PlanStatus
 from planner.pushing import free_turn, push_reference
@@ -216,9 +217,10 @@ def run_ladder(
     (`iterations` of the rung, else of [ladder], 2000 by default). A rung may also spend the
     iterations the rungs below it left unspent (a replayed or skipped rung spends none): the
     whole ladder never exceeds the sum.
-    time_limit: a wall-clock cap per rung in seconds; None: the scenario's (`time_limit` of
-    the rung, else of [ladder]). A safety net on top of the iterations: time a rung leaves
-    passes up too, and a plan is reproducible unless a cap ends a search.
+    time_limit: a wall-clock cap per rung in seconds, on `planner.clock.planning_clock` (time
+    spent compiling kernels not counted); None: the scenario's (`time_limit` of the rung, else
+    of [ladder]). A safety net on top of the iterations: time a rung leaves passes up too, and
+    a plan is reproducible unless a cap ends a search.
     flat: plan directly at the last rung, with the budget of the whole ladder (the sums of the
     rungs' iterations and time limits): the baseline.
     progress: called as progress(rung, iterations, propagations) while a rung plans.
@@ -301,7 +303,7 @@ class _Budget:
     ladder's is the flat baseline's (iterations, and wall time)."""
 
     def __init__(self):
-        self.allowance, self.deadline = 0, time.perf_counter()
+        self.allowance, self.deadline = 0, planning_clock()
 
     def add(self, iterations: int, seconds: float) -> None:
         self.allowance += iterations
@@ -311,7 +313,7 @@ class _Budget:
         return self.allowance - sum(r.iterations for r in reports)
 
     def seconds(self) -> float:
-        return self.deadline - time.perf_counter()
+        return self.deadline - planning_clock()
 
 
 @dataclass
@@ -678,10 +680,10 @@ def _plan_with_restarts(scenario, rung, start, *, seed: int, iterations: int, ti
     searches = max(1, min(RESTARTS if kwargs.get("guide") is None else 1, iterations))
     # equal shares that sum to the budget (a ceiling each would overspend it by up to searches - 1)
     shares = [iterations // searches + (k < iterations % searches) for k in range(searches)]
-    t0, used = time.perf_counter(), {"propagations": 0, "iterations": 0, "failures": 0}
+    t0, used = planning_clock(), {"propagations": 0, "iterations": 0, "failures": 0}
     plan = None
     for attempt in range(searches):
-        left = None if time_limit is None else max(0.0, time_limit - (time.perf_counter() - t0))
+        left = None if time_limit is None else max(0.0, time_limit - (planning_clock() - t0))
         if plan is not None and left == 0.0:
             return replace(plan, status=PlanStatus.TIMEOUT, **used)
         if plan is not None and kwargs.get("stop") and kwargs["stop"]():

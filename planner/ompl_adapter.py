@@ -21,7 +21,6 @@ is an iteration count, so the same seed gives the same plan.
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -31,6 +30,7 @@ from models.rungs import Rung, State
 from models.scenario import Scenario
 from models.stepper import StepStatus
 from models.task import goal_distance
+from planner.clock import planning_clock
 from planner.plan_status import PlanStatus
 
 #: Distance weight of everything but q in the state metric.
@@ -182,17 +182,17 @@ def _projection_coordinates(scenario: Scenario, most: int = 3) -> list[int]:
 
 def _termination(ss, iterations: int, time_limit: float | None, progress=None, stop=None):
     """OMPL's termination condition for both planners, and what it records: stop at an exact
-    solution, after `iterations` iterations, or past the wall-clock cap. OMPL asks before every
-    iteration, so the count is of the iterations it let run; progress(count) is called every
-    PROGRESS_EVERY of them. stop() -> True (Ctrl-C) ends the search too. ``done["ended"]`` is
+    solution, after `iterations` iterations, or past the wall-clock cap (`planning_clock`).
+    OMPL asks before every iteration, so the count is of the iterations it let run;
+    progress(count) is called every PROGRESS_EVERY of them. stop() -> True (Ctrl-C) ends the search too. ``done["ended"]`` is
     why the condition ended the search (TIMEOUT, BUDGET_EXHAUSTED, STOPPED; None: it did not)."""
     done = {"iterations": 0, "ended": None}
-    deadline = None if time_limit is None else time.perf_counter() + time_limit
+    deadline = None if time_limit is None else planning_clock() + time_limit
 
     def finished() -> bool:
         if ss.haveExactSolutionPath():
             return True
-        if deadline is not None and time.perf_counter() > deadline:
+        if deadline is not None and planning_clock() > deadline:
             done["ended"] = PlanStatus.TIMEOUT
             return True
         if done["iterations"] >= iterations:
@@ -247,7 +247,8 @@ def plan_control(
     sampling hook the 2.0.1 bindings leave: OMPL-CRIB section 5); a drawn guide state is a
     direction to grow toward, never taken for a goal state. KPIECE1 does not sample toward
     goals, so the guide does not bias it.
-    time_limit: a wall-clock cap on top of the iteration budget (then not reproducible).
+    time_limit: a wall-clock cap on top of the iteration budget (then not reproducible), on
+    `planning_clock` (compiling kernels does not count).
     progress: called as progress(iterations, propagations) every PROGRESS_EVERY iterations.
     stop: a function -> True (Ctrl-C) that ends the search early.
     reached: q -> bool, a subgoal: a propagation ending where it is True ends the search as the

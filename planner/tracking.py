@@ -13,7 +13,6 @@ same states) under the rung.
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -21,6 +20,7 @@ import numpy as np
 from models.rungs import Rung, State, compiled
 from models.scenario import Scenario
 from models.task import Outcome
+from planner.clock import planning_clock
 from planner.ompl_adapter import control_bounds, plan_control, steered_coordinates
 
 #: A tracked state stays within this much of the reference (m for positions, rad for angles)
@@ -226,11 +226,11 @@ def track(
     follower = _Follower(scenario, rung, reference, h, period, rng, free)
     run = Tracked(start)
     follower.follow(run, 0.0)
-    deadline = None if time_limit is None else time.perf_counter() + time_limit
+    deadline = None if time_limit is None else planning_clock() + time_limit
     while run.lost and run.repairs < repairs and not (stop and stop()):
         resumed = None
         for horizon in REPAIR_HORIZONS:
-            left = None if deadline is None else deadline - time.perf_counter()
+            left = None if deadline is None else deadline - planning_clock()
             budget = min(REPAIR_ITERATIONS, iterations - run.repair_iterations)
             if (left is not None and left <= 0.0) or budget <= 0 or (stop and stop()):
                 break
