@@ -343,7 +343,8 @@ def contact_steps(quick: bool = False) -> dict:
         return taken, pushed, pivots, sweeps, state
 
     def propagate(step):  # a planner's calls (`planner_propagation`): flattened states, no basis table
-        x, y = flatten(start), np.empty(len(flatten(start)))
+        x = flatten(start)
+        y = np.empty_like(x)
         for _ in range(calls):
             step(x, u[0], period, y)
             x, y = y, x
@@ -363,15 +364,15 @@ def contact_steps(quick: bool = False) -> dict:
     theirs = [] if spatial is None else [lambda: peers.timed_run(spatial, u[0], calls * per_call, after=skip, per_call=per_call)]
     polygon = f"dynamic-rigid ({settings.friction_directions}-sided cone, {settings.contact_solver})"
     exact = pgs_rung(rung, exact_cone=True)
-    nq = len(start.q)
     for label, stepper in ((polygon, rung), ("dynamic-rigid (exact cone, pgs)", exact)):
         # the two ways in turns (and MuJoCo between them): column 0 the planners' calls, then
         # MuJoCo's, then `Rung.rollout`'s
         step = planner_propagation(box, stepper, start, h, period)
         walls, x, ends = in_turns(lambda step=step: propagate(step), [*theirs, timed(lambda stepper=stepper: push(stepper))], repeat)
         taken, pushed, pivots, sweeps, state = ends[-1]
-        # the same steps both ways: the propagations' counts are the rollout's where their ends are the same
-        same_end = bool(np.array_equal(x[:nq], state.q) and np.array_equal(x[nq : nq + len(state.nu)], state.nu))
+        # the same steps both ways: the propagations' counts are the rollout's where their ends (the
+        # flattened states but the propagation's flag) are the same
+        same_end = bool(np.array_equal(x[:-1], flatten(state)[:-1]))
         for how, col in ((f"the planners' propagation, calls of {period:g} s", 0), (f"`Rung.rollout`, calls of {period:g} s", -1)):
             cols = [col] + ([1] if theirs else [])
             row = _contact_row(f"box_push_3d, pushing ({how})", label, h, taken, pushed, float(np.median(walls[:, col])), pivots, sweeps)
