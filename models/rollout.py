@@ -193,6 +193,14 @@ def _system_matrix_at(bi, bf, q, eps, h, v_index, kp, kd, max_force, A, R, I):
     _system_matrix_into(bi, bf, q, eps, h, v_index, kp, kd, max_force, A, R, I)
 
 
+@numba.njit(cache=True)
+def warm_period_steps(warm_period, h):
+    """The steps of a warm period (`models.stepper.Model.warm_period`) at step h: a rollout drops
+    its warm starts at every step whose index from t = 0 is a multiple of it; 0: never (no
+    period, or one shorter than half a step)."""
+    return int(np.round(warm_period / h)) if warm_period > 0.0 else 0
+
+
 @numba.njit(cache=True, _nrt=False, error_model="numpy")  # a call without numba's runtime: no array argument reference-counted
 def _keep_warm(spatial, nc, c_slot, p_n, p_t, c_t, c_o, warm_n, warm_t, warm_w, warm_slots, n_warm):
     """PGS warm start for the next step: this step's impulses by slot (the previous step's
@@ -551,7 +559,7 @@ def rollout_kernel(
     if basis.shape[0] != slots + v_index.shape[0] or basis.shape[1] != 3 + directions:
         basis = cold
     # the warm starts are dropped at the steps that start a period of model.warm_period (Model)
-    warm_every = int(np.round(model.warm_period / h)) if model.warm_period > 0.0 else 0
+    warm_every = warm_period_steps(model.warm_period, h)
     system = _start_system(S, D, model, h, q)
     A, Ainv, M_const, rhs_const = system.A, system.Ainv, system.M_const, system.rhs_const
     R3, I3 = np.empty((3, 3)), np.empty((3, 3))  # scratch of A's rebuild where it changes with q

@@ -15,6 +15,7 @@ Every rung has the same interface:
 
 from __future__ import annotations
 
+import math
 import time
 from collections import OrderedDict
 from dataclasses import dataclass, field, replace
@@ -27,7 +28,7 @@ from models.contact import CONTACT_MARGIN, has_script, pair_distance_buffers, pa
 from models.family import FAMILY
 from models.kinematics import PI_INERT, SceneData, compile_scene, kernel_array
 from models.predicates import OP_TOUCH, Program, compile_predicate, evaluate_with
-from models.rollout import bind, propagate_kernel, rollout_bound, rollout_kernel
+from models.rollout import bind, propagate_kernel, rollout_bound, rollout_kernel, warm_period_steps
 from models.scenario import Scenario
 from models.stepper import (
     LAW_ACTIVE,
@@ -38,6 +39,7 @@ from models.stepper import (
     LAW_RATE,
     LAW_TARGET,
     LEMKE,
+    SOLVER_LEMKE,
     Drives,
     Model,
     Solver,
@@ -415,22 +417,27 @@ class Rung:
         """`rollout` (stopping at an outcome) in compiled calls of about `chunk_s` seconds of
         wall time each, so that a long run can report progress and be stopped between them:
         progress(steps_done, steps_total, wall_s) is called after every chunk and may raise
-        (KeyboardInterrupt) to stop the run. The result equals the one-call rollout's (with
-        the Lemke solver; PGS warm starts restart at a chunk boundary): chunks end on
-        recorded steps, an outcome that only the end-of-call classification of a chunk found
-        is left to the next chunk's first step (as one call would do), and the records are
-        joined and capped as one call's. t0: as in `rollout` (each chunk starts where the time
-        has got to, so scripted obstacles move on)."""
+        (KeyboardInterrupt) to stop the run. The result equals the one-call rollout's, bit for
+        bit, whatever the machine's speed: chunks end on recorded steps; with PGS or auto, whose
+        warm starts (PGS's impulses, auto's switch to Lemke) a call starts without, also on
+        steps where the model drops them anyway (a warm period's first, `_chunk_ends`; Lemke's
+        basis crosses calls in the State); an outcome that only the end-of-call classification
+        of a chunk found is left to the next chunk's first step (as one call would do), and the
+        records are joined and capped as one call's. t0: as in `rollout` (each chunk starts
+        where the time has got to, so scripted obstacles move on)."""
         durations = np.atleast_1d(np.asarray(durations, float))
         controls = np.asarray(controls, float).reshape(len(durations), len(scenario.actuated))
         per_control = [int(np.round(d / h)) for d in durations]
         total = sum(per_control)
         record_every = max(1, int(np.round(durations.sum() / h)) // max(max_records - 2, 1))
+        cold_starts = self.model is not None and self.solver.method != SOLVER_LEMKE
+        warm_every = warm_period_steps(self.model.warm_period, h) if cold_starts else 0
+        first_end, every = _chunk_ends(record_every, warm_every, int(np.round(t0 / h)))
         results: list[RolloutResult] = []
         k, used, done, wall = 0, 0, 0, 0.0  # control index, its steps taken, steps taken
-        target = max(record_every, first_chunk // record_every * record_every)
+        target = _chunk_length(done, first_chunk, first_end, every)
         while True:
-            # the next chunk: `target` steps (a multiple of record_every) over the controls left
+            # the next chunk: `target` steps (to a chunk end, `_chunk_ends`) over the controls left
             chunk_u, chunk_d, n = [], [], 0
             while k < len(per_control) and n < target:
                 take = min(per_control[k] - used, target - n)
@@ -468,7 +475,7 @@ class Rung:
             if last or stopped:
                 break
             rate = out.steps / max(out.wall_s, 1e-6)
-            target = max(record_every, int(rate * chunk_s) // record_every * record_every)
+            target = _chunk_length(done, int(rate * chunk_s), first_end, every)
         return _joined(results, max_records)
 
     def step(self, scenario: Scenario, state: State, control: np.ndarray, h: float) -> RolloutResult:
@@ -485,6 +492,29 @@ class Rung:
             if psi < -tolerance:
                 return False
         return True
+
+
+def _chunk_ends(record_every: int, warm_every: int, first_step: int) -> tuple[int, int]:
+    """Where `Rung.rollout_chunked` may end a chunk, in steps from its start: the first such
+    step and their spacing. A recorded step (a multiple of record_every); where warm_every > 0,
+    also one that starts a warm period (its index from t = 0, first_step + steps, a multiple of
+    warm_every: the rollout drops its warm starts there, so a new call starting there takes the
+    same steps), if any recorded step does (else recorded steps only)."""
+    if warm_every > 0:
+        every = math.lcm(record_every, warm_every)
+        for first in range(record_every, every + 1, record_every):
+            if (first_step + first) % warm_every == 0:
+                return first, every
+    return record_every, record_every
+
+
+def _chunk_length(done: int, wanted: int, first_end: int, every: int) -> int:
+    """The steps of the chunk after `done` steps (0 or a chunk end, `_chunk_ends`): to the last
+    chunk end at most `wanted` steps on, or the next one if none is."""
+    end = first_end if done < first_end else done + every
+    if done + wanted > end:
+        end += (done + wanted - end) // every * every
+    return end - done
 
 
 def _joined(results: list[RolloutResult], max_records: int) -> RolloutResult:

@@ -328,6 +328,59 @@ def test_a_chunked_rollout_equals_one_call():
     assert outcomes == ["goal", "unsafe", "goal", "none"]
 
 
+def test_a_chunked_rollout_with_pgs_equals_one_call_wherever_its_chunks_would_end():
+    """PGS's warm starts (and auto's switch to Lemke) live within a call: chunks that ended off
+    a warm period's first step made `ladder simulate`'s result depend on the machine's speed,
+    which sizes its chunks (the push's q up to 6e-5 m apart). They end on those steps now."""
+    from dataclasses import replace
+
+    from models.rungs import pgs_rung, rung_for
+    from models.scenario import load_scenario
+    from models.stepper import contact_solver
+
+    scenario = load_scenario(SCENARIOS / "box_push_3d.toml")
+    u = np.array([scenario.spec.task.policy.speeds.get(name, 0.0) for name in scenario.actuated])
+    controls, durations, h = np.array([u, 0.5 * u]), np.array([0.7, 0.6]), 1e-3
+    base = rung_for(scenario, "dynamic-rigid")
+    rungs = {"pgs": pgs_rung(base), "exact cone": pgs_rung(base, exact_cone=True), "auto": replace(base, solver=contact_solver("auto"))}
+    for name, rung in rungs.items():
+        start = rung.initial_state(scenario)
+        for t0 in (0.0, 0.05):  # warm periods (0.1 s) starting at step 0, and 50 steps in
+            whole = rung.rollout(scenario, start, controls, durations, h, t0=t0)
+            # (the exact cone's run from t0 = 0.05 ends at its 562nd step, CONTACT_NOT_CONVERGED:
+            # a chunked run must end there too)
+            assert whole.force_steps > 500 and whole.sweeps > 0, name
+            for first_chunk in (1, 7, 250):  # chunks wanted of 1, 7 and 250 steps, then of 0
+                chunked = rung.rollout_chunked(scenario, start, controls, durations, h, chunk_s=0.0, first_chunk=first_chunk, t0=t0)
+                what = (name, t0, first_chunk)
+                assert (chunked.status, chunked.steps, chunked.sweeps, chunked.lcp_solves) == (
+                    whole.status,
+                    whole.steps,
+                    whole.sweeps,
+                    whole.lcp_solves,
+                ), what
+                assert np.array_equal(whole.state.q, chunked.state.q) and np.array_equal(whole.state.nu, chunked.state.nu), what
+                assert np.array_equal(whole.trajectory, chunked.trajectory), what
+
+
+def test_chunk_ends_fall_on_recorded_steps_that_start_a_warm_period():
+    from models.rungs import _chunk_ends, _chunk_length
+
+    assert _chunk_ends(40, 0, 0) == (40, 40)  # Lemke, or no warm period: every recorded step
+    assert _chunk_ends(40, 100, 0) == (200, 200)
+    assert _chunk_ends(40, 100, 60) == (40, 200)  # step 60 + 40 starts a period
+    assert _chunk_ends(40, 100, 50) == (40, 40)  # no recorded step does: recorded steps only
+    assert _chunk_ends(1, 100, 50) == (50, 100)
+    first, every = _chunk_ends(1, 100, 50)
+    assert [_chunk_length(done, wanted, first, every) for done, wanted in [(0, 1), (0, 249), (50, 0), (50, 250), (150, 99)]] == [
+        50,
+        150,
+        100,
+        200,
+        100,
+    ]
+
+
 def test_simulate_says_how_many_steps_up_front():
     result = ladder("simulate", TRIANGLE, "--model", "kinematic", "--param", "v1=0.8")
     assert result.returncode == 0, result.stderr
