@@ -65,8 +65,8 @@ PLANNING ?= two_finger_triangle,four_finger_grasp,box_push_3d,box_rotate_3d
 bench-doc: $(VENV)/.installed
 	$(VENV)/bin/ladder bench --planning $(PLANNING) --out docs/bench --doc docs/benchmarks.md
 
-# numba caches compiled kernels beside the sources and does not notice when a kernel's
-# callee in another module changed: clear them after editing models/ by hand.
+# numba's cache of the compiled kernels, beside the sources (stamped by all of models/, so an
+# edit there recompiles them by itself: models/kernel_cache.py): delete it.
 clean-cache:
 	find models -name '*.nbi' -delete -o -name '*.nbc' -delete
 

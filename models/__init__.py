@@ -9,3 +9,9 @@ from numba.core.errors import NumbaPerformanceWarning as _NumbaPerformanceWarnin
 
 # Small dense products on non-contiguous views are fine here; keep users' terminals clean.
 _warnings.filterwarnings("ignore", category=_NumbaPerformanceWarning)
+
+# Every kernel's cache entry is stamped with the whole package's digest (numba stamps it with
+# its own module's only, and missed edits to the helpers it inlines): before any kernel exists.
+from models import kernel_cache as _kernel_cache  # noqa: E402
+
+_kernel_cache.install()
