@@ -11,7 +11,10 @@ before (beside the sources, or in `NUMBA_CACHE_DIR` where it is set).
 
 `install()` (called by `models/__init__`, before any kernel is defined) puts the locator first
 in numba's `CACHE_LOCATOR_CLASSES`; kernels outside the stamped packages keep numba's own
-locators and stamps.
+locators and stamps. A kernel takes its locator when it is defined, at its module's import:
+numba re-reads its whole configuration from the environment when a NUMBA_ variable changes in
+the process, which would drop the setting for modules imported after such a change (none of
+ladder's sets one).
 """
 
 from __future__ import annotations
