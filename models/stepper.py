@@ -149,7 +149,7 @@ _STEP_MESSAGES = {
     StepStatus.BLOCKED: "kinematic model: the commanded motion would penetrate something nothing can push away",
     StepStatus.CONTACT_NOT_CONVERGED: (
         "PGS reached its sweep limit before the contact impulses met its tolerance; raise max_sweeps, "
-        "loosen the tolerance, or use the lemke (or auto) contact solver"
+        "loosen the tolerance, or use the lemke (or auto) contact solver, on the polygonal cone (the exact cone is PGS's only)"
     ),
 }
 
