@@ -33,6 +33,12 @@ NUMBA_LOCATORS = ("UserProvidedCacheLocator", "InTreeCacheLocator", "UserWideCac
 
 
 @functools.cache
+def _package_of(py_file: str) -> Path:
+    """The directory of a kernel's module (resolved once per module, not once per kernel)."""
+    return Path(py_file).resolve().parent
+
+
+@functools.cache
 def package_stamp(package: Path) -> bytes:
     """A digest of the package's modules (the name and bytes of every .py file in it), read
     once per process."""
@@ -50,7 +56,7 @@ def _stamped(base: type) -> type:
 
     class Stamped(base):
         def get_source_stamp(self):
-            return package_stamp(Path(self._py_file).resolve().parent)
+            return package_stamp(_package_of(self._py_file))
 
     Stamped.__name__ = Stamped.__qualname__ = f"Package{base.__name__}"
     return Stamped
@@ -68,7 +74,7 @@ class PackageCacheLocator:
 
     @classmethod
     def from_function(cls, py_func, py_file):
-        if Path(py_file).resolve().parent not in PACKAGES:
+        if _package_of(py_file) not in PACKAGES:
             return None
         for locator in _LOCATORS:
             found = locator.from_function(py_func, py_file)
@@ -84,4 +90,4 @@ def install() -> None:
     name = f"{__name__}.{PackageCacheLocator.__name__}"
     given = [c.strip() for c in config.CACHE_LOCATOR_CLASSES.split(",") if c.strip()]
     if name not in given:
-        config.CACHE_LOCATOR_CLASSES = ",".join([*(given or []), name, *([] if given else NUMBA_LOCATORS)])
+        config.CACHE_LOCATOR_CLASSES = ",".join([*given, name, *([] if given else NUMBA_LOCATORS)])

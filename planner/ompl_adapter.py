@@ -184,8 +184,9 @@ def _termination(ss, iterations: int, time_limit: float | None, progress=None, s
     """OMPL's termination condition for both planners, and what it records: stop at an exact
     solution, after `iterations` iterations, or past the wall-clock cap (`planning_clock`).
     OMPL asks before every iteration, so the count is of the iterations it let run;
-    progress(count) is called every PROGRESS_EVERY of them. stop() -> True (Ctrl-C) ends the search too. ``done["ended"]`` is
-    why the condition ended the search (TIMEOUT, BUDGET_EXHAUSTED, STOPPED; None: it did not)."""
+    progress(count) is called every PROGRESS_EVERY of them. stop() -> True (Ctrl-C) ends the
+    search too. ``done["ended"]`` is why the condition ended the search (TIMEOUT,
+    BUDGET_EXHAUSTED, STOPPED; None: it did not)."""
     done = {"iterations": 0, "ended": None}
     deadline = None if time_limit is None else planning_clock() + time_limit
 
