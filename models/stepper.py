@@ -78,6 +78,8 @@ from models.kinematics import (
     quat_mul_scalars,
 )
 from models.lcp import (
+    LCP_REGULARIZATION,
+    LCP_REGULARIZATION_STEPS,
     STATUS_SOLVED,
     STATUS_SOLVED_INACCURATE,
     LemkeWork,
@@ -99,10 +101,6 @@ ZERO_COLUMN = 1e-12
 PIVOTS_PER_VARIABLE = 50
 #: An LCP solution is accepted while its recomputed residual is below this.
 LCP_TOLERANCE = 1e-7
-#: Relative diagonal added to the contact rows when Lemke fails on a singular (redundant) LCP;
-#: each further retry adds 100 times more, up to LCP_REGULARIZATION * 100**(steps - 1) = 1e-5.
-LCP_REGULARIZATION = 1e-9
-LCP_REGULARIZATION_STEPS = 3
 #: A step's LCP is first tried on the previous step's complementary basis (`basis_table`); that
 #: point is accepted when its recomputed natural-map residual (on the LCP scaled to max |M| = 1)
 #: is at most this (1e3 below LCP_TOLERANCE, what the step accepts of a cold solve); else Lemke
@@ -149,7 +147,8 @@ _STEP_MESSAGES = {
     StepStatus.BLOCKED: "kinematic model: the commanded motion would penetrate something nothing can push away",
     StepStatus.CONTACT_NOT_CONVERGED: (
         "PGS reached its sweep limit before the contact impulses met its tolerance; raise max_sweeps, "
-        "loosen the tolerance, or use the lemke (or auto) contact solver, on the polygonal cone (the exact cone is PGS's only)"
+        "loosen the tolerance, or use the lemke (or auto) contact solver, on the polygonal cone (the exact cone is PGS's only, "
+        "and Lemke on polygons aligned with its friction did not solve it either)"
     ),
 }
 
@@ -1018,7 +1017,7 @@ def _pgs_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, d
     )
     if r.status != PgsStatus.CONVERGED:
         bad = StepStatus.CONTACT_NOT_CONVERGED.value if r.status == PgsStatus.NOT_CONVERGED else StepStatus.NON_FINITE.value
-        return StepResult(q, nu, q_ref, delta_n, delta_t, bad, 0, r.residual, r.unknowns, r.p_n, r.p_t, r.sweeps, basis)
+        return StepResult(q, nu, q_ref, delta_n, delta_t, bad, r.pivots, r.residual, r.unknowns, r.p_n, r.p_t, r.sweeps, basis)
     delta_n_new, delta_t_new = delta_n, delta_t
     if model.compliant:
         active = r.active
@@ -1031,9 +1030,21 @@ def _pgs_step(model, solver, drives, tables, system, h, q, nu, q_ref, delta_n, d
         delta_n_new, delta_t_new = _deformations(h, tables.pf, contacts.pair, contacts.slot, active, pa, ta, delta_n, delta_t)
     q_new, bad = _integrate_checked(bi, model.theta, h, q, nu, r.nu)
     if bad != StepStatus.OK:
-        return StepResult(q, nu, q_ref, delta_n, delta_t, bad, 0, r.residual, r.unknowns, r.p_n, r.p_t, r.sweeps, basis)
+        return StepResult(q, nu, q_ref, delta_n, delta_t, bad, r.pivots, r.residual, r.unknowns, r.p_n, r.p_t, r.sweeps, basis)
     return StepResult(
-        q_new, r.nu, q_ref_new, delta_n_new, delta_t_new, StepStatus.OK.value, 0, r.residual, r.unknowns, r.p_n, r.p_t, r.sweeps, basis
+        q_new,
+        r.nu,
+        q_ref_new,
+        delta_n_new,
+        delta_t_new,
+        StepStatus.OK.value,
+        r.pivots,
+        r.residual,
+        r.unknowns,
+        r.p_n,
+        r.p_t,
+        r.sweeps,
+        basis,
     )
 
 

@@ -261,6 +261,74 @@ def test_the_push_warm_starts_pgs_although_the_pushers_tangent_basis_flips(exact
     assert out.sweeps <= 10 + 1.2 * 499  # the cold first step, then the warm ones
 
 
+#: box_push_3d's straight push with the exact cone from t0 = 0.05 (the policy's speeds, one call,
+#: default PGS), the state its 563rd step starts from: q, nu and the drives' references. There
+#: the box's four corners slide on the table, coplanar, and their approach terms do not fit a
+#: plane exactly (by 1e-9 of w / G_nn), so the exact solution lifts a corner and moves load
+#: along the corners' nearly workless squeeze, where PGS creeps: its residual stays at 1.0025e-6
+#: for thousands of sweeps and passes 1e-6 after 8,370 (docs/measurements.md).
+CREEP_STATE = (
+    [0.04221830203735205, 1.9302772390866238e-11, 0.049999999993724606, 1.0, -4.839046169054608e-13, -7.271546884596125e-11,
+     9.108733238349016e-11, -0.08778169796236882, -4.980849106048231e-13],
+    [0.20000375906524992, 8.824795353622277e-11, -5.247362397711149e-09, 1.6917119840187866e-09, -1.4731508421390428e-07,
+     1.2251314713543447e-09, 0.20000375604606652, -3.426480042453543e-11],
+    [-0.08759999999999679, 0.0],
+)  # fmt: skip
+
+
+def _push_table_friction(sc, out):
+    """The table's force on the box in a rollout's last step: (friction along the table, the
+    normal force), the friction's x component signed against the box's velocity (> 0: opposing)."""
+    table = next(k for k, pair in enumerate(sc.pairs) if {pair.body_a, pair.body_b} == {"table", "box"})
+    on_box = 1.0 if sc.pairs[table].body_b == "box" else -1.0  # (the wrench is on the pair's second body)
+    force = on_box * out.pair_wrench[table]
+    return np.hypot(force[0], force[1]), abs(force[2]), -force[0] * np.sign(out.state.nu[sc.velocities.index("box.x")])
+
+
+def test_where_pgs_creeps_the_exact_cone_pivots_on_polygons_aligned_with_its_friction():
+    """At `CREEP_STATE` PGS does not converge within its 1000 sweeps. The step is then solved
+    by Lemke on polygons turned to put a vertex on each contact's friction as PGS left it
+    (`aligned_lemke_into`, its pivots counted), kept because the exact cone's own residual
+    passes: the step is ok, and the table's friction on the sliding box is exactly mu times its
+    normal force, against its motion (eq. 4; the 8-sided polygon gives that only along a
+    vertex). Before, the step ended the push with contact_not_converged."""
+    sc = load_scenario(SCENARIOS / "box_push_3d.toml")
+    rung = pgs_rung(rung_for(sc, "dynamic-rigid"), exact_cone=True)
+    q, nu, q_ref = (np.array(a) for a in CREEP_STATE)
+    start = replace(rung.initial_state(sc), q=q, nu=nu, q_ref=q_ref)
+    u = np.array([[sc.spec.task.policy.speeds.get(name, 0.0) for name in sc.actuated]])
+    out = rung.rollout(sc, start, u, [H], H, stop_at_outcome=False)
+    assert out.status == "ok" and out.steps == 1
+    assert out.sweeps == 1000 and out.pivots > 0  # PGS ran out, the pivoting solved it
+    assert out.max_residual <= PGS_TOLERANCE
+    friction, normal, opposing = _push_table_friction(sc, out)
+    mu = next(pair.mu for pair in sc.pairs if {pair.body_a, pair.body_b} == {"table", "box"})
+    assert friction == pytest.approx(mu * normal, rel=1e-6) and opposing > 0
+
+
+def test_the_exact_cones_pivoting_solves_the_push_wherever_pgs_stops_short():
+    """The same pivoting from PGS's iterate after a single sweep (max_sweeps = 1), at every step
+    of 0.2 s of box_push_3d's push, one call a step (so PGS starts cold each time): every step
+    ends within the tolerance, and at every step that pivoted the table's friction on the
+    sliding box is exactly mu times its normal force, against its motion."""
+    sc = load_scenario(SCENARIOS / "box_push_3d.toml")
+    base = rung_for(sc, "dynamic-rigid")
+    rung = replace(pgs_rung(base, exact_cone=True), solver=contact_solver("pgs", max_sweeps=1))
+    mu = next(pair.mu for pair in sc.pairs if {pair.body_a, pair.body_b} == {"table", "box"})
+    u = np.array([[sc.spec.task.policy.speeds.get(name, 0.0) for name in sc.actuated]])
+    state = base.rollout(sc, base.initial_state(sc), u, [0.4], H, stop_at_outcome=False).state
+    pivoted = 0
+    for _ in range(200):
+        out = rung.rollout(sc, state, u, [H], H, stop_at_outcome=False)
+        assert out.status == "ok" and out.steps == 1 and out.max_residual <= PGS_TOLERANCE, (out.status, out.max_residual)
+        if out.pivots > 0:
+            pivoted += 1
+            friction, normal, opposing = _push_table_friction(sc, out)
+            assert friction == pytest.approx(mu * normal, rel=1e-6) and opposing > 0
+        state = out.state
+    assert pivoted > 100
+
+
 @pytest.mark.parametrize("d", [3, 4, 8])
 def test_polygon_minimiser_satisfies_its_variational_inequality(d):
     rng = np.random.default_rng(d)
