@@ -1001,22 +1001,22 @@ def aligned_lemke_into(
         if fric[k]:
             first[k] = n + fi * d
             fi += 1
-    # the alignment from PGS's iterate: its slips from v
+    # the impulses by contact, PGS's iterate to align the first round with
     x = np.zeros(3 * n)
     for k in range(n):
         x[3 * k] = p_n[k]
         x[3 * k + 1] = f[k, 0]
         x[3 * k + 2] = f[k, 1]
     vel = np.empty(3 * n)
-    for i in range(3 * n):
-        vel[i] = r0[i]
-        for e in range(3 * n):
-            vel[i] += D[i, e] * x[e]
     dc, ds = np.empty((n, d)), np.empty((n, d))
     M, q, scaling = np.empty((m, m)), np.empty(m), np.empty(m)
     pn_try, f_try, v_try = np.empty(n), np.empty((n, 2)), np.empty(nv)
     pivots = 0
     for _ in range(ALIGNED_ROUNDS):
+        for i in range(3 * n):  # the frame velocities at x (PGS's iterate, then the last candidate)
+            vel[i] = r0[i]
+            for e in range(3 * n):
+                vel[i] += D[i, e] * x[e]
         for k in range(n):
             if fric[k]:
                 c, s = _aligned_direction(x[3 * k + 1], x[3 * k + 2], vel[3 * k + 1], vel[3 * k + 2], mu[k] * x[3 * k])
@@ -1061,23 +1061,22 @@ def aligned_lemke_into(
             q[i] *= scaling[i]
             for e in range(m):
                 M[i, e] *= scaling[i] * scaling[e]
-        z, w, status, piv = lemke_kernel(M, q, DEFAULT_LEMKE_PIVOTS_PER_VARIABLE * (m + 1))
-        pivots += piv
         added = 0.0
-        for retry in range(LCP_REGULARIZATION_STEPS):
-            if status == STATUS_SOLVED or status == STATUS_SOLVED_INACCURATE:
-                break
-            target = LCP_REGULARIZATION * 100.0**retry  # (relative: the diagonal is 1)
-            for i in range(rows):
-                M[i, i] += target - added
-            added = target
+        for retry in range(LCP_REGULARIZATION_STEPS + 1):
+            if retry > 0:  # a singular LCP: regularized (relative: the diagonal is 1)
+                target = LCP_REGULARIZATION * 100.0 ** (retry - 1)
+                for i in range(rows):
+                    M[i, i] += target - added
+                added = target
             z, w, status, piv = lemke_kernel(M, q, DEFAULT_LEMKE_PIVOTS_PER_VARIABLE * (m + 1))
             pivots += piv
+            if status == STATUS_SOLVED or status == STATUS_SOLVED_INACCURATE:
+                break
         if status != STATUS_SOLVED and status != STATUS_SOLVED_INACCURATE:
             break
         for i in range(m):
             z[i] *= scaling[i]
-        # the candidate's impulses, nu+ and frame velocities
+        # the candidate's impulses and nu+
         for k in range(n):
             pn_try[k] = z[k]
             f0 = 0.0
@@ -1092,10 +1091,6 @@ def aligned_lemke_into(
             v_try[c] = nu_free[c]
             for e in range(3 * n):
                 v_try[c] += Y[e, c] * x[e]
-        for i in range(3 * n):
-            vel[i] = r0[i]
-            for e in range(3 * n):
-                vel[i] += D[i, e] * x[e]
         big_impulse = _largest_impulse(n, scale, pn_try, f_try)
         disk = base_c[:0]  # (no polygon: the exact cone's disk)
         residual = _residual(n, True, cdof, cm, jn, jt, jo, gnn, g00, g01, g11, comp, bn, bt, mu, fric, pn_try, f_try, v_try, disk, disk)

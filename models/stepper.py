@@ -78,6 +78,7 @@ from models.kinematics import (
     quat_mul_scalars,
 )
 from models.lcp import (
+    DEFAULT_LEMKE_PIVOTS_PER_VARIABLE,
     LCP_REGULARIZATION,
     LCP_REGULARIZATION_STEPS,
     STATUS_SOLVED,
@@ -97,8 +98,8 @@ from models.lcp import (
 QUASISTATIC_INERTIA = 1e-6
 #: A contact whose Jacobian column is below this does not couple to any free DOF.
 ZERO_COLUMN = 1e-12
-#: Lemke pivots allowed per LCP variable.
-PIVOTS_PER_VARIABLE = 50
+#: Lemke pivots allowed per LCP variable (the solver's own default).
+PIVOTS_PER_VARIABLE = DEFAULT_LEMKE_PIVOTS_PER_VARIABLE
 #: An LCP solution is accepted while its recomputed residual is below this.
 LCP_TOLERANCE = 1e-7
 #: A step's LCP is first tried on the previous step's complementary basis (`basis_table`); that

@@ -281,10 +281,15 @@ CREEP_STATE = (
 COULOMB_REL = 4 * PGS_TOLERANCE
 
 
+def _table_box(sc):
+    """The index of box_push_3d's table-box contact pair."""
+    return next(k for k, pair in enumerate(sc.pairs) if {pair.body_a, pair.body_b} == {"table", "box"})
+
+
 def _push_table_friction(sc, out):
     """The table's force on the box in a rollout's last step: (friction along the table, the
     normal force), the friction's x component signed against the box's velocity (> 0: opposing)."""
-    table = next(k for k, pair in enumerate(sc.pairs) if {pair.body_a, pair.body_b} == {"table", "box"})
+    table = _table_box(sc)
     on_box = 1.0 if sc.pairs[table].body_b == "box" else -1.0  # (the wrench is on the pair's second body)
     force = on_box * out.pair_wrench[table]
     return np.hypot(force[0], force[1]), abs(force[2]), -force[0] * np.sign(out.state.nu[sc.velocities.index("box.x")])
@@ -307,7 +312,7 @@ def test_where_pgs_creeps_the_exact_cone_pivots_on_polygons_aligned_with_its_fri
     assert out.sweeps == 1000 and out.pivots > 0  # PGS ran out, the pivoting solved it
     assert out.max_residual <= PGS_TOLERANCE
     friction, normal, opposing = _push_table_friction(sc, out)
-    mu = next(pair.mu for pair in sc.pairs if {pair.body_a, pair.body_b} == {"table", "box"})
+    mu = sc.pairs[_table_box(sc)].mu
     assert friction == pytest.approx(mu * normal, rel=COULOMB_REL) and opposing > 0
 
 
@@ -319,7 +324,7 @@ def test_the_exact_cones_pivoting_solves_the_push_wherever_pgs_stops_short():
     sc = load_scenario(SCENARIOS / "box_push_3d.toml")
     base = rung_for(sc, "dynamic-rigid")
     rung = replace(pgs_rung(base, exact_cone=True), solver=contact_solver("pgs", max_sweeps=1))
-    mu = next(pair.mu for pair in sc.pairs if {pair.body_a, pair.body_b} == {"table", "box"})
+    mu = sc.pairs[_table_box(sc)].mu
     u = np.array([[sc.spec.task.policy.speeds.get(name, 0.0) for name in sc.actuated]])
     state = base.rollout(sc, base.initial_state(sc), u, [0.4], H, stop_at_outcome=False).state
     pivoted = 0
