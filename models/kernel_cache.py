@@ -21,6 +21,15 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import importlib
+import os
+import pickle
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
 from pathlib import Path
 
 from numba.core import caching, config
@@ -91,3 +100,96 @@ def install() -> None:
     given = [c.strip() for c in config.CACHE_LOCATOR_CLASSES.split(",") if c.strip()]
     if name not in given:
         config.CACHE_LOCATOR_CLASSES = ",".join([*given, name, *([] if given else NUMBA_LOCATORS)])
+
+
+def kernels_cached() -> bool:
+    """Whether numba's on-disk cache holds the rollout kernel for this package's sources (its
+    index file, stamped by `package_stamp`): False on a first run or after an edit."""
+    try:
+        from models.rollout import rollout_kernel
+
+        return bool(rollout_kernel._cache._cache_file._load_index())  # numba internals: {} when cold or stale
+    except Exception:  # numba changed its internals: look in the default place
+        return any(Path(__file__).resolve().parent.joinpath("__pycache__").glob("rollout.rollout_kernel-*.nbi"))
+
+
+#: The helper process's program (`_compile_from`).
+HELPER = "import sys; from models.kernel_cache import _compile_from; _compile_from(sys.argv[1], int(sys.argv[2]))"
+
+#: Whether this process has already started (or declined to start) a compile ahead.
+_AHEAD: dict[str, object] = {}
+
+
+def compile_ahead(kernel, types) -> object:
+    """Compile `kernel` (a cached numba dispatcher of this package) for the argument types that
+    `types()` returns (called only where the helper starts), in a helper process, while this
+    one compiles the rest. The rollout kernel calls `models.stepper.dynamics_step`, the largest
+    single compile of a first run (about 40% of it), and loads it from the cache when it meets
+    the call after the helper has written it (else it compiles it too, as it would alone).
+    Once per process, and only where it pays: the cache cold (`kernels_cached`) and a second
+    core free. The helper is quiet, in a session of its own (a terminal's Ctrl-C is this
+    process's to handle), and ends with this process (Linux: the parent-death signal; else it
+    polls). Returns the helper's Popen, or None."""
+    key = f"{kernel.py_func.__module__}.{kernel.py_func.__name__}"
+    if key in _AHEAD:
+        return None
+    _AHEAD[key] = None
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    if cores < 2 or kernels_cached():
+        return None
+    try:
+        job = pickle.dumps((kernel.py_func.__module__, kernel.py_func.__name__, types()))
+    except Exception:  # an optimisation only: this process compiles it as it would alone
+        return None
+    fd, path = tempfile.mkstemp(prefix="ladder-ahead-", suffix=".pkl")
+    with os.fdopen(fd, "wb") as f:
+        f.write(job)
+    root = str(Path(__file__).resolve().parent.parent)  # the same package, whatever the cwd
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([root, *filter(None, [os.environ.get("PYTHONPATH")])]))
+    try:
+        helper = subprocess.Popen(
+            [sys.executable, "-c", HELPER, path, str(os.getpid())],
+            cwd=root,
+            env=env,
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            start_new_session=True,
+        )
+    except OSError:
+        os.unlink(path)
+        return None
+    threading.Thread(target=helper.wait, daemon=True).start()  # reaped when it ends, not left a zombie
+    _AHEAD[key] = helper
+    return helper
+
+
+def _end_with_parent(parent: int) -> None:
+    """End this helper process when `parent` does."""
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        try:
+            ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+        except (OSError, AttributeError):
+            pass
+    if os.getppid() != parent:  # the parent was gone before the signal was asked for
+        os._exit(0)
+
+    def watch():
+        while os.getppid() == parent:
+            time.sleep(1.0)
+        os._exit(0)
+
+    threading.Thread(target=watch, daemon=True).start()
+
+
+def _compile_from(path: str, parent: int) -> None:
+    """The helper of `compile_ahead`: compile the pickled (module, function, types)."""
+    _end_with_parent(parent)
+    try:
+        with open(path, "rb") as f:
+            module, name, types = pickle.load(f)
+    finally:
+        os.unlink(path)
+    getattr(importlib.import_module(module), name).compile(types)

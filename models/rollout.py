@@ -795,6 +795,22 @@ def bind(items):
     return bound
 
 
+def general_step_types(S, D, model, solver, q, nu, q_ref, delta_n, delta_t, h) -> tuple:
+    """numba's types of the arguments `rollout_kernel` passes `models.stepper.dynamics_step`
+    (its general contact step), made from values built as the kernel builds them, so that
+    `models.kernel_cache.compile_ahead` can compile that step beside the kernel's own compile
+    (tests/test_kernel_cache.py checks them against the cache's entry)."""
+    tables = SceneTables(S.bi, S.bf, S.pi, S.pf, S.dimension == 3)
+    system = _start_system(S, D, model, h, q)
+    contacts, _ = contact_buffers(S.pi, S.nv)
+    frames = _contact_frames(contacts.psi.shape[0])
+    directions = model.friction_directions if S.dimension == 3 else 2
+    basis = basis_table(contacts.psi.shape[0], D.v_index.shape[0], directions)
+    u = np.zeros((1, D.v_index.shape[0]))[0]
+    args = (model, solver, D, tables, system, float(h), q, nu, q_ref, delta_n, delta_t, u, contacts, 0, frames[5], frames[6], basis)
+    return tuple(numba.typeof(a) for a in args)
+
+
 @numba.njit(cache=True, error_model="numpy")
 def rollout_bound(bound, q, nu, q_ref, delta_n, delta_t, basis, controls, durations, h, record_every, max_records, stop_at_outcome, t0):
     """`rollout_kernel` on a scene bound once: bound, a typed List holding one tuple (S, D,

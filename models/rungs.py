@@ -26,9 +26,10 @@ import numpy as np
 from models import geometry as geo
 from models.contact import CONTACT_MARGIN, has_script, pair_distance_buffers, pair_min_distances, pair_min_distances_into
 from models.family import FAMILY
+from models.kernel_cache import compile_ahead
 from models.kinematics import PI_INERT, SceneData, compile_scene, kernel_array
 from models.predicates import OP_TOUCH, Program, compile_predicate, evaluate_with
-from models.rollout import bind, propagate_kernel, rollout_bound, rollout_kernel, warm_period_steps
+from models.rollout import bind, general_step_types, propagate_kernel, rollout_bound, rollout_kernel, warm_period_steps
 from models.scenario import Scenario
 from models.stepper import (
     LAW_ACTIVE,
@@ -45,6 +46,7 @@ from models.stepper import (
     Solver,
     StepStatus,
     contact_solver,
+    dynamics_step,
 )
 from models.task import Outcome
 
@@ -361,6 +363,7 @@ class Rung:
         if self.model is None:
             raise ValueError("the geometric rung has no dynamics to roll out; use valid()")
         c = compiled(scenario)
+        self._compile_ahead(c, self.initial_state(scenario), h)
         sizes = np.array(sizes, dtype=np.int64)
         low, high, windup = (np.ascontiguousarray(a, dtype=float) for a in (low, high, windup))
         drive_q, h = np.ascontiguousarray(drive_q, dtype=np.int64), float(h)
@@ -380,12 +383,23 @@ class Rung:
 
         return propagate
 
+    def _compile_ahead(self, c, state: State, h: float) -> None:
+        """On a first run (numba's cache cold), the general contact step compiled in a helper
+        process beside this one's compile of the rollout kernel (`compile_ahead`)."""
+
+        def types():
+            arrays = (state.q, state.nu, state.q_ref, state.delta_n, state.delta_t)
+            return general_step_types(c.scene, c.drives, self.model, self.solver, *(np.array(a, dtype=float) for a in arrays), float(h))
+
+        compile_ahead(dynamics_step, types)
+
     def _run(self, scenario, state, controls, durations, h, record_every, max_records, stop_at_outcome, t0, laws=False):
         """The compiled rollout on contiguous float arrays (the kernel works on copies of the
         state's arrays); its raw `models.rollout.RolloutOutput`."""
         if self.model is None:
             raise ValueError("the geometric rung has no dynamics to roll out; use valid()")
         c = compiled(scenario)
+        self._compile_ahead(c, state, h)
         drives = c.policy_drives if laws else c.drives
         state_args = (state.q.copy(), state.nu.copy(), state.q_ref.copy(), state.delta_n.copy(), state.delta_t.copy(), _basis_of(state))
         run_args = (controls, durations, float(h), int(record_every), int(max_records), bool(stop_at_outcome), float(t0))

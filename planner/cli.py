@@ -21,6 +21,7 @@ import numpy as np
 
 from models import perfmap
 from models.family import PROPAGATING_RUNGS, RUNG_NAMES
+from models.kernel_cache import kernels_cached
 from models.scenario import Problem, Scenario, ScenarioError, load_scenario, parse_overrides
 from models.schema import CONTROL_PLANNERS
 from models.task import OUTCOME_LABELS
@@ -763,18 +764,6 @@ def announce_compile() -> None:
     if kernels_cached():
         return
     print(COMPILE_NOTE, file=sys.stderr, flush=True)
-
-
-def kernels_cached() -> bool:
-    """Whether numba's on-disk cache holds the rollout kernel (an index file beside models/)."""
-    try:
-        from models.rollout import rollout_kernel
-
-        return bool(rollout_kernel._cache._cache_file._load_index())  # numba internals: {} when cold or stale
-    except Exception:  # numba changed its internals: look in the default place
-        import models
-
-        return any(Path(models.__file__).parent.joinpath("__pycache__").glob("rollout.rollout_kernel-*.nbi"))
 
 
 def print_simulation(summary: dict[str, Any]) -> None:

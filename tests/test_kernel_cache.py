@@ -80,3 +80,65 @@ def test_the_models_kernels_are_stamped_by_the_package():
 
     locator = rollout_kernel._cache._impl.locator
     assert locator.get_source_stamp() == kernel_cache.package_stamp(ROOT / "models")
+
+
+WORK = """\
+import numba
+
+
+@numba.njit(cache=True)
+def work(x, n):
+    return x * n
+"""
+
+
+def test_compile_ahead_compiles_in_a_helper_what_this_process_then_loads(tmp_path, monkeypatch):
+    """`compile_ahead` on a cold cache: a helper process compiles the kernel for the types
+    given, into the cache, where this process then finds it; once per process, and not at
+    all where the cache is warm."""
+    import numba
+
+    from models import kernel_cache
+
+    (tmp_path / "ahead").mkdir()
+    (tmp_path / "ahead" / "__init__.py").write_text("")
+    (tmp_path / "ahead" / "work.py").write_text(WORK)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setenv("PYTHONPATH", str(tmp_path))  # the helper imports the kernel's module too
+    monkeypatch.setattr(kernel_cache, "_AHEAD", {})
+    from ahead.work import work
+
+    types = (numba.float64, numba.int64)
+    monkeypatch.setattr(kernel_cache, "kernels_cached", lambda: True)
+    assert kernel_cache.compile_ahead(work, lambda: types) is None  # a warm cache: no helper
+    monkeypatch.setattr(kernel_cache, "_AHEAD", {})
+    monkeypatch.setattr(kernel_cache, "kernels_cached", lambda: False)
+    monkeypatch.setattr(kernel_cache.os, "sched_getaffinity", lambda pid: {0, 1}, raising=False)  # a second core
+    helper = kernel_cache.compile_ahead(work, lambda: types)
+    assert helper is not None and helper.wait(timeout=300) == 0
+    assert kernel_cache.compile_ahead(work, lambda: types) is None  # once per process
+    assert [key[0] for key in work._cache._cache_file._load_index()] == [types]
+    assert work(2.0, 3) == 6.0 and work.stats.cache_hits.total() == 1  # loaded, not compiled here
+
+
+def test_the_general_step_compiled_ahead_is_the_one_the_rollouts_call():
+    """The types `compile_ahead` compiles `dynamics_step` for are those of the rollout kernel's
+    call, planar and spatial, on every dynamic rung: the cache's entry, which a rollout wrote
+    (or found), is the helper's."""
+    import numpy as np
+
+    from models.rollout import general_step_types
+    from models.rungs import compiled, rung_for
+    from models.scenario import load_scenario
+    from models.stepper import dynamics_step
+
+    for name in ("two_finger_triangle", "box_push_3d"):
+        scenario = load_scenario(ROOT / "scenarios" / f"{name}.toml")
+        c = compiled(scenario)
+        for rung_name in ("quasistatic-rigid", "dynamic-rigid", "dynamic-compliant"):
+            rung = rung_for(scenario, rung_name)
+            s = rung.initial_state(scenario)
+            rung.rollout(scenario, s, np.zeros((1, len(scenario.actuated))), [1e-3], 1e-3)
+            arrays = (np.array(a, dtype=float) for a in (s.q, s.nu, s.q_ref, s.delta_n, s.delta_t))
+            types = general_step_types(c.scene, c.drives, rung.model, rung.solver, *arrays, 1e-3)
+            assert types in {key[0] for key in dynamics_step._cache._cache_file._load_index()}, (name, rung_name)
