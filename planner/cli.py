@@ -753,8 +753,9 @@ def run_with_progress(rung, scenario, state, controls, durations, h, *, live: bo
             bar.stop()
 
 
-#: What a run with numba's cache cold says first. `make demo` from an empty cache took 10.5 min on
-#: this 2-core machine with another compile on the other core (579a28d; docs/measurements.md).
+#: What a run with numba's cache cold says first. `make demo` from an empty cache took 9.5 min on
+#: this 2-core machine, the venv's install included, its second core compiling the general contact
+#: step (`models.kernel_cache.compile_ahead`; ca7b1d2, docs/measurements.md).
 COMPILE_NOTE = "compiling the physics kernels (first run only: about 10 minutes on two cores)"
 
 
