@@ -548,8 +548,8 @@ def contact_pgs(
     pivots = 0
     if status == PgsStatus.NOT_CONVERGED.value and spatial and model.exact_cone:
         scale = _impulse_scale(n, P.cdof, P.cm, P.jn, P.gnn, P.bn, nu_free)
-        solved, pivots, aligned_residual = aligned_lemke_into(
-            n, P.cdof, P.cm, P.jn, P.jt, P.jo, P.yn, P.yt, P.yo, P.gnn, P.g00, P.g01, P.g11, P.comp, P.bn, P.bt, P.mu, P.fric,
+        solved, pivots, aligned_residual = aligned_lemke_into(  # n as int64: not also compiled for a literal 0
+            np.int64(n), P.cdof, P.cm, P.jn, P.jt, P.jo, P.yn, P.yt, P.yo, P.gnn, P.g00, P.g01, P.g11, P.comp, P.bn, P.bt, P.mu, P.fric,
             P.p_n, P.f, nu_free, v, scale, tolerance,
         )  # fmt: skip
         if solved:

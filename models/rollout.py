@@ -539,7 +539,10 @@ def rollout_kernel(
     contacts, first_slot = contact_buffers(pi, nv)  # buffers, allocated once
     c_pair, c_psi, c_slot, W_n, W_t, W_o, c_bias = contacts
     c_n, c_t, c_o, c_pa, c_pb, warm_n, warm_t, warm_w, warm_slots = _contact_frames(c_psi.shape[0])
-    n_warm, keep_warm = 0, solver.method != SOLVER_LEMKE  # PGS warm start: by slot
+    # counters that helpers take start as np.int64, not a literal 0: numba compiles a helper first
+    # for a literal argument's type (its type inference's first guess), a second signature, and a
+    # first run's compile paid it (`_free_run` twice, about 30 s; docs/measurements.md)
+    n_warm, keep_warm = np.int64(0), solver.method != SOLVER_LEMKE  # PGS warm start: by slot
     # auto: once PGS does not converge on a step (a stack: coupled contacts) the rest of the
     # call solves with Lemke, instead of paying PGS's sweeps before Lemke every step
     lemke = Solver(SOLVER_LEMKE, solver.tolerance, solver.max_sweeps, solver.auto_contacts)
@@ -579,14 +582,14 @@ def rollout_kernel(
     # own, compiled even where it is only the type inference's first guess at a loop's variable)
     side, whole = np.int64(0), np.int64(PART_STEP)
     P = pgs_work(pgs_cap, _pgs_directions(model, True))
-    free_q, free_nu, free_q_ref, free_side = np.empty((2, q.shape[0])), np.empty((2, nv)), np.empty((2, q_ref.shape[0])), 0
+    free_q, free_nu, free_q_ref, free_side = np.empty((2, q.shape[0])), np.empty((2, nv)), np.empty((2, q_ref.shape[0])), np.int64(0)
     eps_eff = model.quasistatic_inertia if eps == 0.0 else eps
     max_records, rec_t, rec_q, rec_nu, n_rec = _start_records(max_records, q, nu)
     # runs of free steps in one call (`_free_run`), where they take the free step: tried from the
     # start and after each free step the loop takes, not while contacts persist
     free_runs = (kinematic or (constant_A and not limited)) and not scripted and not has_law
     try_free, detected, nc_back, unsupported_back = free_runs, False, 0, 0
-    t, steps, lcp_solves, pivots, max_residual, max_size, min_psi, force_steps, sweeps = 0.0, 0, 0, 0, 0.0, 0, np.inf, 0, 0
+    t, steps, lcp_solves, pivots, max_residual, max_size, min_psi, force_steps, sweeps = 0.0, np.int64(0), 0, 0, 0.0, 0, np.inf, 0, 0
     no_impulse, no_friction = np.zeros(0), np.zeros((0, 2))  # a step without contact problem (no allocation a step)
     outcome = Outcome.NONE.value
     status = StepStatus.SINGULAR.value if (not kinematic and constant_A and Ainv.shape[0] != nv) else StepStatus.OK.value

@@ -2275,7 +2275,9 @@ def _contact_solve(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf,
         for r in range(nc + nd):
             Mlcp[r, r] += target - added
         added = target
-        z, w, status, more, basic_z, _, residual = lemke_warm_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1), guess, WARM_TOLERANCE)
+        z, w, status, more, basic_z, _, residual = lemke_warm_kernel(
+            Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1), guess, WARM_TOLERANCE, np.int64(0)
+        )  # (none dropped, passed: the call above's signature, not a second one with it omitted)
         pivots += more
     p_n = z[:nc]  # (a view: z is not written again)
     p_t = np.zeros((nc, 2))
