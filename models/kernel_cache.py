@@ -116,8 +116,8 @@ def kernels_cached() -> bool:
 #: The helper process's program (`_compile_from`).
 HELPER = "import sys; from models.kernel_cache import _compile_from; _compile_from(sys.argv[1], int(sys.argv[2]))"
 
-#: Whether this process has already started (or declined to start) a compile ahead.
-_AHEAD: dict[str, object] = {}
+#: The kernels this process has already started (or declined to start) a compile ahead for.
+_AHEAD: set = set()
 
 
 def compile_ahead(kernel, types) -> object:
@@ -130,10 +130,9 @@ def compile_ahead(kernel, types) -> object:
     core free. The helper is quiet, in a session of its own (a terminal's Ctrl-C is this
     process's to handle), and ends with this process (Linux: the parent-death signal; else it
     polls). Returns the helper's Popen, or None."""
-    key = f"{kernel.py_func.__module__}.{kernel.py_func.__name__}"
-    if key in _AHEAD:
+    if kernel in _AHEAD:  # (Rung's every call asks: one set lookup after the first)
         return None
-    _AHEAD[key] = None
+    _AHEAD.add(kernel)
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
     if cores < 2 or kernels_cached():
         return None
@@ -160,7 +159,6 @@ def compile_ahead(kernel, types) -> object:
         os.unlink(path)
         return None
     threading.Thread(target=helper.wait, daemon=True).start()  # reaped when it ends, not left a zombie
-    _AHEAD[key] = helper
     return helper
 
 

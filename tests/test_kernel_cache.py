@@ -105,13 +105,13 @@ def test_compile_ahead_compiles_in_a_helper_what_this_process_then_loads(tmp_pat
     (tmp_path / "ahead" / "work.py").write_text(WORK)
     monkeypatch.syspath_prepend(str(tmp_path))
     monkeypatch.setenv("PYTHONPATH", str(tmp_path))  # the helper imports the kernel's module too
-    monkeypatch.setattr(kernel_cache, "_AHEAD", {})
+    monkeypatch.setattr(kernel_cache, "_AHEAD", set())
     from ahead.work import work
 
     types = (numba.float64, numba.int64)
     monkeypatch.setattr(kernel_cache, "kernels_cached", lambda: True)
     assert kernel_cache.compile_ahead(work, lambda: types) is None  # a warm cache: no helper
-    monkeypatch.setattr(kernel_cache, "_AHEAD", {})
+    monkeypatch.setattr(kernel_cache, "_AHEAD", set())
     monkeypatch.setattr(kernel_cache, "kernels_cached", lambda: False)
     monkeypatch.setattr(kernel_cache.os, "sched_getaffinity", lambda pid: {0, 1}, raising=False)  # a second core
     helper = kernel_cache.compile_ahead(work, lambda: types)
