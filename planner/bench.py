@@ -290,7 +290,8 @@ def contact_steps(quick: bool = False) -> dict:
     exact cone (PGS), each two ways in turns: as a planner calls it (`planner_propagation`:
     flattened states, the call's fixed cost about a third of `Rung.rollout`'s) and through
     `Rung.rollout` (the pipeline's replays; its state and basis table carried from call to
-    call); the two take the same steps (`same_end`: their end states equal, bit for bit, so
+    call), the four and MuJoCo in turns within each round (`exact_vs_polygon`: the exact
+    cone's steps/s over the polygon's, each way); the two ways take the same steps (`same_end`: their end states equal, bit for bit, so
     the propagations' step counts are the rollout's). Each row: steps, steps with a
     contact force, median wall and us per step (`repeat` rounds), and MuJoCo on the same run
     timed in turns with ours (`in_turns`): the paper's scene in its fastest mapping
@@ -364,26 +365,51 @@ def contact_steps(quick: bool = False) -> dict:
     theirs = [] if spatial is None else [lambda: peers.timed_run(spatial, u[0], calls * per_call, after=skip, per_call=per_call)]
     polygon = f"dynamic-rigid ({settings.friction_directions}-sided cone, {settings.contact_solver})"
     exact = pgs_rung(rung, exact_cone=True)
-    for label, stepper in ((polygon, rung), ("dynamic-rigid (exact cone, pgs)", exact)):
-        # the two ways in turns (and MuJoCo between them): column 0 the planners' calls, then
-        # MuJoCo's, then `Rung.rollout`'s
-        step = planner_propagation(box, stepper, start, h, period)
-        walls, x, ends = in_turns(lambda step=step: propagate(step), [*theirs, timed(lambda stepper=stepper: push(stepper))], repeat)
-        taken, pushed, pivots, sweeps, state = ends[-1]
+    cones = ((polygon, rung), ("dynamic-rigid (exact cone, pgs)", exact))
+    # both cones, each both ways, in turns with MuJoCo within every round, so that the cones' ratio
+    # is measured as the ratios to MuJoCo are. Columns: 0 the polygon's planners' calls, then
+    # MuJoCo's (when timed), then the polygon's `Rung.rollout`, the exact cone's planners' calls
+    # and its `Rung.rollout`
+    steps = [planner_propagation(box, stepper, start, h, period) for _, stepper in cones]
+    others = [timed(lambda: push(rung)), timed(lambda: propagate(steps[1])), timed(lambda: push(exact))]
+    walls, x, ends = in_turns(lambda: propagate(steps[0]), [*theirs, *others], repeat)
+    mj = [1] if theirs else []
+    base = 1 + len(mj)
+    ends = [x, *ends[len(mj) :]]  # per column from 0, MuJoCo's left out
+    per_step = {}  # per column: wall per step, each round
+    for k, (label, _) in enumerate(cones):
+        x_end, (taken, pushed, pivots, sweeps, state) = ends[2 * k], ends[2 * k + 1]
         # the same steps both ways: the propagations' counts are the rollout's where their ends (the
         # flattened states but the propagation's flag) are the same
-        same_end = bool(np.array_equal(x[:-1], flatten(state)[:-1]))
-        for how, col in ((f"the planners' propagation, calls of {period:g} s", 0), (f"`Rung.rollout`, calls of {period:g} s", -1)):
-            cols = [col] + ([1] if theirs else [])
+        same_end = bool(np.array_equal(x_end[:-1], flatten(state)[:-1]))
+        planners_col, rollout_col = (0 if k == 0 else base + 1), (base if k == 0 else base + 2)
+        ways = (
+            (f"the planners' propagation, calls of {period:g} s", planners_col),
+            (f"`Rung.rollout`, calls of {period:g} s", rollout_col),
+        )
+        for how, col in ways:
             row = _contact_row(f"box_push_3d, pushing ({how})", label, h, taken, pushed, float(np.median(walls[:, col])), pivots, sweeps)
-            rows.append(row | _peer_columns(walls[:, cols], calls * per_call) | {"same_end": same_end})
+            rows.append(row | _peer_columns(walls[:, [col, *mj]], calls * per_call) | {"same_end": same_end})
+            per_step[col] = walls[:, col] / max(taken, 1)
+    # the exact cone's speed against the polygon's in steps per second, each way: the median of the
+    # rounds' ratios
+    exact_vs_polygon = {
+        "planners": float(np.median(per_step[0] / per_step[base + 1])),
+        "rollout": float(np.median(per_step[base] / per_step[base + 2])),
+    }
     squeezed = _rollout(tri, "dynamic-rigid", 1e-4, 2.0, squeeze, records=2).state  # 0.5 s into the squeeze
     split = [
         _cost_split("two_finger_triangle, squeezing", tri, rung_for(tri, "dynamic-rigid"), squeezed, squeeze[0], 1e-4, quick),
         _cost_split(f"box_push_3d, pushing ({polygon})", box, rung, start, u[0], h, quick),
         _cost_split("box_push_3d, pushing (dynamic-rigid, exact cone, pgs)", box, exact, start, u[0], h, quick),
     ]
-    return {"rows": rows, "repeat": repeat, "peer": None if peers is None else f"MuJoCo {peers.version()}", "split": split}
+    return {
+        "rows": rows,
+        "repeat": repeat,
+        "peer": None if peers is None else f"MuJoCo {peers.version()}",
+        "split": split,
+        "exact_vs_polygon": exact_vs_polygon,
+    }
 
 
 #: Calls per stage of the cost split (`_cost_split`; --quick: a tenth).
@@ -1066,6 +1092,14 @@ def contact_markdown(contact: dict | None) -> list[str]:
             f"| {_solve_work(row['pivots_per_step'], row['sweeps_per_step'])} "
             f"| {row['median_wall_s']:.4f} | {row['us_per_step']:.2f} | {theirs} |"
         )
+    cones = contact.get("exact_vs_polygon")
+    if cones:
+        lines += [
+            "",
+            "box_push_3d's two cones were timed in the same rounds (each round: both cones, each both ways, and MuJoCo, "
+            f"in turns): the exact cone's steps/s over the polygon's, the median of the rounds' ratios, {cones['planners']:.2f}x "
+            f"as a planner calls it and {cones['rollout']:.2f}x through `Rung.rollout`.",
+        ]
     if contact.get("split"):
         names = list(contact["split"][0]["us"])
         lines += [

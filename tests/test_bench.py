@@ -62,6 +62,10 @@ def test_throughput_and_scaling_report_every_rung(quick):
     for planners, rollout in ((push, push_rollout), (exact, exact_rollout)):
         assert "the planners' propagation" in planners["scene"] and "`Rung.rollout`" in rollout["scene"]
         assert planners["same_end"] and rollout["same_end"] and planners["rung"] == rollout["rung"]
+    # the cones timed in the same rounds: their ratio is reported each way, and said in the document
+    cones = r["throughput"]["contact"]["exact_vs_polygon"]
+    assert set(cones) == {"planners", "rollout"} and all(math.isfinite(v) and v > 0 for v in cones.values())
+    assert f"{cones['planners']:.2f}x as a planner calls it" in (quick[0] / "benchmarks.md").read_text()
     # the cost split of a contact step, at a squeezing and two pushing states: every stage timed, the dynamics
     # step in its three parts (differences of timed runs, floored at 0), which together cost the most
     split = r["throughput"]["contact"]["split"]
