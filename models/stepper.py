@@ -98,8 +98,6 @@ from models.lcp import (
 QUASISTATIC_INERTIA = 1e-6
 #: A contact whose Jacobian column is below this does not couple to any free DOF.
 ZERO_COLUMN = 1e-12
-#: Lemke pivots allowed per LCP variable (the solver's own default).
-PIVOTS_PER_VARIABLE = DEFAULT_LEMKE_PIVOTS_PER_VARIABLE
 #: An LCP solution is accepted while its recomputed residual is below this.
 LCP_TOLERANCE = 1e-7
 #: A step's LCP is first tried on the previous step's complementary basis (`basis_table`); that
@@ -796,7 +794,7 @@ def contact_stage(part, model, solver, drives, tables, system, h, q, nu, q_ref, 
     if on_generators:
         status = _guess_or_lemke(G, gen, cf, model.compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, Mlcp, qlcp, scale, guess)[2]
     else:
-        status = lemke_warm_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1), guess, WARM_TOLERANCE, nc)[2]
+        status = lemke_warm_kernel(Mlcp, qlcp, DEFAULT_LEMKE_PIVOTS_PER_VARIABLE * (n + 1), guess, WARM_TOLERANCE, nc)[2]
     return n if status == STATUS_SOLVED or status == STATUS_SOLVED_INACCURATE else 0
 
 
@@ -1866,7 +1864,7 @@ def _lemke_after_guess(M, q_lcp, guess, work, z, w, J, A):
     (warm or general) that fails its guess goes on here: the same bits either way. Returns
     (status, pivots, the natural-map residual: +inf where not solved)."""
     n = q_lcp.shape[0]
-    return lemke_from_guess_into(M, q_lcp, guess, PIVOTS_PER_VARIABLE * (n + 1), work, z, w, guess, J, A, WARM_TOLERANCE)
+    return lemke_from_guess_into(M, q_lcp, guess, DEFAULT_LEMKE_PIVOTS_PER_VARIABLE * (n + 1), work, z, w, guess, J, A, WARM_TOLERANCE)
 
 
 @numba.njit(cache=True, _nrt=False, error_model="numpy")
@@ -2259,12 +2257,13 @@ def _contact_solve(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf,
     reg, scale = _scale_contact_lcp(model, on_generators, h, Mlcp, qlcp, G, gen, cf, active, fric, nf, pf, contacts.pair, m, comp, gs, gmu)
     slot = contacts.slot
     guess = _basis_guess(basis, active, slot, fric, nf, d, lim, m, n, qlcp)
+    limit = DEFAULT_LEMKE_PIVOTS_PER_VARIABLE * (n + 1)
     if on_generators:  # (the residual, as from lemke_warm_kernel: the guess's own, computed there, or Lemke's solution's)
         z, w, status, pivots, basic_z, residual = _guess_or_lemke(
             G, gen, cf, model.compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, Mlcp, qlcp, scale, guess
         )
     else:
-        z, w, status, pivots, basic_z, _, residual = lemke_warm_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1), guess, WARM_TOLERANCE, nc)
+        z, w, status, pivots, basic_z, _, residual = lemke_warm_kernel(Mlcp, qlcp, limit, guess, WARM_TOLERANCE, nc)
     added = 0.0
     for k in range(LCP_REGULARIZATION_STEPS):
         if (status == STATUS_SOLVED or status == STATUS_SOLVED_INACCURATE) and residual <= LCP_TOLERANCE:
@@ -2276,7 +2275,7 @@ def _contact_solve(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf,
             Mlcp[r, r] += target - added
         added = target
         z, w, status, more, basic_z, _, residual = lemke_warm_kernel(
-            Mlcp, qlcp, PIVOTS_PER_VARIABLE * (n + 1), guess, WARM_TOLERANCE, np.int64(0)
+            Mlcp, qlcp, limit, guess, WARM_TOLERANCE, np.int64(0)
         )  # (none dropped, passed: the call above's signature, not a second one with it omitted)
         pivots += more
     p_n = z[:nc]  # (a view: z is not written again)
@@ -2744,7 +2743,7 @@ def _min_norm_passive(Wp, MWp, psi_h, Wa_u, alpha, nc):
     for i in range(nc):
         qlcp[i] = psi_h[i] + alpha * Wa_u[i]
     Mlcp = np.ascontiguousarray(Wp.T) @ MWp
-    lam, w, st, pivots = lemke_kernel(Mlcp, qlcp, PIVOTS_PER_VARIABLE * (nc + 1))
+    lam, w, st, pivots = lemke_kernel(Mlcp, qlcp, DEFAULT_LEMKE_PIVOTS_PER_VARIABLE * (nc + 1))
     residual = complementarity_residual(Mlcp, qlcp, lam)
     ok = (st == STATUS_SOLVED or st == STATUS_SOLVED_INACCURATE) and residual <= LCP_TOLERANCE
     return MWp @ lam, ok, pivots, residual
