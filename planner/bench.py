@@ -291,8 +291,9 @@ def contact_steps(quick: bool = False) -> dict:
     flattened states, the call's fixed cost about a third of `Rung.rollout`'s) and through
     `Rung.rollout` (the pipeline's replays; its state and basis table carried from call to
     call), the four and MuJoCo in turns within each round (`exact_vs_polygon`: the exact
-    cone's steps/s over the polygon's, each way); the two ways take the same steps (`same_end`: their end states equal, bit for bit, so
-    the propagations' step counts are the rollout's). Each row: steps, steps with a
+    cone's steps/s over the polygon's, each way); the two ways take the same steps
+    (`same_end`: their end states equal, bit for bit, so the propagations' step counts are
+    the rollout's). Each row: steps, steps with a
     contact force, median wall and us per step (`repeat` rounds), and MuJoCo on the same run
     timed in turns with ours (`in_turns`): the paper's scene in its fastest mapping
     (`direct`, the inert palm-triangle pair left out), box_push_3d with MuJoCo's own contact
