@@ -1097,8 +1097,9 @@ def contact_markdown(contact: dict | None) -> list[str]:
     if cones:
         lines += [
             "",
-            "box_push_3d's two cones were timed in the same rounds (each round: both cones, each both ways, and MuJoCo, "
-            f"in turns): the exact cone's steps/s over the polygon's, the median of the rounds' ratios, {cones['planners']:.2f}x "
+            "box_push_3d's two cones were timed in the same rounds (each round: both cones, each both ways"
+            f"{', and MuJoCo' if contact.get('peer') else ''}, in turns): the exact cone's steps/s over the polygon's, the "
+            f"median of the rounds' ratios, {cones['planners']:.2f}x "
             f"as a planner calls it and {cones['rollout']:.2f}x through `Rung.rollout`.",
         ]
     if contact.get("split"):
