@@ -378,12 +378,12 @@ def contact_steps(quick: bool = False) -> dict:
     base = 1 + len(mj)
     ends = [x, *ends[len(mj) :]]  # per column from 0, MuJoCo's left out
     per_step = {}  # per column: wall per step, each round
-    for k, (label, _) in enumerate(cones):
+    columns = ((0, base), (base + 1, base + 2))  # per cone: its planners' calls, its `Rung.rollout`
+    for k, ((label, _), (planners_col, rollout_col)) in enumerate(zip(cones, columns)):
         x_end, (taken, pushed, pivots, sweeps, state) = ends[2 * k], ends[2 * k + 1]
         # the same steps both ways: the propagations' counts are the rollout's where their ends (the
         # flattened states but the propagation's flag) are the same
         same_end = bool(np.array_equal(x_end[:-1], flatten(state)[:-1]))
-        planners_col, rollout_col = (0 if k == 0 else base + 1), (base if k == 0 else base + 2)
         ways = (
             (f"the planners' propagation, calls of {period:g} s", planners_col),
             (f"`Rung.rollout`, calls of {period:g} s", rollout_col),
@@ -395,8 +395,8 @@ def contact_steps(quick: bool = False) -> dict:
     # the exact cone's speed against the polygon's in steps per second, each way: the median of the
     # rounds' ratios
     exact_vs_polygon = {
-        "planners": float(np.median(per_step[0] / per_step[base + 1])),
-        "rollout": float(np.median(per_step[base] / per_step[base + 2])),
+        how: float(np.median(per_step[polygon_col] / per_step[exact_col]))
+        for how, polygon_col, exact_col in zip(("planners", "rollout"), *columns)
     }
     squeezed = _rollout(tri, "dynamic-rigid", 1e-4, 2.0, squeeze, records=2).state  # 0.5 s into the squeeze
     split = [
