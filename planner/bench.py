@@ -413,8 +413,8 @@ def contact_steps(quick: bool = False) -> dict:
     }
 
 
-#: Calls per stage of the cost split (`_cost_split`; --quick: a tenth).
-SPLIT_REPEATS = 20_000
+#: Calls per stage and round of the cost split (`_cost_split`).
+SPLIT_REPEATS = 4_000
 
 
 def _cost_split(scene: str, scenario, rung, state, u: np.ndarray, h: float, quick: bool) -> dict:
@@ -422,29 +422,32 @@ def _cost_split(scene: str, scenario, rung, state, u: np.ndarray, h: float, quic
     the pair distances and the task's predicates, the contact Jacobians, and the dynamics step in
     its three parts (`models.stepper.contact_stage`, or the step the rollout takes at the state:
     `models.stepper.planar_warm_step`, `models.stepper.spatial_warm_step`,
-    `models.stepper.spatial_pgs_step`): the free
-    velocity and the LCP's assembly, the
-    warm-started contact solve, and the rest (the impulses' velocity update, the integration), in
-    us per call (each stage's best of SPLIT_ROUNDS runs of SPLIT_REPEATS calls, the stages in
-    turns within a round so that a busy spell of the machine does not fall on one stage alone,
-    less the setup's time; the parts are differences of runs that stop after each, floored at 0)."""
+    `models.stepper.spatial_pgs_step`): the free velocity and the LCP's assembly, the warm-started
+    contact solve, and the rest (the impulses' velocity update, the integration), in us per call.
+    Each round runs every stage SPLIT_REPEATS times, the stages in turns, so that a busy spell of
+    the machine falls on a round's stages alike; a stage's time in a round is its run's less the
+    setup's in that round, and the step's parts are differences, within a round, of runs that stop
+    after each. Each figure is the median over SPLIT_ROUNDS rounds (--quick: a tenth), floored at
+    0; `spread_us` is the interquartile range over the rounds of the round's sum, this machine's
+    noise on one round."""
     from models import rollout as R
     from models.rungs import compiled
 
     c = compiled(scenario)
-    repeats = SPLIT_REPEATS // (10 if quick else 1)
+    rounds = max(SPLIT_ROUNDS // (10 if quick else 1), 3)
     args = (c.scene, c.drives, rung.model, rung.solver, c.goal, c.unsafe, state.q, state.nu, state.q_ref, state.delta_n, state.delta_t)
     order = (R.STAGE_SETUP, R.STAGE_DETECT, R.STAGE_CLASSIFY, R.STAGE_JACOBIANS, R.STAGE_ASSEMBLY, R.STAGE_CONTACT_SOLVE, R.STAGE_SOLVE)
-    best, contacts, pivots, sweeps = dict.fromkeys(order, np.inf), 0, 0, 0
-    for _ in range(SPLIT_ROUNDS):
-        for stage in order:
+    walls, contacts, pivots, sweeps = np.zeros((rounds, len(order))), 0, 0, 0
+    for round_ in range(rounds):
+        for k, stage in enumerate(order):
             t0 = time.perf_counter()
-            contacts, piv, sw = R.stage_loop(stage, *args, np.asarray(u, float), float(h), repeats)
-            best[stage] = min(best[stage], time.perf_counter() - t0)
+            contacts, piv, sw = R.stage_loop(stage, *args, np.asarray(u, float), float(h), SPLIT_REPEATS)
+            walls[round_, k] = time.perf_counter() - t0
             if stage == R.STAGE_SOLVE:
                 pivots, sweeps = piv, sw
-    per_call = {stage: max(best[stage] - best[R.STAGE_SETUP], 0.0) / repeats * 1e6 for stage in order}
-    us = {
+    # per round and stage: us per call, less the setup's run of the same round
+    per_call = dict(zip(order, ((walls - walls[:, :1]) / SPLIT_REPEATS * 1e6).T))
+    parts = {
         "detection": per_call[R.STAGE_DETECT],
         "distances and predicates": per_call[R.STAGE_CLASSIFY],
         "Jacobians": per_call[R.STAGE_JACOBIANS],
@@ -452,12 +455,23 @@ def _cost_split(scene: str, scenario, rung, state, u: np.ndarray, h: float, quic
     # the step's parts: runs that stop after the assembly, after the contact solve, and the whole step
     upto = [per_call[stage] for stage in (R.STAGE_ASSEMBLY, R.STAGE_CONTACT_SOLVE, R.STAGE_SOLVE)]
     for name, low, high in zip(SPLIT_STEP_PARTS, [0.0, *upto[:2]], upto):
-        us[name] = max(high - low, 0.0)
-    return {"scene": scene, "contacts": contacts, "us": us, "repeats": repeats, "rounds": SPLIT_ROUNDS, "pivots": pivots, "sweeps": sweeps}
+        parts[name] = high - low
+    us = {name: max(float(np.median(each)), 0.0) for name, each in parts.items()}
+    q1, q3 = np.percentile(sum(parts.values()), [25, 75])
+    return {
+        "scene": scene,
+        "contacts": contacts,
+        "us": us,
+        "spread_us": float(q3 - q1),
+        "repeats": SPLIT_REPEATS,
+        "rounds": rounds,
+        "pivots": pivots,
+        "sweeps": sweeps,
+    }
 
 
-#: Rounds of the cost split: each stage's time is its best over them (`_cost_split`).
-SPLIT_ROUNDS = 5
+#: Rounds of the cost split: each figure is the median of the rounds' (`_cost_split`).
+SPLIT_ROUNDS = 50
 #: The dynamics step's parts in the cost split (`_cost_split`).
 SPLIT_STEP_PARTS = ("free velocity and assembly", "contact solve", "impulses and integration")
 
@@ -1107,8 +1121,9 @@ def contact_markdown(contact: dict | None) -> list[str]:
         lines += [
             "",
             "Where a contact step's time goes, at one state of each run (`models.rollout.stage_loop`: each stage "
-            f"repeated {contact['split'][0]['repeats']:,} times at the state, the best of {contact['split'][0]['rounds']} rounds "
-            "that run the stages in turns, us per call; the dynamics step "
+            f"repeated {contact['split'][0]['repeats']:,} times at the state in each of {contact['split'][0]['rounds']} rounds "
+            "that run the stages in turns, us per call, the median of the rounds' (a stage's run less the setup's in "
+            "the same round; the step's parts: differences, within a round, of runs that stop after each); the dynamics step "
             "in its three parts (`models.stepper.contact_stage`; on a state whose LCP the previous basis solves, the "
             "warm step the rollout takes there, `models.stepper.planar_warm_step` in the plane, "
             "`models.stepper.spatial_warm_step` in space; with PGS in space, `models.stepper.spatial_pgs_step`): A "
@@ -1118,15 +1133,17 @@ def contact_markdown(contact: dict | None) -> list[str]:
             "integration). The solve is warm-started from the state's own solution, so it does less work there than a "
             "step of the runs above does on average (the two `contact solve` columns: Lemke pivots, PGS sweeps); the "
             "rest of the difference is the rollout's bookkeeping (records, forces, the warm start's table), and each "
-            "stage timed here also pays a compiled call's argument handling:",
+            "stage timed here also pays a compiled call's argument handling. The last column is the interquartile range of "
+            "the rounds' sums, this machine's noise on one round:",
             "",
-            "| state | contacts | contact solve at the state | " + " | ".join(names) + " | sum |",
-            "|---|---|---|" + "---|" * (len(names) + 1),
+            "| state | contacts | contact solve at the state | " + " | ".join(names) + " | sum | rounds' spread |",
+            "|---|---|---|" + "---|" * (len(names) + 2),
         ]
         for split in contact["split"]:
             cells = " | ".join(f"{split['us'][name]:.2f}" for name in names)
             at_state = _solve_work(split["pivots"], split["sweeps"])
-            lines.append(f"| {split['scene']} | {split['contacts']} | {at_state} | {cells} | {sum(split['us'].values()):.2f} |")
+            total = sum(split["us"].values())
+            lines.append(f"| {split['scene']} | {split['contacts']} | {at_state} | {cells} | {total:.2f} | {split['spread_us']:.2f} |")
     return lines
 
 

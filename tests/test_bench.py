@@ -67,7 +67,8 @@ def test_throughput_and_scaling_report_every_rung(quick):
     assert set(cones) == {"planners", "rollout"} and all(math.isfinite(v) and v > 0 for v in cones.values())
     assert f"{cones['planners']:.2f}x as a planner calls it" in (quick[0] / "benchmarks.md").read_text()
     # the cost split of a contact step, at a squeezing and two pushing states: every stage timed, the dynamics
-    # step in its three parts (differences of timed runs, floored at 0), which together cost the most
+    # step in its three parts (medians over the rounds of differences of runs in the same round, floored at 0), which
+    # together cost the most; each state with the rounds' spread
     split = r["throughput"]["contact"]["split"]
     assert [s["contacts"] for s in split] == [2, 5, 5]
     # the solve's work at the state, warm-started from its own solution: Lemke needs no pivot, PGS sweeps
@@ -76,6 +77,8 @@ def test_throughput_and_scaling_report_every_rung(quick):
         assert list(s["us"]) == ["detection", "distances and predicates", "Jacobians", *SPLIT_STEP_PARTS]
         step = sum(s["us"][name] for name in SPLIT_STEP_PARTS)
         assert step > max(s["us"]["detection"], s["us"]["distances and predicates"], s["us"]["Jacobians"]) and min(s["us"].values()) >= 0
+        assert s["rounds"] >= 3 and math.isfinite(s["spread_us"]) and s["spread_us"] >= 0
+    assert "| rounds' spread |" in (quick[0] / "benchmarks.md").read_text()
     peer = r["throughput"]["peer"]
     assert "skipped" in peer or "steps_per_s" in peer
     if "skipped" not in peer:  # the contact rows are timed against MuJoCo too
