@@ -434,14 +434,15 @@ def _cost_split(scene: str, scenario, rung, state, u: np.ndarray, h: float, quic
     from models.rungs import compiled
 
     c = compiled(scenario)
-    rounds = max(SPLIT_ROUNDS // (10 if quick else 1), 3)
+    rounds = SPLIT_ROUNDS // (10 if quick else 1)
     args = (c.scene, c.drives, rung.model, rung.solver, c.goal, c.unsafe, state.q, state.nu, state.q_ref, state.delta_n, state.delta_t)
+    u, h = np.asarray(u, float), float(h)
     order = (R.STAGE_SETUP, R.STAGE_DETECT, R.STAGE_CLASSIFY, R.STAGE_JACOBIANS, R.STAGE_ASSEMBLY, R.STAGE_CONTACT_SOLVE, R.STAGE_SOLVE)
     walls, contacts, pivots, sweeps = np.zeros((rounds, len(order))), 0, 0, 0
     for round_ in range(rounds):
         for k, stage in enumerate(order):
             t0 = time.perf_counter()
-            contacts, piv, sw = R.stage_loop(stage, *args, np.asarray(u, float), float(h), SPLIT_REPEATS)
+            contacts, piv, sw = R.stage_loop(stage, *args, u, h, SPLIT_REPEATS)
             walls[round_, k] = time.perf_counter() - t0
             if stage == R.STAGE_SOLVE:
                 pivots, sweeps = piv, sw

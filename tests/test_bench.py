@@ -65,7 +65,8 @@ def test_throughput_and_scaling_report_every_rung(quick):
     # the cones timed in the same rounds: their ratio is reported each way, and said in the document
     cones = r["throughput"]["contact"]["exact_vs_polygon"]
     assert set(cones) == {"planners", "rollout"} and all(math.isfinite(v) and v > 0 for v in cones.values())
-    assert f"{cones['planners']:.2f}x as a planner calls it" in (quick[0] / "benchmarks.md").read_text()
+    doc = (quick[0] / "benchmarks.md").read_text()
+    assert f"{cones['planners']:.2f}x as a planner calls it" in doc
     # the cost split of a contact step, at a squeezing and two pushing states: every stage timed, the dynamics
     # step in its three parts (medians over the rounds of differences of runs in the same round, floored at 0), which
     # together cost the most; each state with the rounds' spread
@@ -78,7 +79,7 @@ def test_throughput_and_scaling_report_every_rung(quick):
         step = sum(s["us"][name] for name in SPLIT_STEP_PARTS)
         assert step > max(s["us"]["detection"], s["us"]["distances and predicates"], s["us"]["Jacobians"]) and min(s["us"].values()) >= 0
         assert s["rounds"] >= 3 and math.isfinite(s["spread_us"]) and s["spread_us"] >= 0
-    assert "| rounds' spread |" in (quick[0] / "benchmarks.md").read_text()
+    assert "| rounds' spread |" in doc
     peer = r["throughput"]["peer"]
     assert "skipped" in peer or "steps_per_s" in peer
     if "skipped" not in peer:  # the contact rows are timed against MuJoCo too
