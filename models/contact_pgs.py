@@ -122,7 +122,11 @@ def _invert_small(B, m, out):
 
 @numba.njit(cache=True, inline="always")
 def _invert_small_into(B, m, out, work):
-    """`_invert_small` on the caller's work (at least (m, 2 m)), zeroed here."""
+    """`_invert_small` on the caller's work (at least (m, 2 m)), zeroed here. A 6 x 6 block of
+    a free rigid body in space (`_split`) is inverted by its parts (`_invert_split_into`): the
+    same bits."""
+    if m == 6 and _split(B):
+        return _invert_split_into(B, out, work)
     for r in range(m):
         for c in range(2 * m):
             work[r, c] = 0.0
@@ -134,6 +138,19 @@ def _invert_small_into(B, m, out, work):
         work[r, m + r] = 1.0
     if not (big > 0.0):
         return False
+    if not _gauss_jordan(work, m, big):
+        return False
+    for r in range(m):
+        for c in range(m):
+            out[r, c] = work[r, m + c]
+    return True
+
+
+@numba.njit(cache=True, inline="always")
+def _gauss_jordan(work, m, big):
+    """Gauss-Jordan with partial pivoting on work[:m, :2 m] = [B | I], in place (B^-1 ends in
+    work[:m, m:]); a pivot at most SINGULAR_PIVOT times big (B's largest entry) is singular:
+    returns False."""
     for k in range(m):
         p = k
         for r in range(k + 1, m):
@@ -152,9 +169,55 @@ def _invert_small_into(B, m, out, work):
                 f = work[r, k]
                 for c in range(2 * m):
                     work[r, c] -= f * work[k, c]
-    for r in range(m):
-        for c in range(m):
-            out[r, c] = work[r, m + c]
+    return True
+
+
+@numba.njit(cache=True, inline="always")
+def _split(B):
+    """Whether a 6 x 6 block (a rigid body in space: translations, then rotations) is zero but
+    on the translations' diagonal and the rotations' 3 x 3 block: a free body's (m on the
+    translations, R I R^T on the rotations, no drive coupling them). `_invert_small_into`
+    inverts such a block by its parts, and `models.stepper._delassus_into` leaves out the zero
+    entries' products of its inverse (also split): their terms are +-0 added to sums that start
+    at +0, so the bits are the same (for finite Jacobians, the only ones a step keeps)."""
+    for r in range(6):
+        for c in range(6):
+            if r != c and (r < 3 or c < 3) and B[r, c] != 0.0:
+                return False
+    return True
+
+
+@numba.njit(cache=True, inline="always")
+def _invert_split_into(B, out, work):
+    """B^-1 of a `_split` 6 x 6 block into out: 1 / B[k, k] on the translations and the
+    rotations' block by `_gauss_jordan` on work[:3, :6], zero elsewhere. The same bits as the
+    6 x 6 elimination (which pivots on each translation's own row, finds no other row to
+    eliminate there, and on the rotations does these operations, the rest on zeros), with its
+    singular test against the whole block's largest entry; the zero entries here are +0 where
+    it may leave -0."""
+    big = 0.0
+    for r in range(6):
+        for c in range(6):
+            big = max(big, abs(B[r, c]))
+    if not (big > 0.0):
+        return False
+    for k in range(3):
+        if not (abs(B[k, k]) > SINGULAR_PIVOT * big):
+            return False
+    for r in range(3):
+        for c in range(3):
+            work[r, c] = B[3 + r, 3 + c]
+            work[r, 3 + c] = 1.0 if r == c else 0.0
+    if not _gauss_jordan(work, 3, big):
+        return False
+    for r in range(6):
+        for c in range(6):
+            out[r, c] = 0.0
+    for k in range(3):
+        out[k, k] = 1.0 / B[k, k]
+    for r in range(3):
+        for c in range(3):
+            out[3 + r, 3 + c] = work[r, 3 + c]
     return True
 
 
