@@ -177,9 +177,10 @@ def _split(B):
     """Whether a 6 x 6 block (a rigid body in space: translations, then rotations) is zero but
     on the translations' diagonal and the rotations' 3 x 3 block: a free body's (m on the
     translations, R I R^T on the rotations, no drive coupling them). `_invert_small_into`
-    inverts such a block by its parts, and `models.stepper._delassus_into` leaves out the zero
-    entries' products of its inverse (also split): their terms are +-0 added to sums that start
-    at +0, so the bits are the same (for finite Jacobians, the only ones a step keeps)."""
+    inverts such a block by its parts, and `models.stepper._delassus_into` and PGS's
+    `_apply_inverse` leave out the zero entries' products of its inverse (also split): their
+    terms are +-0 added to sums that start at +0, so the bits are the same (for finite
+    Jacobians, the only ones a step keeps)."""
     for r in range(6):
         for c in range(6):
             if r != c and (r < 3 or c < 3) and B[r, c] != 0.0:
@@ -312,18 +313,34 @@ def _add(Y, k, cdof, m, scale, v):
 
 
 @numba.njit(cache=True, inline="always")
-def _apply_inverse(inv, a, b, ca, cb, J, Y, k):
-    """Y[k] = A^-1 J[k] on contact k's DOFs (body a's first ca entries, then body b's cb)."""
-    for r in range(ca):
+def _apply_inverse(inv, a, b, ca, cb, J, Y, k, split_a, split_b):
+    """Y[k] = A^-1 J[k] on contact k's DOFs (body a's first ca entries, then body b's cb).
+    split_a, split_b: whether body a's, b's block is `_split` (6 DOFs), whose zero entries'
+    products are left out (the same bits: `_split`)."""
+    _apply_block(inv, a, ca, J, Y, k, 0, split_a)
+    _apply_block(inv, b, cb, J, Y, k, ca, split_b)
+
+
+@numba.njit(cache=True, inline="always")
+def _apply_block(inv, b, m, J, Y, k, offset, split):
+    """Y[k, offset:offset + m] = inv[b, :m, :m] J[k, offset:offset + m] (`_apply_inverse`): each
+    sum from +0 in the order of its columns, a `_split` block's zero entries' terms left out."""
+    if split:
+        for r in range(3):
+            s = 0.0
+            s += inv[b, r, r] * J[k, offset + r]
+            Y[k, offset + r] = s
+        for r in range(3, 6):
+            s = 0.0
+            for c in range(3, 6):
+                s += inv[b, r, c] * J[k, offset + c]
+            Y[k, offset + r] = s
+        return
+    for r in range(m):
         s = 0.0
-        for c in range(ca):
-            s += inv[a, r, c] * J[k, c]
-        Y[k, r] = s
-    for r in range(cb):
-        s = 0.0
-        for c in range(cb):
-            s += inv[b, r, c] * J[k, ca + c]
-        Y[k, ca + r] = s
+        for c in range(m):
+            s += inv[b, r, c] * J[k, offset + c]
+        Y[k, offset + r] = s
 
 
 @numba.njit(cache=True, inline="always")
@@ -775,17 +792,19 @@ def _delassus(inv, a, b, ca, cb, n, spatial, has_friction, jn, jt, jo, yn, yt, y
     """Contact n's rows y = A^-1 J^T and Delassus blocks, in place: gnn = jn . yn + comp and,
     with friction, g00 = jt . yt + comp (in space also g01 = jt . yo, g11 = jo . yo + comp)."""
     m = ca + cb
-    _apply_inverse(inv, a, b, ca, cb, jn, yn, n)
+    split_a = ca == 6 and _split(inv[a])  # (checked once a contact, for its three rows)
+    split_b = cb == 6 and _split(inv[b])
+    _apply_inverse(inv, a, b, ca, cb, jn, yn, n, split_a, split_b)
     for j in range(m):
         gnn[n] += jn[n, j] * yn[n, j]
     gnn[n] += comp[n]
     if has_friction:
-        _apply_inverse(inv, a, b, ca, cb, jt, yt, n)
+        _apply_inverse(inv, a, b, ca, cb, jt, yt, n, split_a, split_b)
         for j in range(m):
             g00[n] += jt[n, j] * yt[n, j]
         g00[n] += comp[n]
         if spatial:
-            _apply_inverse(inv, a, b, ca, cb, jo, yo, n)
+            _apply_inverse(inv, a, b, ca, cb, jo, yo, n, split_a, split_b)
             for j in range(m):
                 g01[n] += jt[n, j] * yo[n, j]
                 g11[n] += jo[n, j] * yo[n, j]
