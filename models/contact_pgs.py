@@ -323,8 +323,9 @@ def _apply_inverse(inv, a, b, ca, cb, J, Y, k, split_a, split_b):
 
 @numba.njit(cache=True, inline="always")
 def _apply_block(inv, b, m, J, Y, k, offset, split):
-    """Y[k, offset:offset + m] = inv[b, :m, :m] J[k, offset:offset + m] (`_apply_inverse`): each
-    sum from +0 in the order of its columns, a `_split` block's zero entries' terms left out."""
+    """Y[k, offset:offset + m] = inv[b, :m, :m] J[k, offset:offset + m] (`_apply_inverse`,
+    `models.stepper._delassus_into`'s Yb): each sum from +0 in the order of its columns, a
+    `_split` block's zero entries' terms left out."""
     if split:
         for r in range(3):
             s = 0.0
@@ -333,6 +334,13 @@ def _apply_block(inv, b, m, J, Y, k, offset, split):
         for r in range(3, 6):
             s = 0.0
             for c in range(3, 6):
+                s += inv[b, r, c] * J[k, offset + c]
+            Y[k, offset + r] = s
+        return
+    if m == 6:  # (a trip count the compiler knows: a body in space)
+        for r in range(6):
+            s = 0.0
+            for c in range(6):
                 s += inv[b, r, c] * J[k, offset + c]
             Y[k, offset + r] = s
         return

@@ -55,6 +55,7 @@ import numpy as np
 from models.contact_pgs import (
     BODY_DOFS,
     PgsStatus,
+    _apply_block,
     _by_contact_into,
     _split,
     block_solve_into,
@@ -1301,28 +1302,7 @@ def _delassus_into(body, ldof, nloc, Bl, dofs, count, inv, Y, G, Bb, Yb, gl):
             gl[k] = g
             for r in range(m):
                 Bb[k, r] = Bl[g, a0 + r]
-            if split:  # the zero entries' terms left out (`_split`)
-                for r in range(3):
-                    acc = 0.0
-                    acc += inv[b, r, r] * Bb[k, r]
-                    Yb[k, r] = acc
-                for r in range(3, 6):
-                    acc = 0.0
-                    for c in range(3, 6):
-                        acc += inv[b, r, c] * Bb[k, c]
-                    Yb[k, r] = acc
-            elif m == 6:
-                for r in range(6):
-                    acc = 0.0
-                    for c in range(6):
-                        acc += inv[b, r, c] * Bb[k, c]
-                    Yb[k, r] = acc
-            else:
-                for r in range(m):
-                    acc = 0.0
-                    for c in range(m):
-                        acc += inv[b, r, c] * Bb[k, c]
-                    Yb[k, r] = acc
+            _apply_block(inv, b, m, Bb, Yb, k, 0, split)  # (a split block's zero entries' terms left out)
             for r in range(m):
                 Y[dofs[b, r], g] = Yb[k, r]
             k += 1
