@@ -11,6 +11,10 @@ A step of the rollout reads as its stages, each a function named after it:
 detect (`models.contact`) / `_distances` (contacts at q) -> `_classify_with` (goal / unsafe) -> `_assemble`
 (Jacobians, frames) -> solve and integrate (the rung's step kernel, `models.stepper`:
 `kinematic_step`, `free_step` or `dynamics_step`) -> `_record_forces` / `_record_state`.
+Runs of steps of one kind go to a kernel of their own, which takes them in one call, the same
+stages in the same order, without the reference counts the kernel's loop pays on the arrays it
+rebinds at every step: `_free_run` (no contact detected) and `_contact_run` (contacts in space,
+each step taken by a warm step).
 
 Skipping what a scene does not need: with no contact the step is a free update with a
 precomputed inverse system matrix; mu = 0 pairs get no friction variables; rigid models
@@ -267,10 +271,14 @@ def _record_forces(c_pair, c_n, c_t, c_o, p_n, p_t, h, pair_force, pair_wrench):
 
 @numba.njit(cache=True, inline="always")
 def _record_state(rec_t, rec_q, rec_nu, n_rec, t, q, nu):
-    """Stage record: keep (t, q, nu) as record n_rec; returns the next record's index."""
+    """Stage record: keep (t, q, nu) as record n_rec; returns the next record's index. (Copied
+    entry by entry: a row assignment may allocate, where source and row overlap, which a kernel
+    compiled without numba's runtime, `_contact_run`, cannot.)"""
     rec_t[n_rec] = t
-    rec_q[n_rec] = q
-    rec_nu[n_rec] = nu
+    for j in range(q.shape[0]):
+        rec_q[n_rec, j] = q[j]
+    for j in range(nu.shape[0]):
+        rec_nu[n_rec, j] = nu[j]
     return n_rec + 1
 
 
@@ -497,6 +505,109 @@ def _free_run(
     return FREE_DONE, taken, t, steps, n_rec, outcome, free_side, crossed, 0, 0
 
 
+#: Why `_contact_run` returned: the control's steps are done; or at a step it does not take
+#: (no contact, an unsupported pair, the outcome met with stop_at_outcome, a step the warm steps
+#: do not take), handed back to the caller with that step's detection, which takes it whole.
+CONTACT_DONE, CONTACT_HANDED_BACK = 0, 1
+
+#: Which basis table a `_contact_run` left its caller with: the one passed in, the cold table,
+#: or (0, 1) that side of the warm steps' results.
+BASIS_PASSED, BASIS_COLD = -2, -1
+
+
+@numba.njit(cache=True, _nrt=False, error_model="numpy")  # no reference counts: none of its rebindings is counted
+def _contact_run(
+    S, g_op, g_index, g_lo, g_hi, u_op, u_index, u_lo, u_hi, stack, model, solver, lemke, step_solver, D, tables, system, rotating,
+    limited, scripted, h, q, nu, q_ref, u, contacts, delta_n, delta_t, basis, cold, W, P, side, whole, keep_warm, c_n, c_t, c_o, c_pa, c_pb,
+    warm_n, warm_t, warm_w, warm_slots, n_warm, first_slot, unsupported, pos, speed, reach, pair_psi, pair_force, pair_wrench,
+    rec_t, rec_q, rec_nu, n_rec, record_every, max_records, steps, t, t0, outcome, stop_at_outcome, warm_every, n_left, min_psi,
+    force_steps, sweeps, lcp_solves, max_size, pivots, max_residual,
+):  # fmt: skip
+    """Up to n_left of `rollout_kernel`'s steps in space while a warm step takes them
+    (`models.stepper.spatial_pgs_step`, `models.stepper.spatial_warm_step`), in one call
+    compiled without numba's runtime: the same stages in the same order as the kernel's loop
+    (the warm period's drop, detection, distances, classification, assembly, the warm start
+    in the frames, the warm step, auto's switch, the warm start kept, the tally, the forces'
+    and the state's records), the same bits, without the reference counts the kernel's loop
+    pays on the arrays it rebinds at every step (57 a step at box_push_3d's push: the push
+    about 5% faster, docs/measurements.md). For a scene in space with no scripted obstacle
+    (scripted: False), no speed law, no force-limited drive, not kinematic (`rollout_kernel`
+    checks). Each step writes its state on side `side` of W's results and flips it, as the
+    kernel's warm steps do. It hands a step back, with its detection, where it has no contact or an unsupported
+    pair, where the outcome is met with stop_at_outcome, or where neither warm step takes it
+    (tried: the warm step was tried there and did not take it, so the caller goes to the
+    general step without trying it again; the stages before it are repeated, the same).
+    Returns (why: CONTACT_DONE or CONTACT_HANDED_BACK; the steps taken, whose last state is
+    on side 1 - side; t, steps, the records kept, the outcome, side, the basis table now
+    (BASIS_PASSED, BASIS_COLD, or the side of W's results), whether auto switched to Lemke,
+    the PGS warm start's slots kept, min_psi, force_steps and the tally's five; the
+    contacts and unsupported pairs detected at the step handed back, and tried)."""
+    R = W.out
+    c_pair, c_psi, c_slot, W_n, W_t, W_o, c_bias = contacts
+    bi, bf, pi, dimension = S.bi, S.bf, S.pi, S.dimension
+    # the helpers' flags as values, not literals (a literal argument compiles a signature of its own)
+    spatial, with_friction = dimension == 3, not model.kinematic
+    basis_from, taken, nc, n_unsupported = BASIS_PASSED, 0, np.int64(0), 0
+    while taken < n_left:
+        if warm_every > 0 and int(np.round((t0 + t) / h)) % warm_every == 0:
+            basis, step_solver, basis_from = cold, solver, BASIS_COLD
+            n_warm = _drop_warm(n_warm, warm_slots, warm_n, warm_t, warm_w)
+        nc, n_unsupported = detect_spatial_into(S, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pos, speed, reach)
+        if nc == 0 or n_unsupported > 0:
+            break
+        smallest = _distances(nc, c_pair, c_psi, c_slot, first_slot, pair_psi)
+        if smallest < min_psi:
+            min_psi = smallest
+        if outcome == Outcome.NONE or stop_at_outcome:
+            outcome = _classify_with(g_op, g_index, g_lo, g_hi, u_op, u_index, u_lo, u_hi, q, pair_psi, stack)
+            if outcome != Outcome.NONE and stop_at_outcome:
+                break
+        _assemble(bi, bf, pi, dimension, q, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, W_n, W_t, W_o, c_bias, scripted, with_friction, pos)
+        if keep_warm:
+            _warm_in_frames(nc, c_slot, c_t, c_o, warm_w, warm_t)
+        warm, pgs, sw, warm_pivots, size, res = WARM_NOT_TAKEN, False, 0, 0, 0, 0.0
+        if _may_take_spatial_pgs(spatial, limited, model, step_solver, nc):
+            pgs = True
+            warm, size, res, sw = spatial_pgs_step(
+                model, step_solver, D, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, warm_n, warm_t, W, P,
+                side, whole,
+            )  # fmt: skip
+        elif _may_take_spatial_warm(spatial, limited, model, step_solver, nc):
+            warm, size, res, warm_pivots = spatial_warm_step(
+                model, D, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, W, side, whole
+            )
+        if warm != WARM_DONE:
+            return (
+                CONTACT_HANDED_BACK, taken, t, steps, n_rec, outcome, side, basis_from, step_solver.method == SOLVER_LEMKE, n_warm,
+                min_psi, force_steps, sweeps, lcp_solves, max_size, pivots, max_residual, nc, n_unsupported, True,
+            )  # fmt: skip
+        q, nu, q_ref = R.q[side], R.nu[side], R.q_ref[side]
+        if not pgs:  # (PGS keeps the basis table as it is)
+            basis, basis_from = R.basis[side], side
+        if model.compliant:
+            delta_n, delta_t = R.delta_n[side], R.delta_t[side]
+        side = 1 - side
+        p_n, p_t = R.impulses[:nc], R.frictions[:nc]
+        if step_solver.method == SOLVER_AUTO and sw >= solver.max_sweeps:
+            step_solver = lemke
+        if keep_warm:
+            n_warm = _keep_warm(spatial, nc, c_slot, p_n, p_t, c_t, c_o, warm_n, warm_t, warm_w, warm_slots, n_warm)
+        sweeps, lcp_solves, max_size, pivots, max_residual = _tally(
+            sweeps, lcp_solves, max_size, pivots, max_residual, sw, size, warm_pivots, res
+        )
+        force_steps += _record_forces(c_pair, c_n, c_t, c_o, p_n, p_t, h, pair_force, pair_wrench)
+        t += h
+        steps += 1
+        taken += 1
+        if record_every > 0 and steps % record_every == 0 and n_rec < max_records - 1:
+            n_rec = _record_state(rec_t, rec_q, rec_nu, n_rec, t, q, nu)
+    why = CONTACT_DONE if taken >= n_left else CONTACT_HANDED_BACK  # (the loop breaks before a step it hands back)
+    return (
+        why, taken, t, steps, n_rec, outcome, side, basis_from, step_solver.method == SOLVER_LEMKE, n_warm, min_psi,
+        force_steps, sweeps, lcp_solves, max_size, pivots, max_residual, nc, n_unsupported, False,
+    )  # fmt: skip
+
+
 @numba.njit(cache=True, error_model="numpy")
 def rollout_kernel(
     S,
@@ -589,7 +700,11 @@ def rollout_kernel(
     # start and after each free step the loop takes, not while contacts persist
     free_runs = (kinematic or (constant_A and not limited)) and not scripted and not has_law
     try_free, detected, nc_back, unsupported_back = free_runs, False, 0, 0
-    t, steps, lcp_solves, pivots, max_residual, max_size, min_psi, force_steps, sweeps = 0.0, np.int64(0), 0, 0, 0.0, 0, np.inf, 0, 0
+    # runs of contact steps in space in one call (`_contact_run`), where a warm step takes them
+    try_contact = dimension == 3 and not kinematic and not limited and not scripted and not has_law and (pgs_cap > 0 or spatial_cap > 0)
+    t, steps, lcp_solves, pivots, max_residual, max_size, min_psi, force_steps, sweeps = (
+        0.0, np.int64(0), np.int64(0), np.int64(0), 0.0, np.int64(0), np.inf, np.int64(0), np.int64(0)
+    )  # fmt: skip
     no_impulse, no_friction = np.zeros(0), np.zeros((0, 2))  # a step without contact problem (no allocation a step)
     outcome = Outcome.NONE.value
     status = StepStatus.SINGULAR.value if (not kinematic and constant_A and Ainv.shape[0] != nv) else StepStatus.OK.value
@@ -601,7 +716,7 @@ def rollout_kernel(
             u = u.copy()  # the laws' speeds, step by step
         n_steps, i = int(np.round(durations[k] / h)), 0
         while i < n_steps:
-            detected = False
+            detected, tried = False, False
             if try_free and not (compliant and (delta_n.any() or delta_t.any())):
                 why, taken, t, steps, n_rec, outcome, free_side, crossed, nc_back, unsupported_back = _free_run(
                     S, dimension, g_op, g_index, g_lo, g_hi, u_op, u_index, u_lo, u_hi, stack, eps, theta, h, Ainv, M_const, rhs_const,
@@ -620,6 +735,31 @@ def rollout_kernel(
                 if why != FREE_HANDED_BACK:
                     break
                 detected, try_free = True, False
+            if try_contact and not detected:
+                run = _contact_run(
+                    S, g_op, g_index, g_lo, g_hi, u_op, u_index, u_lo, u_hi, stack, model, solver, lemke, step_solver, D, tables, system,
+                    not constant_A, limited, scripted, h, q, nu, q_ref, u, contacts, delta_n, delta_t, basis, cold, W, P, side, whole,
+                    keep_warm, c_n, c_t, c_o, c_pa, c_pb, warm_n, warm_t, warm_w, warm_slots, n_warm, first_slot, unsupported, pos, speed,
+                    reach, pair_psi, pair_force, pair_wrench, rec_t, rec_q, rec_nu, n_rec, record_every, max_records, steps, t, t0,
+                    outcome, stop_at_outcome, warm_every, n_steps - i, min_psi, force_steps, sweeps, lcp_solves, max_size, pivots,
+                    max_residual,
+                )  # fmt: skip
+                why, taken, t, steps, n_rec, outcome, side, basis_from, to_lemke, n_warm, min_psi, force_steps = run[:12]
+                sweeps, lcp_solves, max_size, pivots, max_residual, nc_back, unsupported_back, tried = run[12:]
+                if taken > 0:  # its last state, on the side its last step wrote
+                    last = 1 - side
+                    q, nu, q_ref = R.q[last], R.nu[last], R.q_ref[last]
+                    if compliant:
+                        delta_n, delta_t = R.delta_n[last], R.delta_t[last]
+                    i += taken
+                if basis_from == BASIS_COLD:
+                    basis = cold
+                elif basis_from != BASIS_PASSED:
+                    basis = R.basis[basis_from]
+                step_solver = lemke if to_lemke else solver
+                if why == CONTACT_DONE:
+                    continue
+                detected = True  # the step handed back, whose detection the buffers hold
             if warm_every > 0 and int(np.round((t0 + t) / h)) % warm_every == 0:
                 # every warm start the call carries, as a call starts: Lemke's basis, PGS's
                 # impulses by slot, auto's switch to Lemke
@@ -689,13 +829,14 @@ def rollout_kernel(
                 warm, pgs, warm_pivots = WARM_NOT_TAKEN, False, 0
                 if keep_warm and dimension == 3:
                     _warm_in_frames(nc, c_slot, c_t, c_o, warm_w, warm_t)
-                if _may_take_spatial_pgs(dimension == 3, limited, model, step_solver, nc):
+                # (not where `_contact_run` tried the warm step at this state: it did not take it)
+                if not tried and _may_take_spatial_pgs(dimension == 3, limited, model, step_solver, nc):
                     pgs = True
                     warm, size, res, sw = spatial_pgs_step(
                         model, step_solver, D, tables, system, not constant_A, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t,
                         warm_n, warm_t, W, P, side, whole,
                     )  # fmt: skip
-                elif _may_take_spatial_warm(dimension == 3, limited, model, step_solver, nc):
+                elif not tried and _may_take_spatial_warm(dimension == 3, limited, model, step_solver, nc):
                     warm, size, res, warm_pivots = spatial_warm_step(
                         model, D, tables, system, not constant_A, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, W, side,
                         whole,
