@@ -175,6 +175,23 @@ def _classify_with(g_op, g_index, g_lo, g_hi, u_op, u_index, u_lo, u_hi, q, pair
 
 
 @numba.njit(cache=True, _nrt=False, error_model="numpy")  # a call without numba's runtime: no array argument reference-counted
+def _observe(
+    nc, c_pair, c_psi, c_slot, first_slot, pair_psi, min_psi, outcome, stop_at_outcome, g_op, g_index, g_lo, g_hi, u_op, u_index,
+    u_lo, u_hi, q, stack,
+):  # fmt: skip
+    """Stages distances and classify at a step's detection (`rollout_kernel`'s and
+    `_contact_run`'s): `_distances`, min_psi lowered to the smallest psi, and q classified
+    (`_classify_with`) while no outcome is met yet, or at every step where the run stops at one.
+    Returns (min_psi, outcome); the caller stops where stop_at_outcome and an outcome is met."""
+    smallest = _distances(nc, c_pair, c_psi, c_slot, first_slot, pair_psi)
+    if smallest < min_psi:
+        min_psi = smallest
+    if outcome == Outcome.NONE or stop_at_outcome:
+        outcome = _classify_with(g_op, g_index, g_lo, g_hi, u_op, u_index, u_lo, u_hi, q, pair_psi, stack)
+    return min_psi, outcome
+
+
+@numba.njit(cache=True, _nrt=False, error_model="numpy")  # a call without numba's runtime: no array argument reference-counted
 def _assemble(bi, bf, pi, dimension, q, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, W_n, W_t, W_o, c_bias, scripted, with_friction, pos):
     """Stage assemble: W_n of the first nc (> 0) contacts at q; with scripted obstacles the frames
     and their velocity bias; with friction (every rung with forces) t, o and W_t, W_o. pos: the
@@ -555,13 +572,12 @@ def _contact_run(
         nc, n_unsupported = detect_spatial_into(S, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pos, speed, reach)
         if nc == 0 or n_unsupported > 0:
             break
-        smallest = _distances(nc, c_pair, c_psi, c_slot, first_slot, pair_psi)
-        if smallest < min_psi:
-            min_psi = smallest
-        if outcome == Outcome.NONE or stop_at_outcome:
-            outcome = _classify_with(g_op, g_index, g_lo, g_hi, u_op, u_index, u_lo, u_hi, q, pair_psi, stack)
-            if outcome != Outcome.NONE and stop_at_outcome:
-                break
+        min_psi, outcome = _observe(
+            nc, c_pair, c_psi, c_slot, first_slot, pair_psi, min_psi, outcome, stop_at_outcome, g_op, g_index, g_lo, g_hi, u_op,
+            u_index, u_lo, u_hi, q, stack,
+        )  # fmt: skip
+        if outcome != Outcome.NONE and stop_at_outcome:
+            break
         _assemble(bi, bf, pi, dimension, q, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, W_n, W_t, W_o, c_bias, scripted, with_friction, pos)
         if keep_warm:
             _warm_in_frames(nc, c_slot, c_t, c_o, warm_w, warm_t)
@@ -779,13 +795,12 @@ def rollout_kernel(
                 nc = detect_planar_into(
                     bi, bf, verts, pi, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, pos, poses, speed, reach, axis
                 )
-            smallest = _distances(nc, c_pair, c_psi, c_slot, first_slot, pair_psi)
-            if smallest < min_psi:
-                min_psi = smallest
-            if outcome == Outcome.NONE or stop_at_outcome:
-                outcome = _classify_with(g_op, g_index, g_lo, g_hi, u_op, u_index, u_lo, u_hi, q, pair_psi, stack)
-                if outcome != Outcome.NONE and stop_at_outcome:
-                    break
+            min_psi, outcome = _observe(
+                nc, c_pair, c_psi, c_slot, first_slot, pair_psi, min_psi, outcome, stop_at_outcome, g_op, g_index, g_lo, g_hi, u_op,
+                u_index, u_lo, u_hi, q, stack,
+            )  # fmt: skip
+            if outcome != Outcome.NONE and stop_at_outcome:
+                break
             if n_unsupported > 0:
                 status = StepStatus.UNSUPPORTED_PAIR.value
                 break
