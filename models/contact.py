@@ -22,7 +22,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from models.contact2d import APART_SLACK, apart_along, collide_2d
+from models.contact2d import APART_SLACK, apart_along, collide_2d, core_scratch
 from models.contact3d import _basis, collide_pair_3d_inline, pose_of
 from models.kinematics import (
     BF_BOUND,
@@ -170,43 +170,48 @@ def detect_contacts(S, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsuppo
     handle are listed in ``unsupported``: since convex meshes are compiled (against every
     spatial shape), only a mesh or box without hull tables in `SceneData` would be.
     """
-    pos, poses, speed, reach, axis = planar_scratch(S.bi.shape[0], S.pi.shape[0])
-    return detect_contacts_into(S, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pos, poses, speed, reach, axis)
+    pos, poses, speed, reach, axis, cores = planar_scratch(S.bi, S.pi.shape[0])
+    return detect_contacts_into(S, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pos, poses, speed, reach, axis, cores)
 
 
 @numba.njit(cache=True, inline="always")
-def detect_contacts_into(S, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pos, poses, speed, reach, axis):
-    """`detect_contacts` on the caller's scratch (`planar_scratch`; in space poses and axis are
+def detect_contacts_into(S, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pos, poses, speed, reach, axis, cores):
+    """`detect_contacts` on the caller's scratch (`planar_scratch`; in space poses, axis and cores are
     unused). The rollout's loops dispatch on the dimension themselves, on the scene's arrays
     unpacked: an inlined helper taking the scene would count its 30-odd arrays' references
     every step."""
     if S.dimension == 2:
         bi, bf, verts, pi = S.bi, S.bf, S.verts, S.pi
-        return detect_planar_into(bi, bf, verts, pi, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, pos, poses, speed, reach, axis), 0
+        nc = detect_planar_into(bi, bf, verts, pi, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, pos, poses, speed, reach, axis, cores)
+        return nc, 0
     return detect_spatial_into(S, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pos, speed, reach)
 
 
 @numba.njit(cache=True)
 def detect_planar(bi, bf, verts, pi, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb):
     """detect_contacts for planar scenes on the packed tables."""
-    pos, poses, speed, reach, axis = planar_scratch(bi.shape[0], pi.shape[0])
-    return detect_planar_into(bi, bf, verts, pi, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, pos, poses, speed, reach, axis)
+    pos, poses, speed, reach, axis, cores = planar_scratch(bi, pi.shape[0])
+    return detect_planar_into(bi, bf, verts, pi, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, pos, poses, speed, reach, axis, cores)
 
 
 @numba.njit(cache=True, inline="always")
-def planar_scratch(nb, n_pairs):
-    """The planar detection's scratch (`detect_planar_into`): per body its position (nb, 3),
-    pose (nb, KEPT_POSE_COLUMNS: `planar_poses_kept`, which carries over from step to step)
-    and speed margin (nb,), per pair its reach (n_pairs,) and last separating axis (n_pairs,
-    2; zero: none yet), which carries over too. C-contiguous arrays, not views of one table: a
-    strided view compiled the narrowphase kernels a second time, beside the C-contiguous
+def planar_scratch(bi, n_pairs):
+    """The planar detection's scratch (`detect_planar_into`) for the bodies bi: per body its
+    position (nb, 3), pose (nb, KEPT_POSE_COLUMNS: `planar_poses_kept`, which carries over from
+    step to step) and speed margin (nb,), per pair its reach (n_pairs,) and last separating
+    axis (n_pairs, 2; zero: none yet), which carries over too, and the general narrowphase's
+    world cores (`models.contact2d.core_scratch`). C-contiguous arrays, not views of one table:
+    a strided view compiled the narrowphase kernels a second time, beside the C-contiguous
     arrays Python passes them."""
+    nb = bi.shape[0]
     poses = np.full((nb, KEPT_POSE_COLUMNS), np.nan)
-    return np.empty((nb, 3)), poses, np.empty(nb), np.empty(n_pairs), np.zeros((n_pairs, 2))
+    return np.empty((nb, 3)), poses, np.empty(nb), np.empty(n_pairs), np.zeros((n_pairs, 2)), core_scratch(bi)
 
 
-@numba.njit(cache=True)
-def detect_planar_into(bi, bf, verts, pi, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, pos, poses, speed, reach, axis):
+# without numba's runtime, as `detect_spatial_into`: the rollout's per-step call, on its scratch
+# (`core_scratch` holds the general narrowphase's world cores, which it allocated before)
+@numba.njit(cache=True, _nrt=False)
+def detect_planar_into(bi, bf, verts, pi, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, pos, poses, speed, reach, axis, cores):
     """detect_planar with the caller's scratch (`planar_scratch`): the rollout's hot path.
 
     Between the broadphase and the narrowphase, a pair of two cores is skipped when its gap
@@ -230,7 +235,7 @@ def detect_planar_into(bi, bf, verts, pi, q, nu, h, margin, c_pair, c_psi, c_n, 
                 and apart_along(bi, bf, verts, poses, a, b, axis[p, 0], axis[p, 1]) > r + APART_SLACK
             ):
                 continue
-            k = collide_2d(bi, bf, verts, poses, a, b, r, c_psi, c_n, c_pa, c_pb, nc, axis[p])
+            k = collide_2d(bi, bf, verts, poses, a, b, r, c_psi, c_n, c_pa, c_pb, nc, axis[p], cores)
             for i in range(nc, nc + k):
                 c_pair[i] = p
             nc += k
@@ -266,7 +271,7 @@ def _aabbs_apart(qmap, base_pos, base_quat, vstart, vcount, verts, radius, q, a,
 @numba.njit(cache=True)
 def detect_spatial(S, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsupported):
     """detect_contacts for spatial scenes (`detect_spatial_into` on scratch of its own)."""
-    pos, _, speed, reach, _ = planar_scratch(S.bi.shape[0], S.pi.shape[0])
+    pos, _, speed, reach, _, _ = planar_scratch(S.bi, S.pi.shape[0])
     return detect_spatial_into(S, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pos, speed, reach)
 
 
@@ -496,7 +501,7 @@ def pair_distance_buffers(S):
     cap = 1
     for p in range(S.pi.shape[0]):
         cap += S.pi[p, 2]
-    pos, poses, speed, reach, axis = planar_scratch(S.bi.shape[0], S.pi.shape[0])
+    pos, poses, speed, reach, axis, cores = planar_scratch(S.bi, S.pi.shape[0])
     return (
         np.zeros(cap, np.int64),
         np.zeros(cap),
@@ -509,6 +514,7 @@ def pair_distance_buffers(S):
         speed,
         reach,
         axis,
+        cores,
         np.zeros(S.nv),
     )
 
@@ -519,10 +525,10 @@ def pair_min_distances_into(S, q, margin, out, buffers):
     nothing: the geometric rung's validity check, thousands a plan (the allocations were
     0.7-1 us of the distances' 2.3-6.5 us, measured). The planar separating axes start at zero on
     every call, so a pair's distance does not depend on the calls before it."""
-    c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pos, poses, speed, reach, axis, nu = buffers
+    c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pos, poses, speed, reach, axis, cores, nu = buffers
     axis[:] = 0.0
     nc, n_unsupported = detect_contacts_into(
-        S, q, nu, 0.0, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pos, poses, speed, reach, axis
+        S, q, nu, 0.0, margin, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pos, poses, speed, reach, axis, cores
     )
     out[:] = np.inf
     for i in range(nc):

@@ -51,17 +51,28 @@ APART_SLACK = 1e-12
 
 
 @numba.njit(cache=True)
-def _world_core(bi, verts, poses, b):
+def core_scratch(bi):
+    """The scratch of the general narrowphase (`_core_vs_core`): room for two bodies' world
+    cores, (2, the most core vertices of a body, 2), so the narrowphase allocates nothing and
+    the planar detection runs without numba's runtime (`models.contact.detect_planar_into`)."""
+    most = 1
+    for b in range(bi.shape[0]):
+        most = max(most, bi[b, BI_VCOUNT])
+    return np.empty((2, most, 2))
+
+
+@numba.njit(cache=True)
+def _world_core(bi, verts, poses, b, out):
+    """Body b's core vertices in the world at its pose, written into out's first rows (out:
+    one side of `core_scratch`; a call without numba's runtime returns no view of it)."""
     px, py, c, s = poses[b, 0], poses[b, 1], poses[b, 2], poses[b, 3]
     k = bi[b, BI_VCOUNT]
     v0 = bi[b, BI_VSTART]
-    out = np.empty((k, 2))
     for i in range(k):
         vx = verts[v0 + i, 0]
         vy = verts[v0 + i, 1]
         out[i, 0] = px + c * vx - s * vy
         out[i, 1] = py + s * vx + c * vy
-    return out
 
 
 @numba.njit(cache=True, inline="always")
@@ -283,14 +294,15 @@ def _halfspace_vs_core(bi, bf, verts, poses, h, b, h_is_a, margin, c_psi, c_n, c
     lnx, lny = bf[h, BF_HSN], bf[h, BF_HSN + 1]
     mx, my = c * lnx - s * lny, s * lnx + c * lny
     off = bf[h, BF_HSO] + mx * px + my * py
-    V = _world_core(bi, verts, poses, b)
     r = bf[b, BF_RADIUS]
+    gx, gy, gc, gs = poses[b, 0], poses[b, 1], poses[b, 2], poses[b, 3]
     count = np.int64(0)
-    for i in range(V.shape[0]):
-        sep = V[i, 0] * mx + V[i, 1] * my - off - r
+    for i in range(bi[b, BI_VSTART], bi[b, BI_VSTART] + bi[b, BI_VCOUNT]):  # the core's vertices in the world, one by one
+        vx, vy = _world_vertex(verts, gx, gy, gc, gs, i)
+        sep = vx * mx + vy * my - off - r
         if sep > margin:
             continue
-        bx, by = V[i, 0] - r * mx, V[i, 1] - r * my  # on the shape's surface
+        bx, by = vx - r * mx, vy - r * my  # on the shape's surface
         hx, hy = bx - sep * mx, by - sep * my  # on the boundary line
         if h_is_a:
             _write(c_psi, c_n, c_pa, c_pb, start + count, sep, mx, my, hx, hy, bx, by)
@@ -396,9 +408,10 @@ def _point_vs_polygon(bi, bf, verts, poses, a, b, margin, c_psi, c_n, c_pa, c_pb
 
 
 @numba.njit(cache=True)
-def _core_vs_core(bi, bf, verts, poses, a, b, margin, c_psi, c_n, c_pa, c_pb, start, axis):
-    P = _world_core(bi, verts, poses, a)
-    Q = _world_core(bi, verts, poses, b)
+def _core_vs_core(bi, bf, verts, poses, a, b, margin, c_psi, c_n, c_pa, c_pb, start, axis, cores):
+    _world_core(bi, verts, poses, a, cores[0])
+    _world_core(bi, verts, poses, b, cores[1])
+    P, Q = cores[0, : bi[a, BI_VCOUNT]], cores[1, : bi[b, BI_VCOUNT]]
     ra, rb = bf[a, BF_RADIUS], bf[b, BF_RADIUS]
     psi_core, nx, ny, cpx, cpy, cqx, cqy = core_distance(P, Q)
     axis[0], axis[1] = nx, ny  # the direction from a to b, kept for `apart_along`
@@ -496,11 +509,12 @@ def _core_vs_core(bi, bf, verts, poses, a, b, margin, c_psi, c_n, c_pa, c_pb, st
 
 
 @numba.njit(cache=True, inline="always")
-def collide_2d(bi, bf, verts, poses, a, b, margin, c_psi, c_n, c_pa, c_pb, start, axis):
+def collide_2d(bi, bf, verts, poses, a, b, margin, c_psi, c_n, c_pa, c_pb, start, axis, cores):
     """Contacts between bodies a and b with psi <= margin, written from index start; returns how many.
 
     poses: (nb, 4) rows (x, y, cos theta, sin theta) from `models.kinematics.planar_poses`.
     axis (2,): for two cores, set to the unit direction from a's core to b's (`apart_along`).
+    cores: the general narrowphase's scratch (`core_scratch`).
     """
     count = np.int64(0)
     ka, kb = bi[a, BI_KIND], bi[b, BI_KIND]
@@ -514,7 +528,7 @@ def collide_2d(bi, bf, verts, poses, a, b, margin, c_psi, c_n, c_pa, c_pb, start
         if (na == 1 and nb >= 3) or (nb == 1 and na >= 3):  # a disc and a polygon: one call
             count = _point_vs_polygon(bi, bf, verts, poses, a, b, margin, c_psi, c_n, c_pa, c_pb, start, axis)
         if count < 0:
-            count = _core_vs_core(bi, bf, verts, poses, a, b, margin, c_psi, c_n, c_pa, c_pb, start, axis)
+            count = _core_vs_core(bi, bf, verts, poses, a, b, margin, c_psi, c_n, c_pa, c_pb, start, axis, cores)
     return count
 
 
@@ -524,4 +538,6 @@ def collide_pair_2d(S, q, p, margin, c_psi, c_n, c_pa, c_pb, start):
     poses = np.zeros((S.bi.shape[0], 4))
     planar_poses(S.bi, S.bf, q, poses)
     axis = np.zeros(2)
-    return collide_2d(S.bi, S.bf, S.verts, poses, S.pi[p, PI_A], S.pi[p, PI_B], margin, c_psi, c_n, c_pa, c_pb, start, axis)
+    return collide_2d(
+        S.bi, S.bf, S.verts, poses, S.pi[p, PI_A], S.pi[p, PI_B], margin, c_psi, c_n, c_pa, c_pb, start, axis, core_scratch(S.bi)
+    )

@@ -353,13 +353,13 @@ def _contact_frames(cap):
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _pair_buffers(n_pairs, nb):
+def _pair_buffers(n_pairs, bi):
     """Per-pair buffers of a rollout, allocated once (at least one pair): unsupported flags,
     smallest psi, normal force, world force; and the planar detection's scratch (`planar_scratch`)."""
     n_pairs = max(n_pairs, 1)
     unsupported = np.zeros(n_pairs, np.int64)
     pair_psi, pair_force, pair_wrench = np.full(n_pairs, np.inf), np.zeros(n_pairs), np.zeros((n_pairs, 3))
-    return unsupported, pair_psi, pair_force, pair_wrench, planar_scratch(nb, n_pairs)
+    return unsupported, pair_psi, pair_force, pair_wrench, planar_scratch(bi, n_pairs)
 
 
 @numba.njit(cache=True, inline="always")
@@ -456,19 +456,19 @@ def law_speeds(S, law, q, q_index, u, out):
 FREE_DONE, FREE_HANDED_BACK, FREE_OUTCOME = 0, 1, 2
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, _nrt=False, error_model="numpy")  # no reference counts: none of its rebindings is counted
 def _free_run(
     S, dimension, g_op, g_index, g_lo, g_hi, u_op, u_index, u_lo, u_hi, stack, eps, theta, h, Ainv, M_const, rhs_const, q, nu,
     q_ref, u, q_index, v_index, kp, kd, lower, upper, rhs, blend, free_q, free_nu, free_q_ref, free_side, c_pair, c_psi, c_n,
-    c_pa, c_pb, c_t, c_o, c_slot, first_slot, unsupported, pos, poses, speed, reach, axis, pair_psi, no_impulse, no_friction,
-    pair_force, pair_wrench, rec_t, rec_q, rec_nu, n_rec, record_every, max_records, steps, t, t0, outcome, stop_at_outcome,
+    c_pa, c_pb, c_t, c_o, c_slot, first_slot, unsupported, pos, poses, speed, reach, axis, cores, pair_psi, no_impulse,
+    no_friction, pair_force, pair_wrench, rec_t, rec_q, rec_nu, n_rec, record_every, max_records, steps, t, t0, outcome, stop_at_outcome,
     warm_every, n_left, kinematic,
 ):  # fmt: skip
     """Up to n_left of `rollout_kernel`'s steps while no contact is detected, in one call: the
     same stages in the same order as the kernel's loop (detection, distances, classification,
     `free_step_into`, the forces' record, the state's record), the same bits, without most of
     the reference counts that the kernel's loop pays on its arrays at every step (a third of a
-    free step, profiled). Compiled with numba's runtime: the planar detection allocates. For a
+    free step, profiled), and without numba's runtime: none of the rest. For a
     scene with no scripted obstacle and no speed law, in the kinematic rung (its free step,
     `kinematic_free_step_into`: kinematic True) or with A constant, no force-limited drive and
     no compliant deformation left (`rollout_kernel` checks). Each step writes its state on side
@@ -490,7 +490,7 @@ def _free_run(
             )
         else:
             nc = detect_planar_into(
-                bi, bf, verts, pi, cq, cnu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, pos, poses, speed, reach, axis
+                bi, bf, verts, pi, cq, cnu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, pos, poses, speed, reach, axis, cores
             )
             n_unsupported = 0
         if nc > 0 or n_unsupported > 0:
@@ -535,22 +535,24 @@ BASIS_PASSED, BASIS_COLD = -2, -1
 @numba.njit(cache=True, _nrt=False, error_model="numpy")  # no reference counts: none of its rebindings is counted
 def _contact_run(
     S, g_op, g_index, g_lo, g_hi, u_op, u_index, u_lo, u_hi, stack, model, solver, lemke, step_solver, D, tables, system, rotating,
-    limited, scripted, h, q, nu, q_ref, u, contacts, delta_n, delta_t, basis, cold, W, P, side, whole, keep_warm, c_n, c_t, c_o, c_pa, c_pb,
-    warm_n, warm_t, warm_w, warm_slots, n_warm, first_slot, unsupported, pos, speed, reach, pair_psi, pair_force, pair_wrench,
+    limited, scripted, h, q, nu, q_ref, u, contacts, delta_n, delta_t, basis, cold, B, W, P, side, whole, keep_warm, c_n, c_t, c_o, c_pa,
+    c_pb, warm_n, warm_t, warm_w, warm_slots, n_warm, first_slot, unsupported, pos, poses, speed, reach, axis, cores, pair_psi, pair_force,
+    pair_wrench,
     rec_t, rec_q, rec_nu, n_rec, record_every, max_records, steps, t, t0, outcome, stop_at_outcome, warm_every, n_left, min_psi,
     force_steps, sweeps, lcp_solves, max_size, pivots, max_residual,
 ):  # fmt: skip
-    """Up to n_left of `rollout_kernel`'s steps in space while a warm step takes them
-    (`models.stepper.spatial_pgs_step`, `models.stepper.spatial_warm_step`), in one call
-    compiled without numba's runtime: the same stages in the same order as the kernel's loop
-    (the warm period's drop, detection, distances, classification, assembly, the warm start
-    in the frames, the warm step, auto's switch, the warm start kept, the tally, the forces'
-    and the state's records), the same bits, without the reference counts the kernel's loop
-    pays on the arrays it rebinds at every step (57 a step at box_push_3d's push: the push
-    about 5% faster, docs/measurements.md). For a scene in space with no scripted obstacle
-    (scripted: False), no speed law, no force-limited drive, not kinematic (`rollout_kernel`
-    checks). Each step writes its state on side `side` of W's results and flips it, as the
-    kernel's warm steps do. It hands a step back, with its detection, where it has no contact or an unsupported
+    """Up to n_left of `rollout_kernel`'s contact steps while a warm step takes them (in space
+    `models.stepper.spatial_pgs_step`, `models.stepper.spatial_warm_step`; in the plane
+    `models.stepper.planar_warm_step`), in one call compiled without numba's runtime: the same
+    stages in the same order as the kernel's loop (the warm period's drop, detection,
+    distances, classification, assembly, the warm start in the frames, the warm step, auto's
+    switch, the warm start kept, the tally, the forces' and the state's records), the same
+    bits, without the reference counts the kernel's loop pays on the arrays it rebinds at every
+    step (57 a step at box_push_3d's push: the push about 5% faster, docs/measurements.md). For
+    a scene with no scripted obstacle (scripted: False), no speed law, no force-limited drive,
+    not kinematic, and in the plane A constant and Lemke's steps (`rollout_kernel` checks).
+    Each step writes its state on side `side` of the warm steps' results (W's and B's, the
+    same) and flips it, as the kernel's warm steps do. It hands a step back, with its detection, where it has no contact or an unsupported
     pair, where the outcome is met with stop_at_outcome, or where neither warm step takes it
     (tried: the warm step was tried there and did not take it, so the caller goes to the
     general step without trying it again; the stages before it are repeated, the same).
@@ -561,7 +563,7 @@ def _contact_run(
     contacts and unsupported pairs detected at the step handed back, and tried)."""
     R = W.out
     c_pair, c_psi, c_slot, W_n, W_t, W_o, c_bias = contacts
-    bi, bf, pi, dimension = S.bi, S.bf, S.pi, S.dimension
+    bi, bf, pi, verts, dimension = S.bi, S.bf, S.pi, S.verts, S.dimension
     # the helpers' flags as values, not literals (a literal argument compiles a signature of its own)
     spatial, with_friction = dimension == 3, not model.kinematic
     basis_from, taken, nc, n_unsupported = BASIS_PASSED, 0, np.int64(0), 0
@@ -569,7 +571,14 @@ def _contact_run(
         if warm_every > 0 and int(np.round((t0 + t) / h)) % warm_every == 0:
             basis, step_solver, basis_from = cold, solver, BASIS_COLD
             n_warm = _drop_warm(n_warm, warm_slots, warm_n, warm_t, warm_w)
-        nc, n_unsupported = detect_spatial_into(S, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pos, speed, reach)
+        if spatial:
+            nc, n_unsupported = detect_spatial_into(
+                S, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pos, speed, reach
+            )
+        else:
+            nc = detect_planar_into(
+                bi, bf, verts, pi, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, pos, poses, speed, reach, axis, cores
+            )
         if nc == 0 or n_unsupported > 0:
             break
         min_psi, outcome = _observe(
@@ -579,7 +588,7 @@ def _contact_run(
         if outcome != Outcome.NONE and stop_at_outcome:
             break
         _assemble(bi, bf, pi, dimension, q, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, W_n, W_t, W_o, c_bias, scripted, with_friction, pos)
-        if keep_warm:
+        if keep_warm and spatial:
             _warm_in_frames(nc, c_slot, c_t, c_o, warm_w, warm_t)
         warm, pgs, sw, warm_pivots, size, res = WARM_NOT_TAKEN, False, 0, 0, 0, 0.0
         if _may_take_spatial_pgs(spatial, limited, model, step_solver, nc):
@@ -591,6 +600,10 @@ def _contact_run(
         elif _may_take_spatial_warm(spatial, limited, model, step_solver, nc):
             warm, size, res, warm_pivots = spatial_warm_step(
                 model, D, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, W, side, whole
+            )
+        elif _may_take_planar_warm(not spatial, not rotating, limited, model, step_solver, nc):
+            warm, size, res, warm_pivots = planar_warm_step(
+                model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, side, whole
             )
         if warm != WARM_DONE:
             return (
@@ -674,7 +687,7 @@ def rollout_kernel(
     # call solves with Lemke, instead of paying PGS's sweeps before Lemke every step
     lemke = Solver(SOLVER_LEMKE, solver.tolerance, solver.max_sweeps, solver.auto_contacts)
     step_solver = solver
-    unsupported, pair_psi, pair_force, pair_wrench, (pos, poses, speed, reach, axis) = _pair_buffers(pi.shape[0], bi.shape[0])
+    unsupported, pair_psi, pair_force, pair_wrench, (pos, poses, speed, reach, axis, cores) = _pair_buffers(pi.shape[0], bi)
     g_op, g_index, g_lo, g_hi = goal  # hoisted: reading a tuple's array in the loop costs a reference count
     u_op, u_index, u_lo, u_hi = unsafe
     q_index, v_index, kp, kd, lower, upper, _, max_force, law = D
@@ -716,8 +729,10 @@ def rollout_kernel(
     # start and after each free step the loop takes, not while contacts persist
     free_runs = (kinematic or (constant_A and not limited)) and not scripted and not has_law
     try_free, detected, nc_back, unsupported_back = free_runs, False, 0, 0
-    # runs of contact steps in space in one call (`_contact_run`), where a warm step takes them
-    try_contact = dimension == 3 and not kinematic and not limited and not scripted and not has_law and (pgs_cap > 0 or spatial_cap > 0)
+    # runs of contact steps in one call (`_contact_run`), where a warm step takes them (in the
+    # plane Lemke's: PGS's steps there are the general step's, which the run would hand back)
+    planar_run = planar_cap > 0 and solver.method == SOLVER_LEMKE
+    try_contact = not kinematic and not limited and not scripted and not has_law and (pgs_cap > 0 or spatial_cap > 0 or planar_run)
     t, steps, lcp_solves, pivots, max_residual, max_size, min_psi, force_steps, sweeps = (
         0.0, np.int64(0), np.int64(0), np.int64(0), 0.0, np.int64(0), np.inf, np.int64(0), np.int64(0)
     )  # fmt: skip
@@ -737,9 +752,9 @@ def rollout_kernel(
                 why, taken, t, steps, n_rec, outcome, free_side, crossed, nc_back, unsupported_back = _free_run(
                     S, dimension, g_op, g_index, g_lo, g_hi, u_op, u_index, u_lo, u_hi, stack, eps, theta, h, Ainv, M_const, rhs_const,
                     q, nu, q_ref, u, q_index, v_index, kp, kd, lower, upper, R.rhs, R.blend, free_q, free_nu, free_q_ref, free_side,
-                    c_pair, c_psi, c_n, c_pa, c_pb, c_t, c_o, c_slot, first_slot, unsupported, pos, poses, speed, reach, axis, pair_psi,
-                    no_impulse, no_friction, pair_force, pair_wrench, rec_t, rec_q, rec_nu, n_rec, record_every, max_records, steps, t,
-                    t0, outcome, stop_at_outcome, warm_every, n_steps - i, kinematic,
+                    c_pair, c_psi, c_n, c_pa, c_pb, c_t, c_o, c_slot, first_slot, unsupported, pos, poses, speed, reach, axis, cores,
+                    pair_psi, no_impulse, no_friction, pair_force, pair_wrench, rec_t, rec_q, rec_nu, n_rec, record_every, max_records,
+                    steps, t, t0, outcome, stop_at_outcome, warm_every, n_steps - i, kinematic,
                 )  # fmt: skip
                 if taken > 0:
                     last = 1 - free_side
@@ -754,9 +769,10 @@ def rollout_kernel(
             if try_contact and not detected:
                 run = _contact_run(
                     S, g_op, g_index, g_lo, g_hi, u_op, u_index, u_lo, u_hi, stack, model, solver, lemke, step_solver, D, tables, system,
-                    not constant_A, limited, scripted, h, q, nu, q_ref, u, contacts, delta_n, delta_t, basis, cold, W, P, side, whole,
-                    keep_warm, c_n, c_t, c_o, c_pa, c_pb, warm_n, warm_t, warm_w, warm_slots, n_warm, first_slot, unsupported, pos, speed,
-                    reach, pair_psi, pair_force, pair_wrench, rec_t, rec_q, rec_nu, n_rec, record_every, max_records, steps, t, t0,
+                    not constant_A, limited, scripted, h, q, nu, q_ref, u, contacts, delta_n, delta_t, basis, cold, B, W, P, side, whole,
+                    keep_warm, c_n, c_t, c_o, c_pa, c_pb, warm_n, warm_t, warm_w, warm_slots, n_warm, first_slot, unsupported, pos, poses,
+                    speed, reach, axis, cores, pair_psi, pair_force, pair_wrench, rec_t, rec_q, rec_nu, n_rec, record_every, max_records,
+                    steps, t, t0,
                     outcome, stop_at_outcome, warm_every, n_steps - i, min_psi, force_steps, sweeps, lcp_solves, max_size, pivots,
                     max_residual,
                 )  # fmt: skip
@@ -793,7 +809,7 @@ def rollout_kernel(
                 )
             else:
                 nc = detect_planar_into(
-                    bi, bf, verts, pi, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, pos, poses, speed, reach, axis
+                    bi, bf, verts, pi, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, pos, poses, speed, reach, axis, cores
                 )
             min_psi, outcome = _observe(
                 nc, c_pair, c_psi, c_slot, first_slot, pair_psi, min_psi, outcome, stop_at_outcome, g_op, g_index, g_lo, g_hi, u_op,
@@ -858,7 +874,7 @@ def rollout_kernel(
                     )  # fmt: skip
                 if not constant_A and warm != WARM_DONE:  # A at q, in place: the system's own (no blocks: A changes)
                     _system_matrix_at(bi, bf, q, eps_eff, h, v_index, kp, kd, max_force, A, R3, I3)
-                if warm != WARM_DONE and _may_take_planar_warm(dimension == 2, constant_A, limited, model, step_solver, nc):
+                if warm != WARM_DONE and not tried and _may_take_planar_warm(dimension == 2, constant_A, limited, model, step_solver, nc):
                     warm, size, res, warm_pivots = planar_warm_step(
                         model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, side, whole
                     )
@@ -1073,7 +1089,7 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
     contacts, first_slot = contact_buffers(pi, nv)
     c_pair, c_psi, c_slot, W_n, W_t, W_o, c_bias = contacts
     c_n, c_t, c_o, c_pa, c_pb, warm_n, warm_t, warm_w, warm_slots = _contact_frames(c_psi.shape[0])
-    unsupported, pair_psi, _, _, (pos, poses, speed, reach, axis) = _pair_buffers(pi.shape[0], bi.shape[0])
+    unsupported, pair_psi, _, _, (pos, poses, speed, reach, axis, cores) = _pair_buffers(pi.shape[0], bi)
     g_op, g_index, g_lo, g_hi = goal
     u_op, u_index, u_lo, u_hi = unsafe
     stack = np.zeros(max(g_op.shape[0], u_op.shape[0]) + 1, np.bool_)
@@ -1102,7 +1118,7 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
                 nc, _ = detect_spatial_into(S, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pos, speed, reach)
             else:
                 nc = detect_planar_into(
-                    bi, bf, verts, pi, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, pos, poses, speed, reach, axis
+                    bi, bf, verts, pi, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, pos, poses, speed, reach, axis, cores
                 )
         if k == 0 or stage == STAGE_CLASSIFY:
             _distances(nc, c_pair, c_psi, c_slot, first_slot, pair_psi)

@@ -176,7 +176,7 @@ def test_broadphase_keeps_far_pairs_out_and_widens_with_speed(tmp_path):
 
 @pytest.mark.parametrize("a, b", PAIRS, ids=lambda x: x)
 def test_gap_along_any_axis_bounds_the_distance_and_the_last_axis_meets_it(tmp_path, a, b):
-    from models.contact2d import apart_along, collide_2d
+    from models.contact2d import apart_along, collide_2d, core_scratch
     from models.kinematics import planar_poses
 
     scenario, S = pair_scene(tmp_path, a, b)
@@ -192,7 +192,9 @@ def test_gap_along_any_axis_bounds_the_distance_and_the_last_axis_meets_it(tmp_p
             assert apart_along(S.bi, S.bf, S.verts, poses, ia, ib, np.cos(angle), np.sin(angle)) <= exact + 1e-12
         cap = int(S.pair_max_contacts[2])
         axis = np.zeros(2)  # set by the narrowphase: its direction from a to b
-        collide_2d(S.bi, S.bf, S.verts, poses, ia, ib, 1e9, np.zeros(cap), *(np.zeros((cap, 3)) for _ in range(3)), 0, axis)
+        collide_2d(
+            S.bi, S.bf, S.verts, poses, ia, ib, 1e9, np.zeros(cap), *(np.zeros((cap, 3)) for _ in range(3)), 0, axis, core_scratch(S.bi)
+        )
         bound = apart_along(S.bi, S.bf, S.verts, poses, ia, ib, axis[0], axis[1])
         assert bound <= exact + 1e-12
         if exact > 1e-6:  # apart: the narrowphase's own direction gives the distance itself
@@ -215,14 +217,14 @@ def test_detection_skips_pairs_apart_along_their_last_axis_and_finds_the_same_co
     bi, bf, verts, pi = S.bi, S.bf, S.verts, S.pi
     cap = int(S.pair_max_contacts.sum())
     carried, fresh = ([np.zeros(cap, np.int64), np.zeros(cap), *(np.zeros((cap, 3)) for _ in range(3))] for _ in range(2))
-    pos, poses, speed, reach, axis = planar_scratch(bi.shape[0], pi.shape[0])
+    pos, poses, speed, reach, axis, world_cores = planar_scratch(bi, pi.shape[0])
     cores = [p for p in range(pi.shape[0]) if SHAPE_HALFSPACE not in (bi[pi[p, 0], BI_KIND], bi[pi[p, 1], BI_KIND])]
     h, nu, here = 1e-3, np.array([0.3, -1.0, -1.2]), np.zeros_like(poses)
     skipped, narrowphase, touching = 0, 0, 0
     for k in range(1700):  # the fingers from y = 2.05 to 0.5 and below, the triangle sliding
         q = np.array([0.3 * k * h - 0.2, 2.05 - 1.0 * k * h, 2.05 - 1.2 * k * h])
         before = axis.copy()
-        n_c = detect_planar_into(bi, bf, verts, pi, q, nu, h, 1e-3, *carried, pos, poses, speed, reach, axis)
+        n_c = detect_planar_into(bi, bf, verts, pi, q, nu, h, 1e-3, *carried, pos, poses, speed, reach, axis, world_cores)
         n_f = detect_planar(bi, bf, verts, pi, q, nu, h, 1e-3, *fresh)
         assert n_c == n_f
         for x, y in zip(carried, fresh):
@@ -258,7 +260,7 @@ def test_kept_poses_are_planar_poses_bit_for_bit_and_skip_what_did_not_turn(tmp_
     nb = bi.shape[0]
     angle = [int(bi[b, BI_QMAP + Q_ANGLE]) for b in range(nb)]
     assert sorted(angle) == [-1, 2, 5]  # the floor (its quaternion), a and b (theta in q)
-    kept = planar_scratch(nb, S.pi.shape[0])[1]
+    kept = planar_scratch(bi, S.pi.shape[0])[1]
     fresh = np.zeros((nb, 4))
     rng = np.random.default_rng(7)
     a_angles = [0.0, 0.0, -0.0, -0.0, 0.3, 0.3, -1.2, np.pi, np.pi]
@@ -294,7 +296,7 @@ def test_the_disc_polygon_path_gives_the_general_paths_contact_bit_for_bit(tmp_p
     """`_point_vs_polygon` (a disc against a polygon in one call, no world cores built) against
     `_core_vs_core` (the general path) on random poses: apart, touching and pressed in, and
     with the disc's centre inside the polygon (where it hands over to the general path)."""
-    from models.contact2d import _core_vs_core, _point_vs_polygon, collide_2d
+    from models.contact2d import _core_vs_core, _point_vs_polygon, collide_2d, core_scratch
     from models.kinematics import planar_poses
 
     scenario, S = pair_scene(tmp_path, "disc", polygon) if disc_first else pair_scene(tmp_path, polygon, "disc")
@@ -308,7 +310,7 @@ def test_the_disc_polygon_path_gives_the_general_paths_contact_bit_for_bit(tmp_p
         out = []
         for kernel_ in (collide_2d, _core_vs_core):
             buffers, axis = [np.zeros(4), *(np.zeros((4, 3)) for _ in range(3))], np.zeros(2)
-            k = kernel_(S.bi, S.bf, S.verts, poses, ia, ib, 0.2, *buffers, 0, axis)
+            k = kernel_(S.bi, S.bf, S.verts, poses, ia, ib, 0.2, *buffers, 0, axis, core_scratch(S.bi))
             out.append((k, [b[:k] for b in buffers], axis))
         (k1, b1, a1), (k2, b2, a2) = out
         assert k1 == k2
