@@ -907,7 +907,10 @@ def lemke_warm_kernel(M, q, max_pivots, guess, tol, droppable=0):
     return z, w, status, pivots, basic_z, False, _natural_map_residual(z, w, q)
 
 
-@numba.njit(cache=True, error_model="numpy")
+# without numba's runtime, named: a warm step compiled without it (`models.stepper.planar_warm_step`)
+# called the copy the general step had compiled first, with it, and paid its reference counts (32 a
+# step at the paper's squeeze, these three)
+@numba.njit(cache=True, _nrt=False, error_model="numpy")
 def warm_guess_into(M, q, guess, J, A, z, w):
     """`lemke_warm_kernel`'s guess, on the caller's arrays (J: n ints, A: (n + 1, n), z and w:
     n each, or larger): z_J = -M[J, J]^-1 q_J on the guessed basic set, z = 0 elsewhere, w = M z
@@ -926,7 +929,8 @@ def warm_guess_into(M, q, guess, J, A, z, w):
     return _natural_map_residual(z, w, q)
 
 
-@numba.njit(cache=True, error_model="numpy")
+# without numba's runtime, named (as `warm_guess_into`)
+@numba.njit(cache=True, _nrt=False, error_model="numpy")
 def warm_guess_dropping_into(M, q, guess, J, A, z, w, droppable, tol):
     """`warm_guess_into`, and where M[J, J] is numerically singular, the guess again without one
     of its basic rows among the first droppable, in order; the first whose point's residual is
@@ -1073,7 +1077,8 @@ def _lemke_polish(M, q, basis, J, z2, w2, A, z, w, status):
     return status
 
 
-@numba.njit(cache=True, error_model="numpy")
+# without numba's runtime, named (as `warm_guess_into`)
+@numba.njit(cache=True, _nrt=False, error_model="numpy")
 def _solve_on_into(M, q, J, nj, A, z):
     """z_J = -M[J, J]^-1 q_J on the nj indices J[:nj], z = 0 elsewhere, on the caller's A (at
     least (nj + 1, nj): M[J, J] and, in row nj, -q_J, for `_gauss_solve`) and z (at least n
