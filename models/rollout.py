@@ -31,6 +31,7 @@ import numpy as np
 from models.contact import (
     CONTACT_MARGIN,
     contact_buffers,
+    detect_contacts_into,
     detect_planar,
     detect_planar_into,
     detect_spatial,
@@ -458,7 +459,7 @@ FREE_DONE, FREE_HANDED_BACK, FREE_OUTCOME = 0, 1, 2
 
 @numba.njit(cache=True, _nrt=False, error_model="numpy")  # no reference counts: none of its rebindings is counted
 def _free_run(
-    S, dimension, g_op, g_index, g_lo, g_hi, u_op, u_index, u_lo, u_hi, stack, eps, theta, h, Ainv, M_const, rhs_const, q, nu,
+    S, g_op, g_index, g_lo, g_hi, u_op, u_index, u_lo, u_hi, stack, eps, theta, h, Ainv, M_const, rhs_const, q, nu,
     q_ref, u, q_index, v_index, kp, kd, lower, upper, rhs, blend, free_q, free_nu, free_q_ref, free_side, c_pair, c_psi, c_n,
     c_pa, c_pb, c_t, c_o, c_slot, first_slot, unsupported, pos, poses, speed, reach, axis, cores, pair_psi, no_impulse,
     no_friction, pair_force, pair_wrench, rec_t, rec_q, rec_nu, n_rec, record_every, max_records, steps, t, t0, outcome, stop_at_outcome,
@@ -479,20 +480,14 @@ def _free_run(
     outcome, whose warm starts the caller drops: a free step reads and writes none of them; and
     the contacts and unsupported pairs detected at the step handed back, whose detection the
     buffers hold: the caller does not detect them again)."""
-    bi, bf, verts, pi = S.bi, S.bf, S.verts, S.pi
+    bi = S.bi
     cq, cnu, cq_ref = q, nu, q_ref
     taken, crossed = 0, False
     while taken < n_left:
         period = warm_every > 0 and int(np.round((t0 + t) / h)) % warm_every == 0
-        if dimension == 3:
-            nc, n_unsupported = detect_spatial_into(
-                S, cq, cnu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pos, speed, reach
-            )
-        else:
-            nc = detect_planar_into(
-                bi, bf, verts, pi, cq, cnu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, pos, poses, speed, reach, axis, cores
-            )
-            n_unsupported = 0
+        nc, n_unsupported = detect_contacts_into(
+            S, cq, cnu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pos, poses, speed, reach, axis, cores
+        )
         if nc > 0 or n_unsupported > 0:
             return FREE_HANDED_BACK, taken, t, steps, n_rec, outcome, free_side, crossed, nc, n_unsupported
         _distances(nc, c_pair, c_psi, c_slot, first_slot, pair_psi)
@@ -563,7 +558,7 @@ def _contact_run(
     contacts and unsupported pairs detected at the step handed back, and tried)."""
     R = W.out
     c_pair, c_psi, c_slot, W_n, W_t, W_o, c_bias = contacts
-    bi, bf, pi, verts, dimension = S.bi, S.bf, S.pi, S.verts, S.dimension
+    bi, bf, pi, dimension = S.bi, S.bf, S.pi, S.dimension
     # the helpers' flags as values, not literals (a literal argument compiles a signature of its own)
     spatial, with_friction = dimension == 3, not model.kinematic
     basis_from, taken, nc, n_unsupported = BASIS_PASSED, 0, np.int64(0), 0
@@ -571,14 +566,9 @@ def _contact_run(
         if warm_every > 0 and int(np.round((t0 + t) / h)) % warm_every == 0:
             basis, step_solver, basis_from = cold, solver, BASIS_COLD
             n_warm = _drop_warm(n_warm, warm_slots, warm_n, warm_t, warm_w)
-        if spatial:
-            nc, n_unsupported = detect_spatial_into(
-                S, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pos, speed, reach
-            )
-        else:
-            nc = detect_planar_into(
-                bi, bf, verts, pi, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, pos, poses, speed, reach, axis, cores
-            )
+        nc, n_unsupported = detect_contacts_into(
+            S, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pos, poses, speed, reach, axis, cores
+        )
         if nc == 0 or n_unsupported > 0:
             break
         min_psi, outcome = _observe(
@@ -750,7 +740,7 @@ def rollout_kernel(
             detected, tried = False, False
             if try_free and not (compliant and (delta_n.any() or delta_t.any())):
                 why, taken, t, steps, n_rec, outcome, free_side, crossed, nc_back, unsupported_back = _free_run(
-                    S, dimension, g_op, g_index, g_lo, g_hi, u_op, u_index, u_lo, u_hi, stack, eps, theta, h, Ainv, M_const, rhs_const,
+                    S, g_op, g_index, g_lo, g_hi, u_op, u_index, u_lo, u_hi, stack, eps, theta, h, Ainv, M_const, rhs_const,
                     q, nu, q_ref, u, q_index, v_index, kp, kd, lower, upper, R.rhs, R.blend, free_q, free_nu, free_q_ref, free_side,
                     c_pair, c_psi, c_n, c_pa, c_pb, c_t, c_o, c_slot, first_slot, unsupported, pos, poses, speed, reach, axis, cores,
                     pair_psi, no_impulse, no_friction, pair_force, pair_wrench, rec_t, rec_q, rec_nu, n_rec, record_every, max_records,
