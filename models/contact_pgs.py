@@ -243,17 +243,13 @@ def body_blocks(bi, A, Ainv):
 def body_blocks_into(bi, A, Ainv, dofs, count, inv, block, work):
     """`body_blocks` into the caller's dofs (nb, BODY_DOFS), count (nb,) and inv (nb,
     BODY_DOFS, BODY_DOFS), with the scratch block (BODY_DOFS, BODY_DOFS) and work (BODY_DOFS,
-    2 BODY_DOFS): all set here. Returns ok."""
+    2 BODY_DOFS). Sets dofs, count and each body's inv[b, :count, :count], the only entries
+    its readers take (loops to count[b]; `_split` on a block of 6): the rest of inv is left as
+    it was (zeroing it was 216 stores a step at box_push_3d's five bodies). Returns ok."""
     nb = bi.shape[0]
     for b in range(nb):
-        count[b] = 0
         for r in range(BODY_DOFS):
             dofs[b, r] = -1
-            for c in range(BODY_DOFS):
-                inv[b, r, c] = 0.0
-    for r in range(BODY_DOFS):
-        for c in range(BODY_DOFS):
-            block[r, c] = 0.0
     have_inverse = Ainv.shape[0] == A.shape[0]
     for b in range(nb):
         m = np.int64(0)
