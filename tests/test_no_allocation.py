@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from numba.core.runtime import _nrt_python, rtsys
 
-from models.rungs import pgs_rung, rung_for
+from models.rungs import pgs_rung, policy_controls, rung_for
 from models.scenario import load_scenario
 from tests.conftest import SCENARIOS
 
@@ -79,7 +79,7 @@ def test_box_push_3d_s_push_allocates_per_call_not_per_step(allocations, exact):
     rung = rung_for(scenario, "dynamic-rigid")
     rung = pgs_rung(rung, exact_cone=True) if exact else rung
     h = scenario.rung_settings("dynamic-rigid").h
-    u = np.array([[scenario.spec.task.policy.speeds.get(name, 0.0) for name in scenario.actuated]])
+    u, _ = policy_controls(scenario)
     pushing = rung.rollout(scenario, rung.initial_state(scenario), u, [0.4], h, stop_at_outcome=False).state
     counts, steps = _per_call(allocations, rung, scenario, pushing, u, h, [10, 100])  # one control period: 100 steps
     assert steps == [(10, 10), (100, 100)]
