@@ -298,7 +298,7 @@ def contact_steps(quick: bool = False) -> dict:
     timed in turns with ours (`in_turns`): the paper's scene in its fastest mapping
     (`direct`, the inert palm-triangle pair left out), box_push_3d with MuJoCo's own contact
     model (`peers.build_spatial`), stepped in the same calls."""
-    from models.rungs import pgs_rung, rung_for
+    from models.rungs import pgs_rung, policy_controls, rung_for
     from models.scenario import load_scenario
     from planner.ompl_adapter import flatten, planner_propagation
 
@@ -331,7 +331,7 @@ def contact_steps(quick: bool = False) -> dict:
     rung = rung_for(box, "dynamic-rigid")
     settings = box.rung_settings("dynamic-rigid")
     h, period = settings.h, settings.control_period
-    u = np.array([[box.spec.task.policy.speeds.get(name, 0.0) for name in box.actuated]])
+    u, _ = policy_controls(box)
     first, span = CONTACT_PUSH_S
     start = rung.rollout(box, rung.initial_state(box), u, [first], h, stop_at_outcome=False).state
     calls = int(round(span / period)) // (5 if quick else 1)

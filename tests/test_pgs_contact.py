@@ -19,7 +19,7 @@ import pytest
 from models.contact import CONTACT_MARGIN, ContactSet, contact_frames
 from models.contact_pgs import disk_minimiser, polygon_minimiser
 from models.rollout import _keep_warm, _warm_in_frames
-from models.rungs import RUNGS, compiled, pgs_rung, rung_for
+from models.rungs import RUNGS, compiled, pgs_rung, policy_controls, rung_for
 from models.scenario import ScenarioError, load_scenario
 from models.schema import CONTACT_SOLVERS
 from models.stepper import (
@@ -254,7 +254,7 @@ def test_the_push_warm_starts_pgs_although_the_pushers_tangent_basis_flips(exact
     sc = load_scenario(SCENARIOS / "box_push_3d.toml")
     base = rung_for(sc, "dynamic-rigid")
     rung = pgs_rung(base, exact_cone=exact)
-    u = np.array([[sc.spec.task.policy.speeds.get(name, 0.0) for name in sc.actuated]])
+    u, _ = policy_controls(sc)
     start = base.rollout(sc, base.initial_state(sc), u, [0.4], H, stop_at_outcome=False).state
     out = rung.rollout(sc, start, u, [0.5], H, stop_at_outcome=False)
     assert out.status == "ok" and out.steps == out.force_steps == 500
@@ -306,7 +306,7 @@ def test_where_pgs_creeps_the_exact_cone_pivots_on_polygons_aligned_with_its_fri
     rung = pgs_rung(rung_for(sc, "dynamic-rigid"), exact_cone=True)
     q, nu, q_ref = (np.array(a) for a in CREEP_STATE)
     start = replace(rung.initial_state(sc), q=q, nu=nu, q_ref=q_ref)
-    u = np.array([[sc.spec.task.policy.speeds.get(name, 0.0) for name in sc.actuated]])
+    u, _ = policy_controls(sc)
     out = rung.rollout(sc, start, u, [H], H, stop_at_outcome=False)
     assert out.status == "ok" and out.steps == 1
     assert out.sweeps == 1000 and out.pivots > 0  # PGS ran out, the pivoting solved it
@@ -325,7 +325,7 @@ def test_the_exact_cones_pivoting_solves_the_push_wherever_pgs_stops_short():
     base = rung_for(sc, "dynamic-rigid")
     rung = replace(pgs_rung(base, exact_cone=True), solver=contact_solver("pgs", max_sweeps=1))
     mu = sc.pairs[_table_box(sc)].mu
-    u = np.array([[sc.spec.task.policy.speeds.get(name, 0.0) for name in sc.actuated]])
+    u, _ = policy_controls(sc)
     state = base.rollout(sc, base.initial_state(sc), u, [0.4], H, stop_at_outcome=False).state
     pivoted = 0
     for _ in range(200):
