@@ -2105,10 +2105,9 @@ def spatial_warm_step(model, drives, tables, system, rotating, h, q, nu, q_ref, 
     if not (residual <= LCP_TOLERANCE):
         return WARM_NOT_TAKEN, n, residual, pivots
     nu_new, p_t = R.nu[side], L.p_t[:n_act]
-    if guessed:  # t = C z is the guess's, the same bits (`_generator_impulses_in_space_into`)
-        _impulses_of_t_into(True, n_act, nf, fric, Y, nu_free, L.t[:ng], p_t, nu_new)
-    else:
-        _impulses_into(True, n_act, m, nf, fric, gen, cf, z, Y, nu_free, L.t[:ng], p_t, nu_new)
+    if not guessed:  # (where the guess solved it, t = C z is the guess's: the same bits, `_generator_impulses_in_space_into`)
+        _generator_impulses_into(m, gen, cf, z, L.t[:ng])
+    _impulses_of_t_into(True, n_act, nf, fric, Y, nu_free, L.t[:ng], p_t, nu_new)
     _fill_basis_kept(R.basis[side], basis, guess, active, contacts.slot, fric, nf, d, lim, m)
     if model.compliant:
         _deformations_into(h, pf, contacts.pair, contacts.slot, active, z, p_t, delta_n, delta_t, R.delta_n[side], R.delta_t[side])

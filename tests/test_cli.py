@@ -291,7 +291,7 @@ def test_ctrl_c_during_plan_keeps_the_rungs_done_marked_incomplete(tmp_path):
 
 
 def test_a_chunked_rollout_equals_one_call():
-    from models.rungs import rung_for
+    from models.rungs import policy_controls, rung_for
     from models.scenario import load_scenario
 
     outcomes = []
@@ -305,7 +305,7 @@ def test_a_chunked_rollout_equals_one_call():
         scenario = load_scenario(TRIANGLE, params)
         rung = rung_for(scenario, model)
         start = rung.initial_state(scenario)
-        u = np.array([scenario.spec.task.policy.speeds.get(name, 0.0) for name in scenario.actuated])
+        u = policy_controls(scenario)[0][0]
         controls, durations = np.array([u, 0.5 * u, u]), np.array([0.5, 0.25, 3.0])
         whole = rung.rollout(scenario, start, controls, durations, h)
         outcomes.append(whole.outcome)
@@ -334,12 +334,12 @@ def test_a_chunked_rollout_with_pgs_equals_one_call_wherever_its_chunks_would_en
     which sizes its chunks (the push's q up to 6e-5 m apart). They end on those steps now."""
     from dataclasses import replace
 
-    from models.rungs import pgs_rung, rung_for
+    from models.rungs import pgs_rung, policy_controls, rung_for
     from models.scenario import load_scenario
     from models.stepper import contact_solver
 
     scenario = load_scenario(SCENARIOS / "box_push_3d.toml")
-    u = np.array([scenario.spec.task.policy.speeds.get(name, 0.0) for name in scenario.actuated])
+    u = policy_controls(scenario)[0][0]
     controls, durations, h = np.array([u, 0.5 * u]), np.array([0.7, 0.6]), 1e-3
     base = rung_for(scenario, "dynamic-rigid")
     rungs = {"pgs": pgs_rung(base), "exact cone": pgs_rung(base, exact_cone=True), "auto": replace(base, solver=contact_solver("auto"))}
