@@ -774,11 +774,11 @@ def contact_stage(part, model, solver, drives, tables, system, h, q, nu, q_ref, 
     active = _active_contacts(contacts.W_n, nc)
     spatial = tables.spatial
     if _planar_case(spatial, drives.max_force, active, contacts.pair, tables.pf, contacts.W_t):  # (as _contact_solve)
-        Mlcp, qlcp, Y, gen, cf, fric, nf, lim, G = _planar_lcp(
+        Mlcp, qlcp, Y, gen, cf, fric, nf, lim, G, B = _planar_lcp(
             model, h, dofs, count, inv, nu_free, active, tables.pi, tables.pf, contacts, delta_n, delta_t
         )
     else:
-        Mlcp, qlcp, Y, gen, cf, fric, nf, lim, G = contact_lcp(
+        Mlcp, qlcp, Y, gen, cf, fric, nf, lim, G, B = contact_lcp(
             model, spatial, h, dofs, count, inv, nu_free, active, tables.pi, tables.pf, contacts, delta_n, delta_t, drives, drive_a
         )
     d = model.friction_directions if spatial else 2
@@ -788,13 +788,13 @@ def contact_stage(part, model, solver, drives, tables, system, h, q, nu, q_ref, 
     on_generators = _on_generators(spatial, lim.shape[0])  # (as _contact_solve)
     comp, gs, gmu = np.empty(nc), np.empty(nf), np.empty(nf)
     reg, scale = _scale_contact_lcp(
-        model, on_generators, h, Mlcp, qlcp, G, gen, cf, active, fric, nf, tables.pf, contacts.pair, m, comp, gs, gmu
+        model, on_generators, h, Mlcp, qlcp, Y, B, gen, cf, active, fric, nf, tables.pf, contacts.pair, m, comp, gs, gmu
     )
     guess = _basis_guess(basis, active, contacts.slot, fric, nf, d, lim, m, n, qlcp)
     if part == PART_ASSEMBLY:
         return n
     if on_generators:
-        status = _guess_or_lemke(G, gen, cf, model.compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, Mlcp, qlcp, scale, guess)[2]
+        status = _guess_or_lemke(Y, B, gen, cf, model.compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, Mlcp, qlcp, scale, guess)[2]
     else:
         status = lemke_warm_kernel(Mlcp, qlcp, DEFAULT_LEMKE_PIVOTS_PER_VARIABLE * (n + 1), guess, WARM_TOLERANCE, nc)[2]
     return n if status == STATUS_SOLVED or status == STATUS_SOLVED_INACCURATE else 0
@@ -1065,7 +1065,8 @@ def contact_lcp(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, co
 
     Returns (M, q, Y = A^-1 B, gen, cf: LCP column r < m is cf[0, r] B[:, gen[0, r]] +
     cf[1, r] B[:, gen[1, r]] (`_combinations_into`), fric, nf, lim: the indices of the nl
-    force-limited drives, G).
+    force-limited drives, G, B = (ldof, nloc, Bl): the generators on the DOFs they touch,
+    `_generators_into`).
 
     A force-limited drive j (limit F, P = h F) is a bounded impulse p = x - P, x in [0, 2P]:
     unbounded it would be a - b v (a: its PD impulse at v = 0, `_drives_into`; b = h (h kp + kd); v
@@ -1093,7 +1094,7 @@ def contact_lcp(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, co
         model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, drives, drive_a, lim, nl, fric, nf,
         scratch, Mlcp, qlcp, Y, gen, cf, dirs,
     )  # fmt: skip
-    return Mlcp, qlcp, Y, gen, cf, fric, nf, lim[:nl], G
+    return Mlcp, qlcp, Y, gen, cf, fric, nf, lim[:nl], G, (ldof, nloc, Bl)
 
 
 @numba.njit(cache=True, inline="always")
@@ -1111,23 +1112,22 @@ def contact_lcp_into(
     (`_combinations_into`)."""
     lcp_generators_into(
         model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, drives, lim, nl, fric, nf, scratch, qlcp,
-        Y, gen, cf, dirs,
+        Y, gen, cf, dirs, True,
     )  # fmt: skip
-    G = scratch[4]
-    reg = _regularization(G, gen, cf, active.shape[0], model.compliant, model.regularization)
+    reg = _regularization(Y, scratch[1], scratch[2], scratch[3], gen, cf, active.shape[0], model.compliant, model.regularization)
     lcp_matrix_into(model, spatial, h, active, pf, contacts.pair, drives, drive_a, lim, nl, fric, nf, reg, scratch, Mlcp, qlcp, gen, cf)
 
 
 @numba.njit(cache=True, inline="always")
 def lcp_generators_into(
     model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, drives, lim, nl, fric, nf, scratch, qlcp, Y,
-    gen, cf, dirs,
+    gen, cf, dirs, gram,
 ):  # fmt: skip
     """The first part of `contact_lcp_into`, all the LCP but M: the generators (`_generators_into`),
-    G and Y (`_delassus_into`, G in scratch[4]), C (gen, cf) and q (the normal and friction rows';
-    the drives' rows are M's part, `lcp_matrix_into`), unscaled. On these alone the previous
-    basis's guess is tried (`_generator_guess_into`): M is built only where it fails. dirs: the
-    cone's directions in space (`_combinations_into`)."""
+    Y and, where gram, G (`_delassus_into`, G in scratch[4]), C (gen, cf) and q (the normal and
+    friction rows'; the drives' rows are M's part, `lcp_matrix_into`), unscaled. On these alone
+    (Y, not G) the previous basis's guess is tried (`_generator_guess_into`): G and M are built
+    only where it fails. dirs: the cone's directions in space (`_combinations_into`)."""
     body, ldof, nloc, Bl, G, p, Bt_nu, Jt_nu, Bb, Yb, gl = scratch
     compliant = model.compliant
     c_pair, c_psi, c_slot, c_bias = contacts.pair, contacts.psi, contacts.slot, contacts.bias
@@ -1137,7 +1137,7 @@ def lcp_generators_into(
     nd = nf * d
     m = nc + nd + nl
     _generators_into(spatial, active, fric, nf, lim, nl, drives.v_index, pi, c_pair, W_n, W_t, W_o, dofs, count, body, ldof, nloc, Bl)
-    _delassus_into(body, ldof, nloc, Bl, dofs, count, inv, Y, G, Bb, Yb, gl)
+    _delassus_into(body, ldof, nloc, Bl, dofs, count, inv, Y, G, Bb, Yb, gl, gram)
     _combinations_into(spatial, d, nc, fric, nf, nl, gen, cf, dirs)
     n = m + nf + nl
     for r in range(n):
@@ -1230,8 +1230,9 @@ def _generators_into(spatial, active, fric, nf, lim, nl, v_index, pi, c_pair, W_
                 if count[b] > 0:
                     body[k, s] = b
                     s += 1
-        else:
-            k, src = fric[(g - nc) % nf], W_t if g < nc + nf else W_o
+        else:  # (g - nc) % nf without a division a generator
+            f = g - nc if g < nc + nf else g - nc - nf
+            k, src = fric[f], W_t if g < nc + nf else W_o
             body[g, 0], body[g, 1] = body[k, 0], body[k, 1]
         i = active[k]
         a = 0
@@ -1262,8 +1263,9 @@ def _generators_into(spatial, active, fric, nf, lim, nl, v_index, pi, c_pair, W_
 
 
 @numba.njit(cache=True, inline="always")
-def _delassus_into(body, ldof, nloc, Bl, dofs, count, inv, Y, G, Bb, Yb, gl):
-    """(Y = A^-1 B (nv, ng), G = B^T A^-1 B (ng, ng)) into the caller's Y and G, set here, over
+def _delassus_into(body, ldof, nloc, Bl, dofs, count, inv, Y, G, Bb, Yb, gl, gram):
+    """(Y = A^-1 B (nv, ng), G = B^T A^-1 B (ng, ng)) into the caller's Y and G, set here (G
+    only where gram: the guess on the generators needs Y alone, `_generator_guess_into`), over
     the DOFs of the bodies each generator touches: A is block diagonal by body (inv: its blocks'
     inverses), so Y[:, g] lives on g's bodies and G[g1, g2] is zero unless g1 and g2 share one.
     G is symmetric: its upper triangle is mirrored.
@@ -1283,9 +1285,10 @@ def _delassus_into(body, ldof, nloc, Bl, dofs, count, inv, Y, G, Bb, Yb, gl):
     for v in range(Y.shape[0]):
         for g in range(ng):
             Y[v, g] = 0.0
-    for g1 in range(ng):
-        for g2 in range(ng):
-            G[g1, g2] = 0.0
+    if gram:
+        for g1 in range(ng):
+            for g2 in range(ng):
+                G[g1, g2] = 0.0
     for b in range(count.shape[0]):
         m = count[b]
         if m == 0:
@@ -1306,6 +1309,8 @@ def _delassus_into(body, ldof, nloc, Bl, dofs, count, inv, Y, G, Bb, Yb, gl):
             for r in range(m):
                 Y[dofs[b, r], g] = Yb[k, r]
             k += 1
+        if not gram:
+            continue
         for k1 in range(k):
             g1 = gl[k1]
             if body[g1, 1] >= 0 and body[g1, 1] < body[g1, 0]:  # its sum starts on the later body: below
@@ -1331,6 +1336,8 @@ def _delassus_into(body, ldof, nloc, Bl, dofs, count, inv, Y, G, Bb, Yb, gl):
                     acc += Bb[k1, r] * Yb[k3, r]
                 G[g1, gl[k3]] = acc
                 G[gl[k3], g1] = acc
+    if not gram:
+        return
     for g1 in range(ng):
         p, r = body[g1, 0], body[g1, 1]
         if r < 0 or r > p:
@@ -1412,14 +1419,60 @@ def _compliance(h, K, C):
 
 
 @numba.njit(cache=True, inline="always")
-def _regularization(G, gen, cf, nc, compliant, regularization):
+def _gram_entry(Y, ldof, nloc, Bl, a, b):
+    """G[a, b] (G = B^T A^-1 B, `_delassus_into`'s) from Y = A^-1 B and the generators (ldof,
+    nloc, Bl: `_generators_into`) alone: B[:, lo]^T Y[:, hi] (lo, hi: a, b in order) over lo's
+    local DOFs in their order, G's upper triangle's sum with the same terms in the same order
+    (its other entries' products are zeros): G's entry bit for bit, where G is not built
+    (`spatial_warm_step` builds it only where the guess fails)."""
+    if a > b:
+        a, b = b, a
+    s = 0.0
+    for i in range(nloc[a]):
+        s += Bl[a, i] * Y[ldof[a, i], b]
+    return s
+
+
+@numba.njit(cache=True, inline="always")
+def _normal_diagonal_entry(Y, ldof, nloc, Bl, gen, cf, k):
+    """(C^T G C)[k, k] of active contact k's normal row (`_fill_jacobian_block`'s operations, on
+    `_gram_entry`: M's bits)."""
+    a0, a1 = gen[0, k], gen[1, k]
+    g0 = _gram_entry(Y, ldof, nloc, Bl, a0, k)
+    g1 = g0 if a1 == a0 else _gram_entry(Y, ldof, nloc, Bl, a1, k)
+    return cf[0, k] * g0 + cf[1, k] * g1
+
+
+@numba.njit(cache=True, inline="always")
+def _regularization(Y, ldof, nloc, Bl, gen, cf, nc, compliant, regularization):
     """The rigid contact rows' regularization: `Model.regularization` of the largest normal
-    diagonal of C^T G C (`_jacobian_entry`; 0 with compliance, which regularizes them already)."""
+    diagonal of C^T G C (`_normal_diagonal_entry`; 0 with compliance, which regularizes them
+    already)."""
     reg = 0.0
     if not compliant and regularization > 0.0:
         for k in range(nc):
-            reg = max(reg, regularization * _jacobian_entry(G, gen, cf, nc, k, k))
+            reg = max(reg, regularization * _normal_diagonal_entry(Y, ldof, nloc, Bl, gen, cf, k))
     return reg
+
+
+@numba.njit(cache=True, inline="always")
+def _ctg_row_on_y_into(Y, ldof, nloc, Bl, gen, cf, r, p):
+    """Row r (< m) of C^T G into the caller's p (ng), from Y without G (`_ctg_row_into`'s
+    values, not its bits): (cf[0, r] B[:, gen[0, r]] + cf[1, r] B[:, gen[1, r]])^T Y, each
+    local DOF's entry times Y's row there, added to p (contiguous rows of ng)."""
+    a0, a1, x0, x1 = gen[0, r], gen[1, r], cf[0, r], cf[1, r]
+    ng = p.shape[0]
+    for g in range(ng):
+        p[g] = 0.0
+    for i in range(nloc[a0]):
+        e, v = x0 * Bl[a0, i], ldof[a0, i]
+        for g in range(ng):
+            p[g] += e * Y[v, g]
+    if x1 != 0.0:
+        for i in range(nloc[a1]):
+            e, v = x1 * Bl[a1, i], ldof[a1, i]
+            for g in range(ng):
+                p[g] += e * Y[v, g]
 
 
 @numba.njit(cache=True, inline="always")
@@ -1552,8 +1605,11 @@ def _planar_lcp(model, h, dofs, count, inv, nu_free, active, pi, pf, contacts, d
     gen = I[n_int : n_int + 2 * m].reshape(2, m)
     fric = I[n_int + 2 * m : n_int + 2 * m + nc]
     _planar_lcp_into(model, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, I, F, Mlcp, qlcp, Y, gen, cf, fric)
-    fG = ng * LOCAL_DOFS  # (`_planar_lcp_into`'s layout of F)
-    return Mlcp, qlcp, Y, gen, cf, fric, nc, fric[:0], F[fG : fG + ng * ng].reshape(ng, ng)
+    fG = ng * LOCAL_DOFS  # (`_planar_lcp_into`'s layout of F and I)
+    oL = 2 * ng
+    oN = oL + ng * LOCAL_DOFS
+    B = (I[oL:oN].reshape(ng, LOCAL_DOFS), I[oN : oN + ng], F[:fG].reshape(ng, LOCAL_DOFS))
+    return Mlcp, qlcp, Y, gen, cf, fric, nc, fric[:0], F[fG : fG + ng * ng].reshape(ng, ng), B
 
 
 @numba.njit(cache=True, inline="always")
@@ -2069,17 +2125,19 @@ def spatial_warm_step(model, drives, tables, system, rotating, h, q, nu, q_ref, 
     M, q_lcp, Y, gen, cf = _lcp_views(L, nv, n, m, ng)
     G = W.G[: ng * ng].reshape((ng, ng))
     scratch = (W.body[:ng], W.ldof[:ng], W.nloc[:ng], W.Bl[:ng], G, W.p[:ng], W.Bt_nu[:ng], W.Jt_nu[:m], W.Bb[:ng], W.Yb[:ng], W.gl[:ng])
-    # all of the LCP but M (`lcp_generators_into`), scaled as the general step scales it
-    # (`_scale_contact_lcp` on the generators), and the previous basis's guess on G and C (from q
-    # where a contact is not in it): M is built only where that fails (a contact made or broken
-    # that q does not predict)
+    # all of the LCP but G and M (`lcp_generators_into`), scaled as the general step scales it
+    # (`_scale_contact_lcp` on the generators), and the previous basis's guess on Y and C (from q
+    # where a contact is not in it): G and M are built only where that fails (a contact made or
+    # broken that q does not predict)
     lcp_generators_into(
         model, True, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, drives, lim, 0, fric, nf, scratch, q_lcp, Y,
-        gen, cf, W.dirs,
+        gen, cf, W.dirs, False,
     )  # fmt: skip
     compliant = model.compliant
     comp, gs, gmu = L.comp[:n_act], L.gs[:nf], L.gmu[:nf]
-    reg, scale = _scale_contact_lcp(model, True, h, M[:0], q_lcp, G, gen, cf, active, fric, nf, pf, contacts.pair, m, comp, gs, gmu)
+    ldof, nloc, Bl, dv = W.ldof[:ng], W.nloc[:ng], W.Bl[:ng], W.gyro  # (gyro: the free velocity's scratch, nv)
+    B = (ldof, nloc, Bl)
+    reg, scale = _scale_contact_lcp(model, True, h, M[:0], q_lcp, Y, B, gen, cf, active, fric, nf, pf, contacts.pair, m, comp, gs, gmu)
     _fill_basis_guess(L.guess, basis, active, contacts.slot, fric, nf, d, lim, m, n, q_lcp)
     guess = L.guess[:n]
     if part == PART_ASSEMBLY:
@@ -2087,14 +2145,15 @@ def spatial_warm_step(model, drives, tables, system, rotating, h, q, nu, q_ref, 
     z, w = L.z[:n], L.w[:n]
     pivots = 0
     residual = _generator_guess_dropping_into(
-        G, gen, cf, compliant, n_act, d, m, fric, nf, reg, comp, gs, gmu, q_lcp, scale, guess, L.J, L.lu, z, w, L.t[:ng], L.u[:ng],
-        L.slide[: 2 * nf],
+        Y, ldof, nloc, Bl, dv, gen, cf, compliant, n_act, d, m, fric, nf, reg, comp, gs, gmu, q_lcp, scale, guess, L.J, L.lu, z, w,
+        L.t[:ng], L.u[:ng], L.slide[: 2 * nf],
     )  # fmt: skip
-    guessed = residual <= WARM_TOLERANCE  # (the guess solved it: z, and t = C z, are its)
+    guessed = residual <= WARM_TOLERANCE  # (the guess solved it: z, t = C z and dv = Y t are its)
     if not guessed:
-        # M, scaled as q is, and Lemke from the failed guess's basis (`_warm_solve`'s); the
-        # final basis's flags replace the guess, and the residual is its solution's (the
-        # guess's is its own point's, computed there)
+        # G (Y again with it, the same bits), M, scaled as q is, and Lemke from the failed
+        # guess's basis (`_warm_solve`'s); the final basis's flags replace the guess, and the
+        # residual is its solution's (the guess's is its own point's, computed there)
+        _delassus_into(W.body[:ng], ldof, nloc, Bl, dofs, count, inv, Y, G, W.Bb[:ng], W.Yb[:ng], W.gl[:ng], True)
         lcp_matrix_into(model, True, h, active, pf, contacts.pair, drives, R.drive_a, lim, 0, fric, nf, reg, scratch, M, q_lcp, gen, cf)
         _scale_lcp_by(M, q_lcp[:0], scale)
         status, pivots, residual = _lemke_after_guess(M, q_lcp, guess, L.lemke, z, w, L.J, L.lu)
@@ -2105,9 +2164,11 @@ def spatial_warm_step(model, drives, tables, system, rotating, h, q, nu, q_ref, 
     if not (residual <= LCP_TOLERANCE):
         return WARM_NOT_TAKEN, n, residual, pivots
     nu_new, p_t = R.nu[side], L.p_t[:n_act]
-    if not guessed:  # (where the guess solved it, t = C z is the guess's: the same bits, `_generator_impulses_in_space_into`)
+    # (where the guess solved it, t = C z and dv = Y t are the guess's: the same bits,
+    # `_generator_impulses_in_space_into` and `add_product`'s sums)
+    if not guessed:
         _generator_impulses_into(m, gen, cf, z, L.t[:ng])
-    _impulses_of_t_into(True, n_act, nf, fric, Y, nu_free, L.t[:ng], p_t, nu_new)
+    _impulses_of_t_into(True, n_act, nf, fric, Y, nu_free, L.t[:ng], p_t, nu_new, dv, guessed)
     _fill_basis_kept(R.basis[side], basis, guess, active, contacts.slot, fric, nf, d, lim, m)
     if model.compliant:
         _deformations_into(h, pf, contacts.pair, contacts.slot, active, z, p_t, delta_n, delta_t, R.delta_n[side], R.delta_t[side])
@@ -2249,11 +2310,11 @@ def _contact_solve(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf,
     # the builder chosen here, not in a helper: one that took the build's arguments would count
     # their references each step, 2-3% of the squeeze's (docs/measurements.md)
     if _planar_case(spatial, drives.max_force, active, contacts.pair, pf, contacts.W_t):
-        Mlcp, qlcp, Y, gen, cf, fric, nf, lim, G = _planar_lcp(
+        Mlcp, qlcp, Y, gen, cf, fric, nf, lim, G, B = _planar_lcp(
             model, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t
         )
     else:
-        Mlcp, qlcp, Y, gen, cf, fric, nf, lim, G = contact_lcp(
+        Mlcp, qlcp, Y, gen, cf, fric, nf, lim, G, B = contact_lcp(
             model, spatial, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, drives, drive_a
         )
     nc = active.shape[0]
@@ -2263,13 +2324,15 @@ def _contact_solve(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf,
     n = qlcp.shape[0]
     on_generators = _on_generators(spatial, lim.shape[0])
     comp, gs, gmu = np.empty(nc), np.empty(nf), np.empty(nf)
-    reg, scale = _scale_contact_lcp(model, on_generators, h, Mlcp, qlcp, G, gen, cf, active, fric, nf, pf, contacts.pair, m, comp, gs, gmu)
+    reg, scale = _scale_contact_lcp(
+        model, on_generators, h, Mlcp, qlcp, Y, B, gen, cf, active, fric, nf, pf, contacts.pair, m, comp, gs, gmu
+    )
     slot = contacts.slot
     guess = _basis_guess(basis, active, slot, fric, nf, d, lim, m, n, qlcp)
     limit = DEFAULT_LEMKE_PIVOTS_PER_VARIABLE * (n + 1)
     if on_generators:  # (the residual, as from lemke_warm_kernel: the guess's own, computed there, or Lemke's solution's)
         z, w, status, pivots, basic_z, residual = _guess_or_lemke(
-            G, gen, cf, model.compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, Mlcp, qlcp, scale, guess
+            Y, B, gen, cf, model.compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, Mlcp, qlcp, scale, guess
         )
     else:
         z, w, status, pivots, basic_z, _, residual = lemke_warm_kernel(Mlcp, qlcp, limit, guess, WARM_TOLERANCE, nc)
@@ -2306,31 +2369,34 @@ def _on_generators(spatial, nl):
 
 
 @numba.njit(cache=True, inline="always")
-def _scale_contact_lcp(model, on_generators, h, Mlcp, qlcp, G, gen, cf, active, fric, nf, pf, c_pair, m, comp, gs, gmu):
+def _scale_contact_lcp(model, on_generators, h, Mlcp, qlcp, Y, B, gen, cf, active, fric, nf, pf, c_pair, m, comp, gs, gmu):
     """Scale a built contact LCP (`_scale_lcp`): on the generators (`_on_generators`) by
     `_generator_scales_into`'s max |M|, which fills comp, gs and gmu for the guess, else by M's
-    own. Returns (reg: `_regularization`, where on the generators, else 0; the scale)."""
+    own. Y, B = (ldof, nloc, Bl): the generators' (`contact_lcp`). Returns (reg:
+    `_regularization`, where on the generators, else 0; the scale)."""
     if not on_generators:
         return 0.0, _scale_lcp(Mlcp, qlcp, m)
     d = model.friction_directions
-    reg = _regularization(G, gen, cf, active.shape[0], model.compliant, model.regularization)
-    scale = _generator_scales_into(G, gen, cf, model.compliant, h, reg, active, fric, nf, d, pf, c_pair, comp, gs, gmu)
+    ldof, nloc, Bl = B
+    reg = _regularization(Y, ldof, nloc, Bl, gen, cf, active.shape[0], model.compliant, model.regularization)
+    scale = _generator_scales_into(Y, ldof, nloc, Bl, gen, cf, model.compliant, h, reg, active, fric, nf, d, pf, c_pair, comp, gs, gmu)
     _scale_lcp_by(Mlcp, qlcp, scale)
     return reg, scale
 
 
 @numba.njit(cache=True, inline="always")
-def _guess_or_lemke(G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, Mlcp, qlcp, scale, guess):
+def _guess_or_lemke(Y, B, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, Mlcp, qlcp, scale, guess):
     """`lemke_warm_kernel` with its guess on the generators (`_generator_guess_dropping_into`)
     and, where that fails, Lemke from the guess's basis on the scaled M, q (`_lemke_after_guess`).
     Returns (z, w, status, pivots, basic_z,
     the natural-map residual: the guess's own, computed there, else Lemke's solution's)."""
     n = qlcp.shape[0]
-    ng = G.shape[0]
-    z, w = np.empty(n), np.empty(n)
+    nv, ng = Y.shape
+    ldof, nloc, Bl = B
+    z, w, dv = np.empty(n), np.empty(n), np.empty(nv)
     J, A, t, u, slide = np.empty(n, np.int64), np.empty((n + 1, n)), np.empty(ng), np.empty(ng), np.empty(2 * nf, np.int64)
     residual = _generator_guess_dropping_into(
-        G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, qlcp, scale, guess, J, A, z, w, t, u, slide
+        Y, ldof, nloc, Bl, dv, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, qlcp, scale, guess, J, A, z, w, t, u, slide
     )
     if residual <= WARM_TOLERANCE:
         return z, w, STATUS_SOLVED, 0, guess, residual
@@ -2378,13 +2444,15 @@ def _impulses_into(spatial, nc, m, nf, fric, gen, cf, z, Y, nu_free, t, p_t, nu_
     add_product's loops, not numba's BLAS call: the same bits on every CPU (OpenBLAS picks its
     kernel by CPU), and 0.15-0.3 us less a contact step."""
     _generator_impulses_into(m, gen, cf, z, t)
-    _impulses_of_t_into(spatial, nc, nf, fric, Y, nu_free, t, p_t, nu_new)
+    _impulses_of_t_into(spatial, nc, nf, fric, Y, nu_free, t, p_t, nu_new, nu_new[:0], False)
 
 
 @numba.njit(cache=True, inline="always")
-def _impulses_of_t_into(spatial, nc, nf, fric, Y, nu_free, t, p_t, nu_new):
+def _impulses_of_t_into(spatial, nc, nf, fric, Y, nu_free, t, p_t, nu_new, dv, made):
     """`_impulses_into` from the generators' impulses t = C z already made (where
-    `_generator_guess_into` solved the step, it leaves them in t)."""
+    `_generator_guess_into` solved the step, it leaves them in t) and, where made, Y t too (in
+    dv: the guess's, by `add_product`'s sums, so nu_free + dv is add_product's nu+ bit for
+    bit)."""
     for k in range(nc):
         p_t[k, 0] = 0.0
         p_t[k, 1] = 0.0
@@ -2392,6 +2460,10 @@ def _impulses_of_t_into(spatial, nc, nf, fric, Y, nu_free, t, p_t, nu_new):
         p_t[fric[f], 0] = t[nc + f]
         if spatial:
             p_t[fric[f], 1] = t[nc + nf + f]
+    if made:
+        for v in range(nu_free.shape[0]):
+            nu_new[v] = nu_free[v] + dv[v]
+        return
     for v in range(nu_free.shape[0]):
         nu_new[v] = nu_free[v]
     add_product(nu_new, Y, t, 1.0)
@@ -2438,19 +2510,9 @@ def _largest_entry(Mlcp, m):
 
 
 @numba.njit(cache=True, inline="always")
-def _jacobian_entry(G, gen, cf, nc, r, c):
-    """(C^T G C)[r, c] (r, c < m) by `_fill_jacobian_block`'s operations: the same bits."""
-    a0, a1, x0, x1 = gen[0, r], gen[1, r], cf[0, r], cf[1, r]
-    if c < nc:
-        return x0 * G[a0, c] + x1 * G[a1, c]
-    b0, b1 = gen[0, c], gen[1, c]
-    return (x0 * G[a0, b0] + x1 * G[a1, b0]) * cf[0, c] + (x0 * G[a0, b1] + x1 * G[a1, b1]) * cf[1, c]
-
-
-@numba.njit(cache=True, inline="always")
 def _lcp_entry(jac, cf, compliant, nc, d, m, fric, reg, comp, gs, gmu, r, c):
     """M[r, c] of a contact LCP in space without force-limited drives (`contact_lcp`,
-    unscaled), from jac = (C^T G C)[r, c] (read where r, c < m: `_jacobian_entry`, or a row of
+    unscaled), from jac = (C^T G C)[r, c] (read where r, c < m: `_normal_diagonal_entry`, a row of
     C^T G's `_fill_jacobian_block` way) by the build's operations (`lcp_matrix_into`: the same
     bits): the normal diagonal's reg and compliance, the friction blocks' compliance, gamma's
     entries. comp (nc): each active contact's `_compliance` (with compliance); gs, gmu (nf):
@@ -2480,11 +2542,13 @@ def _lcp_entry(jac, cf, compliant, nc, d, m, fric, reg, comp, gs, gmu, r, c):
 
 
 @numba.njit(cache=True, inline="always")
-def _generator_scales_into(G, gen, cf, compliant, h, reg, active, fric, nf, d, pf, c_pair, comp, gs, gmu):
+def _generator_scales_into(Y, ldof, nloc, Bl, gen, cf, compliant, h, reg, active, fric, nf, d, pf, c_pair, comp, gs, gmu):
     """What `_lcp_entry` needs besides C^T G C, into the caller's comp (nc), gs and gmu (nf):
     each active contact's `_compliance` (0 without), each friction contact's gamma scale
     (`_scale_gamma`'s: its block's largest diagonal entry, 1 where that is 0) and mu times it.
-    Returns max |M| (`_largest_entry`'s: the diagonal's largest, or gamma rows'), without M."""
+    Returns max |M| (`_largest_entry`'s: the diagonal's largest, or gamma rows'), without M or
+    G: C^T G C's diagonal from Y (`_gram_entry`; a friction contact's three entries of G once,
+    its d directions' diagonal by `_fill_jacobian_block`'s operations: M's bits)."""
     nc = active.shape[0]
     m = nc + nf * d
     for k in range(nc):
@@ -2492,13 +2556,18 @@ def _generator_scales_into(G, gen, cf, compliant, h, reg, active, fric, nf, d, p
         comp[k] = _compliance(h, pf[p, PF_K], pf[p, PF_C]) if compliant else 0.0
     scale = 0.0
     for k in range(nc):
-        jac = _jacobian_entry(G, gen, cf, nc, k, k)
+        jac = _normal_diagonal_entry(Y, ldof, nloc, Bl, gen, cf, k)
         scale = max(scale, abs(_lcp_entry(jac, cf, compliant, nc, d, m, fric, reg, comp, gs, gmu, k, k)))
     for f in range(nf):
         s = 0.0
+        a0, a1 = nc + f, nc + nf + f  # (each direction's gen[:, r]: its t and o)
+        gtt = _gram_entry(Y, ldof, nloc, Bl, a0, a0)
+        gto = _gram_entry(Y, ldof, nloc, Bl, a0, a1)
+        goo = _gram_entry(Y, ldof, nloc, Bl, a1, a1)
         for j in range(d):
             r = nc + f * d + j
-            jac = _jacobian_entry(G, gen, cf, nc, r, r)
+            x0, x1 = cf[0, r], cf[1, r]
+            jac = (x0 * gtt + x1 * gto) * x0 + (x0 * gto + x1 * goo) * x1
             s = max(s, abs(_lcp_entry(jac, cf, compliant, nc, d, m, fric, reg, comp, gs, gmu, r, r)))
         scale = max(scale, s)
         mu = pf[c_pair[active[fric[f]]], PF_MU]
@@ -2547,12 +2616,18 @@ def _friction_row(compliant, nc, nf, fric, comp, gen, cf, t, u, f, r):
 
 
 @numba.njit(cache=True, inline="always")
-def _generator_guess_into(G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, q, scale, guess, J, A, z, w, t, u, slide):
+def _generator_guess_into(
+    Y, ldof, nloc, Bl, dv, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, q, scale, guess, J, A, z, w, t, u, slide
+):  # fmt: skip
     """The previous basis's guess (`warm_guess_into`) on an LCP without force-limited drives,
     without M: z_J = -M[J, J]^-1 q_J with M[J, J]'s entries made by `_lcp_entry` (M's own
     bits) and scaled by 1 / scale as `_scale_lcp_by` scales M (q: scaled already), z = 0
     elsewhere, and w = M z + q through the generators: t = C z, G t, C^T (G t), and the
-    diagonal's, friction blocks' and gamma's terms (O(ng^2 + n), not O(n nj)).
+    diagonal's, friction blocks' and gamma's terms (O(ng^2 + n), not O(n nj)). G itself is
+    not needed: its rows from Y = A^-1 B and the generators (ldof, nloc, Bl:
+    `_ctg_row_on_y_into`), G t as B^T (Y t) (Y t in dv, nv entries), so a warm step builds G
+    only where the guess fails (at box_push_3d's push, G's 15 x 15 entries cost more than the
+    guess's few rows).
 
     A sliding contact of the guess (its gamma and exactly one of its directions basic) is
     eliminated from M[J, J] before the solve: gamma's row gives that direction's impulse, beta
@@ -2595,7 +2670,7 @@ def _generator_guess_into(G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, 
     for a in range(nj):
         r = J[a]
         if r < m:  # row r of C^T G, in u (`_fill_jacobian_block`'s p)
-            _ctg_row_into(G, gen, cf, r, u)
+            _ctg_row_on_y_into(Y, ldof, nloc, Bl, gen, cf, r, u)
         for b in range(nj):
             A[a, b] = _guess_entry(u, gen, cf, compliant, nc, d, m, fric, reg, comp, gs, gmu, r, J[b]) * inverse
         rhs = -q[r]
@@ -2620,12 +2695,17 @@ def _generator_guess_into(G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, 
     # z[:m] is whole (gamma is no column of C): t = C z, u = G t, and each row's (M z)[r] but
     # gamma's term (`_friction_row`), which gives a sliding contact's gamma (its direction's w
     # is 0) and then every w
-    ng = G.shape[0]
+    nv, ng = Y.shape
     _generator_impulses_in_space_into(nc, nf, d, cf, z, t)
-    for g in range(ng):
+    for v in range(nv):  # Y t (`add_product`'s sums: the velocity change `_impulses_of_t_into` makes)
         s = 0.0
-        for g2 in range(ng):
-            s += G[g, g2] * t[g2]
+        for g in range(ng):
+            s += Y[v, g] * t[g]
+        dv[v] = s
+    for g in range(ng):  # G t = B^T (Y t), over each generator's local DOFs
+        s = 0.0
+        for a in range(nloc[g]):
+            s += Bl[g, a] * dv[ldof[g, a]]
         u[g] = s
     for f in range(nf):
         s = slide[f]
@@ -2653,7 +2733,9 @@ def _generator_guess_into(G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, 
 
 
 @numba.njit(cache=True, inline="always")
-def _generator_guess_dropping_into(G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, q, scale, guess, J, A, z, w, t, u, slide):
+def _generator_guess_dropping_into(
+    Y, ldof, nloc, Bl, dv, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, q, scale, guess, J, A, z, w, t, u, slide
+):  # fmt: skip
     """`_generator_guess_into`, and where its system is singular, the guess again without one of
     its basic normals, in order, as `warm_guess_dropping_into` drops them on M: the first whose
     point's residual is at most WARM_TOLERANCE is kept, and guess is changed to it. Returns the
@@ -2662,7 +2744,7 @@ def _generator_guess_dropping_into(G, gen, cf, compliant, nc, d, m, fric, nf, re
     k = -1
     while True:
         residual = _generator_guess_into(
-            G, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, q, scale, guess, J, A, z, w, t, u, slide
+            Y, ldof, nloc, Bl, dv, gen, cf, compliant, nc, d, m, fric, nf, reg, comp, gs, gmu, q, scale, guess, J, A, z, w, t, u, slide
         )
         if k < 0 and residual != np.inf:
             return residual

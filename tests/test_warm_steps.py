@@ -43,6 +43,7 @@ from models.stepper import (
     _free_velocity,
     _generator_guess_into,
     _generator_scales_into,
+    _gram_entry,
     _largest_entry,
     _planar_case,
     _regularization,
@@ -339,8 +340,9 @@ def test_the_spatial_pgs_step_is_the_general_one_bit_for_bit(name, rung_name, ex
 
 @pytest.mark.parametrize("name, rung_name", [(name, rung) for name in SPATIAL_SCENES for rung in RUNGS])
 def test_the_guess_on_the_generators_is_the_lcp_s(name, rung_name):
-    """In space, the warm start's guess is tried on G and C (`_generator_guess_into`), M built
-    only where it fails. Against the LCP built whole (`contact_lcp`) at sampled states: the
+    """In space, the warm start's guess is tried on Y and C (`_generator_guess_into`), G and M
+    built only where it fails. Against the LCP built whole (`contact_lcp`) at sampled states:
+    G's entries from Y (`_gram_entry`) are G's bit for bit; the
     scale is M's largest entry (`_largest_entry`) bit for bit; on the previous basis's guess,
     on sliding guesses (whose contacts the guess eliminates) and on random guesses (z's basic
     set), z solves the guessed rows of M z + q = 0 to round-off and is the dense solve's on M[J,
@@ -372,12 +374,15 @@ def test_the_guess_on_the_generators_is_the_lcp_s(name, rung_name):
         if len(active) == 0:
             continue
         args = (h, dofs, count, inv, nu_free, active, S.pi, S.pf, contacts, state.delta_n, state.delta_t, D, drive_a)
-        M, q, Y, gen, cf, fric, nf, lim, G = contact_lcp(model, True, *args)
+        M, q, Y, gen, cf, fric, nf, lim, G, B = contact_lcp(model, True, *args)
         assert len(lim) == 0
         n_act, m, n, ng = len(active), len(active) + nf * d, len(q), G.shape[0]
+        # G's entries from Y alone, where the warm step does not build G: its bits
+        gram = np.array([[_gram_entry(Y, *B, a, b) for b in range(ng)] for a in range(ng)])
+        assert np.array_equal(gram, G), f"t = {t}: G from Y differs by {np.max(np.abs(gram - G))}"
         comp, gs, gmu = np.empty(n_act), np.empty(nf), np.empty(nf)
-        reg = _regularization(G, gen, cf, n_act, model.compliant, model.regularization)
-        scale = _generator_scales_into(G, gen, cf, model.compliant, h, reg, active, fric, nf, d, S.pf, contacts.pair, comp, gs, gmu)
+        reg = _regularization(Y, *B, gen, cf, n_act, model.compliant, model.regularization)
+        scale = _generator_scales_into(Y, *B, gen, cf, model.compliant, h, reg, active, fric, nf, d, S.pf, contacts.pair, comp, gs, gmu)
         assert scale == _largest_entry(M, m), f"t = {t}: scale {scale} against M's {_largest_entry(M, m)}"
         _scale_lcp_by(M, q, scale)
         # the basis Lemke ends on from scratch (the guess a persisting contact set makes), then random basic sets
@@ -396,9 +401,9 @@ def test_the_guess_on_the_generators_is_the_lcp_s(name, rung_name):
             work = np.empty(n, np.int64), np.empty((n + 1, n)), np.empty(n), np.empty(n)
             dense = bool(warm_guess_into(M, q, guess, *work) <= 1e-9)
             J, A, z, w = np.empty(n, np.int64), np.empty((n + 1, n)), np.empty(n), np.empty(n)
-            t_, u_, slide = np.empty(ng), np.empty(ng), np.empty(2 * nf, np.int64)
+            t_, u_, slide, dv = np.empty(ng), np.empty(ng), np.empty(2 * nf, np.int64), np.empty(Y.shape[0])
             residual = _generator_guess_into(
-                G, gen, cf, model.compliant, n_act, d, m, fric, nf, reg, comp, gs, gmu, q, scale, guess, J, A, z, w, t_, u_, slide
+                Y, *B, dv, gen, cf, model.compliant, n_act, d, m, fric, nf, reg, comp, gs, gmu, q, scale, guess, J, A, z, w, t_, u_, slide
             )
             mine = bool(residual <= 1e-9)
             assert mine == dense, f"t = {t}: accepted {mine}, dense {dense}"
