@@ -1,6 +1,15 @@
+import os
 from pathlib import Path
 
 import pytest
+from hypothesis import settings
+
+# Property tests draw the same examples on every run (a seed from each test function), so a
+# red CI run is a change's doing, not a new draw; HYPOTHESIS_PROFILE=explore draws fresh ones
+# (`HYPOTHESIS_PROFILE=explore pytest -m slow tests/stress` searches the random scenes anew).
+settings.register_profile("repeatable", derandomize=True)
+settings.register_profile("explore", derandomize=False)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "repeatable"))
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ROOT / "scenarios"

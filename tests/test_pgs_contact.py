@@ -503,7 +503,7 @@ def test_random_scenes_keep_the_stress_invariants(tmp_path, solver):
         for rung_name in ("dynamic-rigid", "dynamic-compliant"):
             rung = with_solver(sc, rung_name, solver, auto_contacts=2)
             result = rung.rollout(sc, rung.initial_state(sc), np.zeros((1, 0)), [0.5], H, stop_at_outcome=False)
-            check_invariants(result, rigid=rung_name == "dynamic-rigid", passive=True, scenario=sc)
+            check_invariants(result, h=H, rigid=rung_name == "dynamic-rigid", passive=True, scenario=sc)
             assert result.status == "ok"
 
 
