@@ -914,7 +914,7 @@ def test_fc2d_lcp_solution_matches_hand_solution():
     np.testing.assert_allclose(r2, [1.0, -0.2], atol=1e-12)
 
 
-@settings(max_examples=300, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(data=lcp_inputs(), seed=st.integers(0, 2**32 - 1))
 def test_property_lemke_from_any_guess_never_false_success(data, seed):
     """Lemke's method from any guessed basis (`lemke_warm_kernel`: the guess, then
