@@ -123,8 +123,8 @@ def _invert_small(B, m, out):
 @numba.njit(cache=True, inline="always")
 def _invert_small_into(B, m, out, work):
     """`_invert_small` on the caller's work (at least (m, 2 m)), zeroed here. A 6 x 6 block of
-    a free rigid body in space (`_split`) is inverted by its parts (`_invert_split_into`): the
-    same bits."""
+    a free rigid body in space (`_split`) is inverted by its parts (`_invert_split_into`: the
+    translations' reciprocals, the rotations' adjugate)."""
     if m == 6 and _split(B):
         return _invert_split_into(B, out, work)
     for r in range(m):
@@ -190,12 +190,11 @@ def _split(B):
 
 @numba.njit(cache=True, inline="always")
 def _invert_split_into(B, out, work):
-    """B^-1 of a `_split` 6 x 6 block into out: 1 / B[k, k] on the translations and the
-    rotations' block by `_gauss_jordan` on work[:3, :6], zero elsewhere. The same bits as the
-    6 x 6 elimination (which pivots on each translation's own row, finds no other row to
-    eliminate there, and on the rotations does these operations, the rest on zeros), with its
-    singular test against the whole block's largest entry; the zero entries here are +0 where
-    it may leave -0."""
+    """B^-1 of a `_split` 6 x 6 block into out: 1 / B[k, k] on the translations, the rotations'
+    3 x 3 block by its adjugate over its determinant (`_invert_3x3_into`), zero elsewhere.
+    Singular as `_gauss_jordan` judges a pivot: a translation's diagonal, or the rotations'
+    determinant against the cube of the whole block's largest entry, at most SINGULAR_PIVOT
+    times that. work: unused (the general inversion's scratch)."""
     big = 0.0
     for r in range(6):
         for c in range(6):
@@ -205,20 +204,38 @@ def _invert_split_into(B, out, work):
     for k in range(3):
         if not (abs(B[k, k]) > SINGULAR_PIVOT * big):
             return False
-    for r in range(3):
-        for c in range(3):
-            work[r, c] = B[3 + r, 3 + c]
-            work[r, 3 + c] = 1.0 if r == c else 0.0
-    if not _gauss_jordan(work, 3, big):
-        return False
     for r in range(6):
         for c in range(6):
             out[r, c] = 0.0
     for k in range(3):
         out[k, k] = 1.0 / B[k, k]
-    for r in range(3):
-        for c in range(3):
-            out[3 + r, 3 + c] = work[r, 3 + c]
+    return _invert_3x3_into(B, 3, big, out)
+
+
+@numba.njit(cache=True, inline="always")
+def _invert_3x3_into(B, o, big, out):
+    """out[o:o + 3, o:o + 3] = B[o:o + 3, o:o + 3]^-1 by the adjugate over the determinant (a
+    rigid body's world inertia, R I R^T, times eps: symmetric positive definite, whose inverse
+    the rotations' rows of A^-1 are); False, out untouched, where the determinant is at most
+    SINGULAR_PIVOT big r^2 (big: the whole block's largest entry, r: this 3 x 3's; as
+    `_gauss_jordan` holds its smallest pivot to SINGULAR_PIVOT big, the other two at most about
+    r) or not finite. A fifth of Gauss-Jordan's cost on the 3 x 6 [B | I] with pivoting, which
+    it replaced (box_push_3d's step, docs/measurements.md), and as accurate on such a block
+    (tests/test_rotating_blocks.py)."""
+    a, b, c = B[o, o], B[o, o + 1], B[o, o + 2]
+    d, e, f = B[o + 1, o], B[o + 1, o + 1], B[o + 1, o + 2]
+    g, h, i = B[o + 2, o], B[o + 2, o + 1], B[o + 2, o + 2]
+    r = 0.0
+    for x in (a, b, c, d, e, f, g, h, i):
+        r = max(r, abs(x))
+    c00, c10, c20 = e * i - f * h, f * g - d * i, d * h - e * g
+    det = a * c00 + b * c10 + c * c20
+    if not (abs(det) > SINGULAR_PIVOT * big * r * r and np.isfinite(det)):
+        return False
+    s = 1.0 / det
+    out[o, o], out[o, o + 1], out[o, o + 2] = c00 * s, (c * h - b * i) * s, (b * f - c * e) * s
+    out[o + 1, o], out[o + 1, o + 1], out[o + 1, o + 2] = c10 * s, (a * i - c * g) * s, (c * d - a * f) * s
+    out[o + 2, o], out[o + 2, o + 1], out[o + 2, o + 2] = c20 * s, (b * g - a * h) * s, (a * e - b * d) * s
     return True
 
 

@@ -43,7 +43,7 @@ from models.contact import (
     scripted_bias,
     tangents_packed,
 )
-from models.contact_pgs import _pgs_directions, pgs_work
+from models.contact_pgs import BODY_DOFS, _pgs_directions, pgs_work
 from models.kinematics import body_pose_3d, positions
 from models.predicates import evaluate, evaluate_with
 from models.stepper import (
@@ -67,7 +67,6 @@ from models.stepper import (
     _may_take_planar_warm,
     _may_take_spatial_pgs,
     _may_take_spatial_warm,
-    _system_matrix_into,
     any_limited,
     basis_table,
     contact_stage,
@@ -82,6 +81,7 @@ from models.stepper import (
     mass_matrix,
     planar_warm_buffers,
     planar_warm_step,
+    rotating_blocks_into,
     spatial_pgs_step,
     spatial_warm_buffers,
     spatial_warm_step,
@@ -210,9 +210,13 @@ def _assemble(bi, bf, pi, dimension, q, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, W
 
 
 @numba.njit(cache=True, _nrt=False, error_model="numpy")  # a call without numba's runtime: no array argument reference-counted
-def _system_matrix_at(bi, bf, q, eps, h, v_index, kp, kd, max_force, A, R, I):
-    """A at q (`models.stepper.system_matrix`) into the rollout's A; R, I (3, 3) scratch."""
-    _system_matrix_into(bi, bf, q, eps, h, v_index, kp, kd, max_force, A, R, I)
+def _rotating_blocks_at(bi, bf, q, eps, h, v_index, kp, kd, max_force, system, block, work, R, I):
+    """The System's blocks of A^-1 of the rotating bodies at q, in place
+    (`models.stepper.rotating_blocks_into`); block, work, R, I: scratch. Returns ok (False: a
+    block is singular, or the System holds none, where A's are singular from the start)."""
+    if system.count.shape[0] != bi.shape[0]:
+        return False
+    return rotating_blocks_into(bi, bf, q, eps, h, v_index, kp, kd, max_force, system.dofs, system.count, system.inv, block, work, R, I)
 
 
 @numba.njit(cache=True)
@@ -694,8 +698,9 @@ def rollout_kernel(
     # the warm starts are dropped at the steps that start a period of model.warm_period (Model)
     warm_every = warm_period_steps(model.warm_period, h)
     system = _start_system(S, D, model, h, q)
-    A, Ainv, M_const, rhs_const = system.A, system.Ainv, system.M_const, system.rhs_const
-    R3, I3 = np.empty((3, 3)), np.empty((3, 3))  # scratch of A's rebuild where it changes with q
+    Ainv, M_const, rhs_const = system.Ainv, system.M_const, system.rhs_const
+    # scratch of the rotating bodies' blocks where A changes with q (`_rotating_blocks_at`)
+    R3, I3, block3, work3 = np.empty((3, 3)), np.empty((3, 3)), np.empty((BODY_DOFS, BODY_DOFS)), np.empty((BODY_DOFS, 2 * BODY_DOFS))
     constant_A, limited = not has_rotations(bi), any_limited(max_force)
     kinematic, eps, compliant, theta = model.kinematic, model.eps, model.compliant, model.theta
     # the warm steps' arrays (planar, spatial; their results R, which the free step's scratch is
@@ -862,8 +867,9 @@ def rollout_kernel(
                         model, D, tables, system, not constant_A, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, W, side,
                         whole,
                     )  # fmt: skip
-                if not constant_A and warm != WARM_DONE:  # A at q, in place: the system's own (no blocks: A changes)
-                    _system_matrix_at(bi, bf, q, eps_eff, h, v_index, kp, kd, max_force, A, R3, I3)
+                blocks_ok = True
+                if not constant_A and warm != WARM_DONE:  # the rotating bodies' blocks at q, in place: the System's own
+                    blocks_ok = _rotating_blocks_at(bi, bf, q, eps_eff, h, v_index, kp, kd, max_force, system, block3, work3, R3, I3)
                 if warm != WARM_DONE and not tried and _may_take_planar_warm(dimension == 2, constant_A, limited, model, step_solver, nc):
                     warm, size, res, warm_pivots = planar_warm_step(
                         model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, side, whole
@@ -876,6 +882,8 @@ def rollout_kernel(
                         dn2, dt2 = R.delta_n[side], R.delta_t[side]
                     side = 1 - side  # the next warm step writes the other side, not this state
                     st, piv, p_n, p_t = StepStatus.OK.value, warm_pivots, R.impulses[:nc], R.frictions[:nc]
+                elif not blocks_ok:  # (as `dynamics_step` reports A's singular blocks)
+                    q2, nu2, q_ref2, st, piv, res, size, p_n = q, nu, q_ref, StepStatus.SINGULAR.value, 0, 0.0, 0, no_impulse
                 else:
                     r = dynamics_step(
                         model, step_solver, D, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis
@@ -1089,7 +1097,7 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
     rotating = has_rotations(bi)
     eps_eff = model.quasistatic_inertia if model.eps == 0.0 else model.eps
     nc, pivots, sweeps = 0, 0, 0
-    R3, I3 = np.empty((3, 3)), np.empty((3, 3))  # scratch of A's rebuild (as rollout_kernel)
+    R3, I3, block3, work3 = np.empty((3, 3)), np.empty((3, 3)), np.empty((BODY_DOFS, BODY_DOFS)), np.empty((BODY_DOFS, 2 * BODY_DOFS))
     limited = any_limited(D.max_force)
     planar_cap = c_psi.shape[0] if dimension == 2 else 0
     spatial_cap = min(c_psi.shape[0], SPATIAL_WARM_CONTACTS) if dimension == 3 else 0
@@ -1117,7 +1125,7 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
             _assemble(bi, bf, pi, dimension, q, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, W_n, W_t, W_o, c_bias, scripted, with_friction, pos)
         if k == 0 or stage >= STAGE_SOLVE:
             if rotating and not (warm3 or warm_pgs):  # as rollout_kernel: A depends on q (the spatial steps build their own)
-                _system_matrix_at(bi, bf, q, eps_eff, h, D.v_index, D.kp, D.kd, D.max_force, system.A, R3, I3)
+                _rotating_blocks_at(bi, bf, q, eps_eff, h, D.v_index, D.kp, D.kd, D.max_force, system, block3, work3, R3, I3)
         if k > 0 and stage > STAGE_SOLVE:
             part = PART_ASSEMBLY if stage == STAGE_ASSEMBLY else PART_CONTACT_SOLVE
             if warm:

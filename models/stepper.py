@@ -57,10 +57,10 @@ from models.contact_pgs import (
     PgsStatus,
     _apply_block,
     _by_contact_into,
+    _invert_small_into,
     _split,
     block_solve_into,
     body_blocks,
-    body_blocks_into,
     cone_directions_into,
     contact_pgs,
     contact_pgs_into,
@@ -285,8 +285,11 @@ class System(NamedTuple):
     Ainv: np.ndarray  # A^-1, or (0, 0) when A changes with q (then A is solved each step)
     M_const: np.ndarray  # the mass matrix when it does not depend on q, else (0, 0)
     rhs_const: np.ndarray  # (nv,) h * gravity force: the part of rhs that never changes
-    # A^-1's body blocks (`models.contact_pgs.body_blocks`) when Ainv is given, else empty
-    # (then each step inverts A's blocks): built by `make_system`
+    # A^-1's body blocks (`models.contact_pgs.body_blocks`), read from Ainv where it is given,
+    # else A's inverted; empty where a block is singular (then `_blocks` says so): built by
+    # `make_system`. Where A changes with q (a free rotation), the rotating bodies' blocks are
+    # A(q)'s at the q they were last refreshed at (`rotating_blocks_into`, at every step of a
+    # rollout: the other bodies' blocks do not change), and A is A at the start
     dofs: np.ndarray
     count: np.ndarray
     inv: np.ndarray
@@ -295,19 +298,20 @@ class System(NamedTuple):
 @numba.njit(cache=True, error_model="numpy")
 def make_system(bi, A, Ainv, M_const, rhs_const):
     """The `System` of A (Ainv: A^-1 when A never changes, else (0, 0)), with A^-1's body
-    blocks read once when Ainv is given: they are the same every step, and building them costs
-    four allocations a step."""
-    if Ainv.shape[0] == A.shape[0]:
-        dofs, count, inv, ok = body_blocks(bi, A, Ainv)
-        if ok:
-            return System(A, Ainv, M_const, rhs_const, dofs, count, inv)
+    blocks made once (read from Ainv where it is given, else A's inverted): building them
+    costs four allocations a step, and where A changes with q only the rotating bodies' change
+    (`rotating_blocks_into` refreshes them in place)."""
+    dofs, count, inv, ok = body_blocks(bi, A, Ainv)
+    if ok:
+        return System(A, Ainv, M_const, rhs_const, dofs, count, inv)
     none = np.zeros((0, BODY_DOFS), np.int64)
     return System(A, Ainv, M_const, rhs_const, none, np.zeros(0, np.int64), np.zeros((0, BODY_DOFS, BODY_DOFS)))
 
 
 @numba.njit(cache=True, inline="always")
 def _blocks(bi, system):
-    """(dofs, count, inv, ok): A^-1's body blocks, from the System when it holds them."""
+    """(dofs, count, inv, ok): A^-1's body blocks, from the System when it holds them (else A's
+    are singular: ok False)."""
     if system.count.shape[0] == bi.shape[0]:
         return system.dofs, system.count, system.inv, True
     return body_blocks(bi, system.A, system.Ainv)
@@ -417,6 +421,50 @@ def _world_inertia_into(bi, bf, q, b, R, I):
             I[r, c] = s
 
 
+@numba.njit(cache=True, error_model="numpy")
+def rotating_blocks(bi, bf, q, eps, h, v_index, kp, kd, max_force, dofs, count, inv):
+    """`rotating_blocks_into` with its scratch made here (for tests and Python callers)."""
+    block, work, R, I = np.empty((BODY_DOFS, BODY_DOFS)), np.empty((BODY_DOFS, 2 * BODY_DOFS)), np.empty((3, 3)), np.empty((3, 3))
+    return rotating_blocks_into(bi, bf, q, eps, h, v_index, kp, kd, max_force, dofs, count, inv, block, work, R, I)
+
+
+@numba.njit(cache=True, inline="always")
+def rotating_blocks_into(bi, bf, q, eps, h, v_index, kp, kd, max_force, dofs, count, inv, block, work, R, I):
+    """The body blocks of A(q)^-1 (`models.contact_pgs.body_blocks_into` of `system_matrix` at
+    q) of the bodies with a free rotation, in place in inv; dofs and count are the System's
+    (they never change), and the other bodies' blocks do not depend on q. Each block is built
+    alone, its entries as A(q) holds them (eps M(q), then the unlimited drives' h (h kp + kd)
+    on their DOFs, in the drives' order), and inverted as `body_blocks_into` inverts it: the
+    same bits, without A's nv x nv rebuild and the other bodies' inversions (0.85 -> 0.19 us
+    a step at box_push_3d, with `_invert_3x3_into`: docs/measurements.md). block (BODY_DOFS,
+    BODY_DOFS), work (BODY_DOFS, 2 BODY_DOFS), R, I (3, 3): scratch. Returns ok (False: a
+    block is singular, or q not finite)."""
+    for b in range(bi.shape[0]):
+        if bi[b, BI_VMAP + V_WX] < 0:
+            continue
+        m = count[b]
+        for r in range(m):
+            for c in range(m):
+                block[r, c] = 0.0
+        a = 0  # the block's rows in slot order (x, y, z, the angle: diagonal), the rotation's last
+        for k in range(V_WX):
+            if bi[b, BI_VMAP + k] >= 0:
+                block[a, a] = eps * (bf[b, BF_MASS] if k < V_ANGLE else bf[b, BF_INERTIA + 2])
+                a += 1
+        _world_inertia_into(bi, bf, q, b, R, I)
+        for r in range(3):
+            for c in range(3):
+                block[a + r, a + c] = eps * I[r, c]
+        for j in range(v_index.shape[0]):
+            if not np.isfinite(max_force[j]):
+                for r in range(m):
+                    if dofs[b, r] == v_index[j]:
+                        block[r, r] += h * (h * kp[j] + kd[j])
+        if not _invert_small_into(block, m, inv[b], work):
+            return False
+    return True
+
+
 @numba.njit(cache=True, inline="always")
 def _mass_times_into(bi, bf, q, nu, out, R, I):
     """M(q) nu body by body (the products of `mass_matrix` without forming it), O(bodies), into
@@ -436,6 +484,39 @@ def _mass_times_into(bi, bf, q, nu, out, R, I):
                 for c in range(3):
                     s += I[r, c] * nu[bi[b, BI_VMAP + V_WX + c]]
                 out[bi[b, BI_VMAP + V_WX + r]] = s
+
+
+@numba.njit(cache=True, inline="always")
+def _mass_times_gyro_into(bi, bf, q, nu, mass_nu, gyro, R):
+    """M(q) nu (`_mass_times_into`) and the gyroscopic force (`_gyroscopic_into`) in one pass,
+    into the caller's mass_nu and gyro (nv each, zeroed here); R (3, 3) scratch. A rotating
+    body's M nu there is its angular momentum L = R diag(I) R^T w, which the gyroscopic force
+    -w x L needs too: its rotation and L are made once, not three times (L by the gyroscopic
+    term's products, not by the world inertia's 3 x 3)."""
+    for v in range(nu.shape[0]):
+        mass_nu[v] = 0.0
+        gyro[v] = 0.0
+    for b in range(bi.shape[0]):
+        for k in range(3):
+            if bi[b, BI_VMAP + k] >= 0:
+                mass_nu[bi[b, BI_VMAP + k]] = bf[b, BF_MASS] * nu[bi[b, BI_VMAP + k]]
+        if bi[b, BI_VMAP + V_ANGLE] >= 0:
+            mass_nu[bi[b, BI_VMAP + V_ANGLE]] = bf[b, BF_INERTIA + 2] * nu[bi[b, BI_VMAP + V_ANGLE]]
+        if bi[b, BI_VMAP + V_WX] < 0:
+            continue
+        _rotation_into(bi, q, b, R)
+        i0, i1, i2 = bi[b, BI_VMAP + V_WX], bi[b, BI_VMAP + V_WX + 1], bi[b, BI_VMAP + V_WX + 2]
+        w0, w1, w2 = nu[i0], nu[i1], nu[i2]
+        l0 = bf[b, BF_INERTIA] * (R[0, 0] * w0 + R[1, 0] * w1 + R[2, 0] * w2)
+        l1 = bf[b, BF_INERTIA + 1] * (R[0, 1] * w0 + R[1, 1] * w1 + R[2, 1] * w2)
+        l2 = bf[b, BF_INERTIA + 2] * (R[0, 2] * w0 + R[1, 2] * w1 + R[2, 2] * w2)
+        L0 = R[0, 0] * l0 + R[0, 1] * l1 + R[0, 2] * l2
+        L1 = R[1, 0] * l0 + R[1, 1] * l1 + R[1, 2] * l2
+        L2 = R[2, 0] * l0 + R[2, 1] * l1 + R[2, 2] * l2
+        mass_nu[i0], mass_nu[i1], mass_nu[i2] = L0, L1, L2
+        gyro[i0] -= w1 * L2 - w2 * L1
+        gyro[i1] -= w2 * L0 - w0 * L2
+        gyro[i2] -= w0 * L1 - w1 * L0
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -2019,15 +2100,11 @@ class SpatialWarm(NamedTuple):
     + d) cap."""
 
     lim: np.ndarray  # (0,) int: no force-limited drive takes this step
-    A: np.ndarray  # (nv, nv) A(q) where it depends on q
     R: np.ndarray  # (3, 3) scratch
     I: np.ndarray  # (3, 3) scratch
     mass_nu: np.ndarray  # (nv,) M(q) nu
     gyro: np.ndarray  # (nv,) the gyroscopic force
-    dofs: np.ndarray  # (nb, BODY_DOFS) int: A^-1's body blocks (`body_blocks`)
-    count: np.ndarray  # (nb,) int
-    inv: np.ndarray  # (nb, BODY_DOFS, BODY_DOFS)
-    block: np.ndarray  # (BODY_DOFS, BODY_DOFS) scratch
+    block: np.ndarray  # (BODY_DOFS, BODY_DOFS) scratch of the rotating blocks (`rotating_blocks_into`)
     work: np.ndarray  # (BODY_DOFS, 2 BODY_DOFS) scratch
     body: np.ndarray  # (ng, 2) int: the generators (`_generators_into`)
     ldof: np.ndarray  # (ng, LOCAL_DOFS) int
@@ -2055,14 +2132,10 @@ def spatial_warm_buffers(cap, d, nb, out):
     cone_directions_into(dirs[0], dirs[1])
     return SpatialWarm(
         np.empty(0, np.int64),
-        np.empty((nv, nv)),
         np.empty((3, 3)),
         np.empty((3, 3)),
         np.empty(nv),
         np.empty(nv),
-        np.empty((nb, BODY_DOFS), np.int64),
-        np.empty(nb, np.int64),
-        np.empty((nb, BODY_DOFS, BODY_DOFS)),
         np.empty((BODY_DOFS, BODY_DOFS)),
         np.empty((BODY_DOFS, 2 * BODY_DOFS)),
         np.empty((ng, 2), np.int64),
@@ -2091,8 +2164,8 @@ def spatial_warm_step(model, drives, tables, system, rotating, h, q, nu, q_ref, 
     where that guess does not solve it, M is built and Lemke
     runs from the guess's basis (`_lemke_after_guess`, as the general step in space without
     force-limited drives, `_on_generators`).
-    rotating: A depends on q (`has_rotations`), so A(q) and its body blocks are built here
-    (`system_matrix`, `body_blocks`), where the general step has the rollout build them. Where
+    rotating: A depends on q (`has_rotations`), so the rotating bodies' blocks of A^-1 are
+    refreshed here (`rotating_blocks_into`), where the general step has the rollout refresh them. Where
     there are no active contacts or more than W holds, a block of A is singular, Lemke does not
     solve the LCP to LCP_TOLERANCE (the general path then regularizes it) or the state leaves
     the finite range, it returns WARM_NOT_TAKEN and the caller takes the general path, which
@@ -2185,20 +2258,19 @@ def spatial_warm_step(model, drives, tables, system, rotating, h, q, nu, q_ref, 
 @numba.njit(cache=True, inline="always")
 def _spatial_free_velocity_into(model, drives, tables, system, rotating, h, q, nu, q_ref, u, W, side, held):
     """The free velocity of a step in space on W's arrays (`SpatialWarm`): A^-1's body blocks
-    (`_blocks`: the System's where A is constant, else of A(q), built here where rotating), and
-    into W.out nu_free, q_ref+ on side `side` and the drives' a (`_free_velocity_by_body_into`;
-    held as there). Returns (ok: A's blocks are not singular, dofs, count, inv)."""
+    (the System's, the rotating bodies' refreshed at q where rotating: `rotating_blocks_into`),
+    and into W.out nu_free, q_ref+ on side `side` and the drives' a
+    (`_free_velocity_by_body_into`; held as there). Returns (ok: A's blocks are not singular,
+    dofs, count, inv)."""
     bi, bf, R = tables.bi, tables.bf, W.out
     eps = model.quasistatic_inertia if model.eps == 0.0 else model.eps
     dofs, count, inv = system.dofs, system.count, system.inv
-    if count.shape[0] != bi.shape[0]:
-        A = system.A
-        if rotating:
-            _system_matrix_into(bi, bf, q, eps, h, drives.v_index, drives.kp, drives.kd, drives.max_force, W.A, W.R, W.I)
-            A = W.A
-        if not body_blocks_into(bi, A, system.Ainv, W.dofs, W.count, W.inv, W.block, W.work):
-            return False, dofs, count, inv
-        dofs, count, inv = W.dofs, W.count, W.inv
+    if count.shape[0] != bi.shape[0]:  # (the System holds none: A's blocks are singular)
+        return False, dofs, count, inv
+    if rotating and not rotating_blocks_into(
+        bi, bf, q, eps, h, drives.v_index, drives.kp, drives.kd, drives.max_force, dofs, count, inv, W.block, W.work, W.R, W.I
+    ):
+        return False, dofs, count, inv
     _free_velocity_by_body_into(
         model, drives, bi, bf, True, system, held, h, q, nu, q_ref, u, dofs, count, inv, R.rhs, R.nu_free, R.q_ref[side], R.drive_a,
         W.mass_nu, W.gyro, W.R, W.I,
@@ -2224,12 +2296,16 @@ def _free_velocity_by_body_into(
     if not quasistatic:
         if held and system.M_const.shape[0] == nv:
             add_product(rhs, system.M_const, nu, eps)
+            if spatial:
+                _gyroscopic_into(bi, bf, q, nu, gyro, R)
         else:
-            _mass_times_into(bi, bf, q, nu, mass_nu, R, I)
+            if spatial:  # (with the gyroscopic force: one rotation per body for both)
+                _mass_times_gyro_into(bi, bf, q, nu, mass_nu, gyro, R)
+            else:
+                _mass_times_into(bi, bf, q, nu, mass_nu, R, I)
             for v in range(nv):
                 rhs[v] += eps * mass_nu[v]
         if spatial:
-            _gyroscopic_into(bi, bf, q, nu, gyro, R)
             he = h * eps
             for v in range(nv):
                 rhs[v] += he * gyro[v]
