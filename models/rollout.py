@@ -1070,10 +1070,10 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
     """One stage of a dynamics step of `rollout_kernel`, `repeats` times at the state (q, nu,
     q_ref, delta_n, delta_t) under command u: STAGE_DETECT the contacts (broadphase, narrowphase),
     STAGE_CLASSIFY the pair distances and the task's goal and unsafe predicates, STAGE_JACOBIANS
-    the contact frames' Jacobian columns, STAGE_SOLVE the rung's dynamics step (A where it
-    depends on q, the contact problem's assembly, its solve warm-started from the state's own
+    the contact frames' Jacobian columns, STAGE_SOLVE the rung's dynamics step (A^-1's rotating
+    bodies' blocks where A depends on q, the contact problem's assembly, its solve warm-started from the state's own
     first solve as in a steady push (Lemke's basis, PGS's impulses), the integration), and its
-    first parts: STAGE_ASSEMBLY (A, the free velocity and the LCP's assembly) and
+    first parts: STAGE_ASSEMBLY (those blocks, the free velocity and the LCP's assembly) and
     STAGE_CONTACT_SOLVE (that and the contact solve); where the rollout would take the planar
     or spatial warm step at the state (`models.stepper.planar_warm_step`,
     `models.stepper.spatial_warm_step`), these time it and its parts. Every
@@ -1124,7 +1124,7 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
         if k == 0 or stage == STAGE_JACOBIANS:
             _assemble(bi, bf, pi, dimension, q, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, W_n, W_t, W_o, c_bias, scripted, with_friction, pos)
         if k == 0 or stage >= STAGE_SOLVE:
-            if rotating and not (warm3 or warm_pgs):  # as rollout_kernel: A depends on q (the spatial steps build their own)
+            if rotating and not (warm3 or warm_pgs):  # as rollout_kernel: A^-1's rotating blocks at q (the spatial steps refresh them)
                 _rotating_blocks_at(bi, bf, q, eps_eff, h, D.v_index, D.kp, D.kd, D.max_force, system, block3, work3, R3, I3)
         if k > 0 and stage > STAGE_SOLVE:
             part = PART_ASSEMBLY if stage == STAGE_ASSEMBLY else PART_CONTACT_SOLVE
