@@ -126,7 +126,7 @@ def _invert_small_into(B, m, out, work):
     a free rigid body in space (`_split`) is inverted by its parts (`_invert_split_into`: the
     translations' reciprocals, the rotations' adjugate)."""
     if m == 6 and _split(B):
-        return _invert_split_into(B, out, work)
+        return _invert_split_into(B, out)
     for r in range(m):
         for c in range(2 * m):
             work[r, c] = 0.0
@@ -189,12 +189,12 @@ def _split(B):
 
 
 @numba.njit(cache=True, inline="always")
-def _invert_split_into(B, out, work):
+def _invert_split_into(B, out):
     """B^-1 of a `_split` 6 x 6 block into out: 1 / B[k, k] on the translations, the rotations'
     3 x 3 block by its adjugate over its determinant (`_invert_3x3_into`), zero elsewhere.
-    Singular as `_gauss_jordan` judges a pivot: a translation's diagonal, or the rotations'
-    determinant against the cube of the whole block's largest entry, at most SINGULAR_PIVOT
-    times that. work: unused (the general inversion's scratch)."""
+    Singular as `_gauss_jordan` judges a pivot: a translation's diagonal at most SINGULAR_PIVOT
+    times the whole block's largest entry, or the rotations' determinant as
+    `_invert_3x3_into` judges it."""
     big = 0.0
     for r in range(6):
         for c in range(6):

@@ -466,17 +466,24 @@ def rotating_blocks_into(bi, bf, q, eps, h, v_index, kp, kd, max_force, dofs, co
 
 
 @numba.njit(cache=True, inline="always")
+def _diagonal_momentum_into(bi, bf, nu, b, out):
+    """Body b's entries of M nu on its translations (m v) and its planar angle (I_z w), where M
+    is diagonal, into the caller's out."""
+    for k in range(3):
+        if bi[b, BI_VMAP + k] >= 0:
+            out[bi[b, BI_VMAP + k]] = bf[b, BF_MASS] * nu[bi[b, BI_VMAP + k]]
+    if bi[b, BI_VMAP + V_ANGLE] >= 0:
+        out[bi[b, BI_VMAP + V_ANGLE]] = bf[b, BF_INERTIA + 2] * nu[bi[b, BI_VMAP + V_ANGLE]]
+
+
+@numba.njit(cache=True, inline="always")
 def _mass_times_into(bi, bf, q, nu, out, R, I):
     """M(q) nu body by body (the products of `mass_matrix` without forming it), O(bodies), into
     the caller's out (nv), zeroed here; R and I (3, 3) scratch."""
     for v in range(out.shape[0]):
         out[v] = 0.0
     for b in range(bi.shape[0]):
-        for k in range(3):
-            if bi[b, BI_VMAP + k] >= 0:
-                out[bi[b, BI_VMAP + k]] = bf[b, BF_MASS] * nu[bi[b, BI_VMAP + k]]
-        if bi[b, BI_VMAP + V_ANGLE] >= 0:
-            out[bi[b, BI_VMAP + V_ANGLE]] = bf[b, BF_INERTIA + 2] * nu[bi[b, BI_VMAP + V_ANGLE]]
+        _diagonal_momentum_into(bi, bf, nu, b, out)
         if bi[b, BI_VMAP + V_WX] >= 0:
             _world_inertia_into(bi, bf, q, b, R, I)
             for r in range(3):
@@ -497,22 +504,13 @@ def _mass_times_gyro_into(bi, bf, q, nu, mass_nu, gyro, R):
         mass_nu[v] = 0.0
         gyro[v] = 0.0
     for b in range(bi.shape[0]):
-        for k in range(3):
-            if bi[b, BI_VMAP + k] >= 0:
-                mass_nu[bi[b, BI_VMAP + k]] = bf[b, BF_MASS] * nu[bi[b, BI_VMAP + k]]
-        if bi[b, BI_VMAP + V_ANGLE] >= 0:
-            mass_nu[bi[b, BI_VMAP + V_ANGLE]] = bf[b, BF_INERTIA + 2] * nu[bi[b, BI_VMAP + V_ANGLE]]
+        _diagonal_momentum_into(bi, bf, nu, b, mass_nu)
         if bi[b, BI_VMAP + V_WX] < 0:
             continue
         _rotation_into(bi, q, b, R)
         i0, i1, i2 = bi[b, BI_VMAP + V_WX], bi[b, BI_VMAP + V_WX + 1], bi[b, BI_VMAP + V_WX + 2]
         w0, w1, w2 = nu[i0], nu[i1], nu[i2]
-        l0 = bf[b, BF_INERTIA] * (R[0, 0] * w0 + R[1, 0] * w1 + R[2, 0] * w2)
-        l1 = bf[b, BF_INERTIA + 1] * (R[0, 1] * w0 + R[1, 1] * w1 + R[2, 1] * w2)
-        l2 = bf[b, BF_INERTIA + 2] * (R[0, 2] * w0 + R[1, 2] * w1 + R[2, 2] * w2)
-        L0 = R[0, 0] * l0 + R[0, 1] * l1 + R[0, 2] * l2
-        L1 = R[1, 0] * l0 + R[1, 1] * l1 + R[1, 2] * l2
-        L2 = R[2, 0] * l0 + R[2, 1] * l1 + R[2, 2] * l2
+        L0, L1, L2 = _angular_momentum(bf, b, R, w0, w1, w2)
         mass_nu[i0], mass_nu[i1], mass_nu[i2] = L0, L1, L2
         gyro[i0] -= w1 * L2 - w2 * L1
         gyro[i1] -= w2 * L0 - w0 * L2
@@ -539,6 +537,19 @@ def gravity_force(bi, bf, gravity, nv):
 
 
 @numba.njit(cache=True, inline="always")
+def _angular_momentum(bf, b, R, w0, w1, w2):
+    """Body b's angular momentum L = R diag(I) R^T w in world axes (R: its rotation, w its
+    angular velocity), written out: numba's @ calls BLAS, whose overhead dwarfs a 3 x 3."""
+    l0 = bf[b, BF_INERTIA] * (R[0, 0] * w0 + R[1, 0] * w1 + R[2, 0] * w2)
+    l1 = bf[b, BF_INERTIA + 1] * (R[0, 1] * w0 + R[1, 1] * w1 + R[2, 1] * w2)
+    l2 = bf[b, BF_INERTIA + 2] * (R[0, 2] * w0 + R[1, 2] * w1 + R[2, 2] * w2)
+    L0 = R[0, 0] * l0 + R[0, 1] * l1 + R[0, 2] * l2
+    L1 = R[1, 0] * l0 + R[1, 1] * l1 + R[1, 2] * l2
+    L2 = R[2, 0] * l0 + R[2, 1] * l1 + R[2, 2] * l2
+    return L0, L1, L2
+
+
+@numba.njit(cache=True, inline="always")
 def _gyroscopic_into(bi, bf, q, nu, f, R):
     """-w x (I_world w) for free spatial rotations (the paper's k(t, q, nu)) into the caller's f
     (nv), zeroed here; R (3, 3) scratch."""
@@ -549,13 +560,7 @@ def _gyroscopic_into(bi, bf, q, nu, f, R):
             continue
         _rotation_into(bi, q, b, R)
         w0, w1, w2 = nu[bi[b, BI_VMAP + V_WX]], nu[bi[b, BI_VMAP + V_WX + 1]], nu[bi[b, BI_VMAP + V_WX + 2]]
-        # L = R diag(I) R^T w, written out: numba's @ calls BLAS, whose overhead dwarfs a 3 x 3
-        l0 = bf[b, BF_INERTIA] * (R[0, 0] * w0 + R[1, 0] * w1 + R[2, 0] * w2)
-        l1 = bf[b, BF_INERTIA + 1] * (R[0, 1] * w0 + R[1, 1] * w1 + R[2, 1] * w2)
-        l2 = bf[b, BF_INERTIA + 2] * (R[0, 2] * w0 + R[1, 2] * w1 + R[2, 2] * w2)
-        L0 = R[0, 0] * l0 + R[0, 1] * l1 + R[0, 2] * l2
-        L1 = R[1, 0] * l0 + R[1, 1] * l1 + R[1, 2] * l2
-        L2 = R[2, 0] * l0 + R[2, 1] * l1 + R[2, 2] * l2
+        L0, L1, L2 = _angular_momentum(bf, b, R, w0, w1, w2)
         f[bi[b, BI_VMAP + V_WX]] -= w1 * L2 - w2 * L1
         f[bi[b, BI_VMAP + V_WX + 1]] -= w2 * L0 - w0 * L2
         f[bi[b, BI_VMAP + V_WX + 2]] -= w0 * L1 - w1 * L0
