@@ -93,6 +93,7 @@ from models.lcp import (
     lemke_kernel,
     lemke_warm_kernel,
     lemke_work,
+    matrix_view,
     warm_guess_dropping_into,
 )
 
@@ -1684,18 +1685,18 @@ def _planar_lcp(model, h, dofs, count, inv, nu_free, active, pi, pf, contacts, d
     fq = fM + n * n
     fY = fq + n
     fC = fY + nv * ng
-    Mlcp = F[fM:fq].reshape(n, n)
+    Mlcp = matrix_view(F[fM:], n, n)
     qlcp = F[fq:fY]
-    Y = F[fY:fC].reshape(nv, ng)
-    cf = F[fC : fC + 2 * m].reshape(2, m)
-    gen = I[n_int : n_int + 2 * m].reshape(2, m)
+    Y = matrix_view(F[fY:], nv, ng)
+    cf = matrix_view(F[fC:], 2, m)
+    gen = matrix_view(I[n_int:], 2, m)
     fric = I[n_int + 2 * m : n_int + 2 * m + nc]
     _planar_lcp_into(model, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, I, F, Mlcp, qlcp, Y, gen, cf, fric)
     fG = ng * LOCAL_DOFS  # (`_planar_lcp_into`'s layout of F and I)
     oL = 2 * ng
     oN = oL + ng * LOCAL_DOFS
-    B = (I[oL:oN].reshape(ng, LOCAL_DOFS), I[oN : oN + ng], F[:fG].reshape(ng, LOCAL_DOFS))
-    return Mlcp, qlcp, Y, gen, cf, fric, nc, fric[:0], F[fG : fG + ng * ng].reshape(ng, ng), B
+    B = (matrix_view(I[oL:], ng, LOCAL_DOFS), I[oN : oN + ng], matrix_view(F, ng, LOCAL_DOFS))
+    return Mlcp, qlcp, Y, gen, cf, fric, nc, fric[:0], matrix_view(F[fG:], ng, ng), B
 
 
 @numba.njit(cache=True, inline="always")
@@ -1909,7 +1910,7 @@ class WarmLCP(NamedTuple):
     """A warm step's contact problem (`warm_lcp`) for up to cap contacts: an LCP of n unknowns
     whose first m rows are the generators' (J^T's columns: normals and friction directions),
     ng contact directions (2 a contact in the plane, 3 in space). The matrices are flat: a step
-    views its own sizes' part as a C-contiguous array (`buf[: n * n].reshape((n, n))`; a view
+    views its own sizes' part as a C-contiguous array (`matrix_view(buf, n, n)`; a view
     such as M[:n, :n] has a row stride numba does not know, and indexing it made the build 35%
     slower)."""
 
@@ -2086,8 +2087,8 @@ def _lcp_views(L, nv, n, m, ng):
     """A `WarmLCP`'s arrays for a step's sizes (n unknowns, m generators, ng directions): M
     (n, n), q_lcp (n,), Y (nv, ng), gen and cf (2, m), the matrices C-contiguous views of the
     flat buffers."""
-    M, q_lcp = L.M[: n * n].reshape((n, n)), L.q_lcp[:n]
-    Y, gen, cf = L.Y[: nv * ng].reshape((nv, ng)), L.gen[: 2 * m].reshape((2, m)), L.cf[: 2 * m].reshape((2, m))
+    M, q_lcp = matrix_view(L.M, n, n), L.q_lcp[:n]
+    Y, gen, cf = matrix_view(L.Y, nv, ng), matrix_view(L.gen, 2, m), matrix_view(L.cf, 2, m)
     return M, q_lcp, Y, gen, cf
 
 
@@ -2201,7 +2202,7 @@ def spatial_warm_step(model, drives, tables, system, rotating, h, q, nu, q_ref, 
     n = m + nf
     lim = W.lim[:0]
     M, q_lcp, Y, gen, cf = _lcp_views(L, nv, n, m, ng)
-    G = W.G[: ng * ng].reshape((ng, ng))
+    G = matrix_view(W.G, ng, ng)
     scratch = (W.body[:ng], W.ldof[:ng], W.nloc[:ng], W.Bl[:ng], G, W.p[:ng], W.Bt_nu[:ng], W.Jt_nu[:m], W.Bb[:ng], W.Yb[:ng], W.gl[:ng])
     # all of the LCP but G and M (`lcp_generators_into`), scaled as the general step scales it
     # (`_scale_contact_lcp` on the generators), and the previous basis's guess on Y and C (from q

@@ -8,6 +8,7 @@ import warnings
 from fractions import Fraction
 from types import SimpleNamespace
 
+import numba
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, assume, given, settings
@@ -943,3 +944,51 @@ def test_property_lemke_from_any_guess_never_false_success(data, seed):
         assert abs(natural_residual(M, q, z) - residual) <= roundoff + 1e-15
         if warm:
             assert residual <= 1e-12
+
+
+# ------------------------------------------------------------------------------------------
+# matrix_view: the warm steps' and Lemke's C-contiguous views of their flat buffers
+# ------------------------------------------------------------------------------------------
+@numba.njit(cache=False)
+def _views_of(buf, offset, rows, cols):
+    """matrix_view and reshape of buf[offset:]'s first rows * cols entries, and the view's
+    (0, 0) and last entry written through (to 1 and 2)."""
+    v = lcp.matrix_view(buf[offset:], rows, cols)
+    r = buf[offset : offset + rows * cols].reshape((rows, cols))
+    same = v.shape == r.shape and (rows * cols == 0 or v.strides == r.strides)  # (an empty array's strides are moot)
+    for i in range(rows):
+        for j in range(cols):
+            if v[i, j] != r[i, j]:
+                same = False
+    if rows > 0 and cols > 0:
+        v[0, 0] = 1
+        v[rows - 1, cols - 1] = 2
+    return same
+
+
+@numba.njit(cache=False)
+def _view_too_big(buf, rows, cols):
+    return lcp.matrix_view(buf, rows, cols).shape[0]
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.int64])
+@pytest.mark.parametrize(("offset", "rows", "cols"), [(0, 3, 4), (5, 2, 7), (0, 0, 5), (3, 6, 1), (1, 4, 0)])
+def test_matrix_view_is_reshape_without_its_call(dtype, offset, rows, cols):
+    """matrix_view(buf, r, c) is buf[: r * c].reshape((r, c)): the same shape, strides (of a
+    non-empty view) and entries, and a write through it lands in buf at row-major offsets."""
+    buf = np.arange(40, dtype=dtype) + 10
+    assert _views_of(buf, offset, rows, cols)
+    if rows > 0 and cols > 0:
+        assert buf[offset] == 1 and buf[offset + rows * cols - 1] == 2
+        untouched = np.delete(np.arange(40), [offset, offset + rows * cols - 1])
+        assert np.array_equal(buf[untouched], untouched + 10)
+
+
+def test_matrix_view_that_does_not_fit_raises():
+    """A view larger than its buffer (or of a negative size) raises, as reshape does on a size
+    that does not match, instead of reading past the buffer."""
+    buf = np.zeros(12)
+    assert _view_too_big(buf, 3, 4) == 3
+    for rows, cols in [(3, 5), (13, 1), (-1, 4)]:
+        with pytest.raises(ValueError, match="does not fit"):
+            _view_too_big(buf, rows, cols)
