@@ -626,9 +626,11 @@ def lemke_kernel(M, q, max_pivots):
 
 @intrinsic
 def _c_matrix(typingctx, flat, rows, cols):
-    """flat's data (a C-contiguous 1D array) as a C-contiguous (rows, cols) array: the same
-    memory, nothing checked (`matrix_view` checks)."""
+    """flat's data (a C-contiguous 1D array) as a C-contiguous (rows, cols) array of integer
+    sizes: the same memory, the sizes not checked against flat (`matrix_view` checks)."""
     if not (isinstance(flat, types.Array) and flat.ndim == 1 and flat.layout == "C"):
+        return None
+    if not (isinstance(rows, types.Integer) and isinstance(cols, types.Integer)):
         return None
     sig = types.Array(flat.dtype, 2, "C")(flat, rows, cols)
 

@@ -992,3 +992,9 @@ def test_matrix_view_that_does_not_fit_raises():
     for rows, cols in [(3, 5), (13, 1), (-1, 4)]:
         with pytest.raises(ValueError, match="does not fit"):
             _view_too_big(buf, rows, cols)
+
+
+def test_matrix_view_takes_integer_sizes_only():
+    """A float size is refused when the kernel is typed, not truncated to an integer."""
+    with pytest.raises(numba.core.errors.TypingError):
+        _view_too_big(np.zeros(12), 3.0, 4)
