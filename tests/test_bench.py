@@ -39,7 +39,31 @@ def test_large_steps_stay_bounded_and_keep_the_outcome(quick):
     for row in rows:
         assert row["bounded"] and row["status"] == "ok" and row["outcome"] == row["reference_outcome"] == "goal"
         assert row["x_error"] < 5e-3
+        # along the way the gap is larger than at the end (the grasp brings the runs together) and bounded
+        assert row["x_error"] <= row["largest_x_gap"] < 5e-2 and 1.4 < row["largest_x_gap_t"] <= row["t"]
+    # the gap along the way is first order in h: where the push before the grasp is resolved in fewer steps
+    plastic = {row["h"]: row["largest_x_gap"] for row in rows if row["C"] == 1e4}
+    assert 1.5 < plastic[1e-3] / plastic[5e-4] < 2.5 and 1.5 < plastic[2e-4] / plastic[1e-4] < 2.5, plastic
     assert "## Stability" in (r_text := (quick[0] / "benchmarks.md").read_text()) and "x at the end" in r_text
+    assert "largest gap (at t)" in r_text
+
+
+def test_largest_gap_interpolates_the_reference_at_the_runs_times():
+    """`_largest_gap` against a reference x = t (every 0.1 s to 1 s) and a run x = t + 0.05 sin(pi t)
+    recorded every 0.25 s past the reference's end: the gap is largest at t = 0.5, and the
+    record after the reference's end is not compared."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from planner.bench import _largest_gap
+
+    rt = np.linspace(0.0, 1.0, 11)
+    ref = SimpleNamespace(times=rt, trajectory=np.stack([-rt, rt], axis=1))
+    t = np.array([0.0, 0.25, 0.5, 0.75, 1.0, 1.25])
+    run = SimpleNamespace(times=t, trajectory=np.stack([-t, t + 0.05 * np.sin(np.pi * t) + 9.0 * (t > 1.0)], axis=1))
+    gap, when = _largest_gap(run, ref, 1)
+    assert gap == pytest.approx(0.05) and when == 0.5
 
 
 def test_throughput_and_scaling_report_every_rung(quick):
