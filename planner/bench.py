@@ -41,15 +41,33 @@ SCENARIOS = ROOT / "scenarios"
 G = 9.81
 
 
-def machine() -> dict:
-    cpu = ""
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
+def cpu_name(cpuinfo: str) -> str:
+    """The first processor of a /proc/cpuinfo text, named so that two machines sold under one
+    model name ("AMD EPYC") tell apart: the model name, its family and model numbers, and the
+    widest vector extension it has (AVX-512, AVX2 or neither): "AMD EPYC (family 25, model 17,
+    AVX-512)". Empty where the text names no processor."""
+    fields: dict[str, str] = {}
+    for line in cpuinfo.splitlines():
+        if not line.strip():
+            if fields:
                 break
+            continue
+        key, _, value = line.partition(":")
+        fields.setdefault(key.strip(), value.strip())
+    name = fields.get("model name", "")
+    if not name:
+        return ""
+    flags = set(fields.get("flags", "").split())
+    details = [f"{label} {fields[key]}" for key, label in (("cpu family", "family"), ("model", "model")) if key in fields]
+    details += ["AVX-512"] if "avx512f" in flags else ["AVX2"] if "avx2" in flags else []
+    return f"{name} ({', '.join(details)})" if details else name
+
+
+def machine() -> dict:
+    try:
+        cpu = cpu_name(Path("/proc/cpuinfo").read_text())
     except OSError:
-        pass
+        cpu = ""
     return {
         "host": socket.gethostname(),
         "cpu": cpu or platform.processor(),

@@ -173,3 +173,16 @@ def test_peer_says_it_skipped_without_mujoco(monkeypatch):
     peer = bench.mujoco_peer(None, None, 0, 1e-4, None)
     assert set(peer) == {"skipped"} and "not installed" in peer["skipped"]
     assert bench.peer_markdown(peer) == [f"Peer (MuJoCo): skipped: {peer['skipped']}."]
+
+
+def test_cpu_name_tells_machines_of_one_model_name_apart():
+    """`cpu_name` on /proc/cpuinfo texts: the first processor's model name, family, model and
+    widest vector extension; the second processor's fields are not read; no model name, no name."""
+    from planner.bench import cpu_name
+
+    zen4 = "processor\t: 0\ncpu family\t: 25\nmodel\t\t: 17\nmodel name\t: AMD EPYC\nflags\t\t: fpu avx2 avx512f\n"
+    other = "\nprocessor\t: 1\ncpu family\t: 23\nmodel\t\t: 49\nmodel name\t: AMD EPYC\nflags\t\t: fpu avx2\n"
+    assert cpu_name(zen4 + other) == "AMD EPYC (family 25, model 17, AVX-512)"
+    assert cpu_name(other) == "AMD EPYC (family 23, model 49, AVX2)"
+    assert cpu_name("model name\t: Some CPU\n") == "Some CPU"
+    assert cpu_name("processor\t: 0\nflags\t\t: avx2\n") == ""
