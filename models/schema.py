@@ -473,7 +473,11 @@ class RungSpec(Strict):
     )
     iterations: _int(gt=0, le=MAX_ITERATIONS) | None = Field(None, description="planner iterations of this rung (default: ladder's)")
     planner: Literal[PLANNERS] | None = None  # type: ignore[valid-type]
-    theta: Annotated[Num, Field(ge=0, le=1)] = Field(1.0, description="theta-rule weight: 1 = semi-implicit (paper's scheme)")
+    theta: Annotated[Num, Field(ge=0, le=1)] = Field(
+        1.0,
+        description="theta-rule weight: 1 = semi-implicit (paper's scheme); below 1 the position update and the drives' "
+        "PD force are evaluated at l+theta (0.5: second order for the drives)",
+    )
     friction_directions: _int(ge=2, le=64) | None = Field(
         None, description="directions of the polyhedral friction cone (spatial scenes; planar: 2)"
     )

@@ -12,6 +12,9 @@ contacts -> assemble -> solve -> integrate:
        A nu+ = eps M nu + h (f_gravity + kp (q_ref+ - q) + kd u) + W_n p_n + D beta,
        A = eps M + h (h kp + kd) on the driven DOFs,
 
+   at theta = 1; with the paper's theta-rule (theta < 1) the drives' force is evaluated at
+   l+theta (`_drive_impulse`; A's drive term theta h (theta h kp + kd)),
+
    where p = h lambda are contact impulses.
 3. solve the LCP in (p_n, beta, gamma) (Stewart-Trinkle form) with Lemke. Compliant contact
    (eq. 3, damping read as C/h (delta+ - delta)) adds 1 / (h (h K + C)) to the diagonal of the
@@ -588,6 +591,19 @@ def _system_matrix_into(bi, bf, q, eps, h, v_index, kp, kd, max_force, A, R, I):
             A[v_index[j], v_index[j]] += h * (h * kp[j] + kd[j])
 
 
+@numba.njit(cache=True, inline="always")
+def _drive_impulse(h, theta, kp, kd, q_ref, q_ref_new, q, nu, ff):
+    """A drive's PD impulse over a step but its implicit part (in A: theta h (theta h kp + kd) nu+,
+    `system_matrix` at step theta h): with the paper's theta-rule, the force evaluated at l+theta,
+    h (kp (q_ref(theta) - q(theta)) + kd (ff - nu(theta))), q_ref(theta) = theta q_ref+ +
+    (1 - theta) q_ref, q(theta) = q + theta h nu(theta), nu(theta) = theta nu+ + (1 - theta) nu;
+    at theta = 1, h (kp (q_ref+ - q) + kd ff) (eq. 3's semi-implicit step: the same bits)."""
+    pd = h * (kp * (q_ref_new - q) + kd * ff)
+    if theta != 1.0:
+        pd -= h * (1.0 - theta) * (kp * (q_ref_new - q_ref) + (theta * h * kp + kd) * nu)
+    return pd
+
+
 @numba.njit(cache=True, error_model="numpy")
 def any_limited(max_force):
     """True when some drive has a finite force limit."""
@@ -733,7 +749,7 @@ def free_step_into(
         q_ref_new[j] = q_ref[j]
     for j in range(v_index.shape[0]):
         q_ref_new[j], ff = drive_reference(h, q_ref[j], u[j], lower[j], upper[j])
-        rhs[v_index[j]] += h * (kp[j] * (q_ref_new[j] - q[q_index[j]]) + kd[j] * ff)
+        rhs[v_index[j]] += _drive_impulse(h, theta, kp[j], kd[j], q_ref[j], q_ref_new[j], q[q_index[j]], nu[v_index[j]], ff)
     for v in range(nu_new.shape[0]):
         nu_new[v] = 0.0
     add_product(nu_new, Ainv, rhs, 1.0)
@@ -888,7 +904,7 @@ def contact_stage(part, model, solver, drives, tables, system, h, q, nu, q_ref, 
 
 
 @numba.njit(cache=True, inline="always")
-def _drives_into(h, q, q_ref, u, drives, rhs, q_ref_new, a):
+def _drives_into(h, theta, q, nu, q_ref, u, drives, rhs, q_ref_new, a):
     """Advance the drive references (stopped at their limits) into q_ref_new and add the PD terms
     of the unlimited drives to rhs. A force-limited drive j instead gets -h max_force[j] (its
     impulse enters the contact problem shifted to be >= 0) and its PD impulse at nu = 0 in a[j]
@@ -897,7 +913,7 @@ def _drives_into(h, q, q_ref, u, drives, rhs, q_ref_new, a):
     lower, upper = drives.lower, drives.upper  # hoisted: a tuple's array read in the loop is counted per pass
     for j in range(v_index.shape[0]):
         q_ref_new[j], ff = drive_reference(h, q_ref[j], u[j], lower[j], upper[j])
-        pd = h * (kp[j] * (q_ref_new[j] - q[q_index[j]]) + kd[j] * ff)
+        pd = _drive_impulse(h, theta, kp[j], kd[j], q_ref[j], q_ref_new[j], q[q_index[j]], nu[v_index[j]], ff)
         a[j] = 0.0
         if np.isfinite(max_force[j]):
             a[j] = pd
@@ -989,7 +1005,7 @@ def _free_velocity_into(model, drives, system, h, q, nu, q_ref, u, rhs, nu_free,
         rhs[v] = rhs_const[v]
     if model.eps != 0.0:
         add_product(rhs, system.M_const, nu, model.eps)
-    _drives_into(h, q, q_ref, u, drives, rhs, q_ref_new, a)
+    _drives_into(h, model.theta, q, nu, q_ref, u, drives, rhs, q_ref_new, a)
     for v in range(nv):
         nu_free[v] = 0.0
     add_product(nu_free, system.Ainv, rhs, 1.0)
@@ -1257,7 +1273,7 @@ def lcp_matrix_into(model, spatial, h, active, pf, c_pair, drives, drive_a, lim,
     _normal_diagonal(Mlcp, model.compliant, h, active, pf, c_pair, reg)
     _friction_matrix(Mlcp, model.compliant, h, d, m, active, fric, nf, cf, pf, c_pair)
     _scale_gamma(Mlcp, d, m, nc, nf)
-    _drive_rows(Mlcp, qlcp, h, nc + nd, m + nf, lim, nl, drives.kp, drives.kd, drives.max_force, drive_a, Jt_nu)
+    _drive_rows(Mlcp, qlcp, h, model.theta * h, nc + nd, m + nf, lim, nl, drives.kp, drives.kd, drives.max_force, drive_a, Jt_nu)
 
 
 @numba.njit(cache=True, inline="always")
@@ -1646,7 +1662,7 @@ def _scale_gamma(Mlcp, d, m, nc, nf):
 
 
 @numba.njit(cache=True, inline="always")
-def _drive_rows(Mlcp, qlcp, h, first_row, first_slack, lim, nl, kp, kd, max_force, drive_a, Jt_nu):
+def _drive_rows(Mlcp, qlcp, h, hd, first_row, first_slack, lim, nl, kp, kd, max_force, drive_a, Jt_nu):
     """Box rows of the force-limited drives, in place (see `contact_lcp`): row first_row + e
     of drive lim[e] gets 1 / b on the diagonal and q = J^T nu_free - (P + a) / b; its slack s
     (row and column first_slack + e) is scaled to that diagonal, with q = 2 P times it."""
@@ -1655,7 +1671,7 @@ def _drive_rows(Mlcp, qlcp, h, first_row, first_slack, lim, nl, kp, kd, max_forc
         r = first_row + e
         sx = first_slack + e
         P = h * max_force[j]
-        b = h * (h * kp[j] + kd[j])
+        b = hd * (hd * kp[j] + kd[j])  # (hd = theta h: the drives' theta-rule, `_drive_impulse`)
         Mlcp[r, r] += 1.0 / b
         qlcp[r] = Jt_nu[r] - (P + drive_a[j]) / b
         scale = abs(Mlcp[r, r])
@@ -2274,7 +2290,7 @@ def _spatial_free_velocity_into(model, drives, tables, system, rotating, h, q, n
     if count.shape[0] != bi.shape[0]:  # (the System holds none: A's blocks are singular)
         return False, dofs, count, inv
     if rotating and not rotating_blocks_into(
-        bi, bf, q, eps, h, drives.v_index, drives.kp, drives.kd, drives.max_force, dofs, count, inv, W.block, W.work, W.R, W.I
+        bi, bf, q, eps, model.theta * h, drives.v_index, drives.kp, drives.kd, drives.max_force, dofs, count, inv, W.block, W.work, W.R, W.I
     ):
         return False, dofs, count, inv
     _free_velocity_by_body_into(
@@ -2315,7 +2331,7 @@ def _free_velocity_by_body_into(
             he = h * eps
             for v in range(nv):
                 rhs[v] += he * gyro[v]
-    _drives_into(h, q, q_ref, u, drives, rhs, q_ref_new, a)
+    _drives_into(h, model.theta, q, nu, q_ref, u, drives, rhs, q_ref_new, a)
     if held and system.Ainv.shape[0] == nv:
         for v in range(nv):
             nu_free[v] = 0.0
