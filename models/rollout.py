@@ -70,6 +70,7 @@ from models.stepper import (
     any_limited,
     basis_table,
     contact_stage,
+    drive_step,
     dynamics_step,
     free_step,
     free_step_into,
@@ -338,7 +339,7 @@ def _start_system(S, D, model, h, q):
     bi, bf, nv = S.bi, S.bf, S.nv
     eps = model.eps
     eps_eff = model.quasistatic_inertia if eps == 0.0 else eps
-    A = system_matrix(bi, bf, q, nv, eps_eff, model.theta * h, D.v_index, D.kp, D.kd, D.max_force)  # (the drives' theta-rule)
+    A = system_matrix(bi, bf, q, nv, eps_eff, drive_step(model, h), D.v_index, D.kp, D.kd, D.max_force)
     Ainv = np.zeros((0, 0))
     M_const = np.zeros((0, 0))
     if not has_rotations(bi):
@@ -703,6 +704,7 @@ def rollout_kernel(
     R3, I3, block3, work3 = np.empty((3, 3)), np.empty((3, 3)), np.empty((BODY_DOFS, BODY_DOFS)), np.empty((BODY_DOFS, 2 * BODY_DOFS))
     constant_A, limited = not has_rotations(bi), any_limited(max_force)
     kinematic, eps, compliant, theta = model.kinematic, model.eps, model.compliant, model.theta
+    hd = drive_step(model, h)  # (A's drive term's step: the rotating blocks' refresh below)
     # the warm steps' arrays (planar, spatial; their results R, which the free step's scratch is
     # also) and the free step's results: each writes its results on its side, not the one its last
     # results (which the state may be) are on; buffers for contacts only where that warm step can
@@ -869,7 +871,6 @@ def rollout_kernel(
                     )  # fmt: skip
                 blocks_ok = True
                 if not constant_A and warm != WARM_DONE:  # the rotating bodies' blocks at q, in place: the System's own
-                    hd = theta * h  # (A's drive term at the drives' theta-rule step)
                     blocks_ok = _rotating_blocks_at(bi, bf, q, eps_eff, hd, v_index, kp, kd, max_force, system, block3, work3, R3, I3)
                 if warm != WARM_DONE and not tried and _may_take_planar_warm(dimension == 2, constant_A, limited, model, step_solver, nc):
                     warm, size, res, warm_pivots = planar_warm_step(
@@ -1126,7 +1127,8 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
             _assemble(bi, bf, pi, dimension, q, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, W_n, W_t, W_o, c_bias, scripted, with_friction, pos)
         if k == 0 or stage >= STAGE_SOLVE:
             if rotating and not (warm3 or warm_pgs):  # as rollout_kernel: A^-1's rotating blocks at q (the spatial steps refresh them)
-                _rotating_blocks_at(bi, bf, q, eps_eff, model.theta * h, D.v_index, D.kp, D.kd, D.max_force, system, block3, work3, R3, I3)
+                hd = drive_step(model, h)
+                _rotating_blocks_at(bi, bf, q, eps_eff, hd, D.v_index, D.kp, D.kd, D.max_force, system, block3, work3, R3, I3)
         if k > 0 and stage > STAGE_SOLVE:
             part = PART_ASSEMBLY if stage == STAGE_ASSEMBLY else PART_CONTACT_SOLVE
             if warm:

@@ -592,6 +592,14 @@ def _system_matrix_into(bi, bf, q, eps, h, v_index, kp, kd, max_force, A, R, I):
 
 
 @numba.njit(cache=True, inline="always")
+def drive_step(model, h):
+    """The step A's drive term is built at, h' (h' kp + kd) on the driven DOFs (`system_matrix`,
+    `rotating_blocks_into`, the force-limited drives' rows): theta h, the implicit part of the
+    drives' force under the paper's theta-rule (`_drive_impulse`); h at theta = 1."""
+    return model.theta * h
+
+
+@numba.njit(cache=True, inline="always")
 def _drive_impulse(h, theta, kp, kd, q_ref, q_ref_new, q, nu, ff):
     """A drive's PD impulse over a step but its implicit part (in A: theta h (theta h kp + kd) nu+,
     `system_matrix` at step theta h): with the paper's theta-rule, the force evaluated at l+theta,
@@ -1273,7 +1281,7 @@ def lcp_matrix_into(model, spatial, h, active, pf, c_pair, drives, drive_a, lim,
     _normal_diagonal(Mlcp, model.compliant, h, active, pf, c_pair, reg)
     _friction_matrix(Mlcp, model.compliant, h, d, m, active, fric, nf, cf, pf, c_pair)
     _scale_gamma(Mlcp, d, m, nc, nf)
-    _drive_rows(Mlcp, qlcp, h, model.theta * h, nc + nd, m + nf, lim, nl, drives.kp, drives.kd, drives.max_force, drive_a, Jt_nu)
+    _drive_rows(Mlcp, qlcp, h, drive_step(model, h), nc + nd, m + nf, lim, nl, drives.kp, drives.kd, drives.max_force, drive_a, Jt_nu)
 
 
 @numba.njit(cache=True, inline="always")
@@ -1671,7 +1679,7 @@ def _drive_rows(Mlcp, qlcp, h, hd, first_row, first_slack, lim, nl, kp, kd, max_
         r = first_row + e
         sx = first_slack + e
         P = h * max_force[j]
-        b = hd * (hd * kp[j] + kd[j])  # (hd = theta h: the drives' theta-rule, `_drive_impulse`)
+        b = hd * (hd * kp[j] + kd[j])  # (hd: `drive_step`)
         Mlcp[r, r] += 1.0 / b
         qlcp[r] = Jt_nu[r] - (P + drive_a[j]) / b
         scale = abs(Mlcp[r, r])
@@ -2290,8 +2298,9 @@ def _spatial_free_velocity_into(model, drives, tables, system, rotating, h, q, n
     if count.shape[0] != bi.shape[0]:  # (the System holds none: A's blocks are singular)
         return False, dofs, count, inv
     if rotating and not rotating_blocks_into(
-        bi, bf, q, eps, model.theta * h, drives.v_index, drives.kp, drives.kd, drives.max_force, dofs, count, inv, W.block, W.work, W.R, W.I
-    ):
+        bi, bf, q, eps, drive_step(model, h), drives.v_index, drives.kp, drives.kd, drives.max_force, dofs, count, inv,
+        W.block, W.work, W.R, W.I,
+    ):  # fmt: skip
         return False, dofs, count, inv
     _free_velocity_by_body_into(
         model, drives, bi, bf, True, system, held, h, q, nu, q_ref, u, dofs, count, inv, R.rhs, R.nu_free, R.q_ref[side], R.drive_a,

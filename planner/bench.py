@@ -211,12 +211,14 @@ def stability(quick: bool = False) -> dict:
     largest gap in its x along the way (`_largest_gap`: where the end's error hides one)."""
     from models.scenario import load_scenario
 
+    def every_step(h: float) -> int:  # records for every step of the 3 s runs
+        return int(round(3.0 / h)) + 2
+
     rows = []
     for C in (1e4, 0.0):
         tri = load_scenario(SCENARIOS / "two_finger_triangle.toml", {"v1": 0.8, "C": C, "K": 1e6})
         x = tri.coordinates.index("triangle.x")
         controls = np.array([[-0.8, -1.0]])
-        every_step = lambda h: int(round(3.0 / h)) + 2  # noqa: E731
         ref = _rollout(tri, "dynamic-compliant", 1e-5, 3.0, controls, stop=True, records=every_step(1e-5))
         for h in STABILITY_STEPS:
             out = _rollout(tri, "dynamic-compliant", h, 3.0, controls, stop=True, records=every_step(h))
