@@ -1098,6 +1098,7 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
     system = _start_system(S, D, model, h, q)
     rotating = has_rotations(bi)
     eps_eff = model.quasistatic_inertia if model.eps == 0.0 else model.eps
+    hd = drive_step(model, h)  # (A's drive term's step, as rollout_kernel's)
     nc, pivots, sweeps = 0, 0, 0
     R3, I3, block3, work3 = np.empty((3, 3)), np.empty((3, 3)), np.empty((BODY_DOFS, BODY_DOFS)), np.empty((BODY_DOFS, 2 * BODY_DOFS))
     limited = any_limited(D.max_force)
@@ -1127,7 +1128,6 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
             _assemble(bi, bf, pi, dimension, q, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, W_n, W_t, W_o, c_bias, scripted, with_friction, pos)
         if k == 0 or stage >= STAGE_SOLVE:
             if rotating and not (warm3 or warm_pgs):  # as rollout_kernel: A^-1's rotating blocks at q (the spatial steps refresh them)
-                hd = drive_step(model, h)
                 _rotating_blocks_at(bi, bf, q, eps_eff, hd, D.v_index, D.kp, D.kd, D.max_force, system, block3, work3, R3, I3)
         if k > 0 and stage > STAGE_SOLVE:
             part = PART_ASSEMBLY if stage == STAGE_ASSEMBLY else PART_CONTACT_SOLVE
