@@ -15,3 +15,9 @@ _warnings.filterwarnings("ignore", category=_NumbaPerformanceWarning)
 from models import kernel_cache as _kernel_cache  # noqa: E402
 
 _kernel_cache.install()
+
+# The kernels marked `nonnegative_indices` compile without numba's wraparound of negative
+# indices: before any kernel is compiled.
+from models import nonnegative as _nonnegative  # noqa: E402
+
+_nonnegative.install()

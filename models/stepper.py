@@ -99,6 +99,7 @@ from models.lcp import (
     matrix_view,
     warm_guess_dropping_into,
 )
+from models.nonnegative import nonnegative_indices
 
 #: Quasistatic rungs: inertia scale standing in for eps -> 0 (times the mass matrix).
 QUASISTATIC_INERTIA = 1e-6
@@ -2186,9 +2187,12 @@ def spatial_warm_buffers(cap, d, nb, out):
 
 
 @numba.njit(cache=True, _nrt=False, error_model="numpy")
+@nonnegative_indices
 def spatial_warm_step(model, drives, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, W, side, part):
     """A contact step of `_lemke_step` in space with no force-limited drive, compiled without
-    numba's runtime: no reference counts, no allocation; every array is W's (`SpatialWarm`).
+    numba's runtime: no reference counts, no allocation; every array is W's (`SpatialWarm`); and
+    without numba's wraparound of negative indices (`nonnegative_indices`: every index in it,
+    its inlined helpers' included, is at least 0).
     The LCP is solved on the previous step's basis (a contact not in it guessed from q,
     `_basis_guess`), tried on G and C without building M (`_generator_guess_dropping_into`), and
     where that guess does not solve it, M is built and Lemke
