@@ -2354,12 +2354,14 @@ def _free_velocity_by_body_into(
 
 
 @numba.njit(cache=True, _nrt=False, error_model="numpy")
+@nonnegative_indices
 def spatial_pgs_step(
     model, solver, drives, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, warm_n, warm_t, W, P, side,
     part,
 ):  # fmt: skip
     """`_pgs_step` in space (PGS on the polygon or the exact cone), compiled without numba's
-    runtime: no reference counts, no allocation; the free velocity's arrays and the results
+    runtime and without its wraparound of negative indices (`nonnegative_indices`): no reference
+    counts, no allocation; the free velocity's arrays and the results
     are W's (`SpatialWarm`, as `spatial_warm_step`'s), the contacts' rows P's
     (`models.contact_pgs.PgsWork`). Where nc exceeds P, a block of A is singular, PGS does not
     converge or the state leaves the finite range, it returns WARM_NOT_TAKEN and the caller

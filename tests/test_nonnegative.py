@@ -1,6 +1,6 @@
 """Kernels marked `nonnegative_indices` compile without numba's wraparound of negative indices
-(`models.nonnegative`); the spatial warm step, the one marked, is checked bit for bit against
-the general step in tests/test_warm_steps.py."""
+(`models.nonnegative`); the marked steps (the spatial warm step and PGS's step in space) are
+checked bit for bit against the general step in tests/test_warm_steps.py."""
 
 import numba
 import numpy as np
@@ -54,9 +54,10 @@ def test_a_marked_kernel_keeps_numba_s_slices():
     assert _tail_sum(a, 2) == 4.0 + 5.0 + 2.0
 
 
-def test_the_spatial_warm_step_is_marked():
-    assert _prefix("models.stepper.spatial_warm_step") in nonnegative._MARKED
-    assert callable(stepper.spatial_warm_step)
+def test_the_spatial_warm_steps_are_marked():
+    for name in ("spatial_warm_step", "spatial_pgs_step"):
+        assert _prefix(f"models.stepper.{name}") in nonnegative._MARKED
+        assert callable(getattr(stepper, name))
 
 
 def test_a_marked_name_is_matched_whole():
@@ -65,4 +66,4 @@ def test_a_marked_name_is_matched_whole():
     assert _marked(p + "B2v1B42xyzE5ArrayIdLi1E1C7mutable7alignedE")
     assert _marked(p + "E5Array")
     assert not _marked("_ZN6models7stepper18spatial_warm_steps" + "B2v1")  # (another name it starts)
-    assert not _marked("_ZN6models7stepper16spatial_pgs_stepB2v1")
+    assert not _marked("_ZN6models7stepper20spatial_warm_buffersB2v1")
