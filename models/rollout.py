@@ -23,6 +23,7 @@ carry no deformation; quasistatic models never touch the inertia terms.
 
 from __future__ import annotations
 
+from types import FunctionType
 from typing import NamedTuple
 
 import numba
@@ -46,6 +47,7 @@ from models.contact import (
 from models.contact_pgs import BODY_DOFS, _pgs_directions, pgs_work
 from models.kinematics import body_pose_3d, positions
 from models.predicates import evaluate, evaluate_with
+from models.reference import reference
 from models.stepper import (
     LAW_ACTIVE,
     LAW_AXIS,
@@ -84,8 +86,10 @@ from models.stepper import (
     planar_warm_step,
     rotating_blocks_into,
     spatial_pgs_step,
+    spatial_pgs_step_on,
     spatial_warm_buffers,
     spatial_warm_step,
+    spatial_warm_step_on,
     system_matrix,
     warm_results,
 )
@@ -527,6 +531,31 @@ def _free_run(
 #: do not take), handed back to the caller with that step's detection, which takes it whole.
 CONTACT_DONE, CONTACT_HANDED_BACK = 0, 1
 
+
+def _inlined(kernel, **callees):
+    """A second dispatcher of `kernel`'s Python function, compiled into each function that calls
+    it (numba's inline="always"; no cache entry of its own). For `_contact_run`, compiled without
+    numba's runtime: there an inlined helper's array arguments are not reference-counted, and
+    its call no longer copies them onto the stack (about 700 words a step at box_push_3d's
+    push, with the scene's 40 arrays for detection); `rollout_kernel`, with the runtime, calls
+    the kernels themselves. callees: global names of the function resolved to other kernels
+    (their inlined copies). The copies compile with their caller's flags (numpy's error model:
+    a division by zero is inf, not an exception)."""
+    function = kernel.py_func
+    if callees:
+        names = dict(function.__globals__)
+        names.update(callees)
+        function = FunctionType(function.__code__, names, function.__name__, function.__defaults__, function.__closure__)
+    return numba.njit(_nrt=False, error_model="numpy", inline="always")(function)
+
+
+# `_contact_run`'s stages, compiled into it (`_inlined`)
+_detect_spatial_in_run = _inlined(detect_spatial_into)
+_observe_in_run = _inlined(_observe, _distances=_inlined(_distances), _classify_with=_inlined(_classify_with))
+_assemble_in_run = _inlined(_assemble)
+_record_forces_in_run = _inlined(_record_forces)
+
+
 #: Which basis table a `_contact_run` left its caller with: the one passed in, the cold table,
 #: or (0, 1) that side of the warm steps' results.
 BASIS_PASSED, BASIS_COLD = -2, -1
@@ -567,34 +596,43 @@ def _contact_run(
     # the helpers' flags as values, not literals (a literal argument compiles a signature of its own)
     spatial, with_friction = dimension == 3, not model.kinematic
     basis_from, taken, nc, n_unsupported = BASIS_PASSED, 0, np.int64(0), 0
+    # the steps' fixed arguments by reference, made once (`models.reference`)
+    warm_fixed = reference((D, tables, system, contacts, W))
+    pgs_fixed = reference((D, tables, system, contacts, warm_n, warm_t, W, P))
     while taken < n_left:
         if warm_every > 0 and int(np.round((t0 + t) / h)) % warm_every == 0:
             basis, step_solver, basis_from = cold, solver, BASIS_COLD
             n_warm = _drop_warm(n_warm, warm_slots, warm_n, warm_t, warm_w)
-        nc, n_unsupported = detect_contacts_into(
-            S, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pos, poses, speed, reach, axis, cores
-        )
+        if spatial:
+            nc, n_unsupported = _detect_spatial_in_run(
+                S, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pos, speed, reach
+            )
+        else:
+            nc, n_unsupported = detect_contacts_into(
+                S, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pos, poses, speed, reach, axis, cores
+            )
         if nc == 0 or n_unsupported > 0:
             break
-        min_psi, outcome = _observe(
+        min_psi, outcome = _observe_in_run(
             nc, c_pair, c_psi, c_slot, first_slot, pair_psi, min_psi, outcome, stop_at_outcome, g_op, g_index, g_lo, g_hi, u_op,
             u_index, u_lo, u_hi, q, stack,
         )  # fmt: skip
         if outcome != Outcome.NONE and stop_at_outcome:
             break
-        _assemble(bi, bf, pi, dimension, q, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, W_n, W_t, W_o, c_bias, scripted, with_friction, pos)
+        _assemble_in_run(
+            bi, bf, pi, dimension, q, nc, c_pair, c_n, c_t, c_o, c_pa, c_pb, W_n, W_t, W_o, c_bias, scripted, with_friction, pos
+        )
         if keep_warm and spatial:
             _warm_in_frames(nc, c_slot, c_t, c_o, warm_w, warm_t)
         warm, pgs, sw, warm_pivots, size, res = WARM_NOT_TAKEN, False, 0, 0, 0, 0.0
         if _may_take_spatial_pgs(spatial, limited, model, step_solver, nc):
             pgs = True
-            warm, size, res, sw = spatial_pgs_step(
-                model, step_solver, D, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, warm_n, warm_t, W, P,
-                side, whole,
-            )  # fmt: skip
+            warm, size, res, sw = spatial_pgs_step_on(
+                model, step_solver, pgs_fixed, rotating, h, q, nu, q_ref, u, nc, delta_n, delta_t, side, whole
+            )
         elif _may_take_spatial_warm(spatial, limited, model, step_solver, nc):
-            warm, size, res, warm_pivots = spatial_warm_step(
-                model, D, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, W, side, whole
+            warm, size, res, warm_pivots = spatial_warm_step_on(
+                model, warm_fixed, rotating, h, q, nu, q_ref, u, nc, delta_n, delta_t, basis, side, whole
             )
         elif _may_take_planar_warm(not spatial, not rotating, limited, model, step_solver, nc):
             warm, size, res, warm_pivots = planar_warm_step(
@@ -619,7 +657,7 @@ def _contact_run(
         sweeps, lcp_solves, max_size, pivots, max_residual = _tally(
             sweeps, lcp_solves, max_size, pivots, max_residual, sw, size, warm_pivots, res
         )
-        force_steps += _record_forces(c_pair, c_n, c_t, c_o, p_n, p_t, h, pair_force, pair_wrench)
+        force_steps += _record_forces_in_run(c_pair, c_n, c_t, c_o, p_n, p_t, h, pair_force, pair_wrench)
         t += h
         steps += 1
         taken += 1
@@ -1113,6 +1151,9 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
     warm = False  # whether the rollout takes the planar warm step at the state (as rollout_kernel)
     warm3 = False  # the spatial warm step
     warm_pgs = False  # the spatial PGS step
+    # the spatial steps' fixed arguments by reference, as `_contact_run` passes them
+    warm_fixed = reference((D, tables, system, contacts, W))
+    pgs_fixed = reference((D, tables, system, contacts, warm_n, warm_t, W, P))
     for k in range(repeats + 1):
         if k == 0 or stage == STAGE_DETECT:
             if dimension == 3:
@@ -1134,14 +1175,9 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
             if warm:
                 planar_warm_step(model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, side, part)
             elif warm3:
-                spatial_warm_step(
-                    model, D, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, W, side, part
-                )
+                spatial_warm_step_on(model, warm_fixed, rotating, h, q, nu, q_ref, u, nc, delta_n, delta_t, basis, side, part)
             elif warm_pgs:
-                spatial_pgs_step(
-                    model, solver, D, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, warm_n, warm_t, W, P,
-                    side, part,
-                )  # fmt: skip
+                spatial_pgs_step_on(model, solver, pgs_fixed, rotating, h, q, nu, q_ref, u, nc, delta_n, delta_t, side, part)
             else:
                 contact_stage(
                     part, model, solver, D, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis
@@ -1155,15 +1191,10 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
             )[3]  # fmt: skip
             sweeps = 0
         elif k > 0 and stage == STAGE_SOLVE and warm3:
-            pivots = spatial_warm_step(
-                model, D, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, W, side, whole
-            )[3]
+            pivots = spatial_warm_step_on(model, warm_fixed, rotating, h, q, nu, q_ref, u, nc, delta_n, delta_t, basis, side, whole)[3]
             sweeps = 0
         elif k > 0 and stage == STAGE_SOLVE and warm_pgs:
-            sweeps = spatial_pgs_step(
-                model, solver, D, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, warm_n, warm_t, W, P,
-                side, whole,
-            )[3]  # fmt: skip
+            sweeps = spatial_pgs_step_on(model, solver, pgs_fixed, rotating, h, q, nu, q_ref, u, nc, delta_n, delta_t, side, whole)[3]
             pivots = 0
         elif k == 0 or stage == STAGE_SOLVE:
             r = dynamics_step(model, solver, D, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis)

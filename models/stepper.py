@@ -100,6 +100,7 @@ from models.lcp import (
     warm_guess_dropping_into,
 )
 from models.nonnegative import nonnegative_indices
+from models.reference import reference, referent
 
 #: Quasistatic rungs: inertia scale standing in for eps -> 0 (times the mass matrix).
 QUASISTATIC_INERTIA = 1e-6
@@ -2187,8 +2188,17 @@ def spatial_warm_buffers(cap, d, nb, out):
 
 
 @numba.njit(cache=True, _nrt=False, error_model="numpy")
-@nonnegative_indices
 def spatial_warm_step(model, drives, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, W, side, part):
+    """`spatial_warm_step_on` with its arguments by value: its fixed ones (drives, tables, system,
+    contacts, W) passed on by reference (`models.reference`). For a caller taking one step; a
+    run of steps makes the reference once (`models.rollout._contact_run`)."""
+    fixed = reference((drives, tables, system, contacts, W))
+    return spatial_warm_step_on(model, fixed, rotating, h, q, nu, q_ref, u, nc, delta_n, delta_t, basis, side, part)
+
+
+@numba.njit(cache=True, _nrt=False, error_model="numpy")
+@nonnegative_indices
+def spatial_warm_step_on(model, fixed, rotating, h, q, nu, q_ref, u, nc, delta_n, delta_t, basis, side, part):
     """A contact step of `_lemke_step` in space with no force-limited drive, compiled without
     numba's runtime: no reference counts, no allocation; every array is W's (`SpatialWarm`); and
     without numba's wraparound of negative indices (`nonnegative_indices`: every index in it,
@@ -2208,7 +2218,9 @@ def spatial_warm_step(model, drives, tables, system, rotating, h, q, nu, q_ref, 
     the side the state is on), and the impulses by contact. The same operations in the same
     order as `_lemke_step`: the same bits (tests/test_warm_steps.py). part: PART_STEP, or the
     first parts only, for the cost split (as `contact_stage`). Returns (outcome, the LCP's
-    size, residual, Lemke's pivots)."""
+    size, residual, Lemke's pivots). fixed: a reference (`models.reference`) to (drives, tables,
+    system, contacts, W), read once here."""
+    drives, tables, system, contacts, W = referent(fixed, "fixed")
     bi, pi, pf = tables.bi, tables.pi, tables.pf
     nv = nu.shape[0]
     L, R = W.lcp, W.out
@@ -2354,11 +2366,20 @@ def _free_velocity_by_body_into(
 
 
 @numba.njit(cache=True, _nrt=False, error_model="numpy")
-@nonnegative_indices
 def spatial_pgs_step(
     model, solver, drives, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, warm_n, warm_t, W, P, side,
     part,
 ):  # fmt: skip
+    """`spatial_pgs_step_on` with its arguments by value: its fixed ones (drives, tables, system,
+    contacts, the warm starts warm_n and warm_t, W, P) passed on by reference
+    (`models.reference`), as `spatial_warm_step` passes its own."""
+    fixed = reference((drives, tables, system, contacts, warm_n, warm_t, W, P))
+    return spatial_pgs_step_on(model, solver, fixed, rotating, h, q, nu, q_ref, u, nc, delta_n, delta_t, side, part)
+
+
+@numba.njit(cache=True, _nrt=False, error_model="numpy")
+@nonnegative_indices
+def spatial_pgs_step_on(model, solver, fixed, rotating, h, q, nu, q_ref, u, nc, delta_n, delta_t, side, part):
     """`_pgs_step` in space (PGS on the polygon or the exact cone), compiled without numba's
     runtime and without its wraparound of negative indices (`nonnegative_indices`): no reference
     counts, no allocation; the free velocity's arrays and the results
@@ -2370,7 +2391,9 @@ def spatial_pgs_step(
     `side` of W.out (not the side the state is on), and the impulses by contact. The same
     operations in the same order as `_pgs_step`: the same bits (tests/test_warm_steps.py).
     part: PART_STEP, or the first parts only, for the cost split (as `contact_stage`). Returns
-    (outcome, unknowns, residual, sweeps)."""
+    (outcome, unknowns, residual, sweeps). fixed: a reference (`models.reference`) to (drives,
+    tables, system, contacts, warm_n, warm_t, W, P), read once here."""
+    drives, tables, system, contacts, warm_n, warm_t, W, P = referent(fixed, "fixed")
     R = W.out
     if not tables.spatial or nc > P.active.shape[0] or any_limited(drives.max_force):
         return WARM_NOT_TAKEN, 0, 0.0, 0
