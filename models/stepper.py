@@ -2220,7 +2220,7 @@ def spatial_warm_step_on(model, fixed, rotating, h, q, nu, q_ref, u, nc, delta_n
     first parts only, for the cost split (as `contact_stage`). Returns (outcome, the LCP's
     size, residual, Lemke's pivots). fixed: a reference (`models.reference`) to (drives, tables,
     system, contacts, W), read once here."""
-    drives, tables, system, contacts, W = referent(fixed, "fixed")
+    drives, tables, system, contacts, W = referent(fixed)
     bi, pi, pf = tables.bi, tables.pi, tables.pf
     nv = nu.shape[0]
     L, R = W.lcp, W.out
@@ -2393,7 +2393,7 @@ def spatial_pgs_step_on(model, solver, fixed, rotating, h, q, nu, q_ref, u, nc, 
     part: PART_STEP, or the first parts only, for the cost split (as `contact_stage`). Returns
     (outcome, unknowns, residual, sweeps). fixed: a reference (`models.reference`) to (drives,
     tables, system, contacts, warm_n, warm_t, W, P), read once here."""
-    drives, tables, system, contacts, warm_n, warm_t, W, P = referent(fixed, "fixed")
+    drives, tables, system, contacts, warm_n, warm_t, W, P = referent(fixed)
     R = W.out
     if not tables.spatial or nc > P.active.shape[0] or any_limited(drives.max_force):
         return WARM_NOT_TAKEN, 0, 0.0, 0

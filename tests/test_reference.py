@@ -1,14 +1,11 @@
 """Values passed to a kernel by reference (`models.reference`): the value a kernel reads back is
-the one referenced, its arrays are the caller's own (written through, not copied), and the
-kernel's argument carries what lets LLVM read the value where it is used (dereferenceable,
-noalias, nonnull; the load invariant), without which a reference saves nothing
-(docs/measurements.md, thirtieth and thirty-eighth sessions). The warm steps' bodies take
-their fixed arguments this way; tests/test_warm_steps.py holds them, through their by-value
-wrappers, to the general step bit for bit."""
+the one referenced (a bool field included: a byte in memory, a bit in a value), and its arrays
+are the caller's own (written through, not copied). The warm steps' bodies take their fixed
+arguments this way; tests/test_warm_steps.py holds them, through their by-value wrappers, to
+the general step bit for bit."""
 
 from __future__ import annotations
 
-import re
 from typing import NamedTuple
 
 import numba
@@ -31,7 +28,7 @@ class Fixed(NamedTuple):
 def _read(fixed_ref, i):
     """Reads the referenced value's fields, writes into its array: returns (table row sum,
     values[i] * scale, spatial)."""
-    f = referent(fixed_ref, "fixed_ref")
+    f = referent(fixed_ref)
     f.values[i] = f.values[i] * f.scale
     return f.table[i, 0] + f.table[i, 1], f.values[i], f.spatial
 
@@ -65,21 +62,6 @@ def test_the_flag_reads_back_as_it_was_written():
     # (a bool is a byte in memory and a bit in a value: the reference stores and reads it as memory)
     fixed = _fixed()._replace(spatial=False)
     assert _through(fixed, 0, 1)[2] is False
-
-
-def test_the_reading_kernel_s_argument_carries_the_attributes():
-    _through(_fixed(), 0, 1)
-    (signature,) = _read.signatures
-    ir = _read.inspect_llvm(signature)
-    definitions = [line for line in ir.splitlines() if line.startswith("define") and "_read" in line]
-    assert definitions
-    before, found, _ = definitions[0].partition("%arg.fixed_ref")
-    assert found
-    attributes = before.rsplit(", ", 1)[-1]  # the parameter's own: from the comma before it
-    assert "noalias" in attributes and "nonnull" in attributes
-    size = re.search(r"dereferenceable\((\d+)\)", attributes)
-    assert size is not None and int(size.group(1)) >= 2 * 7 * 8  # two arrays' words at least
-    assert "!invariant.load" in ir
 
 
 def test_the_warm_steps_take_their_fixed_arguments_by_reference():
