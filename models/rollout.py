@@ -536,9 +536,9 @@ def _inlined(kernel, **callees):
     """A second dispatcher of `kernel`'s Python function, compiled into each function that calls
     it (numba's inline="always"; no cache entry of its own). For `_contact_run`, compiled without
     numba's runtime: there an inlined helper's array arguments are not reference-counted, and
-    its call no longer copies them onto the stack (about 700 words a step at box_push_3d's
-    push, with the scene's 40 arrays for detection); `rollout_kernel`, with the runtime, calls
-    the kernels themselves. callees: global names of the function resolved to other kernels
+    its call no longer copies them onto the stack (about 630 words a step at box_push_3d's
+    push, 330 of them detection's, the scene's 40 arrays); `rollout_kernel`, with the runtime,
+    calls the kernels themselves. callees: global names of the function resolved to other kernels
     (their inlined copies). The copies compile with their caller's flags (numpy's error model:
     a division by zero is inf, not an exception)."""
     function = kernel.py_func
