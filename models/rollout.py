@@ -47,7 +47,6 @@ from models.contact import (
 from models.contact_pgs import BODY_DOFS, _pgs_directions, pgs_work
 from models.kinematics import body_pose_3d, positions
 from models.predicates import evaluate, evaluate_with
-from models.reference import reference
 from models.stepper import (
     LAW_ACTIVE,
     LAW_AXIS,
@@ -85,9 +84,11 @@ from models.stepper import (
     planar_warm_buffers,
     planar_warm_step,
     rotating_blocks_into,
+    spatial_pgs_fixed,
     spatial_pgs_step,
     spatial_pgs_step_on,
     spatial_warm_buffers,
+    spatial_warm_fixed,
     spatial_warm_step,
     spatial_warm_step_on,
     system_matrix,
@@ -596,9 +597,9 @@ def _contact_run(
     # the helpers' flags as values, not literals (a literal argument compiles a signature of its own)
     spatial, with_friction = dimension == 3, not model.kinematic
     basis_from, taken, nc, n_unsupported = BASIS_PASSED, 0, np.int64(0), 0
-    # the steps' fixed arguments by reference, made once (`models.reference`)
-    warm_fixed = reference((D, tables, system, contacts, W))
-    pgs_fixed = reference((D, tables, system, contacts, warm_n, warm_t, W, P))
+    # the steps' fixed arguments by reference, made once (`models.reference`, `spatial_warm_fixed`)
+    warm_fixed = spatial_warm_fixed(D, tables, system, contacts, W)
+    pgs_fixed = spatial_pgs_fixed(D, tables, system, contacts, warm_n, warm_t, W, P)
     while taken < n_left:
         if warm_every > 0 and int(np.round((t0 + t) / h)) % warm_every == 0:
             basis, step_solver, basis_from = cold, solver, BASIS_COLD
@@ -1152,8 +1153,8 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
     warm3 = False  # the spatial warm step
     warm_pgs = False  # the spatial PGS step
     # the spatial steps' fixed arguments by reference, as `_contact_run` passes them
-    warm_fixed = reference((D, tables, system, contacts, W))
-    pgs_fixed = reference((D, tables, system, contacts, warm_n, warm_t, W, P))
+    warm_fixed = spatial_warm_fixed(D, tables, system, contacts, W)
+    pgs_fixed = spatial_pgs_fixed(D, tables, system, contacts, warm_n, warm_t, W, P)
     for k in range(repeats + 1):
         if k == 0 or stage == STAGE_DETECT:
             if dimension == 3:

@@ -2187,12 +2187,25 @@ def spatial_warm_buffers(cap, d, nb, out):
     )
 
 
+@numba.njit(cache=True, inline="always")
+def spatial_warm_fixed(drives, tables, system, contacts, W):
+    """The reference `spatial_warm_step_on` takes (`models.reference`), its one layout. Inlined,
+    so the value is copied into the caller's frame, where the reference stays valid."""
+    return reference((drives, tables, system, contacts, W))
+
+
+@numba.njit(cache=True, inline="always")
+def spatial_pgs_fixed(drives, tables, system, contacts, warm_n, warm_t, W, P):
+    """The reference `spatial_pgs_step_on` takes, as `spatial_warm_fixed` makes its own."""
+    return reference((drives, tables, system, contacts, warm_n, warm_t, W, P))
+
+
 @numba.njit(cache=True, _nrt=False, error_model="numpy")
 def spatial_warm_step(model, drives, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, W, side, part):
     """`spatial_warm_step_on` with its arguments by value: its fixed ones (drives, tables, system,
     contacts, W) passed on by reference (`models.reference`). For a caller taking one step; a
     run of steps makes the reference once (`models.rollout._contact_run`)."""
-    fixed = reference((drives, tables, system, contacts, W))
+    fixed = spatial_warm_fixed(drives, tables, system, contacts, W)
     return spatial_warm_step_on(model, fixed, rotating, h, q, nu, q_ref, u, nc, delta_n, delta_t, basis, side, part)
 
 
@@ -2219,7 +2232,7 @@ def spatial_warm_step_on(model, fixed, rotating, h, q, nu, q_ref, u, nc, delta_n
     order as `_lemke_step`: the same bits (tests/test_warm_steps.py). part: PART_STEP, or the
     first parts only, for the cost split (as `contact_stage`). Returns (outcome, the LCP's
     size, residual, Lemke's pivots). fixed: a reference (`models.reference`) to (drives, tables,
-    system, contacts, W), read once here."""
+    system, contacts, W), read once here (`spatial_warm_fixed`)."""
     drives, tables, system, contacts, W = referent(fixed)
     bi, pi, pf = tables.bi, tables.pi, tables.pf
     nv = nu.shape[0]
@@ -2373,7 +2386,7 @@ def spatial_pgs_step(
     """`spatial_pgs_step_on` with its arguments by value: its fixed ones (drives, tables, system,
     contacts, the warm starts warm_n and warm_t, W, P) passed on by reference
     (`models.reference`), as `spatial_warm_step` passes its own."""
-    fixed = reference((drives, tables, system, contacts, warm_n, warm_t, W, P))
+    fixed = spatial_pgs_fixed(drives, tables, system, contacts, warm_n, warm_t, W, P)
     return spatial_pgs_step_on(model, solver, fixed, rotating, h, q, nu, q_ref, u, nc, delta_n, delta_t, side, part)
 
 
@@ -2392,7 +2405,7 @@ def spatial_pgs_step_on(model, solver, fixed, rotating, h, q, nu, q_ref, u, nc, 
     operations in the same order as `_pgs_step`: the same bits (tests/test_warm_steps.py).
     part: PART_STEP, or the first parts only, for the cost split (as `contact_stage`). Returns
     (outcome, unknowns, residual, sweeps). fixed: a reference (`models.reference`) to (drives,
-    tables, system, contacts, warm_n, warm_t, W, P), read once here."""
+    tables, system, contacts, warm_n, warm_t, W, P), read once here (`spatial_pgs_fixed`)."""
     drives, tables, system, contacts, warm_n, warm_t, W, P = referent(fixed)
     R = W.out
     if not tables.spatial or nc > P.active.shape[0] or any_limited(drives.max_force):
