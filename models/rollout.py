@@ -82,7 +82,9 @@ from models.stepper import (
     make_system,
     mass_matrix,
     planar_warm_buffers,
+    planar_warm_fixed,
     planar_warm_step,
+    planar_warm_step_on,
     rotating_blocks_into,
     spatial_pgs_fixed,
     spatial_pgs_step,
@@ -600,6 +602,7 @@ def _contact_run(
     # the steps' fixed arguments by reference, made once (`models.reference`, `spatial_warm_fixed`)
     warm_fixed = spatial_warm_fixed(D, tables, system, contacts, W)
     pgs_fixed = spatial_pgs_fixed(D, tables, system, contacts, warm_n, warm_t, W, P)
+    planar_fixed = planar_warm_fixed(D, tables, system, contacts, B)
     while taken < n_left:
         if warm_every > 0 and int(np.round((t0 + t) / h)) % warm_every == 0:
             basis, step_solver, basis_from = cold, solver, BASIS_COLD
@@ -636,8 +639,8 @@ def _contact_run(
                 model, warm_fixed, rotating, h, q, nu, q_ref, u, nc, delta_n, delta_t, basis, side, whole
             )
         elif _may_take_planar_warm(not spatial, not rotating, limited, model, step_solver, nc):
-            warm, size, res, warm_pivots = planar_warm_step(
-                model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, side, whole
+            warm, size, res, warm_pivots = planar_warm_step_on(
+                model, planar_fixed, h, q, nu, q_ref, u, nc, delta_n, delta_t, basis, side, whole
             )
         if warm != WARM_DONE:
             return (
@@ -1155,6 +1158,7 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
     # the spatial steps' fixed arguments by reference, as `_contact_run` passes them
     warm_fixed = spatial_warm_fixed(D, tables, system, contacts, W)
     pgs_fixed = spatial_pgs_fixed(D, tables, system, contacts, warm_n, warm_t, W, P)
+    planar_fixed = planar_warm_fixed(D, tables, system, contacts, B)
     for k in range(repeats + 1):
         if k == 0 or stage == STAGE_DETECT:
             if dimension == 3:
@@ -1174,7 +1178,7 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
         if k > 0 and stage > STAGE_SOLVE:
             part = PART_ASSEMBLY if stage == STAGE_ASSEMBLY else PART_CONTACT_SOLVE
             if warm:
-                planar_warm_step(model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, side, part)
+                planar_warm_step_on(model, planar_fixed, h, q, nu, q_ref, u, nc, delta_n, delta_t, basis, side, part)
             elif warm3:
                 spatial_warm_step_on(model, warm_fixed, rotating, h, q, nu, q_ref, u, nc, delta_n, delta_t, basis, side, part)
             elif warm_pgs:
@@ -1183,13 +1187,10 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
                 contact_stage(
                     part, model, solver, D, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis
                 )
-        # the whole step called as its parts are above and as the rollout calls it, with its
-        # arguments: a tuple of them, unpacked, counted the references of every array in it
-        # (W's and B's dozens) each call, about 0.5 us that the split put in the step's last part
+        # the whole step called as its parts are above and as the rollout calls it (its fixed
+        # arguments by reference, so no array in them is counted at the call)
         if k > 0 and stage == STAGE_SOLVE and warm:
-            pivots = planar_warm_step(
-                model, D, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, side, whole
-            )[3]  # fmt: skip
+            pivots = planar_warm_step_on(model, planar_fixed, h, q, nu, q_ref, u, nc, delta_n, delta_t, basis, side, whole)[3]
             sweeps = 0
         elif k > 0 and stage == STAGE_SOLVE and warm3:
             pivots = spatial_warm_step_on(model, warm_fixed, rotating, h, q, nu, q_ref, u, nc, delta_n, delta_t, basis, side, whole)[3]

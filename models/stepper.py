@@ -2042,8 +2042,23 @@ def _lemke_after_guess(M, q_lcp, guess, work, z, w, J, A):
     return lemke_from_guess_into(M, q_lcp, guess, DEFAULT_LEMKE_PIVOTS_PER_VARIABLE * (n + 1), work, z, w, guess, J, A, WARM_TOLERANCE)
 
 
+@numba.njit(cache=True, inline="always")
+def planar_warm_fixed(drives, tables, system, contacts, B):
+    """The reference `planar_warm_step_on` takes (`models.reference`), as `spatial_warm_fixed`
+    makes its own."""
+    return reference((drives, tables, system, contacts, B))
+
+
 @numba.njit(cache=True, _nrt=False, error_model="numpy")
 def planar_warm_step(model, drives, tables, system, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, B, side, part):
+    """`planar_warm_step_on` with its arguments by value: its fixed ones (drives, tables, system,
+    contacts, B) passed on by reference (`models.reference`), as `spatial_warm_step`."""
+    fixed = planar_warm_fixed(drives, tables, system, contacts, B)
+    return planar_warm_step_on(model, fixed, h, q, nu, q_ref, u, nc, delta_n, delta_t, basis, side, part)
+
+
+@numba.njit(cache=True, _nrt=False, error_model="numpy")
+def planar_warm_step_on(model, fixed, h, q, nu, q_ref, u, nc, delta_n, delta_t, basis, side, part):
     """A contact step of `_lemke_step` in the plane with A constant and no force-limited drive,
     compiled without numba's runtime: no reference counts, no allocation; every array is B's
     (`PlanarWarm`). The LCP is solved on the previous step's basis (the usual step while
@@ -2056,7 +2071,10 @@ def planar_warm_step(model, drives, tables, system, h, q, nu, q_ref, u, contacts
     the state q, nu, q_ref, basis, delta_n, delta_t is on), and the impulses by contact. The
     same operations in the same order as `_lemke_step`: the same bits
     (tests/test_warm_steps.py). part: PART_STEP, or the first parts only, for the cost split (as
-    `contact_stage`). Returns (outcome, the LCP's size, residual, Lemke's pivots)."""
+    `contact_stage`). Returns (outcome, the LCP's size, residual, Lemke's pivots). fixed: a
+    reference (`models.reference`) to (drives, tables, system, contacts, B), read once here
+    (`planar_warm_fixed`)."""
+    drives, tables, system, contacts, B = referent(fixed)
     nv = nu.shape[0]
     # A^-1's body blocks held (`_blocks`), A (and M) constant in the plane, no force limit
     if system.count.shape[0] != tables.bi.shape[0] or not _constant_plane(model, tables.spatial, system, nv):
