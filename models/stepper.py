@@ -2058,6 +2058,7 @@ def planar_warm_step(model, drives, tables, system, h, q, nu, q_ref, u, contacts
 
 
 @numba.njit(cache=True, _nrt=False, error_model="numpy")
+@nonnegative_indices
 def planar_warm_step_on(model, fixed, h, q, nu, q_ref, u, nc, delta_n, delta_t, basis, side, part):
     """A contact step of `_lemke_step` in the plane with A constant and no force-limited drive,
     compiled without numba's runtime: no reference counts, no allocation; every array is B's

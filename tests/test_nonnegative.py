@@ -54,12 +54,13 @@ def test_a_marked_kernel_keeps_numba_s_slices():
     assert _tail_sum(a, 2) == 4.0 + 5.0 + 2.0
 
 
-def test_the_spatial_warm_steps_are_marked():
+def test_the_warm_steps_are_marked():
     # the steps' bodies (their arguments by reference); their by-value wrappers index nothing
-    for name in ("spatial_warm_step_on", "spatial_pgs_step_on"):
+    for name in ("spatial_warm_step_on", "spatial_pgs_step_on", "planar_warm_step_on"):
         assert _prefix(f"models.stepper.{name}") in nonnegative._MARKED
         assert callable(getattr(stepper, name))
-    assert _prefix("models.stepper.spatial_warm_step") not in nonnegative._MARKED
+    for name in ("spatial_warm_step", "spatial_pgs_step", "planar_warm_step"):
+        assert _prefix(f"models.stepper.{name}") not in nonnegative._MARKED
 
 
 def test_a_marked_name_is_matched_whole():
