@@ -4,10 +4,11 @@ numba lowers every signed integer index `a[i]` as `a[i + n if i < 0 else i]`, Py
 of a negative index, a compare and a select at each access. Inside a kernel that indexes
 through other arrays (`nu[ldof[g, a]]`, `pf[c_pair[i], ...]`) the compiler cannot prove the
 index non-negative, so it keeps them all, and they hold back the loops' other optimizations.
-On box_push_3d's push the two steps marked here run faster compiled without them, with the same
-bits: the spatial warm step (Lemke, 8 directions) 1.08-1.10x, PGS's step in space on the exact
-cone 1.07-1.12x; left out of the rest of the compiled code, they cost 3-6%
-(docs/measurements.md, thirty-seventh session).
+On box_push_3d's push the two spatial steps marked here run faster compiled without them, with
+the same bits: the spatial warm step (Lemke, 8 directions) 1.08-1.10x, PGS's step in space on
+the exact cone 1.07-1.12x; left out of the rest of the compiled code, they cost 3-6%
+(docs/measurements.md, thirty-seventh session). The planar warm step, marked too, made the
+paper's squeeze 1.06-1.15x faster (thirty-ninth session).
 
 `nonnegative_indices` marks a kernel whose integer indices are all at least 0: in its compiled
 body (with every helper inlined into it; not in the functions it calls) a signed index is taken

@@ -479,7 +479,7 @@ def _free_run(
 ):  # fmt: skip
     """Up to n_left of `rollout_kernel`'s steps while no contact is detected, in one call: the
     same stages in the same order as the kernel's loop (detection, distances, classification,
-    `free_step_into`, the forces' record, the state's record), the same bits, without most of
+    `free_step_into`, the forces' record, the state's record; compiled into it, `_inlined`), the same bits, without most of
     the reference counts that the kernel's loop pays on its arrays at every step (a third of a
     free step, profiled), and without numba's runtime: none of the rest. For a
     scene with no scripted obstacle and no speed law, in the kinematic rung (its free step,
@@ -497,21 +497,21 @@ def _free_run(
     taken, crossed = 0, False
     while taken < n_left:
         period = warm_every > 0 and int(np.round((t0 + t) / h)) % warm_every == 0
-        nc, n_unsupported = detect_contacts_into(
+        nc, n_unsupported = _detect_in_run(
             S, cq, cnu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pos, poses, speed, reach, axis, cores
         )
         if nc > 0 or n_unsupported > 0:
             return FREE_HANDED_BACK, taken, t, steps, n_rec, outcome, free_side, crossed, nc, n_unsupported
-        _distances(nc, c_pair, c_psi, c_slot, first_slot, pair_psi)
+        _distances_in_run(nc, c_pair, c_psi, c_slot, first_slot, pair_psi)
         if outcome == Outcome.NONE or stop_at_outcome:
-            outcome = _classify_with(g_op, g_index, g_lo, g_hi, u_op, u_index, u_lo, u_hi, cq, pair_psi, stack)
+            outcome = _classify_in_run(g_op, g_index, g_lo, g_hi, u_op, u_index, u_lo, u_hi, cq, pair_psi, stack)
             if outcome != Outcome.NONE and stop_at_outcome:  # (the kernel drops at a period's step before it stops)
                 return FREE_OUTCOME, taken, t, steps, n_rec, outcome, free_side, crossed or period, nc, n_unsupported
         f_q, f_nu, f_q_ref = free_q[free_side], free_nu[free_side], free_q_ref[free_side]
         if kinematic:
-            ok = kinematic_free_step_into(bi, h, cq, u, q_index, v_index, lower, upper, f_q, f_nu, f_q_ref)
+            ok = _kinematic_free_step_in_run(bi, h, cq, u, q_index, v_index, lower, upper, f_q, f_nu, f_q_ref)
         else:
-            ok = free_step_into(
+            ok = _free_step_in_run(
                 eps, theta, h, bi, Ainv, M_const, rhs_const, cq, cnu, cq_ref, u, q_index, v_index, kp, kd, lower, upper, rhs, blend, f_q,
                 f_nu, f_q_ref,
             )  # fmt: skip
@@ -520,7 +520,7 @@ def _free_run(
         free_side = 1 - free_side
         cq, cnu, cq_ref = f_q, f_nu, f_q_ref
         crossed = crossed or period
-        _record_forces(c_pair, c_n, c_t, c_o, no_impulse, no_friction, h, pair_force, pair_wrench)
+        _record_forces_in_run(c_pair, c_n, c_t, c_o, no_impulse, no_friction, h, pair_force, pair_wrench)
         t += h
         steps += 1
         taken += 1
@@ -537,11 +537,13 @@ CONTACT_DONE, CONTACT_HANDED_BACK = 0, 1
 
 def _inlined(kernel, **callees):
     """A second dispatcher of `kernel`'s Python function, compiled into each function that calls
-    it (numba's inline="always"; no cache entry of its own). For `_contact_run`, compiled without
-    numba's runtime: there an inlined helper's array arguments are not reference-counted, and
-    its call no longer copies them onto the stack (about 630 words a step at box_push_3d's
-    push, 330 of them detection's, the scene's 40 arrays); `rollout_kernel`, with the runtime,
-    calls the kernels themselves. callees: global names of the function resolved to other kernels
+    it (numba's inline="always"; no cache entry of its own). For `_free_run` and `_contact_run`,
+    compiled without numba's runtime: there an inlined helper's array arguments are not
+    reference-counted, and its call no longer copies them onto the stack (about 630 words a
+    step at box_push_3d's push, 330 of them detection's, the scene's 40 arrays); a free step
+    in the plane, whose stages are each a few dozen operations, ran 1.6-2x faster so
+    (docs/measurements.md, thirty-ninth session). `rollout_kernel`, with the runtime, calls the
+    kernels themselves. callees: global names of the function resolved to other kernels
     (their inlined copies). The copies compile with their caller's flags (numpy's error model:
     a division by zero is inf, not an exception)."""
     function = kernel.py_func
@@ -552,11 +554,15 @@ def _inlined(kernel, **callees):
     return numba.njit(_nrt=False, error_model="numpy", inline="always")(function)
 
 
-# `_contact_run`'s stages, compiled into it (`_inlined`)
-_detect_spatial_in_run = _inlined(detect_spatial_into)
-_observe_in_run = _inlined(_observe, _distances=_inlined(_distances), _classify_with=_inlined(_classify_with))
+# `_free_run`'s and `_contact_run`'s stages, compiled into them (`_inlined`)
+_detect_in_run = _inlined(
+    detect_contacts_into, detect_planar_into=_inlined(detect_planar_into), detect_spatial_into=_inlined(detect_spatial_into)
+)
+_distances_in_run, _classify_in_run = _inlined(_distances), _inlined(_classify_with)
+_observe_in_run = _inlined(_observe, _distances=_distances_in_run, _classify_with=_classify_in_run)
 _assemble_in_run = _inlined(_assemble)
 _record_forces_in_run = _inlined(_record_forces)
+_free_step_in_run, _kinematic_free_step_in_run = _inlined(free_step_into), _inlined(kinematic_free_step_into)
 
 
 #: Which basis table a `_contact_run` left its caller with: the one passed in, the cold table,
@@ -607,14 +613,9 @@ def _contact_run(
         if warm_every > 0 and int(np.round((t0 + t) / h)) % warm_every == 0:
             basis, step_solver, basis_from = cold, solver, BASIS_COLD
             n_warm = _drop_warm(n_warm, warm_slots, warm_n, warm_t, warm_w)
-        if spatial:
-            nc, n_unsupported = _detect_spatial_in_run(
-                S, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pos, speed, reach
-            )
-        else:
-            nc, n_unsupported = detect_contacts_into(
-                S, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pos, poses, speed, reach, axis, cores
-            )
+        nc, n_unsupported = _detect_in_run(
+            S, q, nu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pos, poses, speed, reach, axis, cores
+        )
         if nc == 0 or n_unsupported > 0:
             break
         min_psi, outcome = _observe_in_run(

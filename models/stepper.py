@@ -2062,7 +2062,8 @@ def planar_warm_step(model, drives, tables, system, h, q, nu, q_ref, u, contacts
 def planar_warm_step_on(model, fixed, h, q, nu, q_ref, u, nc, delta_n, delta_t, basis, side, part):
     """A contact step of `_lemke_step` in the plane with A constant and no force-limited drive,
     compiled without numba's runtime: no reference counts, no allocation; every array is B's
-    (`PlanarWarm`). The LCP is solved on the previous step's basis (the usual step while
+    (`PlanarWarm`); and without numba's wraparound of negative indices (`nonnegative_indices`,
+    as `spatial_warm_step_on`). The LCP is solved on the previous step's basis (the usual step while
     contacts persist; a contact not in it guessed from q, `_basis_guess`) or, where that guess
     does not solve it, by Lemke from that basis (`_warm_solve`). Where the LCP is not `_planar_case`, Lemke does not solve it to
     LCP_TOLERANCE (the general path then regularizes it) or the state leaves the finite range,
