@@ -497,7 +497,7 @@ def _free_run(
     taken, crossed = 0, False
     while taken < n_left:
         period = warm_every > 0 and int(np.round((t0 + t) / h)) % warm_every == 0
-        nc, n_unsupported = _detect_in_run(
+        nc, n_unsupported = _detect_in_free_run(
             S, cq, cnu, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pos, poses, speed, reach, axis, cores
         )
         if nc > 0 or n_unsupported > 0:
@@ -555,9 +555,11 @@ def _inlined(kernel, **callees):
 
 
 # `_free_run`'s and `_contact_run`'s stages, compiled into them (`_inlined`)
-_detect_in_run = _inlined(
-    detect_contacts_into, detect_planar_into=_inlined(detect_planar_into), detect_spatial_into=_inlined(detect_spatial_into)
-)
+# (`_free_run` calls the spatial detection: a copy of it there lengthened a cold compile, for
+# the free runs of scenes in space without rotating bodies only; docs/measurements.md)
+_detect_planar_in_run = _inlined(detect_planar_into)
+_detect_in_run = _inlined(detect_contacts_into, detect_planar_into=_detect_planar_in_run, detect_spatial_into=_inlined(detect_spatial_into))
+_detect_in_free_run = _inlined(detect_contacts_into, detect_planar_into=_detect_planar_in_run)
 _distances_in_run, _classify_in_run = _inlined(_distances), _inlined(_classify_with)
 _observe_in_run = _inlined(_observe, _distances=_distances_in_run, _classify_with=_classify_in_run)
 _assemble_in_run = _inlined(_assemble)
