@@ -1045,6 +1045,46 @@ def rollout_bound(bound, q, nu, q_ref, delta_n, delta_t, basis, controls, durati
     )  # fmt: skip
 
 
+@numba.njit(cache=True, error_model="numpy")
+def rollout_each(bound, q, nu, q_ref, delta_n, delta_t, basis, controls, durations, h):
+    """`rollout_bound` once per control, in one compiled call: control k runs from the state
+    and basis table control k - 1 ended on, each in a `rollout_kernel` call of its own (stopping
+    at an outcome, from t0 = 0, its warm starts dropped at its start), as separate calls of
+    `Rung.rollout` would run them, with the same bits, until one ends in an outcome or a step
+    failure. Only the Python round trip of each call is saved (about 20 of its 35 us before
+    its steps, docs/measurements.md): the ladder replays plans this way. Not for scenes with
+    scripted obstacles (as `rollout_bound`). Returns (n: the controls run; per control, n rows
+    of: its end state's q, nu, q_ref, delta_n, delta_t, basis table; its `StepStatus` value,
+    outcome, smallest signed distance and steps with a contact force)."""
+    S, D, model, solver, goal, unsafe = bound[0]
+    K = controls.shape[0]
+    Q, NU, Q_REF = np.empty((K, q.shape[0])), np.empty((K, nu.shape[0])), np.empty((K, q_ref.shape[0]))
+    DN, DT = np.empty((K, delta_n.shape[0])), np.empty((K, delta_t.shape[0], 2))
+    BASIS = np.empty((K, 0, 0), np.int8)  # shaped by the first call's table
+    status, outcome = np.zeros(K, np.int64), np.zeros(K, np.int64)
+    min_psi, force_steps = np.empty(K), np.zeros(K, np.int64)
+    u, d = np.empty((1, controls.shape[1])), np.empty(1)
+    # np.int64 / np.bool_, as `propagate_kernel`: the types Python's calls compiled rollout_kernel for
+    every, records, stop = np.int64(1 << 30), np.int64(2), np.bool_(True)
+    n = 0
+    for k in range(K):
+        u[0] = controls[k]
+        d[0] = durations[k]
+        out = rollout_kernel(
+            S, D, model, solver, goal, unsafe, q.copy(), nu.copy(), q_ref.copy(), delta_n.copy(), delta_t.copy(), basis, u, d, h,
+            every, records, stop, 0.0,
+        )  # fmt: skip
+        if k == 0:
+            BASIS = np.empty((K, out.basis.shape[0], out.basis.shape[1]), np.int8)
+        Q[k], NU[k], Q_REF[k], DN[k], DT[k], BASIS[k] = out.q, out.nu, out.q_ref, out.delta_n, out.delta_t, out.basis
+        status[k], outcome[k], min_psi[k], force_steps[k] = out.status, out.outcome, out.min_psi, out.force_steps
+        q, nu, q_ref, delta_n, delta_t, basis = out.q, out.nu, out.q_ref, out.delta_n, out.delta_t, out.basis
+        n = k + 1
+        if out.status != StepStatus.OK or out.outcome != Outcome.NONE:
+            break
+    return n, Q, NU, Q_REF, DN, DT, BASIS, status, outcome, min_psi, force_steps
+
+
 # ----------------------------------------------------------------------------- the planners' propagation
 
 #: How the rollout that made a planner's state ended, held as its last entry (see

@@ -29,7 +29,7 @@ from models.family import FAMILY
 from models.kernel_cache import compile_ahead
 from models.kinematics import PI_INERT, SceneData, compile_scene, kernel_array
 from models.predicates import OP_TOUCH, Program, compile_predicate, evaluate_with
-from models.rollout import bind, general_step_types, propagate_kernel, rollout_bound, rollout_kernel, warm_period_steps
+from models.rollout import bind, general_step_types, propagate_kernel, rollout_bound, rollout_each, rollout_kernel, warm_period_steps
 from models.scenario import Scenario
 from models.stepper import (
     LAW_ACTIVE,
@@ -123,6 +123,23 @@ def policy_controls(scenario: Scenario, duration: float | None = None) -> tuple[
     policy = scenario.spec.task.policy
     controls = np.array([[policy.speeds.get(name, 0.0) for name in scenario.actuated]])
     return controls, np.array([float(duration if duration is not None else policy.duration)])
+
+
+@dataclass(frozen=True)
+class ControlEnd:
+    """Where one control of `Rung.rollout_each` ended: what a `RolloutResult` of that control
+    alone says of it, but its records and counters."""
+
+    state: State
+    outcome: str  # goal, unsafe, none
+    status: str  # ok or a failure code name
+    message: str
+    min_psi: float  # smallest contact signed distance met in the control's steps, m
+    force_steps: int  # its steps in which some contact carried a positive normal force
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "ok"
 
 
 @dataclass(frozen=True)
@@ -353,6 +370,46 @@ class Rung:
             pair_wrench=out.pair_wrench[: len(scenario.pairs)],
         )
 
+    def rollout_each(self, scenario: Scenario, state: State, controls, durations, h: float) -> list[ControlEnd]:
+        """Each control run from where the one before ended, as separate calls of `rollout`
+        (stopping at an outcome, from t0 = 0) would run them, with the same bits, until one
+        ends in an outcome or a failure: the end of each control run, in one compiled call
+        (`models.rollout.rollout_each`; a scene with scripted obstacles, one `rollout` a
+        control)."""
+        durations = np.array(durations, dtype=float, ndmin=1)
+        controls = np.array(controls, dtype=float).reshape(len(durations), len(scenario.actuated))
+        if self.model is None:
+            raise ValueError("the geometric rung has no dynamics to roll out; use valid()")
+        c = compiled(scenario)
+        if c.scripted:
+            ends = []
+            for u, d in zip(controls, durations):
+                out = self.rollout(scenario, state, u.reshape(1, -1), [d], h, max_records=2)
+                ends.append(ControlEnd(out.state, out.outcome, out.status, out.message, out.min_psi, out.force_steps))
+                state = out.state
+                if not out.ok or out.outcome != Outcome.NONE.label:
+                    break
+            return ends
+        self._compile_ahead(c, state, h)
+        n, Q, NU, Q_REF, DN, DT, BASIS, status, outcome, min_psi, force_steps = rollout_each(
+            self._bound(c, False),
+            state.q.copy(),
+            state.nu.copy(),
+            state.q_ref.copy(),
+            state.delta_n.copy(),
+            state.delta_t.copy(),
+            _basis_of(state),
+            controls,
+            durations,
+            float(h),
+        )
+        ends = []
+        for k in range(n):
+            label, message = _STATUS_TEXT[status[k]]
+            end = State(Q[k], NU[k], Q_REF[k], DN[k], DT[k], BASIS[k])
+            ends.append(ControlEnd(end, _OUTCOME_LABEL[outcome[k]], label, message, float(min_psi[k]), int(force_steps[k])))
+        return ends
+
     def propagator(self, scenario: Scenario, h: float, sizes, low, high, drive_q, windup):
         """The planners' propagation at step h (`models.rollout.propagate_kernel`: one control
         from a flattened state into another, with the limits checked), bound to this rung and
@@ -405,13 +462,18 @@ class Rung:
         run_args = (controls, durations, float(h), int(record_every), int(max_records), bool(stop_at_outcome), float(t0))
         if c.scripted:  # the kernel moves scripted obstacles in the pose tables: its own copy, every call
             return rollout_kernel(own_poses(c.scene), drives, self.model, self.solver, c.goal, c.unsafe, *state_args, *run_args)
-        # the scene bound once in a typed List (`bind`, about 0.1 ms) and kept with the compiled scenario:
-        # one pointer crosses into the kernel per call, not the scene's 30-odd arrays one by one
+        return rollout_bound(self._bound(c, laws), *state_args, *run_args)
+
+    def _bound(self, c, laws: bool):
+        """The scene bound once in a typed List (`bind`, about 0.1 ms) and kept with the compiled
+        scenario `c`: one pointer crosses into the kernel per call, not the scene's 30-odd arrays
+        one by one (laws: with the policy's drives)."""
         key = (self.model, self.solver, laws)
         bound = c.bound.get(key)
         if bound is None:
+            drives = c.policy_drives if laws else c.drives
             bound = c.bound[key] = bind((c.scene, drives, self.model, self.solver, c.goal, c.unsafe))
-        return rollout_bound(bound, *state_args, *run_args)
+        return bound
 
     def rollout_chunked(
         self,

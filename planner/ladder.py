@@ -840,8 +840,8 @@ class _Replay:
 
 
 def _replay_controls(scenario, rung, state, controls, durations, h, so_far: _Replay) -> _Replay:
-    """Continue `so_far` with controls, one rollout each, until one ends in the goal, the
-    unsafe set or a solver failure."""
+    """Continue `so_far` with controls, one rollout each (`Rung.rollout_each`), until one ends
+    in the goal, the unsafe set or a solver failure."""
     run = _Replay(
         state,
         list(so_far.states),
@@ -853,8 +853,8 @@ def _replay_controls(scenario, rung, state, controls, durations, h, so_far: _Rep
         so_far.contact_steps,
         list(so_far.steps_min_psi),
     )
-    for u, d in zip(controls, durations):
-        out = rung.rollout(scenario, run.state, np.array(u, float).reshape(1, -1), [float(d)], h)
+    ends = rung.rollout_each(scenario, state, controls, durations, h)  # (one compiled call)
+    for u, d, out in zip(controls, durations, ends):
         run.min_psi = min(run.min_psi, out.min_psi)
         run.contact_steps += out.force_steps
         run.state = out.state

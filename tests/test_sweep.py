@@ -93,6 +93,8 @@ def test_an_interrupted_sweep_keeps_what_it_computed():
 
 
 def test_ctrl_c_on_the_command_writes_partial_results_marked_incomplete(tmp_path):
+    # 4,000 runs: far more than 3 s of work (400 once were; the faster free and contact steps
+    # of the thirty-ninth session finished them within it)
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     out = tmp_path / "sweep"
     proc = subprocess.Popen(
@@ -103,7 +105,7 @@ def test_ctrl_c_on_the_command_writes_partial_results_marked_incomplete(tmp_path
             "sweep",
             TRIANGLE,
             "--grid",
-            "v1=0.25:4:400:log",
+            "v1=0.25:4:4000:log",
             "--param",
             "v2=1",
             "--model",
@@ -121,14 +123,14 @@ def test_ctrl_c_on_the_command_writes_partial_results_marked_incomplete(tmp_path
         env=env,
     )
     line = proc.stderr.readline()  # "sweeping N runs ..." once the sweep starts
-    assert line.startswith("sweeping 400 runs"), line
+    assert line.startswith("sweeping 4000 runs"), line
     time.sleep(3.0)
     proc.send_signal(signal.SIGINT)
     stdout, stderr = proc.communicate(timeout=300)
     assert proc.returncode == 130, stderr
     data = json.loads((out / "sweep.json").read_text())
     assert data["complete"] is False
-    assert 0 < len(data["points"]) < 400 and data["missing"] == 400 - len(data["points"])
+    assert 0 < len(data["points"]) < 4000 and data["missing"] == 4000 - len(data["points"])
     assert "INCOMPLETE" in stdout
     assert (out / "sweep.csv").read_text().count("\n") == len(data["points"]) + 1
 
