@@ -1052,8 +1052,10 @@ def rollout_each(bound, q, nu, q_ref, delta_n, delta_t, basis, controls, duratio
     at an outcome, from t0 = 0, its warm starts dropped at its start), as separate calls of
     `Rung.rollout` would run them, with the same bits, until one ends in an outcome or a step
     failure. Only the Python round trip of each call is saved (about 20 of its 35 us before
-    its steps, docs/measurements.md): the ladder replays plans this way. Not for scenes with
-    scripted obstacles (as `rollout_bound`). Returns (n: the controls run; per control, n rows
+    its steps, docs/measurements.md): the ladder replays plans this way. A scene with scripted
+    obstacles is bound with pose tables of this call's own (`models.rungs.own_poses`): each
+    control's call places them at its start. The caller's state arrays are copied, not
+    written. Returns (n: the controls run; per control, n rows
     of: its end state's q, nu, q_ref, delta_n, delta_t, basis table; its `StepStatus` value,
     outcome, smallest signed distance and steps with a contact force)."""
     S, D, model, solver, goal, unsafe = bound[0]

@@ -374,34 +374,18 @@ class Rung:
         """Each control run from where the one before ended, as separate calls of `rollout`
         (stopping at an outcome, from t0 = 0) would run them, with the same bits, until one
         ends in an outcome or a failure: the end of each control run, in one compiled call
-        (`models.rollout.rollout_each`; a scene with scripted obstacles, one `rollout` a
-        control)."""
+        (`models.rollout.rollout_each`, which copies the state it starts from)."""
         durations = np.array(durations, dtype=float, ndmin=1)
         controls = np.array(controls, dtype=float).reshape(len(durations), len(scenario.actuated))
         if self.model is None:
             raise ValueError("the geometric rung has no dynamics to roll out; use valid()")
         c = compiled(scenario)
-        if c.scripted:
-            ends = []
-            for u, d in zip(controls, durations):
-                out = self.rollout(scenario, state, u.reshape(1, -1), [d], h, max_records=2)
-                ends.append(ControlEnd(out.state, out.outcome, out.status, out.message, out.min_psi, out.force_steps))
-                state = out.state
-                if not out.ok or out.outcome != Outcome.NONE.label:
-                    break
-            return ends
         self._compile_ahead(c, state, h)
+        # scripted obstacles: this call's own pose tables, bound once (each control's kernel call
+        # places the obstacles at its start, t0 = 0, as a separate `rollout` does)
+        bound = bind((own_poses(c.scene), c.drives, self.model, self.solver, c.goal, c.unsafe)) if c.scripted else self._bound(c, False)
         n, Q, NU, Q_REF, DN, DT, BASIS, status, outcome, min_psi, force_steps = rollout_each(
-            self._bound(c, False),
-            state.q.copy(),
-            state.nu.copy(),
-            state.q_ref.copy(),
-            state.delta_n.copy(),
-            state.delta_t.copy(),
-            _basis_of(state),
-            controls,
-            durations,
-            float(h),
+            bound, state.q, state.nu, state.q_ref, state.delta_n, state.delta_t, _basis_of(state), controls, durations, float(h)
         )
         ends = []
         for k in range(n):
