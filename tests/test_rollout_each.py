@@ -3,8 +3,8 @@ against separate `Rung.rollout` calls of each control, bit for bit: each control
 (q, nu, q_ref, deformations, Lemke's basis table), its outcome, status, smallest signed
 distance and steps with contact force, and where the run stops (the first control that ends
 in an outcome or a failure). In the plane and in space, with Lemke and with PGS (whose warm
-starts each separate call drops at its start), and on a scene with a scripted obstacle (one
-`rollout` a control)."""
+starts each separate call drops at its start), and on a scene with a scripted obstacle (its
+pose tables the call's own, each control placing the obstacle at its start)."""
 
 from __future__ import annotations
 
@@ -87,7 +87,7 @@ def test_box_push_replayed_in_one_call_is_each_control_s_rollout(solver):
         assert len(ends) == len(controls) and all(e.ok for e in ends)
 
 
-def test_a_scripted_scene_is_replayed_one_rollout_a_control(tmp_path):
+def test_a_scripted_scene_is_replayed_as_separate_rollouts(tmp_path):
     """A ram moving at 0.5 m/s reaches the puck at 0.1 s: each control's call places it at the
     call's start (t0 = 0), as separate calls do (the goal, puck.x >= 0.5, is not reached)."""
     text = scene(RAM, smooth=[("ram", "puck")]).replace('"floor_dummy" = [0.0, 1.0]', '"floor_dummy" = [0.5, 1.0]')
