@@ -256,7 +256,7 @@ def _add_submit_parser(sub: argparse._SubParsersAction) -> None:
         "the job (its id and state, as GET /jobs/{id} answers). --wait follows it to its end, showing progress on "
         "stderr; the exit code is then that of `ladder plan` (0 the top rung holds, 1 it does not or the job failed "
         "or was cancelled). 2: bad input, the service refused the job or cannot be reached. "
-        'Needs httpx (the serve extra: pip install "contact-ladder[serve]").',
+        'Needs httpx2 (the serve extra: pip install "contact-ladder[serve]").',
     )
     submit.add_argument("file", type=Path, help="scenario file (TOML)")
     submit.add_argument(
@@ -1119,9 +1119,9 @@ def cmd_serve(args: argparse.Namespace) -> int:
 
 def cmd_submit(args: argparse.Namespace) -> int:
     """`ladder submit`: a plan job sent to a planning service, printed (and followed with --wait)."""
-    if importlib.util.find_spec("httpx") is None:
+    if importlib.util.find_spec("httpx2") is None:
         raise ScenarioError(
-            "ladder submit", [Problem("ladder submit", 'needs httpx: install the serve extra: pip install "contact-ladder[serve]"')]
+            "ladder submit", [Problem("ladder submit", 'needs httpx2: install the serve extra: pip install "contact-ladder[serve]"')]
         )
     from planner.service.client import Client, ServiceError, job_request
 

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 pytest.importorskip("fastapi")
-pytest.importorskip("httpx")
+pytest.importorskip("httpx2")
 
 from fastapi.testclient import TestClient  # noqa: E402
 
@@ -393,7 +393,7 @@ def test_kill_9_the_server_while_a_job_runs_and_restart(tmp_path):
     import subprocess
     import sys
 
-    import httpx
+    import httpx2
 
     db = tmp_path / "jobs.sqlite"
 
@@ -408,12 +408,12 @@ def test_kill_9_the_server_while_a_job_runs_and_restart(tmp_path):
             stdout=subprocess.DEVNULL,
             stderr=subprocess.DEVNULL,
         )
-        client = httpx.Client(base_url=f"http://127.0.0.1:{port}", timeout=10)
+        client = httpx2.Client(base_url=f"http://127.0.0.1:{port}", timeout=10)
         for _ in range(300):
             try:
                 client.get("/jobs")
                 return proc, client
-            except httpx.TransportError:
+            except httpx2.TransportError:
                 time.sleep(0.1)
         raise AssertionError("the server did not start")
 

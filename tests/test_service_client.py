@@ -9,7 +9,7 @@ import json
 import pytest
 
 pytest.importorskip("fastapi")
-httpx = pytest.importorskip("httpx")
+httpx2 = pytest.importorskip("httpx2")
 
 from planner.cli import main  # noqa: E402
 from planner.service.client import Client, ServiceError, job_request  # noqa: E402
@@ -109,22 +109,22 @@ def test_the_client_cancels_and_reports_refusals(idle):
 
 def test_a_connection_that_dies_under_a_request_is_tried_once_more_where_repeating_is_safe():
     """A pooled connection that dies under a request: the server closed it as the request went
-    out (httpx.RemoteProtocolError, the keep-alive race), or its socket is gone (a ReadError,
+    out (httpx2.RemoteProtocolError, the keep-alive race), or its socket is gone (a ReadError,
     "Bad file descriptor"; both seen in test_service_load on busy cores). A GET, a DELETE and a
     POST with its Idempotency-Key go once more (the POST with the same key); a second failure,
     a timeout or a POST without a key is the service unreachable (status None)."""
     seen = []  # (method, path, Idempotency-Key) of every request sent
-    drops = {"left": 0, "error": httpx.RemoteProtocolError}
+    drops = {"left": 0, "error": httpx2.RemoteProtocolError}
 
-    def answer(request: httpx.Request) -> httpx.Response:
+    def answer(request: httpx2.Request) -> httpx2.Response:
         seen.append((request.method, request.url.path, request.headers.get("Idempotency-Key")))
         if drops["left"] > 0:
             drops["left"] -= 1
             raise drops["error"]("Server disconnected without sending a response.", request=request)
-        return httpx.Response(200, json={"id": "j1", "state": "queued", "jobs": []})
+        return httpx2.Response(200, json={"id": "j1", "state": "queued", "jobs": []})
 
     with Client("http://127.0.0.1:9") as client:
-        client._http = httpx.Client(base_url=client.url, transport=httpx.MockTransport(answer))
+        client._http = httpx2.Client(base_url=client.url, transport=httpx2.MockTransport(answer))
         for call, method in ((lambda: client.get("j1"), "GET"), (lambda: client.cancel("j1"), "DELETE")):
             seen.clear()
             drops["left"] = 1
@@ -143,10 +143,10 @@ def test_a_connection_that_dies_under_a_request_is_tried_once_more_where_repeati
             client._request("POST", "/jobs", json={})
         assert unkeyed.value.status is None and len(seen) == 1  # not sent again: it might make a second job
         seen.clear()
-        drops.update(left=1, error=httpx.ReadError)  # "[Errno 9] Bad file descriptor"
+        drops.update(left=1, error=httpx2.ReadError)  # "[Errno 9] Bad file descriptor"
         assert client.get("j1")["id"] == "j1" and len(seen) == 2
         seen.clear()
-        drops.update(left=1, error=httpx.ReadTimeout)
+        drops.update(left=1, error=httpx2.ReadTimeout)
         with pytest.raises(ServiceError) as slow:
             client.get("j1")
         assert slow.value.status is None and len(seen) == 1  # a timeout is not doubled

@@ -13,7 +13,7 @@ from concurrent.futures import ThreadPoolExecutor
 import pytest
 
 pytest.importorskip("fastapi")
-pytest.importorskip("httpx")
+pytest.importorskip("httpx2")
 
 from planner.service.client import Client, ServiceError, job_request  # noqa: E402
 from tests.conftest import ROOT  # noqa: E402

@@ -1,5 +1,6 @@
-"""A client of the planning service (`ladder serve`) over httpx: what `ladder submit` runs, and
-what a script or a notebook uses to submit a scenario and wait for its plan.
+"""A client of the planning service (`ladder serve`) over httpx2 (the maintained fork of httpx,
+which Starlette's test client also takes): what `ladder submit` runs, and what a script or a
+notebook uses to submit a scenario and wait for its plan.
 
     from planner.service.client import Client
 
@@ -24,7 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 from typing import Any
 
-import httpx
+import httpx2
 
 from models.scenario import Problem, ScenarioError
 from planner.service.jobs import file_references, path_problem
@@ -101,7 +102,7 @@ def job_request(path: str | Path, kind: str = "plan", *, parameters: dict | None
     }
 
 
-def _message(response: httpx.Response) -> str:
+def _message(response: httpx2.Response) -> str:
     """A refused request's message: the service's `detail` (FastAPI's validation errors as `where: what` lines)."""
     try:
         detail = response.json().get("detail")
@@ -124,8 +125,8 @@ class Client:
             raise ServiceError(f"{url}: the service's address must start with http:// or https://")
         self.url = url.rstrip("/")
         headers = {"Authorization": f"Bearer {token}"} if token else {}
-        limits = httpx.Limits(keepalive_expiry=KEEPALIVE_S)
-        self._http = httpx.Client(base_url=self.url, headers=headers, timeout=timeout, limits=limits)
+        limits = httpx2.Limits(keepalive_expiry=KEEPALIVE_S)
+        self._http = httpx2.Client(base_url=self.url, headers=headers, timeout=timeout, limits=limits)
 
     def close(self) -> None:
         self._http.close()
@@ -136,7 +137,7 @@ class Client:
     def __exit__(self, *exc) -> None:
         self.close()
 
-    def _request(self, method: str, path: str, **kwargs) -> httpx.Response:
+    def _request(self, method: str, path: str, **kwargs) -> httpx2.Response:
         # a pooled connection that died under the request (the server closed it as the request
         # went out: RemoteProtocolError, "Server disconnected without sending a response"; or its
         # socket is gone: "Bad file descriptor") is not the service failing: where sending the
@@ -147,8 +148,8 @@ class Client:
             try:
                 response = self._http.request(method, path, **kwargs)
                 break
-            except httpx.TransportError as exc:
-                if not repeatable or attempt == 1 or isinstance(exc, httpx.TimeoutException):
+            except httpx2.TransportError as exc:
+                if not repeatable or attempt == 1 or isinstance(exc, httpx2.TimeoutException):
                     raise ServiceError(f"cannot reach the service at {self.url}: {exc or type(exc).__name__}") from None
         if response.status_code >= 400:
             retry = response.headers.get("retry-after")
@@ -230,7 +231,7 @@ class Client:
 
     def _stream(self, job_id: str, last: int) -> Iterator[Event]:
         headers = {"Last-Event-ID": str(last)} if last else {}
-        timeout = httpx.Timeout(TIMEOUT_S, read=EVENTS_READ_TIMEOUT_S)
+        timeout = httpx2.Timeout(TIMEOUT_S, read=EVENTS_READ_TIMEOUT_S)
         try:
             with self._http.stream("GET", f"/jobs/{job_id}/events", headers=headers, timeout=timeout) as response:
                 if response.status_code >= 400:
@@ -245,7 +246,7 @@ class Client:
                     elif not line.startswith(":"):
                         name, _, value = line.partition(":")
                         fields[name] = value.removeprefix(" ")
-        except httpx.TransportError as exc:
+        except httpx2.TransportError as exc:
             raise ServiceError(f"cannot reach the service at {self.url}: {exc or type(exc).__name__}") from None
 
     def wait(self, job_id: str, on_event: Callable[[Event], Any] | None = None) -> dict:
