@@ -1147,6 +1147,91 @@ def propagate_kernel(bound, x, u, duration, h, y):
     return out.status
 
 
+# ----------------------------------------------------------------------------- the plane's own kernels
+
+
+def _planar_copy(kernel, **callees):
+    """A cached dispatcher of `kernel`'s Python function for scenes in the plane, its global
+    names `callees` resolved to other kernels (the plane's copies, or the stubs below in place
+    of what only a scene in space runs), with the kernel's flags and a cache entry of its own
+    (`<name>_planar`). `rollout_kernel` and its runs choose the dimension's steps at run time,
+    so numba compiles both dimensions' code into them: on a planar scene's first run, half of
+    the main process's compile was code only scenes in space run (170 of 333 s: the spatial
+    warm and PGS steps, the spatial detection; docs/measurements.md, fortieth session). The
+    copies are the same code: a planar scene's run takes the same steps, the same bits."""
+    function = kernel.py_func
+    names = dict(function.__globals__)
+    names.update(callees)
+    copy = FunctionType(function.__code__, names, function.__name__ + "_planar", function.__defaults__, function.__closure__)
+    copy.__qualname__ = function.__qualname__ + "_planar"  # (numba's cache files are named after it)
+    flags = {key: value for key, value in kernel.targetoptions.items() if key in ("_nrt", "error_model")}
+    return numba.njit(cache=True, **flags)(copy)
+
+
+@numba.njit(cache=True, _nrt=False, error_model="numpy")
+def _no_spatial_step(*args):
+    """In a planar kernel, the spatial warm and PGS steps: not taken (WARM_NOT_TAKEN), so the
+    general step would take the step. A planar scene never reaches them (dimension 2)."""
+    return WARM_NOT_TAKEN, np.int64(0), 0.0, np.int64(0)
+
+
+@numba.njit(cache=True, _nrt=False, error_model="numpy")
+def _no_spatial_detection(*args):
+    """In a planar kernel, the spatial detection: (no contact, one unsupported pair), so that a
+    scene in space run there would end at once with the unsupported-pair status, not silently.
+    A planar scene never reaches it (dimension 2)."""
+    return np.int64(0), np.int64(1)
+
+
+@numba.njit(cache=True, _nrt=False, error_model="numpy")
+def _no_rotating_blocks(*args):
+    """In a planar kernel, the blocks of spatially rotating bodies (none in the plane): not
+    refreshed (False), which the kernel reports as singular."""
+    return False
+
+
+_detect_planar_only = _inlined(detect_contacts_into, detect_planar_into=_detect_planar_in_run, detect_spatial_into=_no_spatial_detection)
+_free_run_planar = _planar_copy(_free_run, _detect_in_free_run=_detect_planar_only)
+_contact_run_planar = _planar_copy(
+    _contact_run, _detect_in_run=_detect_planar_only, spatial_pgs_step_on=_no_spatial_step, spatial_warm_step_on=_no_spatial_step
+)
+_finish_planar = _planar_copy(_finish, _final_outcome=_planar_copy(_final_outcome, detect_spatial=_no_spatial_detection))
+rollout_kernel_planar = _planar_copy(
+    rollout_kernel,
+    _free_run=_free_run_planar,
+    _contact_run=_contact_run_planar,
+    _finish=_finish_planar,
+    spatial_pgs_step=_no_spatial_step,
+    spatial_warm_step=_no_spatial_step,
+    detect_spatial_into=_no_spatial_detection,
+    _rotating_blocks_at=_no_rotating_blocks,
+)
+rollout_bound_planar = _planar_copy(rollout_bound, rollout_kernel=rollout_kernel_planar)
+rollout_each_planar = _planar_copy(rollout_each, rollout_kernel=rollout_kernel_planar)
+propagate_kernel_planar = _planar_copy(propagate_kernel, rollout_kernel=rollout_kernel_planar)
+
+
+class Kernels(NamedTuple):
+    """The compiled entries a scene's rollouts call (`kernels_for`)."""
+
+    rollout_kernel: object
+    rollout_bound: object
+    rollout_each: object
+    propagate_kernel: object
+
+
+#: Scenes in the plane run the plane's copies; scenes in space the kernels themselves.
+KERNELS = {
+    2: Kernels(rollout_kernel_planar, rollout_bound_planar, rollout_each_planar, propagate_kernel_planar),
+    3: Kernels(rollout_kernel, rollout_bound, rollout_each, propagate_kernel),
+}
+
+
+def kernels_for(dimension: int) -> Kernels:
+    """The compiled entries for a scene of this dimension (`SceneData.dimension`: 2 or 3)."""
+    return KERNELS[int(dimension)]
+
+
 # ----------------------------------------------------------------------------- the cost split
 
 #: Stages `stage_loop` repeats (`ladder bench`'s cost split of a contact step); SETUP repeats none.
