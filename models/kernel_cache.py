@@ -102,20 +102,15 @@ def install() -> None:
         config.CACHE_LOCATOR_CLASSES = ",".join([*given, name, *([] if given else NUMBA_LOCATORS)])
 
 
-def kernels_cached(dimension: int | None = None) -> bool:
-    """Whether numba's on-disk cache holds the rollout kernel a scene of this dimension runs
-    (`models.rollout.kernels_for`; None: both dimensions') for this package's sources (its
+def kernels_cached() -> bool:
+    """Whether numba's on-disk cache holds the rollout kernel for this package's sources (its
     index file, stamped by `package_stamp`): False on a first run or after an edit."""
-    dimensions = (2, 3) if dimension is None else (int(dimension),)
     try:
-        from models.rollout import KERNELS
+        from models.rollout import rollout_kernel
 
-        # numba internals: {} when cold or stale
-        return all(bool(KERNELS[d].rollout_kernel._cache._cache_file._load_index()) for d in dimensions)
+        return bool(rollout_kernel._cache._cache_file._load_index())  # numba internals: {} when cold or stale
     except Exception:  # numba changed its internals: look in the default place
-        cache = Path(__file__).resolve().parent.joinpath("__pycache__")
-        names = {2: "rollout_kernel_planar", 3: "rollout_kernel"}
-        return all(any(cache.glob(f"rollout.{names[d]}-*.nbi")) for d in dimensions)
+        return any(Path(__file__).resolve().parent.joinpath("__pycache__").glob("rollout.rollout_kernel-*.nbi"))
 
 
 #: The helper process's program (`_compile_from`).
@@ -164,34 +159,7 @@ def compile_ahead(kernel, types) -> object:
         os.unlink(path)
         return None
     threading.Thread(target=helper.wait, daemon=True).start()  # reaped when it ends, not left a zombie
-    _compile_after(kernel, helper)
     return helper
-
-
-#: How long this process's compile of a kernel waits for the helper compiling it (s): past it,
-#: this process compiles the kernel too, as it would alone.
-HELPER_WAIT_S = 1800.0
-
-
-def _compile_after(kernel, helper) -> None:
-    """Make this process's first compile of `kernel` wait for `helper`, which compiles it, and
-    then load what the helper wrote to the cache (numba's compile looks there first). The
-    planar scenes' rollout kernel (`models.rollout.kernels_for`) compiles none of the spatial
-    steps, so it meets its call of the general step about 100 s into a first run, where the
-    helper needs about 180 s: compiling it here as well would take the helper's time again
-    (docs/measurements.md, fortieth session). numba's typing of a call compiles the callee
-    through the dispatcher's `compile`, which this wraps once."""
-    compile_here = kernel.compile
-
-    def compile_after_helper(sig):
-        kernel.compile = compile_here  # the first compile only
-        try:
-            helper.wait(timeout=HELPER_WAIT_S)
-        except subprocess.TimeoutExpired:
-            pass
-        return compile_here(sig)
-
-    kernel.compile = compile_after_helper
 
 
 def _end_with_parent(parent: int) -> None:

@@ -29,7 +29,7 @@ from models.family import FAMILY
 from models.kernel_cache import compile_ahead
 from models.kinematics import PI_INERT, SceneData, compile_scene, kernel_array
 from models.predicates import OP_TOUCH, Program, compile_predicate, evaluate_with
-from models.rollout import bind, general_step_types, kernels_for, warm_period_steps
+from models.rollout import bind, general_step_types, propagate_kernel, rollout_bound, rollout_each, rollout_kernel, warm_period_steps
 from models.scenario import Scenario
 from models.stepper import (
     LAW_ACTIVE,
@@ -384,7 +384,7 @@ class Rung:
         # scripted obstacles: this call's own pose tables, bound once (each control's kernel call
         # places the obstacles at its start, t0 = 0, as a separate `rollout` does)
         bound = bind((own_poses(c.scene), c.drives, self.model, self.solver, c.goal, c.unsafe)) if c.scripted else self._bound(c, False)
-        n, Q, NU, Q_REF, DN, DT, BASIS, status, outcome, min_psi, force_steps = kernels_for(c.scene.dimension).rollout_each(
+        n, Q, NU, Q_REF, DN, DT, BASIS, status, outcome, min_psi, force_steps = rollout_each(
             bound, state.q, state.nu, state.q_ref, state.delta_n, state.delta_t, _basis_of(state), controls, durations, float(h)
         )
         ends = []
@@ -419,8 +419,6 @@ class Rung:
             scene = own_poses(scene)
         bound = bind((scene, c.drives, self.model, self.solver, c.goal, c.unsafe, sizes, low, high, drive_q, windup, _no_basis()))
 
-        propagate_kernel = kernels_for(scene.dimension).propagate_kernel
-
         def propagate(x: np.ndarray, u: np.ndarray, duration: float, y: np.ndarray) -> int:
             return propagate_kernel(bound, x, u, duration, h, y)
 
@@ -446,10 +444,9 @@ class Rung:
         drives = c.policy_drives if laws else c.drives
         state_args = (state.q.copy(), state.nu.copy(), state.q_ref.copy(), state.delta_n.copy(), state.delta_t.copy(), _basis_of(state))
         run_args = (controls, durations, float(h), int(record_every), int(max_records), bool(stop_at_outcome), float(t0))
-        kernels = kernels_for(c.scene.dimension)
         if c.scripted:  # the kernel moves scripted obstacles in the pose tables: its own copy, every call
-            return kernels.rollout_kernel(own_poses(c.scene), drives, self.model, self.solver, c.goal, c.unsafe, *state_args, *run_args)
-        return kernels.rollout_bound(self._bound(c, laws), *state_args, *run_args)
+            return rollout_kernel(own_poses(c.scene), drives, self.model, self.solver, c.goal, c.unsafe, *state_args, *run_args)
+        return rollout_bound(self._bound(c, laws), *state_args, *run_args)
 
     def _bound(self, c, laws: bool):
         """The scene bound once in a typed List (`bind`, about 0.1 ms) and kept with the compiled

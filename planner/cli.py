@@ -472,7 +472,7 @@ def _run_simulation(args: argparse.Namespace, scenario: Scenario, plan_controls,
     controls, durations = plan_controls if plan_controls is not None else policy_controls(scenario, duration)
     live = sys.stderr.isatty() and not args.json
     with interrupt.deferred():
-        announce_compile(scenario.dimension)
+        announce_compile()
         rung.rollout(scenario, state, controls[:1], [h], h)  # load the compiled kernels before timing
         if not args.json or total > PROGRESS_STEPS:
             print(f"simulating {total:,} steps of {args.model} (h = {h:g}, {duration:g} s; Ctrl-C stops)", file=sys.stderr, flush=True)
@@ -595,7 +595,7 @@ def _run_plan(args: argparse.Namespace, scenario: Scenario, names: list[str]):
     from planner.ladder import check_start
 
     with interrupt.deferred():  # Ctrl-C ends the rung under way; the rungs done are kept
-        announce_compile(scenario.dimension)
+        announce_compile()
         check_start(scenario)  # the start's checks (the ladder repeats them), before the folder is made
         problems = make_out_dir("--out", args.out)
         if problems:
@@ -759,11 +759,10 @@ def run_with_progress(rung, scenario, state, controls, durations, h, *, live: bo
 COMPILE_NOTE = "compiling the physics kernels (first run only: about 10 minutes on two cores)"
 
 
-def announce_compile(dimension: int | None = None) -> None:
+def announce_compile() -> None:
     """Say so (on stderr, with --json too) before the first call compiles the physics kernels
-    (numba's cache is cold for a scene of this dimension; None: for either): otherwise the
-    first run sits silent for minutes."""
-    if kernels_cached(dimension):
+    (numba's cache is cold): otherwise the first run sits silent for minutes."""
+    if kernels_cached():
         return
     print(COMPILE_NOTE, file=sys.stderr, flush=True)
 
@@ -976,7 +975,7 @@ def _run_sweep(args: argparse.Namespace, scenario: Scenario, fixed: dict, axes, 
     where = args.executor or f"{args.workers or os.cpu_count() or 1} local workers"
     if not args.json:
         print(f"sweeping {runs} runs on {where} (Ctrl-C stops and keeps what is done)", file=sys.stderr, flush=True)
-        announce_compile(scenario.dimension)
+        announce_compile()
     try:
         with interrupt.deferred(), sw.Executor(args.workers, args.executor) as executor:
             result = sw.sweep(

@@ -180,7 +180,7 @@ def test_ladder_writes_a_perf_map_when_asked(tmp_path):
     path = Path(line.removeprefix("perf map: "))
     try:
         assert path.parent == Path("/tmp") and path.name.startswith("perf-") and path.suffix == ".map"
-        assert "models.rollout.rollout_kernel_planar" in {name for _, _, name in perf_map_entries(path)}
+        assert "models.rollout.rollout_kernel" in {name for _, _, name in perf_map_entries(path)}
     finally:
         path.unlink(missing_ok=True)
 
@@ -599,9 +599,9 @@ def test_bench_help_and_default_scenes():
 def test_a_cold_kernel_cache_is_announced(monkeypatch, capsys):
     from planner import cli
 
-    assert cli.kernels_cached(2)  # the tests above compiled the plane's rollout kernel
-    cli.announce_compile(2)
+    assert cli.kernels_cached()  # the tests above compiled the rollout kernel
+    cli.announce_compile()
     assert capsys.readouterr().err == ""
-    monkeypatch.setattr(cli, "kernels_cached", lambda dimension=None: False)
-    cli.announce_compile(2)
+    monkeypatch.setattr(cli, "kernels_cached", lambda: False)
+    cli.announce_compile()
     assert capsys.readouterr().err == cli.COMPILE_NOTE + "\n" and cli.COMPILE_NOTE.startswith("compiling the physics kernels")

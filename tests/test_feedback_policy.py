@@ -13,7 +13,7 @@ import textwrap
 import numpy as np
 import pytest
 
-from models.rollout import kernels_for
+from models.rollout import rollout_kernel
 from models.rungs import RUNGS, _basis_of, compiled, policy_controls
 from models.scenario import ScenarioError, load_scenario
 from tests.test_cli import ladder
@@ -170,8 +170,7 @@ def test_an_unknown_policy_name_is_bad_input():
 
 def test_a_rollout_runs_on_the_drives_asked_for_with_the_scene_bound_once():
     """`Rung.rollout` binds the scene once per (model, solver, laws) (`models.rollout.rollout_bound`):
-    with and without the laws, asked in turns, each run is the kernel's own on those drives (the
-    plane's copy, `kernels_for`),
+    with and without the laws, asked in turns, each run is the kernel's own on those drives,
     bit for bit, and the two differ."""
     scenario = load_scenario("scenarios/two_finger_triangle.toml", {"v1": 0.8}).with_policy("potential")
     r, h = RUNGS["dynamic-compliant"], 1e-4
@@ -180,7 +179,7 @@ def test_a_rollout_runs_on_the_drives_asked_for_with_the_scene_bound_once():
     finals = {}
     for laws in (True, False, True):
         out = r.rollout(scenario, start, controls, durations, h, stop_at_outcome=False, laws=laws)
-        raw = kernels_for(c.scene.dimension).rollout_kernel(
+        raw = rollout_kernel(
             c.scene, c.policy_drives if laws else c.drives, r.model, r.solver, c.goal, c.unsafe, start.q.copy(), start.nu.copy(),
             start.q_ref.copy(), start.delta_n.copy(), start.delta_t.copy(), _basis_of(start),
             np.array(controls, dtype=float).reshape(len(durations), -1), np.array(durations, dtype=float), h, out.steps, 2, False, 0.0,

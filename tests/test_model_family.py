@@ -486,7 +486,7 @@ def test_a_rollout_and_the_planners_propagation_run_one_compiled_rollout():
     types a Python rollout passes, so both run one compile of it, and the same physics. (It once
     passed literal constants, which numba types Literal[...]: a second compile of the whole
     rollout, minutes of a fresh clone's first run; docs/measurements.md.)"""
-    from models.rollout import kernels_for
+    from models.rollout import rollout_kernel
     from models.stepper import StepStatus
     from planner.ompl_adapter import _layout, configuration_limits, flatten
 
@@ -506,7 +506,6 @@ def test_a_rollout_and_the_planners_propagation_run_one_compiled_rollout():
     # loaded from numba's cache, they leave its dispatcher's own signatures empty, so the
     # compiles are counted in its cache index, which lists every signature compiled from this
     # source for this machine (as callee too)
-    rollout_kernel = kernels_for(2).rollout_kernel  # the plane's copy: the triangle's
     magic = rollout_kernel.targetctx.codegen().magic_tuple()
     compiled = {key[0] for key in rollout_kernel._cache._cache_file._load_index() if key[1] == magic}
     assert len(compiled) == 1 and set(rollout_kernel.signatures) <= compiled, compiled

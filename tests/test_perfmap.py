@@ -25,8 +25,8 @@ def test_the_map_names_the_kernels_a_rollout_ran(tmp_path):
     assert out.steps == 100
     rows = perf_map_entries(perfmap.write_perf_map(tmp_path / "kernels.map"))
     names = {name for _, _, name in rows}
-    # the rollout (the plane's copy, `kernels_for`) and the stages it calls (the step's helpers are inlined into it: no code of their own)
-    assert {"models.rollout.rollout_kernel_planar", "models.contact.detect_planar_into", "NRT_incref"} <= names
+    # the rollout and the stages it calls (the step's helpers are inlined into it: no code of their own)
+    assert {"models.rollout.rollout_kernel", "models.contact.detect_planar_into", "NRT_incref"} <= names
     starts = [start for start, _, _ in rows]
     assert starts == sorted(set(starts))
     # each function ends where the next one loaded after it starts, or within MAX_SIZE
