@@ -381,9 +381,9 @@ class Rung:
             raise ValueError("the geometric rung has no dynamics to roll out; use valid()")
         c = compiled(scenario)
         self._compile_ahead(c, state, h)
-        # scripted obstacles: this call's own pose tables, bound once (each control's kernel call
+        # scripted obstacles: this call's own pose tables (`_bound`; each control's kernel call
         # places the obstacles at its start, t0 = 0, as a separate `rollout` does)
-        bound = bind((own_poses(c.scene), c.drives, self.model, self.solver, c.goal, c.unsafe)) if c.scripted else self._bound(c, False)
+        bound = self._bound(c, False)
         n, Q, NU, Q_REF, DN, DT, BASIS, status, outcome, min_psi, force_steps = rollout_each(
             bound, state.q, state.nu, state.q_ref, state.delta_n, state.delta_t, _basis_of(state), controls, durations, float(h)
         )
@@ -451,11 +451,14 @@ class Rung:
     def _bound(self, c, laws: bool):
         """The scene bound once in a typed List (`bind`, about 0.1 ms) and kept with the compiled
         scenario `c`: one pointer crosses into the kernel per call, not the scene's 30-odd arrays
-        one by one (laws: with the policy's drives)."""
+        one by one (laws: with the policy's drives). A scene with scripted obstacles, whose pose
+        tables the kernel writes, is bound anew with tables of its own (`own_poses`), not kept."""
+        drives = c.policy_drives if laws else c.drives
+        if c.scripted:
+            return bind((own_poses(c.scene), drives, self.model, self.solver, c.goal, c.unsafe))
         key = (self.model, self.solver, laws)
         bound = c.bound.get(key)
         if bound is None:
-            drives = c.policy_drives if laws else c.drives
             bound = c.bound[key] = bind((c.scene, drives, self.model, self.solver, c.goal, c.unsafe))
         return bound
 
