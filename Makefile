@@ -63,7 +63,7 @@ bench: $(VENV)/.installed-test
 # a few minutes).
 PLANNING ?= two_finger_triangle,four_finger_grasp,box_push_3d,box_rotate_3d
 bench-doc: $(VENV)/.installed
-	$(VENV)/bin/ladder bench --planning $(PLANNING) --out docs/bench --doc docs/benchmarks.md
+	$(VENV)/bin/ladder bench --planning $(PLANNING) --out docs/bench --doc docs/benchmarks.md --readme README.md
 
 # numba's cache of the compiled kernels, beside the sources (stamped by all of models/, so an
 # edit there recompiles them by itself: models/kernel_cache.py): delete it.

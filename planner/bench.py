@@ -314,6 +314,8 @@ def throughput(quick: bool = False) -> dict:
 #: box_push_3d's push as its ladder's top rung steps it (calls of one control period).
 CONTACT_SQUEEZE_STEPS = 40_000
 CONTACT_PUSH_S = (0.4, 2.6)  # the push's first contact is at 0.35 s: timed from 0.4 s, for 2.6 s
+#: How a contact row of box_push_3d names the planners' calls (`planner_propagation`), in its scene.
+PLANNERS_WAY = "the planners' propagation"
 
 
 def contact_steps(quick: bool = False) -> dict:
@@ -420,7 +422,7 @@ def contact_steps(quick: bool = False) -> dict:
         # flattened states but the propagation's flag) are the same
         same_end = bool(np.array_equal(x_end[:-1], flatten(state)[:-1]))
         ways = (
-            (f"the planners' propagation, calls of {period:g} s", planners_col),
+            (f"{PLANNERS_WAY}, calls of {period:g} s", planners_col),
             (f"`Rung.rollout`, calls of {period:g} s", rollout_col),
         )
         for how, col in ways:
@@ -972,7 +974,15 @@ def write_ompl_log(path: Path, name: str, result: dict) -> Path:
 # ----------------------------------------------------------------------------- all
 
 
-def run_all(out: Path, doc: Path | None, quick: bool = False, progress=print, scenes=PLANNING_SCENES, seeds: int = PLANNING_SEEDS) -> dict:
+def run_all(
+    out: Path,
+    doc: Path | None,
+    quick: bool = False,
+    progress=print,
+    scenes=PLANNING_SCENES,
+    seeds: int = PLANNING_SEEDS,
+    readme: Path | None = None,
+) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     results = {"machine": machine(), "quick": quick, "date": _dt.datetime.now().isoformat(timespec="seconds")}
     for name, fn in (("throughput", throughput), ("work_precision", work_precision), ("stability", stability), ("scaling", scaling)):
@@ -988,9 +998,44 @@ def run_all(out: Path, doc: Path | None, quick: bool = False, progress=print, sc
     from planner.cli import write_atomic  # a failed write leaves the old file, and is bad input, not a traceback
 
     write_atomic(out / "bench.json", json.dumps(results, indent=1) + "\n")
-    if doc is not None:
-        write_atomic(doc, markdown(results, doc.parent, out), key="--doc")
+    write_reports(results, out, doc, readme)
     return results
+
+
+def readme_input_problems(readme: Path | None, quick: bool) -> list:
+    """Why `--readme` cannot take this run's figures: the README must be a readable file whose
+    blocks' markers stand as `readme_problems` asks, and the run a full one (a --quick run's
+    figures are a smoke test's)."""
+    from models.scenario import Problem
+
+    if readme is None:
+        return []
+    if quick:
+        return [Problem("--readme", "a --quick run's figures do not go into a README: run the full bench (make bench-doc)")]
+    try:
+        text = readme.read_text()
+    except (OSError, UnicodeDecodeError) as e:
+        return [Problem("--readme", f"{readme}: cannot read it ({e.strerror if isinstance(e, OSError) else e})")]
+    return [Problem("--readme", f"{readme}: block {p.key}: {p.reason}") for p in readme_problems(text)]
+
+
+def write_reports(results: dict, out: Path, doc: Path | None = None, readme: Path | None = None) -> None:
+    """Write the markdown report to `doc` and the README's figures (`readme_blocks`) into `readme`,
+    both made before either is written, each written whole or not at all. `out`: the folder of
+    bench.json and the OMPL logs the report links to."""
+    from models.scenario import ScenarioError
+    from planner.cli import write_atomic  # a failed write leaves the old file, and is bad input, not a traceback
+
+    texts = []
+    if doc is not None:
+        texts.append(("--doc", doc, markdown(results, doc.parent, out)))
+    if readme is not None:
+        problems = readme_input_problems(readme, bool(results.get("quick")))
+        if problems:  # (the README changed while the bench ran)
+            raise ScenarioError(readme, problems)
+        texts.append(("--readme", readme, with_readme_blocks(readme.read_text(), readme_blocks(results))))
+    for key, path, text in texts:
+        write_atomic(path, text, key=key)
 
 
 def _us(value) -> str:
@@ -1115,6 +1160,157 @@ def markdown(r: dict, doc_dir: Path, out: Path) -> str:
         lines.append(f"| {scene} | speed-up (median wall, flat / ladder) | | {res['summary']['speedup_median_wall']:.2f}x | |")
     lines += ["", f"OMPL benchmark logs: `{rel(out)}/ladder_vs_flat.*.log` (`ompl_benchmark_statistics LOG -d bench.db`).", ""]
     return "\n".join(lines)
+
+
+# ----------------------------------------------------------------------------- the README's figures
+
+#: The README's blocks that `ladder bench --readme` writes (`readme_blocks`), each between its two
+#: markers (`readme_markers`); the rest of the README is left as it is.
+README_BLOCKS = ("headline", "figures")
+
+
+def readme_markers(name: str) -> tuple[str, str]:
+    """The lines that open and close the README's block `name`."""
+    return f"<!-- ladder bench: {name} -->", f"<!-- /ladder bench: {name} -->"
+
+
+def _ratio_range(ratios: list[float]) -> str:
+    lo, hi = f"{min(ratios):.1f}", f"{max(ratios):.1f}"
+    return f"{lo}x" if lo == hi else f"{lo}-{hi}x"
+
+
+def _contacts(r: dict, prefix: str) -> str:
+    """The contacts a step of the cost split's state of this scene has ('' when not measured)."""
+    counts = {row["contacts"] for row in (r["throughput"].get("contact") or {}).get("split", []) if row["scene"].startswith(prefix)}
+    return f"{counts.pop()} contacts a step" if len(counts) == 1 else ""
+
+
+def readme_blocks(r: dict) -> dict[str, str]:
+    """The README's figures from a full run's results (`run_all`'s, as bench.json holds them):
+    `headline`, one paragraph of the ratios that matter, each saying what its steps do; `figures`,
+    the tables they come from (steps with and without contact against MuJoCo, the ladder against
+    flat) and the stability sweep's errors. The text between the blocks is the README's own."""
+    m, peer = r["machine"], r["throughput"]["peer"]
+    rows = (r["throughput"].get("contact") or {}).get("rows", [])
+    timed = [row for row in rows if row.get("speed_vs_mujoco") is not None]
+    squeeze = [row["speed_vs_mujoco"] for row in timed if row["scene"].startswith("two_finger_triangle")]
+    push = [row["speed_vs_mujoco"] for row in timed if row["scene"].startswith("box_push_3d") and PLANNERS_WAY in row["scene"]]
+    planning = {scene: res["summary"]["speedup_median_wall"] for scene, res in r["planning"].items()}
+    seeds = {len(res["runs"]) // 2 for res in r["planning"].values()}
+    run = f"`ladder bench` of {r['date'][:10]}, {m['cpu']}, {m['cores']} cores"
+    parts = []
+    if "skipped" in peer:
+        parts.append(f"MuJoCo was not timed in the latest {run} ({peer['skipped']})")
+    else:
+        free = "free flight (the paper's scene until the grasp: no step carries a contact force)"
+        said = [f"{peer['ratio']:.1f}x MuJoCo's steps per second in {free}"]
+        if squeeze:
+            said.append(f"{_ratio_range(squeeze)} while two fingers squeeze the triangle ({_contacts(r, 'two_finger_triangle')})")
+        if push:
+            said.append(
+                f"{_ratio_range(push)} on box_push_3d's push ({_contacts(r, 'box_push_3d')}; both friction cones, as a planner calls them)"
+            )
+        parts.append(
+            f"Against MuJoCo {peer['version']} on the same runs, timed in turns ({run}), a step runs at "
+            + (", ".join(said[:-1]) + " and " + said[-1] if len(said) > 1 else said[0])
+        )
+    if planning:
+        lo, hi = min(planning, key=planning.get), max(planning, key=planning.get)
+        parts.append(
+            f"planning up the ladder takes {planning[lo]:.1f}x ({lo}) to {planning[hi]:.1f}x ({hi}) less time than planning at "
+            f"the top rung alone (median wall over {'/'.join(str(s) for s in sorted(seeds))} seeds)"
+        )
+    headline = "; ".join(parts) + "."
+
+    figures = [
+        f"The latest full {run} ([docs/benchmarks.md](docs/benchmarks.md)). "
+        + (
+            f"Against MuJoCo {peer['version']} on the same runs (`planner/peers.py`), ours and MuJoCo's timed in turns, "
+            f"{peer['repeat']} rounds; speed is ours over MuJoCo's in steps per second, the median of the rounds' ratios:"
+            if "skipped" not in peer
+            else f"MuJoCo was not timed ({peer['skipped']})."
+        ),
+        "",
+        "| run | rung | h | steps with contact force | ours, us a step | MuJoCo, us a step | speed vs MuJoCo |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    if "skipped" not in peer:
+        free = next(row for row in r["throughput"]["rows"] if row["rung"] == peer["ours"]["rung"])
+        figures.append(
+            f"| {r['throughput']['scene']}: free flight (MuJoCo: `{peer['against']}`) | {peer['ours']['rung']} | {peer['h']:g} "
+            f"| {free['contact_steps']:,} of {free['steps']:,} | {1e6 / peer['ours']['steps_per_s']:.2f} "
+            f"| {1e6 / peer['steps_per_s']:.2f} | {peer['ratio']:.2f}x |"
+        )
+    for row in rows:
+        theirs, speed = row.get("mujoco_us_per_step"), row.get("speed_vs_mujoco")
+        figures.append(
+            f"| {row['scene']} | {row['rung']} | {row['h']:g} | {row['contact_steps']:,} of {row['steps']:,} | {row['us_per_step']:.2f} "
+            f"| {'-' if theirs is None else f'{theirs:.2f}'} | {'-' if speed is None else f'{speed:.2f}x'} |"
+        )
+    figures += [
+        "",
+        "Planning up the ladder against planning at the top rung alone with the ladder's whole budget (`--flat`), "
+        "seeds 1 to N each, in turns, the same run:",
+        "",
+        "| scene | seeds | ladder: success, median wall (s) | flat: success, median wall (s) | speed-up (median wall) |",
+        "|---|---|---|---|---|",
+    ]
+    for scene, res in r["planning"].items():
+        x = res["summary"]
+        figures.append(
+            f"| {scene} | {len(res['runs']) // 2} | {x['ladder']['success_rate']:.0%}, {x['ladder']['median_wall_s']:.3f} "
+            f"| {x['flat']['success_rate']:.0%}, {x['flat']['median_wall_s']:.3f} | {x['speedup_median_wall']:.2f}x |"
+        )
+    st = r["stability"]
+    by_c = {}
+    for row in st["rows"]:
+        by_c.setdefault(row["C"], []).append(row)
+    errors = "; ".join(
+        f"C = {c:g}: " + ", ".join(f"{row['x_error']:.2e} at h = {row['h']:g}" for row in c_rows) for c, c_rows in by_c.items()
+    )
+    differ = [f"C = {row['C']:g}, h = {row['h']:g}" for row in st["rows"] if not row["same_outcome"]]
+    figures += [
+        "",
+        f"Stability at large steps ({st['scene']}): "
+        + ("every run ends with the reference's outcome" if not differ else f"a run ends unlike the reference at {', '.join(differ)}")
+        + f"; the triangle's x there is off by {errors}.",
+    ]
+    return {"headline": headline, "figures": "\n".join(figures)}
+
+
+def readme_problems(text: str) -> list:
+    """What keeps `with_readme_blocks` from writing into this README: each block's markers must
+    stand once each, on lines of their own, the opening one first."""
+    from models.scenario import Problem
+
+    problems = []
+    lines = text.split("\n")
+    for name in README_BLOCKS:
+        begin, end = readme_markers(name)
+        at = [lines.count(begin), lines.count(end)]
+        if at != [1, 1]:
+            problems.append(Problem(name, f"needs the lines {begin!r} and {end!r} once each (found {at[0]} and {at[1]})"))
+        elif lines.index(begin) > lines.index(end):
+            problems.append(Problem(name, f"{begin!r} must come before {end!r}"))
+    return problems
+
+
+def with_readme_blocks(text: str, blocks: dict[str, str]) -> str:
+    """The README `text` with each block's lines between its markers replaced by `blocks[name]`
+    (`readme_problems` must find nothing)."""
+    lines = text.split("\n")
+    for name in README_BLOCKS:
+        begin, end = readme_markers(name)
+        i, j = lines.index(begin), lines.index(end)
+        lines[i + 1 : j] = blocks[name].split("\n")
+    return "\n".join(lines)
+
+
+def readme_block_text(text: str, name: str) -> str:
+    """What the README `text` holds between the markers of block `name`."""
+    lines = text.split("\n")
+    begin, end = readme_markers(name)
+    return "\n".join(lines[lines.index(begin) + 1 : lines.index(end)])
 
 
 def contact_markdown(contact: dict | None) -> list[str]:

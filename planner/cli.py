@@ -208,6 +208,20 @@ def _add_bench_parser(sub: argparse._SubParsersAction) -> None:
     )
     bench.add_argument("--out", type=Path, default=Path("out/bench"), help="output folder, created if missing (default out/bench)")
     bench.add_argument("--doc", type=Path, help="also write the markdown report here (make bench-doc: docs/benchmarks.md)")
+    bench.add_argument(
+        "--readme",
+        type=Path,
+        help="also write the figures into this README, between its '<!-- ladder bench: headline -->' and "
+        "'<!-- ladder bench: figures -->' markers and their closing '<!-- /ladder bench: ... -->' lines (make bench-doc: "
+        "README.md); full runs only",
+    )
+    bench.add_argument(
+        "--from",
+        dest="saved",
+        type=Path,
+        metavar="BENCH_JSON",
+        help="write --doc and --readme from this saved result (a run's bench.json) instead of running the benchmarks",
+    )
     bench.add_argument("--json", action="store_true", help="print the results as one JSON object")
     bench.add_argument(
         "--planning",
@@ -1030,10 +1044,45 @@ def _print_sweep(args: argparse.Namespace, result, data: dict, plot, interrupted
         print(f"{state}results written to {args.out / 'sweep.json'}, {args.out / 'sweep.csv'}" + (f", {plot}" if plot else ""))
 
 
-def cmd_bench(args: argparse.Namespace) -> int:
-    from planner.bench import DEFAULT_PLANNING_SCENES, PLANNING_SCENES, PLANNING_SEEDS, run_all
+#: The sections a `ladder bench` result has (bench.json), which `--from` needs.
+BENCH_SECTIONS = ("machine", "quick", "date", "throughput", "work_precision", "stability", "scaling", "planning", "plots")
 
-    problems = check_out_dir("--out", args.out) + check_out_file("--doc", args.doc)
+
+def _saved_bench(path: Path) -> tuple[dict | None, list[Problem]]:
+    """A saved `ladder bench` result (`--from`), or the problems reading it."""
+    try:
+        results = json.loads(path.read_text())
+    except OSError as e:
+        return None, [Problem("--from", f"{path}: cannot read it ({e.strerror})")]
+    except (UnicodeDecodeError, ValueError) as e:
+        return None, [Problem("--from", f"{path}: not JSON ({e})")]
+    missing = [key for key in BENCH_SECTIONS if key not in results] if isinstance(results, dict) else list(BENCH_SECTIONS)
+    if missing:
+        return None, [Problem("--from", f"{path}: not a `ladder bench` result (no {', '.join(missing)})")]
+    return results, []
+
+
+def cmd_bench(args: argparse.Namespace) -> int:
+    from planner.bench import DEFAULT_PLANNING_SCENES, PLANNING_SCENES, PLANNING_SEEDS, readme_input_problems, run_all, write_reports
+
+    problems = check_out_file("--doc", args.doc) + check_out_file("--readme", args.readme)
+    if args.saved is not None:  # the reports from a saved result: nothing runs
+        results, more = _saved_bench(args.saved)
+        problems += more
+        if args.doc is None and args.readme is None:
+            problems.append(Problem("--from", "nothing to write: give --doc and/or --readme"))
+        if results is not None:
+            problems += readme_input_problems(args.readme, bool(results["quick"]))
+        if problems:
+            raise ScenarioError("ladder bench", problems)
+        try:
+            write_reports(results, args.saved.parent, args.doc, args.readme)
+        except (KeyError, TypeError, ValueError, IndexError, AttributeError) as e:  # a result of another shape
+            problem = Problem("--from", f"{args.saved}: not a complete `ladder bench` result ({e!r})")
+            raise ScenarioError("ladder bench", [problem]) from None
+        print(f"written from {args.saved}: " + " and ".join(str(p) for p in (args.doc, args.readme) if p is not None))
+        return EXIT_OK
+    problems += check_out_dir("--out", args.out) + readme_input_problems(args.readme, args.quick)
     scenes = DEFAULT_PLANNING_SCENES if args.planning is None else tuple(s.strip() for s in args.planning.split(",") if s.strip())
     unknown = [s for s in scenes if s not in PLANNING_SCENES]
     if unknown or not scenes:
@@ -1052,7 +1101,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
             print(text, file=sys.stderr, flush=True)
 
     seeds = PLANNING_SEEDS if args.seeds is None else args.seeds
-    results = run_all(args.out, args.doc, quick=args.quick, progress=progress, scenes=scenes, seeds=seeds)
+    results = run_all(args.out, args.doc, quick=args.quick, progress=progress, scenes=scenes, seeds=seeds, readme=args.readme)
     if args.json:
         print(json.dumps(results, indent=2))
     else:
@@ -1074,7 +1123,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
                 f"planning {scene}: ladder {x['ladder']['success_rate']:.0%} in {x['ladder']['median_wall_s']:.3f} s, "
                 f"flat {x['flat']['success_rate']:.0%} in {x['flat']['median_wall_s']:.3f} s (median)"
             )
-        print(f"results written to {args.out / 'bench.json'}" + (f" and {args.doc}" if args.doc else ""))
+        print(f"results written to {args.out / 'bench.json'}" + "".join(f" and {p}" for p in (args.doc, args.readme) if p))
     return EXIT_OK
 
 
