@@ -1071,6 +1071,9 @@ def cmd_bench(args: argparse.Namespace) -> int:
         problems += more
         if args.doc is None and args.readme is None:
             problems.append(Problem("--from", "nothing to write: give --doc and/or --readme"))
+        for flag, given in (("--quick", args.quick), ("--planning", args.planning is not None), ("--seeds", args.seeds is not None)):
+            if given:
+                problems.append(Problem(flag, "sets up a run, and --from runs nothing"))
         if results is not None:
             problems += readme_input_problems(args.readme, bool(results["quick"]))
         if problems:

@@ -125,6 +125,7 @@ def test_bench_refuses_what_it_cannot_use_and_writes_nothing(tmp_path):
         (["--from", str(SAVED), "--readme", str(no_markers), "--doc", str(doc)], "block headline: needs the lines"),
         (["--from", str(tmp_path / "quick.json"), "--readme", str(README)], "a --quick run's figures do not go into a README"),
         (["--quick", "--readme", str(README)], "a --quick run's figures do not go into a README"),
+        (["--from", str(SAVED), "--doc", str(doc), "--seeds", "3"], "--seeds: sets up a run, and --from runs nothing"),
     ]
     for args, message in cases:
         result = ladder("bench", *args)
