@@ -200,8 +200,8 @@ def _add_bench_parser(sub: argparse._SubParsersAction) -> None:
         description="Measure work-precision (error against closed forms or fine-step references vs wall "
         "time), throughput (steps/s per rung on the paper's scene, and MuJoCo's on the same scene with the "
         "peers extra), scaling with the number of contacts, "
-        "and the ladder against flat planning (also as OMPL benchmark logs). Writes bench.json, plots and "
-        "docs/benchmarks.md (--doc). --quick is a smoke run of every section.",
+        "and the ladder against flat planning (also as OMPL benchmark logs). Writes bench.json, plots, "
+        "docs/benchmarks.md (--doc) and the README's figures (--readme). --quick is a smoke run of every section.",
     )
     bench.add_argument(
         "--quick", action="store_true", help="a small version of every section (a few seconds once the kernels are compiled)"
@@ -227,8 +227,8 @@ def _add_bench_parser(sub: argparse._SubParsersAction) -> None:
         "--planning",
         metavar="SCENE,...",
         help="scenes of the ladder-vs-flat section (default: two_finger_triangle,four_finger_grasp, "
-        "the planar scenes; make bench-doc plans all four: box_push_3d takes about ten minutes and "
-        "box_rotate_3d about five, mostly their flat runs, up to a minute per seed)",
+        "the planar scenes; make bench-doc plans all four: box_push_3d and box_rotate_3d take about two "
+        "minutes each, mostly their flat runs, up to 17 s a seed)",
     )
     bench.add_argument("--seeds", type=int, default=None, metavar="N", help="seeds 1..N per planning scene (default 20; --quick: 3)")
     bench.set_defaults(handler=cmd_bench)

@@ -591,7 +591,7 @@ def test_bench_help_and_default_scenes():
     assert result.returncode == 0
     text = " ".join(result.stdout.split())
     assert "a few seconds" in text and "about a minute" not in text
-    assert "default: two_finger_triangle,four_finger_grasp" in text and "box_push_3d takes about ten minutes" in text
+    assert "default: two_finger_triangle,four_finger_grasp" in text and "box_push_3d and box_rotate_3d take about two minutes each" in text
     assert "seeds 1..N per planning scene (default 20" in text
     assert DEFAULT_PLANNING_SCENES == ("two_finger_triangle", "four_finger_grasp")
 
