@@ -1002,21 +1002,41 @@ def run_all(
     return results
 
 
-def readme_input_problems(readme: Path | None, quick: bool) -> list:
-    """Why `--readme` cannot take this run's figures: the README must be a readable file whose
-    blocks' markers stand as `readme_problems` asks, and the run a full one (a --quick run's
-    figures are a smoke test's)."""
+#: The sections of a `run_all` result (bench.json), which `load_results` asks of a saved one.
+RESULT_SECTIONS = ("machine", "quick", "date", "throughput", "work_precision", "stability", "scaling", "planning", "plots")
+
+
+def load_results(path: Path) -> tuple[dict | None, list]:
+    """A saved `run_all` result (`ladder bench --from`), or the problems reading it."""
+    from models.scenario import Problem
+
+    try:
+        results = json.loads(path.read_text())
+    except OSError as e:
+        return None, [Problem("--from", f"{path}: cannot read it ({e.strerror})")]
+    except (UnicodeDecodeError, ValueError) as e:
+        return None, [Problem("--from", f"{path}: not JSON ({e})")]
+    missing = [key for key in RESULT_SECTIONS if key not in results] if isinstance(results, dict) else list(RESULT_SECTIONS)
+    if missing:
+        return None, [Problem("--from", f"{path}: not a `ladder bench` result (no {', '.join(missing)})")]
+    return results, []
+
+
+def read_readme(readme: Path | None, quick: bool) -> tuple[str | None, list]:
+    """The README `--readme` writes this run's figures into, or why it cannot: it must be a
+    readable file whose blocks' markers stand as `readme_problems` asks, and the run a full one
+    (a --quick run's figures are a smoke test's)."""
     from models.scenario import Problem
 
     if readme is None:
-        return []
+        return None, []
     if quick:
-        return [Problem("--readme", "a --quick run's figures do not go into a README: run the full bench (make bench-doc)")]
+        return None, [Problem("--readme", "a --quick run's figures do not go into a README: run the full bench (make bench-doc)")]
     try:
         text = readme.read_text()
     except (OSError, UnicodeDecodeError) as e:
-        return [Problem("--readme", f"{readme}: cannot read it ({e.strerror if isinstance(e, OSError) else e})")]
-    return [Problem("--readme", f"{readme}: block {p.key}: {p.reason}") for p in readme_problems(text)]
+        return None, [Problem("--readme", f"{readme}: cannot read it ({e.strerror if isinstance(e, OSError) else e})")]
+    return text, [Problem("--readme", f"{readme}: block {p.key}: {p.reason}") for p in readme_problems(text)]
 
 
 def write_reports(results: dict, out: Path, doc: Path | None = None, readme: Path | None = None) -> None:
@@ -1030,10 +1050,10 @@ def write_reports(results: dict, out: Path, doc: Path | None = None, readme: Pat
     if doc is not None:
         texts.append(("--doc", doc, markdown(results, doc.parent, out)))
     if readme is not None:
-        problems = readme_input_problems(readme, bool(results.get("quick")))
+        text, problems = read_readme(readme, bool(results.get("quick")))
         if problems:  # (the README changed while the bench ran)
             raise ScenarioError(readme, problems)
-        texts.append(("--readme", readme, with_readme_blocks(readme.read_text(), readme_blocks(results))))
+        texts.append(("--readme", readme, with_readme_blocks(text, readme_blocks(results))))
     for key, path, text in texts:
         write_atomic(path, text, key=key)
 
@@ -1235,10 +1255,10 @@ def readme_blocks(r: dict) -> dict[str, str]:
         "|---|---|---|---|---|---|---|",
     ]
     if "skipped" not in peer:
-        free = next(row for row in r["throughput"]["rows"] if row["rung"] == peer["ours"]["rung"])
+        ours = next(row for row in r["throughput"]["rows"] if row["rung"] == peer["ours"]["rung"])
         figures.append(
             f"| {r['throughput']['scene']}: free flight (MuJoCo: `{peer['against']}`) | {peer['ours']['rung']} | {peer['h']:g} "
-            f"| {free['contact_steps']:,} of {free['steps']:,} | {1e6 / peer['ours']['steps_per_s']:.2f} "
+            f"| {ours['contact_steps']:,} of {ours['steps']:,} | {1e6 / peer['ours']['steps_per_s']:.2f} "
             f"| {1e6 / peer['steps_per_s']:.2f} | {peer['ratio']:.2f}x |"
         )
     for row in rows:
@@ -1295,22 +1315,24 @@ def readme_problems(text: str) -> list:
     return problems
 
 
+def _block_span(lines: list[str], name: str) -> slice:
+    """The lines between the markers of block `name` (`readme_problems` must find nothing)."""
+    begin, end = readme_markers(name)
+    return slice(lines.index(begin) + 1, lines.index(end))
+
+
 def with_readme_blocks(text: str, blocks: dict[str, str]) -> str:
-    """The README `text` with each block's lines between its markers replaced by `blocks[name]`
-    (`readme_problems` must find nothing)."""
+    """The README `text` with each block's lines between its markers replaced by `blocks[name]`."""
     lines = text.split("\n")
     for name in README_BLOCKS:
-        begin, end = readme_markers(name)
-        i, j = lines.index(begin), lines.index(end)
-        lines[i + 1 : j] = blocks[name].split("\n")
+        lines[_block_span(lines, name)] = blocks[name].split("\n")
     return "\n".join(lines)
 
 
 def readme_block_text(text: str, name: str) -> str:
     """What the README `text` holds between the markers of block `name`."""
     lines = text.split("\n")
-    begin, end = readme_markers(name)
-    return "\n".join(lines[lines.index(begin) + 1 : lines.index(end)])
+    return "\n".join(lines[_block_span(lines, name)])
 
 
 def contact_markdown(contact: dict | None) -> list[str]:

@@ -1044,30 +1044,12 @@ def _print_sweep(args: argparse.Namespace, result, data: dict, plot, interrupted
         print(f"{state}results written to {args.out / 'sweep.json'}, {args.out / 'sweep.csv'}" + (f", {plot}" if plot else ""))
 
 
-#: The sections a `ladder bench` result has (bench.json), which `--from` needs.
-BENCH_SECTIONS = ("machine", "quick", "date", "throughput", "work_precision", "stability", "scaling", "planning", "plots")
-
-
-def _saved_bench(path: Path) -> tuple[dict | None, list[Problem]]:
-    """A saved `ladder bench` result (`--from`), or the problems reading it."""
-    try:
-        results = json.loads(path.read_text())
-    except OSError as e:
-        return None, [Problem("--from", f"{path}: cannot read it ({e.strerror})")]
-    except (UnicodeDecodeError, ValueError) as e:
-        return None, [Problem("--from", f"{path}: not JSON ({e})")]
-    missing = [key for key in BENCH_SECTIONS if key not in results] if isinstance(results, dict) else list(BENCH_SECTIONS)
-    if missing:
-        return None, [Problem("--from", f"{path}: not a `ladder bench` result (no {', '.join(missing)})")]
-    return results, []
-
-
 def cmd_bench(args: argparse.Namespace) -> int:
-    from planner.bench import DEFAULT_PLANNING_SCENES, PLANNING_SCENES, PLANNING_SEEDS, readme_input_problems, run_all, write_reports
+    from planner.bench import DEFAULT_PLANNING_SCENES, PLANNING_SCENES, PLANNING_SEEDS, load_results, read_readme, run_all, write_reports
 
     problems = check_out_file("--doc", args.doc) + check_out_file("--readme", args.readme)
     if args.saved is not None:  # the reports from a saved result: nothing runs
-        results, more = _saved_bench(args.saved)
+        results, more = load_results(args.saved)
         problems += more
         if args.doc is None and args.readme is None:
             problems.append(Problem("--from", "nothing to write: give --doc and/or --readme"))
@@ -1075,7 +1057,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
             if given:
                 problems.append(Problem(flag, "sets up a run, and --from runs nothing"))
         if results is not None:
-            problems += readme_input_problems(args.readme, bool(results["quick"]))
+            problems += read_readme(args.readme, bool(results["quick"]))[1]
         if problems:
             raise ScenarioError("ladder bench", problems)
         try:
@@ -1085,7 +1067,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
             raise ScenarioError("ladder bench", [problem]) from None
         print(f"written from {args.saved}: " + " and ".join(str(p) for p in (args.doc, args.readme) if p is not None))
         return EXIT_OK
-    problems += check_out_dir("--out", args.out) + readme_input_problems(args.readme, args.quick)
+    problems += check_out_dir("--out", args.out) + read_readme(args.readme, args.quick)[1]
     scenes = DEFAULT_PLANNING_SCENES if args.planning is None else tuple(s.strip() for s in args.planning.split(",") if s.strip())
     unknown = [s for s in scenes if s not in PLANNING_SCENES]
     if unknown or not scenes:
