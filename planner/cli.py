@@ -1181,7 +1181,7 @@ def cmd_submit(args: argparse.Namespace) -> int:
         print(json.dumps(job, indent=2))
     else:
         holds = plan is not None and plan.get("top_holds")
-        rungs = ", ".join(f"{r['rung']} {r['ended']}" for r in job.get("rungs", [])) or "none"
+        rungs = ", ".join(f"{r.get('label', r['rung'])} {r['ended']}" for r in job.get("rungs", [])) or "none"
         error = f": {job['error']}" if job.get("error") else ""
         print(f"job {job['id']}: {job['state']}{error}; rungs: {rungs}; top rung holds: {'yes' if holds else 'no'}")
         if job["result_available"]:
@@ -1207,7 +1207,9 @@ def _job_progress(live: bool):
         text = {
             "state": lambda: f"{data.get('state')}" + (" again (the server restarted)" if data.get("requeued") else ""),
             "rung_started": lambda: f"planning: {data.get('rung')} ...",
-            "rung_ended": lambda: f"{data.get('rung')}: {data.get('ended')} ({data.get('outcome')}, {data.get('iterations')} iterations)",
+            "rung_ended": lambda: (
+                f"{data.get('label', data.get('rung'))}: {data.get('ended')} ({data.get('outcome')}, {data.get('iterations')} iterations)"
+            ),
             "cancel_requested": lambda: "cancel requested",
             "job_ended": lambda: f"ended: {data.get('state')}" + (f" ({data['error']})" if data.get("error") else ""),
         }.get(event.type)

@@ -111,11 +111,7 @@ class LadderResult:
 
     def to_json(self, timings: bool = True) -> dict:
         """The plan; without timings it is a pure function of the scenario and the seed."""
-        rungs = [asdict(r) for r in self.rungs]
-        for r in rungs:
-            r["ended"] = r["ended"].label
-            if not timings:
-                del r["wall_s"]
+        rungs = [rung_json(r, timings) for r in self.rungs]
         return {
             "scenario": self.scenario,
             "scene": self.scene,
@@ -124,6 +120,17 @@ class LadderResult:
             "top_holds": self.top_holds,
             "rungs": rungs,
         }
+
+
+def rung_json(report: RungReport, timings: bool = True) -> dict:
+    """A rung's report as plan.json and the service's rung_ended events write it: its fields,
+    `label` after `rung` (a coarse stage's "dynamic-rigid@0.002", which tells it from the rung
+    itself), how it ended by its label; without timings, no wall_s."""
+    data = asdict(report)
+    data = {"rung": data.pop("rung"), "label": report.label, **data, "ended": report.ended.label}
+    if not timings:
+        del data["wall_s"]
+    return data
 
 
 def plan_json_text(result: LadderResult) -> str:

@@ -218,6 +218,45 @@ def test_the_scene_of_a_spatial_job_has_its_shapes_and_mesh_vertices(idle):
     assert idle.get("/jobs/nope/scene").status_code == 404
 
 
+def test_a_coarse_stage_is_told_from_its_rung_by_its_label_in_plan_json_events_view_and_submit(capsys):
+    """A rung planned at a coarser step first reports twice under one rung name; plan.json, the
+    rung_ended events, the viewer's rungs and `ladder submit`'s lines carry RungReport.label
+    ("kinematic@0.02"), so the two are told apart."""
+    from types import SimpleNamespace
+
+    from planner.cli import _job_progress
+    from planner.ladder import LadderResult, RungReport, plan_json_text
+    from planner.plan_status import PlanStatus
+    from planner.service.jobs import rung_view
+    from planner.service.view import scene_view
+
+    reports = [
+        RungReport("geometric", PlanStatus.EXACT, outcome="goal"),
+        RungReport("kinematic", PlanStatus.REPAIRED, outcome="goal", h=0.02, stage="coarse", wall_s=1.5),
+        RungReport("kinematic", PlanStatus.TRACKED, outcome="goal", h=0.01),
+    ]
+    labels = ["geometric", "kinematic@0.02", "kinematic"]
+    plan = json.loads(plan_json_text(LadderResult("free_transfer", 1, reports)))
+    assert [r["label"] for r in plan["rungs"]] == labels and [r["rung"] for r in plan["rungs"]] == ["geometric", "kinematic", "kinematic"]
+    assert list(plan["rungs"][1])[:3] == ["rung", "label", "ended"] and plan["rungs"][1]["ended"] == "repaired"
+    assert "wall_s" not in plan["rungs"][1]  # plan.json: a pure function of the scenario and the seed
+    event = rung_view(reports[1])
+    assert event["label"] == "kinematic@0.02" and event["wall_s"] == 1.5 and event["controls"] == 0
+    assert "durations" not in event and "states" not in event
+    view = scene_view({"scenario": FREE}, json.dumps(plan))
+    assert [r["label"] for r in view["rungs"]] == labels
+    show = _job_progress(live=False)
+    for report in reports[1:]:
+        show(SimpleNamespace(type="rung_ended", data=rung_view(report)))
+    before_labels = {"rung": "kinematic", "ended": "tracked", "outcome": "goal", "iterations": 3}  # a job's events from before labels
+    show(SimpleNamespace(type="rung_ended", data=before_labels))
+    assert capsys.readouterr().err.splitlines() == [
+        "kinematic@0.02: repaired (goal, 0 iterations)",
+        "kinematic: tracked (goal, 0 iterations)",
+        "kinematic: tracked (goal, 3 iterations)",
+    ]
+
+
 # ----------------------------------------------------------------------------- with a worker
 
 

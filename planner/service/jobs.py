@@ -13,7 +13,6 @@ The checks and the runs are the CLI's own (planner.cli): the same problems, the 
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import json
 import os
 import tempfile
@@ -290,8 +289,9 @@ def validate(kind: str, inputs: dict, options: dict) -> None:
 
 def rung_view(report) -> dict:
     """A rung's report for the job's progress (the plan.json entry without its controls, durations and states)."""
-    data = dataclasses.asdict(report)
-    data["ended"] = report.ended.label
+    from planner.ladder import rung_json
+
+    data = rung_json(report)
     data["controls"] = len(report.durations)
     del data["durations"], data["states"]
     return data

@@ -23,7 +23,7 @@ def scene_view(inputs: dict, result: str | None = None) -> dict:
     """The scene of a job's `inputs` (parameters applied): `dimension`, `coordinates`, and per
     body its name, role, shape (the scenario's, lengths in metres in the body frame; a mesh
     with its scaled `vertices`), whether it `moves` (has DOFs) and its `start` placement. With a
-    plan's `result` (plan.json text), `rungs`: per rung its name, `times` (s, from 0; one per
+    plan's `result` (plan.json text), `rungs`: per rung its name and `label`, `times` (s, from 0; one per
     state) and `placements` (per state, the moving bodies' placements)."""
     with tempfile.TemporaryDirectory(prefix="ladder-view-") as tmp:
         root = Path(tmp)
@@ -61,4 +61,11 @@ def _rung_view(scenario, rung: dict) -> dict:
     for state in rung.get("states", []):
         at = scenario.placements(state)
         placements.append({name: _placement(at[name]) for name in moving})
-    return {"rung": rung.get("rung"), "ended": rung.get("ended"), "outcome": rung.get("outcome"), "times": times, "placements": placements}
+    return {
+        "rung": rung.get("rung"),
+        "label": rung.get("label", rung.get("rung")),  # a plan.json from before labels: the rung's name
+        "ended": rung.get("ended"),
+        "outcome": rung.get("outcome"),
+        "times": times,
+        "placements": placements,
+    }
