@@ -320,13 +320,15 @@ def _band_handle(colour: str, label: str):
 def plot_feasible_sets(path: Path, result) -> Path:
     """The sweep's map: each grid point coloured by outcome (Z_F green, Z_U red, none grey),
     one panel per model; refined boundaries as black ticks. Two axes: a map over them; one
-    axis: a strip. Writes PNG (and SVG when path ends in .png)."""
+    axis: a strip. An axis of one value (`--grid mu=0.5`) is a fixed parameter, named in the
+    panels' titles, not an axis. Writes PNG (and SVG when path ends in .png)."""
     plt = _pyplot()
     models = [m.label for m in result.models]
-    axes = result.axes
+    varying = [a for a in result.axes if len(a.values) > 1] or list(result.axes[:1])
+    fixed = ", ".join(f"{a.name} = {a.values[0]:g}" for a in result.axes if a not in varying)
     fig, panels = plt.subplots(1, len(models), figsize=(4.2 * len(models), 3.9), squeeze=False, sharey=True)
-    x_axis = axes[0]
-    y_axis = axes[1] if len(axes) > 1 else None
+    x_axis = varying[0]
+    y_axis = varying[1] if len(varying) > 1 else None
     for panel, model in zip(panels[0], models):
         for outcome, colour in OUTCOME_COLOURS.items():
             pts = [p for p in result.points if p is not None and p.model == model and p.outcome == outcome]
@@ -351,8 +353,10 @@ def plot_feasible_sets(path: Path, result) -> Path:
             panel.set_xscale("log")
             log_ticks(panel.xaxis, min(x_axis.values), max(x_axis.values))
         panel.set_xlabel(x_axis.name)
-        panel.set_title(_wrap(model, 38), fontsize=8)
+        panel.set_title(_wrap(model + (f" ({fixed})" if fixed else ""), 38), fontsize=8)
         panel.legend(fontsize=7, loc="best")
+        if y_axis is None:  # a strip: its height means nothing
+            panel.set_yticks([])
     panels[0][0].set_ylabel(y_axis.name if y_axis else "")
     title = f"{Path(result.file).stem}: goal (Z_F) and unsafe (Z_U) sets" + ("" if result.complete else " (INCOMPLETE)")
     fig.suptitle(_wrap(title, max(40, int(30 * len(models)))))

@@ -135,6 +135,34 @@ def test_ctrl_c_on_the_command_writes_partial_results_marked_incomplete(tmp_path
     assert (out / "sweep.csv").read_text().count("\n") == len(data["points"]) + 1
 
 
+@pytest.mark.parametrize(
+    "axes, x, y, title",
+    [
+        ((("mu", (0.5,)), ("v1", (0.5, 1.0, 2.0))), "v1", "", "quasistatic-rigid (mu = 0.5)"),  # the README's Fig. 5 row
+        ((("v1", (0.5, 1.0, 2.0)), ("mu", (0.5, 1.2))), "v1", "mu", "quasistatic-rigid"),
+        ((("v1", (1.0,)),), "v1", "", "quasistatic-rigid"),
+    ],
+)
+def test_the_sweep_plot_takes_an_axis_of_one_value_as_a_fixed_parameter(tmp_path, monkeypatch, axes, x, y, title):
+    """`--grid mu=0.5` fixes mu: the map is a strip over the axis that varies, with mu = 0.5 in
+    the panel's title, not a y axis of one value."""
+    from planner import plots
+
+    drawn = []
+    monkeypatch.setattr(plots, "_save", lambda fig, path, svg=False: drawn.append(fig) or path)
+    grid = [sw.Axis(name, values, log=name == "v1") for name, values in axes]
+    model = sw.ModelSpec("quasistatic-rigid")
+    points = [
+        sw.Point(model.label, dict(p), "goal" if dict(p)["v1"] == 1.0 else "unsafe", 1.0, "ok", {}, 10, 0.0) for p in sw.grid_points(grid)
+    ]
+    result = sw.SweepResult(str(TRIANGLE), grid, [model], {}, None, None, points)
+    plots.plot_feasible_sets(tmp_path / "sweep.png", result)
+    (panel,) = drawn[0].axes
+    assert (panel.get_xlabel(), panel.get_ylabel(), panel.get_title()) == (x, y, title)
+    if not y:
+        assert len(panel.get_yticks()) == 0  # a strip's height means nothing
+
+
 def test_sweep_command_writes_json_csv_and_plot(tmp_path):
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     out = tmp_path / "s"
