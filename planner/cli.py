@@ -500,7 +500,9 @@ def _run_simulation(args: argparse.Namespace, scenario: Scenario, plan_controls,
 
 
 def _simulation_summary(args: argparse.Namespace, scenario: Scenario, result, h: float, duration: float) -> dict[str, Any]:
-    """The simulate report: the run's outcome, final state, solver counters and parameters."""
+    """The simulate report: the run's outcome, final state, solver counters, the largest
+    penetration met at a step's start (m: a compliant contact's deformation, or a step that
+    carried a body into another) and parameters."""
     return {
         "file": str(scenario.path),
         "model": args.model,
@@ -520,6 +522,7 @@ def _simulation_summary(args: argparse.Namespace, scenario: Scenario, result, h:
         "pivots": result.pivots,
         "max_residual": result.max_residual,
         "max_lcp_size": result.max_lcp_size,
+        "max_penetration": result.max_penetration,
         "parameters": dict(scenario.parameters),
     }
 
@@ -807,7 +810,8 @@ def print_simulation(summary: dict[str, Any]) -> None:
         f"{summary['steps']} steps in {summary['wall_s']:.3f} s"
         + (f" ({rate:,.0f} steps/s)" if rate else "")
         + f"; {summary['lcp_solves']} LCP solves, {summary['pivots']} pivots, "
-        f"largest LCP {summary['max_lcp_size']}, max residual {summary['max_residual']:.2e}"
+        f"largest LCP {summary['max_lcp_size']}, max residual {summary['max_residual']:.2e}, "
+        f"largest penetration {summary['max_penetration']:.2e} m"
     )
     if "plot" in summary:
         console.print(f"plot written to {summary['plot']}")

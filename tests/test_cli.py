@@ -169,6 +169,21 @@ def test_simulate_json_on_the_paper_scene(tmp_path):
     assert plot.stat().st_size > 10_000
 
 
+def test_simulate_reports_the_largest_penetration_a_step_that_carried_a_body_into_another():
+    """A finger of 1e6 kg on a drive of kp = 1e5 N/m: the quasistatic step, which has no inertia to
+    hold it, drops each finger from y = 2.05 m to about -5.5 m in its first step, into the
+    triangle and the palm; simulate says so (`max_penetration`, metres), where a rigid run of the
+    scene as it is stays at round-off."""
+    scene = str(SCENARIOS / "two_finger_triangle.toml")
+    heavy = ladder("simulate", scene, "--model", "quasistatic-rigid", "--param", "v1=0.8", "--param", "finger_mass=1e6", "--json")
+    assert heavy.returncode == 0, heavy.stderr
+    assert json.loads(heavy.stdout)["max_penetration"] > 1.0
+    usual = ladder("simulate", scene, "--model", "quasistatic-rigid", "--param", "v1=0.8", "--json")
+    assert 0.0 <= json.loads(usual.stdout)["max_penetration"] < 1e-9
+    text = ladder("simulate", scene, "--model", "quasistatic-rigid", "--param", "v1=0.8", "--param", "finger_mass=1e6")
+    assert "largest penetration 5.55e+00 m" in text.stdout
+
+
 def test_ladder_writes_a_perf_map_when_asked(tmp_path):
     """LADDER_PERF_MAP=1: as it exits, `ladder` writes /tmp/perf-<pid>.map, naming the kernels it ran
     (`models.perfmap`), and says where on stderr."""
