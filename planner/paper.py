@@ -167,7 +167,9 @@ def run(out: Path, doc: Path, workers: int | None, progress=print) -> dict:
         if b["axis"] == "mu" and {b["low_outcome"], b["high_outcome"]} == {"unsafe", "goal"}:
             lo, hi = mu_edges.get(b["model"], (math.inf, -math.inf))
             mu_edges[b["model"]] = (min(lo, b["boundary"]), max(hi, b["boundary"]))
-    text = report(bands, derived_band(scenario), timings, total, doc.parent, out, fig4, fig5, len(combined.points), mu_edges, gains)
+    text = report(
+        bands, derived_band(scenario), timings, total, doc.parent, out, fig4, fig5, len(combined.points), mu_edges, gains, combined.points
+    )
     from planner import table1
 
     text += "\n" + "\n".join(table1.report(table1.run()))
@@ -224,6 +226,52 @@ def _fig5_panels(slices: dict) -> list:
     return panels
 
 
+#: A run whose largest penetration exceeds this (m) is named under the penetration table.
+DEEP = 0.01
+
+
+def _penetration_section(points) -> list[str]:
+    """The largest penetration met at a step's start over each model's runs at each mu (grid and
+    refinement, every outcome), and where a grasp (goal) came with more than DEEP: a compliant
+    model's penetration is its contact's deformation, which grows without bound where a drive
+    stiffer than the contact presses on a body that cannot give way."""
+    points = [p for p in points if p is not None]
+    if not points:
+        return []
+    deepest: dict = {}
+    for p in points:
+        key = (p.model, p.parameters["mu"])
+        deepest[key] = max(deepest.get(key, 0.0), p.max_penetration)
+    lines = [
+        "## Largest penetration (m)",
+        "",
+        "Over each model's runs at each mu (grid and refinement, every outcome), the deepest penetration met at a",
+        "step's start: for a compliant model its contact's deformation (K = 1e6 N/m), which grows as long as a drive",
+        "stiffer than the contact keeps pressing on a body that does not give way.",
+        "",
+        "| model | " + " | ".join(f"mu = {m:g}" for m in MUS) + " |",
+        "|---|" + "---|" * len(MUS),
+    ]
+    for model, title in [*TITLES.items(), ("well", WELL_TITLE)]:
+        lines.append(f"| {title} | " + " | ".join(f"{deepest[(model, m)]:.2g}" if (model, m) in deepest else "-" for m in MUS) + " |")
+    deep = {}
+    for p in points:
+        if p.outcome == "goal" and p.max_penetration > DEEP:
+            deep.setdefault((p.model, p.parameters["mu"]), []).append(p)
+    if deep:
+        parts = []
+        order = [(model, mu) for model in [*TITLES, "well"] for mu in MUS if (model, mu) in deep]
+        for (model, mu), runs in ((key, deep[key]) for key in order):
+            total = sum(1 for p in points if p.model == model and p.parameters["mu"] == mu and p.outcome == "goal")
+            worst = max(runs, key=lambda p: p.max_penetration)
+            parts.append(
+                f"{model} at mu = {mu:g}: {len(runs)} of its {total} grasps (the deepest {worst.max_penetration:.3f} m, "
+                f"at rho = {worst.parameters['v1']:.3g})"
+            )
+        lines += ["", f"Grasps reached with more than {DEEP:g} m of penetration: " + "; ".join(parts) + "."]
+    return lines
+
+
 def _band(bands: dict, model: str, mu: float):
     edges = bands[model].get(f"mu={mu:g}", [])
     return edges
@@ -244,8 +292,11 @@ def _single(edges):
     return (edges[0]["from"], edges[0]["to"]) if len(edges) == 1 else None
 
 
-def report(bands, derived, timings, total, doc_dir: Path, out: Path, fig4: Path, fig5: Path, runs: int, mu_edges: dict, gains: dict) -> str:
-    """The markdown report: the setup, the bands per model and mu, the paper's statements checked, and the timings."""
+def report(
+    bands, derived, timings, total, doc_dir: Path, out: Path, fig4: Path, fig5: Path, runs: int, mu_edges: dict, gains: dict, points=()
+) -> str:
+    """The markdown report: the setup, the bands per model and mu, the largest penetrations, the
+    paper's statements checked, and the timings."""
     import os
 
     def rel(p: Path) -> str:
@@ -254,6 +305,7 @@ def report(bands, derived, timings, total, doc_dir: Path, out: Path, fig4: Path,
     lines = _report_intro(total, runs)
     for model, title in [*TITLES.items(), ("well", WELL_TITLE)]:
         lines.append(f"| {title} | " + " | ".join(_fmt(_band(bands, model, m)) for m in MUS) + " |")
+    lines += ["", *_penetration_section(points)]
     lines += [
         "",
         f"![Fig. 5 analogue]({rel(fig5)})",
@@ -266,7 +318,7 @@ def report(bands, derived, timings, total, doc_dir: Path, out: Path, fig4: Path,
     lines += ["The v2 = 1 slice as a map over (v1, mu): black ticks are the refined boundaries.", ""]
     lines += [f"![Fig. 4 analogue]({rel(fig4)})", "", *_fig4_caption(), "", "## Against the paper's statements", ""]
     lines.append(_quasistatic_statement(bands, derived))
-    lines.append(_wide_statement(bands, mu_edges))
+    lines.append(_wide_statement(bands, mu_edges, points))
     lines.append(_plastic_statement(bands))
     lines.append(_elastic_statement(bands))
     lines.append(_fingers_statement(bands, gains))
@@ -379,11 +431,25 @@ def _quasistatic_statement(bands, derived) -> str:
     )
 
 
-def _wide_statement(bands, mu_edges: dict) -> str:
-    """Statement 2: mu >= 1 widens the feasible set to the whole quadrant."""
+def _wide_statement(bands, mu_edges: dict, points=()) -> str:
+    """Statement 2: mu >= 1 widens the feasible set to the whole quadrant; with the deepest
+    penetration of each compliant model's grasps at mu = 1.2, where the jam is held by the
+    contact's deformation."""
     # 2. mu >= 1 widens to the whole quadrant
     wide = [(_band(bands, m, 1.2), m) for m in TITLES]
     full = {m: (len(e) == 1 and e[0]["from_is_grid_end"] and e[0]["to_is_grid_end"]) for e, m in wide}
+    deepest = {}
+    for p in points:
+        if p is not None and p.parameters["mu"] == 1.2 and p.outcome == "goal" and p.model in TITLES and p.model != "quasistatic":
+            deepest[p.model] = max(deepest.get(p.model, 0.0), p.max_penetration)
+    held = (
+        " Under the compliant models the jam holds only through the contact's deformation: a finger that sticks on the "
+        "face is driven on toward its reference and sinks into the triangle, as deep at mu = 1.2 as "
+        + ", ".join(f"{m} {depth:.3g} m" for m, depth in deepest.items())
+        + " (the penetration table above); the rigid quasistatic model stops the finger instead."
+        if deepest
+        else ""
+    )
     return (
         "2. **mu >= 1 widens the feasible set to the whole quadrant.** At mu = 1.2 every ratio in [0.25, 4] "
         + ("grasps under the quasistatic model" if full["quasistatic"] else "does NOT grasp under the quasistatic model")
@@ -392,6 +458,7 @@ def _wide_statement(bands, mu_edges: dict) -> str:
         + ". Refined mu boundaries (ratios outside the mu < 1 band): "
         + ", ".join(f"{m}: {lo:.4f} .. {hi:.4f}" for m, (lo, hi) in mu_edges.items())
         + " (tan 45 degrees = 1: from mu = 1 the first finger sticks and jams the triangle)."
+        + held
     )
 
 

@@ -87,6 +87,7 @@ class Point:
     final: dict
     steps: int
     wall_s: float
+    max_penetration: float = 0.0  # the largest met at a step's start, m (`RolloutResult.max_penetration`)
 
 
 def _number(text: str, what: str) -> float:
@@ -232,7 +233,8 @@ def run_task(task: Task) -> Point:
     h = task.h or scenario.rung_settings(task.model.rung).h
     controls, durations = policy_controls(scenario, task.duration)
     out = rung.rollout(scenario, rung.initial_state(scenario), controls, durations, h, max_records=2, laws=True)
-    return Point(task.model.label, dict(task.parameters), out.outcome, out.t, out.status, out.state.named(scenario), out.steps, out.wall_s)
+    final = out.state.named(scenario)
+    return Point(task.model.label, dict(task.parameters), out.outcome, out.t, out.status, final, out.steps, out.wall_s, out.max_penetration)
 
 
 def _warm() -> None:
@@ -359,7 +361,7 @@ class SweepResult:
     def to_csv(self) -> str:
         names = [a.name for a in self.axes]
         coords = sorted({k for p in self.points if p is not None for k in p.final})
-        lines = [",".join(["model", *names, "outcome", "t", "status", "steps", *coords])]
+        lines = [",".join(["model", *names, "outcome", "t", "status", "steps", "max_penetration", *coords])]
         for p in self.points:
             if p is None:
                 continue
@@ -372,6 +374,7 @@ class SweepResult:
                         repr(p.t),
                         p.status,
                         str(p.steps),
+                        repr(p.max_penetration),
                         *(repr(p.final.get(c, float("nan"))) for c in coords),
                     ]
                 )

@@ -201,7 +201,8 @@ def test_sweep_command_writes_json_csv_and_plot(tmp_path):
     data = json.loads(done.stdout)
     assert data["complete"] and len(data["points"]) == 10 and data["boundaries"]
     assert json.loads((out / "sweep.json").read_text())["points"] == data["points"]
-    assert (out / "sweep.csv").read_text().splitlines()[0].startswith("model,v1,mu,outcome,t,status")
+    assert (out / "sweep.csv").read_text().splitlines()[0].startswith("model,v1,mu,outcome,t,status,steps,max_penetration,")
+    assert all(0.0 <= p["max_penetration"] < 1e-6 for p in data["points"])  # quasistatic-rigid: contacts met to round-off
     assert (out / "sweep.png").stat().st_size > 0 and (out / "sweep.svg").exists()
 
 
