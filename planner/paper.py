@@ -59,6 +59,8 @@ TITLES = {
     "elastic": "(c) dynamic, elastic impacts (C = 0)",
     "fingers": "(d) complete dynamic model with finger dynamics",
 }
+#: The report's tables' rows: (model label, title), the paper's four models and the well.
+ROWS = [*TITLES.items(), ("well", WELL_TITLE)]
 MUS = (0.3, 0.5, 0.8, 1.2)
 RATIOS = "v1=0.25:4:41:log"
 DURATION = 8.0  # s: the slowest finger (0.25 m/s) needs about 6 s to reach the triangle
@@ -226,6 +228,11 @@ def _fig5_panels(slices: dict) -> list:
     return panels
 
 
+def _mu_header() -> list[str]:
+    """The header of a table with a row per model and a column per mu."""
+    return ["| model | " + " | ".join(f"mu = {m:g}" for m in MUS) + " |", "|---|" + "---|" * len(MUS)]
+
+
 #: A run whose largest penetration exceeds this (m) is named under the penetration table.
 DEEP = 0.01
 
@@ -249,10 +256,9 @@ def _penetration_section(points) -> list[str]:
         "step's start: for a compliant model its contact's deformation (K = 1e6 N/m), which grows as long as a drive",
         "stiffer than the contact keeps pressing on a body that does not give way.",
         "",
-        "| model | " + " | ".join(f"mu = {m:g}" for m in MUS) + " |",
-        "|---|" + "---|" * len(MUS),
+        *_mu_header(),
     ]
-    for model, title in [*TITLES.items(), ("well", WELL_TITLE)]:
+    for model, title in ROWS:
         lines.append(f"| {title} | " + " | ".join(f"{deepest[(model, m)]:.2g}" if (model, m) in deepest else "-" for m in MUS) + " |")
     deep = {}
     for p in points:
@@ -303,7 +309,7 @@ def report(
         return os.path.relpath(p, doc_dir)
 
     lines = _report_intro(total, runs)
-    for model, title in [*TITLES.items(), ("well", WELL_TITLE)]:
+    for model, title in ROWS:
         lines.append(f"| {title} | " + " | ".join(_fmt(_band(bands, model, m)) for m in MUS) + " |")
     lines += ["", *_penetration_section(points)]
     lines += [
@@ -403,8 +409,7 @@ def _report_intro(total, runs: int) -> list[str]:
         "",
         "## Bands of successful speed ratios rho = v1 / v2",
         "",
-        "| model | " + " | ".join(f"mu = {m:g}" for m in MUS) + " |",
-        "|---|" + "---|" * len(MUS),
+        *_mu_header(),
     ]
 
 
