@@ -1185,7 +1185,9 @@ def cmd_submit(args: argparse.Namespace) -> int:
         print(json.dumps(job, indent=2))
     else:
         holds = plan is not None and plan.get("top_holds")
-        rungs = ", ".join(f"{r.get('label', r['rung'])} {r['ended']}" for r in job.get("rungs", [])) or "none"
+        from planner.plan_status import rung_label
+
+        rungs = ", ".join(f"{rung_label(r)} {r['ended']}" for r in job.get("rungs", [])) or "none"
         error = f": {job['error']}" if job.get("error") else ""
         print(f"job {job['id']}: {job['state']}{error}; rungs: {rungs}; top rung holds: {'yes' if holds else 'no'}")
         if job["result_available"]:
@@ -1196,6 +1198,7 @@ def cmd_submit(args: argparse.Namespace) -> int:
 def _job_progress(live: bool):
     """What `ladder submit --wait` shows of a job's events on stderr: one live line on a
     terminal, else one line per state, rung and end."""
+    from planner.plan_status import rung_label
 
     def show(event) -> None:
         data = event.data
@@ -1211,9 +1214,7 @@ def _job_progress(live: bool):
         text = {
             "state": lambda: f"{data.get('state')}" + (" again (the server restarted)" if data.get("requeued") else ""),
             "rung_started": lambda: f"planning: {data.get('rung')} ...",
-            "rung_ended": lambda: (
-                f"{data.get('label', data.get('rung'))}: {data.get('ended')} ({data.get('outcome')}, {data.get('iterations')} iterations)"
-            ),
+            "rung_ended": lambda: f"{rung_label(data)}: {data.get('ended')} ({data.get('outcome')}, {data.get('iterations')} iterations)",
             "cancel_requested": lambda: "cancel requested",
             "job_ended": lambda: f"ended: {data.get('state')}" + (f" ({data['error']})" if data.get("error") else ""),
         }.get(event.type)

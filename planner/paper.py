@@ -237,18 +237,24 @@ def _mu_header() -> list[str]:
 DEEP = 0.01
 
 
+def _deepest(points, keep=lambda p: True) -> dict:
+    """{(model, mu): the largest penetration} over the runs that `keep` takes."""
+    deepest: dict = {}
+    for p in points:
+        if p is not None and keep(p):
+            key = (p.model, p.parameters["mu"])
+            deepest[key] = max(deepest.get(key, 0.0), p.max_penetration)
+    return deepest
+
+
 def _penetration_section(points) -> list[str]:
     """The largest penetration met at a step's start over each model's runs at each mu (grid and
     refinement, every outcome), and where a grasp (goal) came with more than DEEP: a compliant
     model's penetration is its contact's deformation, which grows without bound where a drive
     stiffer than the contact presses on a body that cannot give way."""
-    points = [p for p in points if p is not None]
-    if not points:
+    deepest = _deepest(points)
+    if not deepest:
         return []
-    deepest: dict = {}
-    for p in points:
-        key = (p.model, p.parameters["mu"])
-        deepest[key] = max(deepest.get(key, 0.0), p.max_penetration)
     lines = [
         "## Largest penetration (m)",
         "",
@@ -260,20 +266,23 @@ def _penetration_section(points) -> list[str]:
     ]
     for model, title in ROWS:
         lines.append(f"| {title} | " + " | ".join(f"{deepest[(model, m)]:.2g}" if (model, m) in deepest else "-" for m in MUS) + " |")
-    deep = {}
+    grasps: dict = {}  # (model, mu): the grasps, and those deeper than DEEP
     for p in points:
-        if p.outcome == "goal" and p.max_penetration > DEEP:
-            deep.setdefault((p.model, p.parameters["mu"]), []).append(p)
-    if deep:
-        parts = []
-        order = [(model, mu) for model in [*TITLES, "well"] for mu in MUS if (model, mu) in deep]
-        for (model, mu), runs in ((key, deep[key]) for key in order):
-            total = sum(1 for p in points if p.model == model and p.parameters["mu"] == mu and p.outcome == "goal")
-            worst = max(runs, key=lambda p: p.max_penetration)
+        if p is not None and p.outcome == "goal":
+            runs = grasps.setdefault((p.model, p.parameters["mu"]), ([], []))
+            runs[0].append(p)
+            if p.max_penetration > DEEP:
+                runs[1].append(p)
+    parts = []
+    for key in ((model, mu) for model, _ in ROWS for mu in MUS):
+        every, deep = grasps.get(key, ([], []))
+        if deep:
+            worst = max(deep, key=lambda p: p.max_penetration)
             parts.append(
-                f"{model} at mu = {mu:g}: {len(runs)} of its {total} grasps (the deepest {worst.max_penetration:.3f} m, "
+                f"{key[0]} at mu = {key[1]:g}: {len(deep)} of its {len(every)} grasps (the deepest {worst.max_penetration:.3f} m, "
                 f"at rho = {worst.parameters['v1']:.3g})"
             )
+    if parts:
         lines += ["", f"Grasps reached with more than {DEEP:g} m of penetration: " + "; ".join(parts) + "."]
     return lines
 
@@ -443,10 +452,8 @@ def _wide_statement(bands, mu_edges: dict, points=()) -> str:
     # 2. mu >= 1 widens to the whole quadrant
     wide = [(_band(bands, m, 1.2), m) for m in TITLES]
     full = {m: (len(e) == 1 and e[0]["from_is_grid_end"] and e[0]["to_is_grid_end"]) for e, m in wide}
-    deepest = {}
-    for p in points:
-        if p is not None and p.parameters["mu"] == 1.2 and p.outcome == "goal" and p.model in TITLES and p.model != "quasistatic":
-            deepest[p.model] = max(deepest.get(p.model, 0.0), p.max_penetration)
+    grasped = _deepest(points, lambda p: p.outcome == "goal" and p.parameters["mu"] == 1.2)
+    deepest = {m: grasped[(m, 1.2)] for m in TITLES if m != "quasistatic" and (m, 1.2) in grasped}
     held = (
         " Under the compliant models the jam holds only through the contact's deformation: a finger that sticks on the "
         "face is driven on toward its reference and sinks into the triangle, as deep at mu = 1.2 as "

@@ -1,4 +1,6 @@
-"""How a planning search, and a rung of the ladder, ended: `PlanStatus`."""
+"""How a planning search, and a rung of the ladder, ended: `PlanStatus`; and the label of a rung's
+entry in plan.json or the service's events (`rung_label`), which the service's client reads
+without importing the planner."""
 
 from __future__ import annotations
 
@@ -68,3 +70,9 @@ _LABELS = {
     PlanStatus.STOPPED: "stopped",
     PlanStatus.ABORTED: "failed",
 }
+
+
+def rung_label(entry: dict) -> str:
+    """The label of a rung's entry in plan.json or of a rung_ended event (`planner.ladder.rung_json`
+    writes `RungReport.label`); one written before labels were: its rung's name."""
+    return entry.get("label", entry.get("rung"))

@@ -11,6 +11,7 @@ from pathlib import Path
 
 from models.geometry import read_obj
 from models.scenario import load_scenario
+from planner.plan_status import rung_label
 from planner.service.jobs import write_inputs
 
 
@@ -63,7 +64,7 @@ def _rung_view(scenario, rung: dict) -> dict:
         placements.append({name: _placement(at[name]) for name in moving})
     return {
         "rung": rung.get("rung"),
-        "label": rung.get("label", rung.get("rung")),  # a plan.json from before labels: the rung's name
+        "label": rung_label(rung),
         "ended": rung.get("ended"),
         "outcome": rung.get("outcome"),
         "times": times,
