@@ -117,6 +117,31 @@ def _speed_margins(bi, bf, nu, scale, out):
 
 
 @numba.njit(cache=True, inline="always")
+def step_outran(bi, bf, h, margin, nu_step, speed, moved):
+    """Whether a step whose positions moved at nu_step (the new velocity; with theta < 1 the blend
+    moves no faster than the larger of the two, and the old one is within its margin) carried
+    some body further than the detection before it allowed for: each pair is detected out to
+    margin plus both bodies' speed margins (speed, `_speed_margins` at the velocity detected
+    with), so a body that moved at most its own plus half the margin cannot have closed a
+    pair's gap unseen. A memoryless (quasistatic) or kinematic step's velocity is not the last
+    one's, so its detection can fall short. moved: (nb,) scratch, each body's bound over h."""
+    _speed_margins(bi, bf, nu_step, h, moved)
+    for b in range(bi.shape[0]):
+        if moved[b] > speed[b] + 0.5 * margin:
+            return True
+    return False
+
+
+@numba.njit(cache=True, inline="always")
+def widened_velocity(nu, nu_step, probe):
+    """probe = max(|nu|, |nu_step|) entrywise: a velocity whose speed bounds cover both (the
+    bound is monotone in each entry's magnitude), to detect a step's contacts again with
+    (`step_outran`)."""
+    for j in range(nu.shape[0]):
+        probe[j] = max(abs(nu[j]), abs(nu_step[j]))
+
+
+@numba.njit(cache=True, inline="always")
 def _halfspace_normal(bi, bf, q, h, pos):
     """World normal (nx, ny, nz) and offset of half-space body h."""
     lx, ly, lz = bf[h, BF_HSN], bf[h, BF_HSN + 1], bf[h, BF_HSN + 2]

@@ -42,7 +42,9 @@ from models.contact import (
     place_scripted,
     planar_scratch,
     scripted_bias,
+    step_outran,
     tangents_packed,
+    widened_velocity,
 )
 from models.contact_pgs import BODY_DOFS, _pgs_directions, pgs_work
 from models.kinematics import body_pose_3d, positions
@@ -468,6 +470,10 @@ def law_speeds(S, law, q, q_index, u, out):
 #: the outcome met with stop_at_outcome (the caller stops, that step not taken).
 FREE_DONE, FREE_HANDED_BACK, FREE_OUTCOME = 0, 1, 2
 
+#: How many times `rollout_kernel` takes a step again over the contacts its motion could reach
+#: (`models.contact.step_outran`) before it keeps the step as it is.
+WIDEN_TRIES = 3
+
 
 @numba.njit(cache=True, _nrt=False, error_model="numpy")  # no reference counts: none of its rebindings is counted
 def _free_run(
@@ -475,7 +481,7 @@ def _free_run(
     q_ref, u, q_index, v_index, kp, kd, lower, upper, rhs, blend, free_q, free_nu, free_q_ref, free_side, c_pair, c_psi, c_n,
     c_pa, c_pb, c_t, c_o, c_slot, first_slot, unsupported, pos, poses, speed, reach, axis, cores, pair_psi, no_impulse,
     no_friction, pair_force, pair_wrench, rec_t, rec_q, rec_nu, n_rec, record_every, max_records, steps, t, t0, outcome, stop_at_outcome,
-    warm_every, n_left, kinematic,
+    warm_every, n_left, kinematic, moved,
 ):  # fmt: skip
     """Up to n_left of `rollout_kernel`'s steps while no contact is detected, in one call: the
     same stages in the same order as the kernel's loop (detection, distances, classification,
@@ -491,7 +497,9 @@ def _free_run(
     free_side, whether a step of a new warm period (`Model.warm_period`) was taken or met the
     outcome, whose warm starts the caller drops: a free step reads and writes none of them; and
     the contacts and unsupported pairs detected at the step handed back, whose detection the
-    buffers hold: the caller does not detect them again)."""
+    buffers hold: the caller does not detect them again). A step that moved a body further than
+    its detection allowed for (`models.contact.step_outran`; moved: its scratch) is handed back
+    untaken, for the caller to take and detect again."""
     bi = S.bi
     cq, cnu, cq_ref = q, nu, q_ref
     taken, crossed = 0, False
@@ -516,6 +524,8 @@ def _free_run(
                 f_nu, f_q_ref,
             )  # fmt: skip
         if not ok:
+            return FREE_HANDED_BACK, taken, t, steps, n_rec, outcome, free_side, crossed, nc, n_unsupported
+        if _step_outran_in_run(bi, S.bf, h, CONTACT_MARGIN, f_nu, speed, moved):  # the caller's: it detects again
             return FREE_HANDED_BACK, taken, t, steps, n_rec, outcome, free_side, crossed, nc, n_unsupported
         free_side = 1 - free_side
         cq, cnu, cq_ref = f_q, f_nu, f_q_ref
@@ -565,6 +575,7 @@ _observe_in_run = _inlined(_observe, _distances=_distances_in_run, _classify_wit
 _assemble_in_run = _inlined(_assemble)
 _record_forces_in_run = _inlined(_record_forces)
 _free_step_in_run, _kinematic_free_step_in_run = _inlined(free_step_into), _inlined(kinematic_free_step_into)
+_step_outran_in_run = _inlined(step_outran)
 
 
 #: Which basis table a `_contact_run` left its caller with: the one passed in, the cold table,
@@ -579,7 +590,7 @@ def _contact_run(
     c_pb, warm_n, warm_t, warm_w, warm_slots, n_warm, first_slot, unsupported, pos, poses, speed, reach, axis, cores, pair_psi, pair_force,
     pair_wrench,
     rec_t, rec_q, rec_nu, n_rec, record_every, max_records, steps, t, t0, outcome, stop_at_outcome, warm_every, n_left, min_psi,
-    force_steps, sweeps, lcp_solves, max_size, pivots, max_residual,
+    force_steps, sweeps, lcp_solves, max_size, pivots, max_residual, moved,
 ):  # fmt: skip
     """Up to n_left of `rollout_kernel`'s contact steps while a warm step takes them (in space
     `models.stepper.spatial_pgs_step`, `models.stepper.spatial_warm_step`; in the plane
@@ -595,7 +606,10 @@ def _contact_run(
     same) and flips it, as the kernel's warm steps do. It hands a step back, with its detection, where it has no contact or an unsupported
     pair, where the outcome is met with stop_at_outcome, or where neither warm step takes it
     (tried: the warm step was tried there and did not take it, so the caller goes to the
-    general step without trying it again; the stages before it are repeated, the same).
+    general step without trying it again; the stages before it are repeated, the same), or
+    where the warm step moved a body further than its detection allowed for
+    (`models.contact.step_outran`; moved: its scratch; tried too: the caller takes the step and
+    detects again).
     Returns (why: CONTACT_DONE or CONTACT_HANDED_BACK; the steps taken, whose last state is
     on side 1 - side; t, steps, the records kept, the outcome, side, the basis table now
     (BASIS_PASSED, BASIS_COLD, or the side of W's results), whether auto switched to Lemke,
@@ -645,7 +659,7 @@ def _contact_run(
             warm, size, res, warm_pivots = planar_warm_step_on(
                 model, planar_fixed, h, q, nu, q_ref, u, nc, delta_n, delta_t, basis, side, whole
             )
-        if warm != WARM_DONE:
+        if warm != WARM_DONE or _step_outran_in_run(bi, bf, h, CONTACT_MARGIN, R.nu[side], speed, moved):
             return (
                 CONTACT_HANDED_BACK, taken, t, steps, n_rec, outcome, side, basis_from, step_solver.method == SOLVER_LEMKE, n_warm,
                 min_psi, force_steps, sweeps, lcp_solves, max_size, pivots, max_residual, nc, n_unsupported, True,
@@ -771,6 +785,12 @@ def rollout_kernel(
     # start and after each free step the loop takes, not while contacts persist
     free_runs = (kinematic or (constant_A and not limited)) and not scripted and not has_law
     try_free, detected, nc_back, unsupported_back = free_runs, False, 0, 0
+    # a step that moved a body further than its detection allowed for (`step_outran`) is taken
+    # again over the contacts detected at a velocity that covers its motion (probe), up to
+    # WIDEN_TRIES times, where that detection finds more (a memoryless or kinematic step's
+    # velocity is not the last one's: a pusher started at 0.5 m/s moves 5 cm in a 0.1 s step)
+    widen, moved, probe = 0, np.empty(bi.shape[0]), np.empty(nv)
+    side0, basis0, free_side0 = side, basis, free_side
     # runs of contact steps in one call (`_contact_run`), where a warm step takes them (in the
     # plane Lemke's: PGS's steps there are the general step's, which the run would hand back)
     planar_run = planar_cap > 0 and solver.method == SOLVER_LEMKE
@@ -789,14 +809,14 @@ def rollout_kernel(
             u = u.copy()  # the laws' speeds, step by step
         n_steps, i = int(np.round(durations[k] / h)), 0
         while i < n_steps:
-            detected, tried = False, False
-            if try_free and not (compliant and (delta_n.any() or delta_t.any())):
+            detected, tried = widen > 0, False  # (taken again: its detection is in the buffers)
+            if try_free and not detected and not (compliant and (delta_n.any() or delta_t.any())):
                 why, taken, t, steps, n_rec, outcome, free_side, crossed, nc_back, unsupported_back = _free_run(
                     S, g_op, g_index, g_lo, g_hi, u_op, u_index, u_lo, u_hi, stack, eps, theta, h, Ainv, M_const, rhs_const,
                     q, nu, q_ref, u, q_index, v_index, kp, kd, lower, upper, R.rhs, R.blend, free_q, free_nu, free_q_ref, free_side,
                     c_pair, c_psi, c_n, c_pa, c_pb, c_t, c_o, c_slot, first_slot, unsupported, pos, poses, speed, reach, axis, cores,
                     pair_psi, no_impulse, no_friction, pair_force, pair_wrench, rec_t, rec_q, rec_nu, n_rec, record_every, max_records,
-                    steps, t, t0, outcome, stop_at_outcome, warm_every, n_steps - i, kinematic,
+                    steps, t, t0, outcome, stop_at_outcome, warm_every, n_steps - i, kinematic, moved,
                 )  # fmt: skip
                 if taken > 0:
                     last = 1 - free_side
@@ -816,7 +836,7 @@ def rollout_kernel(
                     speed, reach, axis, cores, pair_psi, pair_force, pair_wrench, rec_t, rec_q, rec_nu, n_rec, record_every, max_records,
                     steps, t, t0,
                     outcome, stop_at_outcome, warm_every, n_steps - i, min_psi, force_steps, sweeps, lcp_solves, max_size, pivots,
-                    max_residual,
+                    max_residual, moved,
                 )  # fmt: skip
                 why, taken, t, steps, n_rec, outcome, side, basis_from, to_lemke, n_warm, min_psi, force_steps = run[:12]
                 sweeps, lcp_solves, max_size, pivots, max_residual, nc_back, unsupported_back, tried = run[12:]
@@ -841,6 +861,7 @@ def rollout_kernel(
                 n_warm = _drop_warm(n_warm, warm_slots, warm_n, warm_t, warm_w)
             if scripted:  # obstacles where they are at this time
                 place_scripted(bf, S.base_pos, S.base_quat, t0 + t)
+            side0, basis0, free_side0 = side, basis, free_side  # (a step taken again starts from these)
             # stage detect (SceneData crosses a call only in space, where detection needs it)
             n_unsupported = 0
             if detected:  # by `_free_run`, at this state: its buffers hold it
@@ -946,6 +967,23 @@ def rollout_kernel(
             if st != StepStatus.OK:
                 status = st
                 break
+            if widen < WIDEN_TRIES and step_outran(bi, bf, h, CONTACT_MARGIN, nu2, speed, moved):
+                widened_velocity(probe if widen > 0 else nu, nu2, probe)
+                if dimension == 3:
+                    nc_back, unsupported_back = detect_spatial_into(
+                        S, q, probe, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pos, speed, reach
+                    )
+                else:
+                    nc_back = detect_planar_into(
+                        bi, bf, verts, pi, q, probe, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, pos, poses, speed, reach, axis,
+                        cores,
+                    )  # fmt: skip
+                    unsupported_back = 0
+                if nc_back != nc or unsupported_back > 0:  # more contacts within its reach: the step taken again over them
+                    widen += 1
+                    side, basis, free_side = side0, basis0, free_side0
+                    continue
+            widen = 0
             q, nu, q_ref, delta_n, delta_t = q2, nu2, q_ref2, dn2, dt2
             force_steps += _record_forces(c_pair, c_n, c_t, c_o, p_n, p_t, h, pair_force, pair_wrench)
             t += h

@@ -95,6 +95,34 @@ def test_a_symmetric_squeeze_leaves_the_box_where_it_is(name, h):
     assert -0.1301 < named["left.y"] < -0.125
 
 
+@pytest.mark.parametrize(("name", "h"), RUNG_STEPS[:3])
+def test_a_pusher_started_from_rest_meets_the_box_within_its_first_step_not_inside_it(name, h):
+    """The memoryless and kinematic steps move at the commanded speed from the first step, which
+    the velocity the contacts were detected with (the last step's: zero at rest) does not
+    foresee: a pusher at rest half its first step's travel short of the face (0.5 m/s) moved
+    through it untouched, the box left where it was (models.contact.step_outran). Now the step
+    is taken again over the contacts its motion reaches: the sphere ends on the face
+    (box.x - pusher.x = 0.13 m, the half width plus the radius; less the compliant rung's
+    deformation, its impulse over h K + C) and the box moved by the rest."""
+    scenario = load_scenario(PUSH)
+    r = rung(scenario, name)
+    names = list(scenario.coordinates)
+    free = run(r, scenario, [0.5, 0.0], h, h, offset=0.5)  # beside the box: one free step's travel
+    travel = free.state.named(scenario)["pusher.x"] + 0.2
+    assert travel > 4 * 1e-3  # more than the contact margin (1 mm) can see from rest
+    state = r.initial_state(scenario)
+    q = state.q.copy()
+    q[names.index("pusher.x")] = -0.13 - travel / 2
+    state = replace(state, q=q, q_ref=q[[names.index(a) for a in scenario.actuated]].copy())
+    out = r.rollout(scenario, state, np.array([[0.5, 0.0]]), [h], h, stop_at_outcome=False)
+    named = out.state.named(scenario)
+    assert out.status == "ok" and out.steps == 1
+    k, pair = next((k, p) for k, p in enumerate(scenario.pairs) if {p.body_a, p.body_b} == {"box", "pusher"})
+    deformation = out.pair_force[k] * h / (h * pair.K + pair.C) if r.model.compliant else 0.0
+    assert named["box.x"] - named["pusher.x"] == pytest.approx(0.13 - deformation, abs=1e-9)
+    assert named["box.x"] > travel / 4  # pushed, not passed through
+
+
 #: Pusher offsets off the box's centre line (m) for the turn tests.
 OFFSETS = [0.02, 0.04, 0.06, 0.08]
 
