@@ -9,7 +9,10 @@ r x direction, r from the body's origin to its contact point). Only free DOFs ha
 
 Broadphase: a pair is skipped when its bounding spheres stay apart by more than one step
 can close: ``margin + h * (speed bound of A + speed bound of B)``, with a body's speed bound
-|v| + |w| * (its bounding radius). Two bodies that never move are never pairs.
+|v| + |w| * (its bounding radius). Two bodies that never move are never pairs. A rollout's
+step that moves a body further than its detection allowed for (a memoryless or kinematic
+step: its velocity is not the last one's) is taken again over the contacts its motion reaches
+(`step_outran`, `models.rollout.rollout_kernel`).
 
 Everything here runs in numba; `contact_frames` is the Python-facing convenience.
 """
