@@ -208,7 +208,8 @@ def detect_contacts_into(S, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, un
     unused). The rollout's runs, compiled without numba's runtime (`models.rollout._free_run`,
     `_contact_run`), call it; the loops compiled with it (`rollout_kernel`'s, `stage_loop`'s)
     dispatch on the dimension themselves, on the scene's arrays unpacked: there an inlined
-    helper taking the scene would count its 30-odd arrays' references every step."""
+    helper taking the scene would count its 30-odd arrays' references every step (`rollout_kernel`
+    calls it only to detect again for a step it takes again, `step_outran`)."""
     if S.dimension == 2:
         bi, bf, verts, pi = S.bi, S.bf, S.verts, S.pi
         nc = detect_planar_into(bi, bf, verts, pi, q, nu, h, margin, c_pair, c_psi, c_n, c_pa, c_pb, pos, poses, speed, reach, axis, cores)

@@ -790,7 +790,6 @@ def rollout_kernel(
     # WIDEN_TRIES times, where that detection finds more (a memoryless or kinematic step's
     # velocity is not the last one's: a pusher started at 0.5 m/s moves 5 cm in a 0.1 s step)
     widen, moved, probe = 0, np.empty(bi.shape[0]), np.empty(nv)
-    side0, basis0, free_side0 = side, basis, free_side
     # runs of contact steps in one call (`_contact_run`), where a warm step takes them (in the
     # plane Lemke's: PGS's steps there are the general step's, which the run would hand back)
     planar_run = planar_cap > 0 and solver.method == SOLVER_LEMKE
@@ -969,16 +968,9 @@ def rollout_kernel(
                 break
             if widen < WIDEN_TRIES and step_outran(bi, bf, h, CONTACT_MARGIN, nu2, speed, moved):
                 widened_velocity(probe if widen > 0 else nu, nu2, probe)
-                if dimension == 3:
-                    nc_back, unsupported_back = detect_spatial_into(
-                        S, q, probe, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pos, speed, reach
-                    )
-                else:
-                    nc_back = detect_planar_into(
-                        bi, bf, verts, pi, q, probe, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, pos, poses, speed, reach, axis,
-                        cores,
-                    )  # fmt: skip
-                    unsupported_back = 0
+                nc_back, unsupported_back = detect_contacts_into(
+                    S, q, probe, h, CONTACT_MARGIN, c_pair, c_psi, c_n, c_pa, c_pb, unsupported, pos, poses, speed, reach, axis, cores
+                )
                 if nc_back != nc or unsupported_back > 0:  # more contacts within its reach: the step taken again over them
                     widen += 1
                     side, basis, free_side = side0, basis0, free_side0

@@ -501,8 +501,8 @@ def _run_simulation(args: argparse.Namespace, scenario: Scenario, plan_controls,
 
 def _simulation_summary(args: argparse.Namespace, scenario: Scenario, result, h: float, duration: float) -> dict[str, Any]:
     """The simulate report: the run's outcome, final state, solver counters, the largest
-    penetration met at a step's start (m: a compliant contact's deformation, or a step that
-    carried a body into another) and parameters."""
+    penetration met at a step's start (m: a compliant contact's deformation, or a rigid contact's
+    first-order error at a large step) and parameters."""
     return {
         "file": str(scenario.path),
         "model": args.model,
