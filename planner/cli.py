@@ -387,6 +387,13 @@ def cmd_schema(args: argparse.Namespace) -> int:
 MAX_STEPS = 10**9
 
 
+def control_steps(durations, h: float) -> list[int]:
+    """The steps a run takes for each control's duration at step h: round(duration / h), as
+    the rollout kernel counts them (`models.rollout.rollout_kernel`), so a control shorter than
+    h / 2 takes none."""
+    return [round(float(d) / h) for d in np.atleast_1d(durations)]
+
+
 def read_plan(path: Path, scenario: Scenario) -> tuple[np.ndarray, np.ndarray]:
     """The top rung's controls and durations of a plan.json, which must be of this scene
     (same scenario name, contents after parameters, driven coordinates); else bad input."""
@@ -461,7 +468,25 @@ def _check_simulate_args(args: argparse.Namespace):
     total = 0
     if h is not None and duration is not None:
         durations = plan_controls[1] if plan_controls is not None else [duration]
-        total = sum(round(d / h) for d in durations)
+        per_control = control_steps(durations, h)
+        total = sum(per_control)
+        idle = [d for d, n in zip(durations, per_control) if n == 0]
+        if idle and plan_controls is not None:
+            problems.append(
+                Problem(
+                    "--step" if args.step is not None else "--plan",
+                    f"at h = {h:g}, {len(idle)} of the plan's {len(durations)} controls (the shortest {min(idle):g} s) "
+                    "would take no step (a control takes round(duration / h) steps); use a smaller --step",
+                )
+            )
+        elif idle:
+            problems.append(
+                Problem(
+                    "--step" if args.step is not None else "--duration" if args.duration is not None else "task.policy.duration",
+                    f"{duration:g} s at h = {h:g} is no step (a run takes round(duration / h) steps); "
+                    "use a smaller --step or a longer --duration",
+                )
+            )
         if total > MAX_STEPS:
             problems.append(
                 Problem(
@@ -738,7 +763,7 @@ def run_with_progress(rung, scenario, state, controls, durations, h, *, live: bo
     `steps_done`), and on a terminal a long one shows steps done / total, the rate and the time left."""
     from planner import interrupt
 
-    total = sum(round(d / h) for d in np.atleast_1d(durations))
+    total = sum(control_steps(durations, h))
     bar = None
     if live and total > PROGRESS_STEPS:
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
@@ -852,17 +877,16 @@ def sweep_point_problems(scenario: Scenario, texts: list[str], axes, models, fix
             else:
                 h = step or variant.rung_settings(model.rung).h
                 seconds = duration or (variant.spec.task.policy.duration if variant.spec.task.policy else 0.0)
+                key = "--step" if step else "--duration" if duration else "task.policy.duration"
                 if seconds / h > MAX_STEPS:
-                    key = "--step" if step else "--duration" if duration else "task.policy.duration"
-                    found.setdefault(
-                        (
-                            key,
-                            model.label,
-                            f"a run of {seconds:g} s at h = {h:g} is {seconds / h:.3g} steps, "
-                            f"more than the {MAX_STEPS:.0e} one run may take",
-                        ),
-                        [],
-                    ).append(where)
+                    steps = f"{seconds / h:.3g} steps"
+                    reason = f"a run of {seconds:g} s at h = {h:g} is {steps}, more than the {MAX_STEPS:.0e} one run may take"
+                elif control_steps(seconds, h)[0] == 0:
+                    reason = f"a run of {seconds:g} s at h = {h:g} is no step (a run takes round(duration / h) steps)"
+                else:
+                    reason = None
+                if reason is not None:
+                    found.setdefault((key, model.label, reason), []).append(where)
                     bad += 1
             if bad >= MAX_BAD_POINTS:
                 break

@@ -434,6 +434,40 @@ def test_simulate_refuses_an_absurd_number_of_steps():
 @pytest.mark.parametrize(
     "args, message",
     [
+        (["--step", "10"], "--step: 3 s at h = 10 is no step"),
+        (["--duration", "4e-5"], "--duration: 4e-05 s at h = 0.0001 is no step"),
+    ],
+)
+def test_simulate_refuses_a_run_that_takes_no_step(args, message):
+    # a step longer than twice the run rounds to no step: the run would end where it starts
+    # and report it as a simulation
+    result = ladder("simulate", TRIANGLE, "--model", "dynamic-rigid", *args)
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    assert result.stderr == (
+        f"error: {TRIANGLE}: {message} (a run takes round(duration / h) steps); use a smaller --step or a longer --duration\n"
+    )
+    assert result.stdout == ""
+    # the longest step that still takes one (3 s rounds to one step of 3.1 s)
+    one = ladder("simulate", TRIANGLE, "--model", "dynamic-rigid", "--step", "3.1", "--json")
+    assert one.returncode == 0, one.stderr
+    assert json.loads(one.stdout)["steps"] == 1
+
+
+def test_simulate_refuses_a_step_that_skips_a_plans_controls(tmp_path):
+    plan = _plan(tmp_path, "a")
+    durations = json.loads(plan.read_text())["rungs"][-1]["durations"]
+    step = 3 * max(durations)
+    result = ladder("simulate", TRIANGLE, "--param", "v1=0.8", "--plan", str(plan), "--model", "dynamic-compliant", "--step", f"{step!r}")
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    assert result.stderr == (
+        f"error: {TRIANGLE}: --step: at h = {step:g}, {len(durations)} of the plan's {len(durations)} controls "
+        f"(the shortest {min(durations):g} s) would take no step (a control takes round(duration / h) steps); use a smaller --step\n"
+    )
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
         (["plan", TRIANGLE, "--seed", "-1"], "--seed: must be between 0 and 4294967295, got -1"),
         (["plan", TRIANGLE, "--iterations", "0"], "--iterations: must be at least 1, got 0"),
         (["plan", TRIANGLE, "--time-limit", "0"], "--time-limit: must be a positive number, got 0.0"),

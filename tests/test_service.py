@@ -115,6 +115,10 @@ def test_bad_options_and_parameters_are_422_named_as_in_the_request(idle):
     assert r.status_code == 422 and "nope" in r.json()["detail"]
     r = submit(idle, {"kind": "simulate", "scenario": FREE, "options": {}})
     assert r.status_code == 422 and r.json()["problems"][0]["key"] == "options.model"
+    r = submit(idle, {"kind": "simulate", "scenario": FREE, "options": {"model": "dynamic-rigid", "step": 20.0}})
+    assert r.status_code == 422 and [(p["key"], p["reason"]) for p in r.json()["problems"]] == [
+        ("options.step", "5 s at h = 20 is no step (a run takes round(duration / h) steps); use a smaller --step or a longer --duration")
+    ]
     assert submit(idle, {"kind": "sweep", "scenario": FREE}).status_code == 422
     r = submit(idle, {"kind": "bogus", "scenario": FREE, "extra": 1})  # not what the API's description allows: the same shape
     assert r.status_code == 422 and [p["key"] for p in r.json()["problems"]] == ["body.kind", "body.extra"]
@@ -369,6 +373,9 @@ def test_bad_sweep_jobs_are_422_named_as_in_the_request(idle):
     assert problems({"grid": ["bogus=1:2:3"], "model": "kinematic"})[0].startswith("options.grid bogus: not a design parameter")
     assert problems({"grid": ["v1=1:2:3"], "model": "nope"})[0].startswith("options.model")
     assert problems({"grid": ["v1=0.1:4:200", "mu=0:1:100"], "model": "kinematic"})[0].startswith("options.grid: 20,000 runs")
+    assert problems({"grid": ["v1=1:2:3"], "model": "kinematic", "step": 10.0}) == [
+        "options.step: kinematic at v1=1 and 2 more grid points: a run of 3 s at h = 10 is no step (a run takes round(duration / h) steps)"
+    ]
     no_policy = TRIANGLE[: TRIANGLE.index("[task.policy]")] + TRIANGLE[TRIANGLE.index("[ladder]") :]
     assert problems({"grid": ["v1=1:2:3"], "model": "kinematic"}, no_policy) == [
         "task.policy: a sweep runs the scenario's policy, and this file has none"

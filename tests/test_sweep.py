@@ -216,6 +216,8 @@ def test_sweep_command_writes_json_csv_and_plot(tmp_path):
         (["--grid", "v1=0.5:1:3", "--model", "dynamic-rigid[Q=1]"], "--model dynamic-rigid"),
         (["--grid", "v1=0.5:1:3", "--workers", "0"], "--workers"),
         (["--grid", "v1=0.5:1:3", "--executor", "tcp://x:1"], "--executor"),
+        (["--grid", "v1=0.5:1:3", "--step", "10"], "--step: quasistatic-rigid at v1=0.5 and 2 more grid points: a run of 3 s at h = 10"),
+        (["--grid", "v1=0.5:1:3", "--duration", "1e-6"], "--duration: quasistatic-rigid at v1=0.5 and 2 more grid points: a run of 1e-06"),
     ],
 )
 def test_bad_sweep_input_is_exit_2_naming_the_key_and_writes_nothing(tmp_path, args, key):
