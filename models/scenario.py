@@ -521,6 +521,7 @@ def _derive(spec: ScenarioSpec, parameters: Mapping[str, float], path: Path) -> 
     problems += _check_touch_tolerance("contact.touch_tolerance", spec.contact.touch_tolerance)
     problems += _check_task(spec, coordinates, actuated, names, _pair_status(spec))
     problems += _check_ladder(spec)
+    problems += _check_expected_runs(spec)
     problems += _check_limits(spec, coordinates, start, dim)
     if problems:
         raise ScenarioError(path, problems)
@@ -793,6 +794,27 @@ def _exact_cone_problems(spec: ScenarioSpec, rung, key: str) -> list[Problem]:
     limited = [f"{b.name}.{dof}" for b in spec.bodies for dof, d in b.actuators.items() if d.max_force is not None]
     if limited:
         out.append(Problem(f"{key}.friction_cone", f"the exact cone's PGS does not take force-limited drives ({', '.join(limited)})"))
+    return out
+
+
+def _check_expected_runs(spec: ScenarioSpec) -> list[Problem]:
+    """Each `[expect.policy]` rung's run of the policy (at the rung's h, as `pytest scenarios/`
+    runs it) takes a step: a run takes round(duration / h), so a policy shorter than h / 2
+    would end where it starts and be judged there."""
+    policy = spec.task.policy
+    if spec.expect is None or policy is None:
+        return []
+    out = []
+    for name in spec.expect.policy:
+        h = resolve_rung_settings(spec.ladder, name).h
+        if h is not None and round(policy.duration / h) == 0:
+            out.append(
+                Problem(
+                    key_path(("expect", "policy", name)),
+                    f"the policy's {policy.duration:g} s (task.policy.duration) at {name}'s h = {h:g} is no step "
+                    "(a run takes round(duration / h) steps)",
+                )
+            )
     return out
 
 
