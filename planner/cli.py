@@ -514,7 +514,11 @@ def _run_simulation(args: argparse.Namespace, scenario: Scenario, plan_controls,
         announce_compile()
         rung.rollout(scenario, state, controls[:1], [h], h)  # load the compiled kernels before timing
         if not args.json or total > PROGRESS_STEPS:
-            print(f"simulating {total:,} steps of {args.model} (h = {h:g}, {duration:g} s; Ctrl-C stops)", file=sys.stderr, flush=True)
+            # each control runs whole steps (`control_steps`): say so where that is not the duration asked for
+            whole = abs(total * h - duration) <= 1e-9 * duration
+            span = f"{duration:g} s" if whole else f"{duration:g} s run as {total * h:g} s of whole steps"
+            steps = f"{total:,} step{'' if total == 1 else 's'}"
+            print(f"simulating {steps} of {args.model} (h = {h:g}, {span}; Ctrl-C stops)", file=sys.stderr, flush=True)
         try:
             interrupt.check()
             return run_with_progress(rung, scenario, state, controls, durations, h, live=live, laws=laws)
@@ -849,7 +853,7 @@ MAX_BAD_POINTS = 1000
 def sweep_point_problems(scenario: Scenario, texts: list[str], axes, models, fixed: dict, step, duration) -> list[Problem]:
     """Every run of a sweep checked before any starts: the scenario with the point's and the
     model's parameters applied must load (the file's validation), and the run must not take
-    more than MAX_STEPS steps. A problem names the --grid value(s) (or --model, or the step)
+    more than MAX_STEPS steps nor none. A problem names the --grid value(s) (or --model, or the step)
     responsible, the first point it holds at and how many more points it holds at."""
     from planner import sweep as sw
 

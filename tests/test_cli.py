@@ -420,6 +420,12 @@ def test_simulate_says_how_many_steps_up_front():
     result = ladder("simulate", TRIANGLE, "--model", "kinematic", "--param", "v1=0.8")
     assert result.returncode == 0, result.stderr
     assert "simulating 300 steps of kinematic (h = 0.01, 3 s; Ctrl-C stops)" in result.stderr
+    # a duration that is not a whole number of steps runs round(duration / h) of them, and says so
+    rounded = ladder("simulate", TRIANGLE, "--model", "quasistatic-rigid", "--step", "0.7")
+    assert rounded.returncode == 0, rounded.stderr
+    assert "simulating 4 steps of quasistatic-rigid (h = 0.7, 3 s run as 2.8 s of whole steps; Ctrl-C stops)" in rounded.stderr
+    one = ladder("simulate", TRIANGLE, "--model", "quasistatic-rigid", "--step", "3.1")
+    assert "simulating 1 step of quasistatic-rigid (h = 3.1, 3 s run as 3.1 s of whole steps; Ctrl-C stops)" in one.stderr
 
 
 def test_simulate_refuses_an_absurd_number_of_steps():
