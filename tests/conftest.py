@@ -14,6 +14,9 @@ settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "repeatable"))
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ROOT / "scenarios"
 DATA = Path(__file__).resolve().parent / "data"
+# tests/data holds the tests' input files, not tests: the scenario plugin would collect a file
+# with an [expect] table there (tests/data/bad/expect_policy_no_step.toml is one, meant to fail to load)
+collect_ignore = ["data"]
 
 
 def perf_map_entries(path: Path) -> list[tuple[int, int, str]]:
