@@ -506,6 +506,19 @@ def _run_simulation(args: argparse.Namespace, scenario: Scenario, plan_controls,
     from planner import interrupt
 
     rung = rung_for(scenario, args.model)
+    if args.model not in [r.model for r in scenario.spec.ladder.rungs] and not args.json:
+        # its settings are then the family's, which the file does not show: say which
+        settings, model = scenario.rung_settings(args.model), rung.model
+        quasistatic = model.eps == 0.0 and not model.kinematic
+        print(
+            f"{args.model} is not in the scenario's ladder, so it runs at its family's defaults: h = {settings.h:g} "
+            f"(unless --step), {settings.contact_solver}"
+            + (f", {settings.friction_directions} friction directions" if scenario.spec.scene.dimension == 3 else "")
+            + (f", quasistatic inertia scale {model.quasistatic_inertia:g}" if quasistatic else "")
+            + "; a [[ladder.rungs]] entry would set them (and add the rung to the ladder)",
+            file=sys.stderr,
+            flush=True,
+        )
     state = rung.initial_state(scenario)
     laws = plan_controls is None  # the policy's feedback laws (a plan's controls are open loop)
     controls, durations = plan_controls if plan_controls is not None else policy_controls(scenario, duration)

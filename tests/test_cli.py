@@ -230,6 +230,22 @@ def test_simulate_runs_a_rung_the_ladder_does_not_list_at_the_rungs_default_step
     result = ladder("simulate", str(SCENARIOS / "two_finger_triangle.toml"), "--model", "dynamic-rigid", "--json")
     assert result.returncode == 0, result.stderr
     assert json.loads(result.stdout)["h"] == scenario.rung_settings("dynamic-rigid").h == 1e-4
+    # and says so, with the settings the file does not show
+    said = ladder("simulate", str(SCENARIOS / "two_finger_triangle.toml"), "--model", "dynamic-rigid", "--duration", "0.01")
+    assert said.returncode == 0, said.stderr
+    assert said.stderr.splitlines()[0] == (
+        "dynamic-rigid is not in the scenario's ladder, so it runs at its family's defaults: h = 0.0001 (unless --step), lemke; "
+        "a [[ladder.rungs]] entry would set them (and add the rung to the ladder)"
+    )
+    listed = ladder("simulate", str(SCENARIOS / "two_finger_triangle.toml"), "--model", "dynamic-compliant", "--duration", "0.01")
+    assert listed.returncode == 0 and "not in the scenario's ladder" not in listed.stderr
+    box = ladder("simulate", str(SCENARIOS / "box_push_3d.toml"), "--model", "quasistatic-compliant", "--duration", "0.01")
+    assert box.returncode == 0, box.stderr
+    assert box.stderr.splitlines()[0] == (
+        "quasistatic-compliant is not in the scenario's ladder, so it runs at its family's defaults: h = 0.001 (unless --step), "
+        "lemke, 4 friction directions, quasistatic inertia scale 1e-06; a [[ladder.rungs]] entry would set them (and add the rung "
+        "to the ladder)"
+    )
 
 
 @pytest.mark.parametrize(
