@@ -506,19 +506,9 @@ def _run_simulation(args: argparse.Namespace, scenario: Scenario, plan_controls,
     from planner import interrupt
 
     rung = rung_for(scenario, args.model)
-    if args.model not in [r.model for r in scenario.spec.ladder.rungs] and not args.json:
-        # its settings are then the family's, which the file does not show: say which
-        settings, model = scenario.rung_settings(args.model), rung.model
-        quasistatic = model.eps == 0.0 and not model.kinematic
-        print(
-            f"{args.model} is not in the scenario's ladder, so it runs at its family's defaults: h = {settings.h:g} "
-            f"(unless --step), {settings.contact_solver}"
-            + (f", {settings.friction_directions} friction directions" if scenario.spec.scene.dimension == 3 else "")
-            + (f", quasistatic inertia scale {model.quasistatic_inertia:g}" if quasistatic else "")
-            + "; a [[ladder.rungs]] entry would set them (and add the rung to the ladder)",
-            file=sys.stderr,
-            flush=True,
-        )
+    note = unlisted_rung_note(scenario, args.model)
+    if note and not args.json:
+        print(note, file=sys.stderr, flush=True)
     state = rung.initial_state(scenario)
     laws = plan_controls is None  # the policy's feedback laws (a plan's controls are open loop)
     controls, durations = plan_controls if plan_controls is not None else policy_controls(scenario, duration)
@@ -539,6 +529,25 @@ def _run_simulation(args: argparse.Namespace, scenario: Scenario, plan_controls,
             done = getattr(stop, "steps_done", 0)
             print(f"interrupted after {done:,} of {total:,} steps; nothing written", file=sys.stderr, flush=True)
             return None
+
+
+def unlisted_rung_note(scenario: Scenario, name: str) -> str | None:
+    """What a rung the scenario's ladder does not list runs at (its family's defaults, which
+    the file does not show); None for a listed rung."""
+    from models.rungs import rung_for
+
+    model = rung_for(scenario, name).model
+    if model is None or name in [r.model for r in scenario.spec.ladder.rungs]:
+        return None
+    settings = scenario.rung_settings(name)
+    quasistatic = model.eps == 0.0 and not model.kinematic
+    return (
+        f"{name} is not in the scenario's ladder, so it runs at its family's defaults: h = {settings.h:g} "
+        f"(unless --step), {settings.contact_solver}"
+        + (f", {settings.friction_directions} friction directions" if scenario.spec.scene.dimension == 3 else "")
+        + (f", quasistatic inertia scale {model.quasistatic_inertia:g}" if quasistatic else "")
+        + "; a [[ladder.rungs]] entry would set them (and add the rung to the ladder)"
+    )
 
 
 def _simulation_summary(args: argparse.Namespace, scenario: Scenario, result, h: float, duration: float) -> dict[str, Any]:
@@ -1034,6 +1043,10 @@ def _run_sweep(args: argparse.Namespace, scenario: Scenario, fixed: dict, axes, 
     where = args.executor or f"{args.workers or os.cpu_count() or 1} local workers"
     if not args.json:
         print(f"sweeping {runs} runs on {where} (Ctrl-C stops and keeps what is done)", file=sys.stderr, flush=True)
+        for name in dict.fromkeys(m.rung for m in models):
+            note = unlisted_rung_note(scenario, name)
+            if note:
+                print(note, file=sys.stderr, flush=True)
         announce_compile()
     try:
         with interrupt.deferred(), sw.Executor(args.workers, args.executor) as executor:

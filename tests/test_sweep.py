@@ -253,6 +253,17 @@ def sweep_command(tmp_path, *args, timeout=120):
     )
 
 
+def test_sweep_names_the_defaults_of_a_rung_the_ladder_does_not_list(tmp_path):
+    # the paper's scene lists kinematic, quasistatic-rigid and dynamic-compliant, not dynamic-rigid
+    done = sweep_command(tmp_path, "--grid", "v1=0.8,1", "--model", "kinematic,dynamic-rigid[mu=0.3]", "--duration", "0.01")
+    assert done.returncode == 0, done.stderr
+    notes = [line for line in done.stderr.splitlines() if "is not in the scenario's ladder" in line]
+    assert notes == [
+        "dynamic-rigid is not in the scenario's ladder, so it runs at its family's defaults: h = 0.0001 (unless --step), lemke; "
+        "a [[ladder.rungs]] entry would set them (and add the rung to the ladder)"
+    ]
+
+
 @pytest.mark.parametrize(
     "args, message",
     [
