@@ -531,9 +531,9 @@ def _run_simulation(args: argparse.Namespace, scenario: Scenario, plan_controls,
             return None
 
 
-def unlisted_rung_note(scenario: Scenario, name: str) -> str | None:
+def unlisted_rung_note(scenario: Scenario, name: str, step_flag: bool = True) -> str | None:
     """What a rung the scenario's ladder does not list runs at (its family's defaults, which
-    the file does not show); None for a listed rung."""
+    the file does not show); None for a listed rung. step_flag: the command takes --step."""
     from models.rungs import rung_for
 
     model = rung_for(scenario, name).model
@@ -542,8 +542,9 @@ def unlisted_rung_note(scenario: Scenario, name: str) -> str | None:
     settings = scenario.rung_settings(name)
     quasistatic = model.eps == 0.0 and not model.kinematic
     return (
-        f"{name} is not in the scenario's ladder, so it runs at its family's defaults: h = {settings.h:g} "
-        f"(unless --step), {settings.contact_solver}"
+        f"{name} is not in the scenario's ladder, so it runs at its family's defaults: h = {settings.h:g}"
+        + (" (unless --step)" if step_flag else "")
+        + f", {settings.contact_solver}"
         + (f", {settings.friction_directions} friction directions" if scenario.spec.scene.dimension == 3 else "")
         + (f", quasistatic inertia scale {model.quasistatic_inertia:g}" if quasistatic else "")
         + "; a [[ladder.rungs]] entry would set them (and add the rung to the ladder)"
@@ -641,6 +642,11 @@ def _run_plan(args: argparse.Namespace, scenario: Scenario, names: list[str]):
     """Run the ladder over `names`, showing progress on stderr; Ctrl-C ends the rung under way."""
 
     live = sys.stderr.isatty() and not args.json
+    if not args.json:
+        for name in names:
+            note = unlisted_rung_note(scenario, name, step_flag=False)
+            if note:
+                print(note, file=sys.stderr, flush=True)
     budgets = {n: args.iterations if args.iterations is not None else scenario.rung_settings(n).iterations for n in names}
     flat_budget = sum(budgets.values())
 

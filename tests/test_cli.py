@@ -220,7 +220,7 @@ def test_ladder_writes_a_perf_map_when_asked(tmp_path):
         path.unlink(missing_ok=True)
 
 
-def test_simulate_runs_a_rung_the_ladder_does_not_list_at_the_rungs_default_step():
+def test_simulate_runs_a_rung_the_ladder_does_not_list_at_the_rungs_default_step(tmp_path):
     """The paper's scene lists no dynamic-rigid rung: simulate takes its step where plan, sweep
     and the pytest plugin do (Scenario.rung_settings: the family's default)."""
     from models.scenario import load_scenario
@@ -239,6 +239,16 @@ def test_simulate_runs_a_rung_the_ladder_does_not_list_at_the_rungs_default_step
     )
     listed = ladder("simulate", str(SCENARIOS / "two_finger_triangle.toml"), "--model", "dynamic-compliant", "--duration", "0.01")
     assert listed.returncode == 0 and "not in the scenario's ladder" not in listed.stderr
+    # plan with --rungs naming it (plan takes no --step)
+    planned = ladder(
+        "plan", str(SCENARIOS / "two_finger_triangle.toml"), "--rungs", "geometric,dynamic-rigid", "--param", "v1=0.8", "--seed", "2",
+        "--iterations", "300", "--out", str(tmp_path / "p"),
+    )  # fmt: skip
+    assert planned.returncode == 0, planned.stderr
+    assert planned.stderr.splitlines()[0] == (
+        "dynamic-rigid is not in the scenario's ladder, so it runs at its family's defaults: h = 0.0001, lemke; "
+        "a [[ladder.rungs]] entry would set them (and add the rung to the ladder)"
+    )
     box = ladder("simulate", str(SCENARIOS / "box_push_3d.toml"), "--model", "quasistatic-compliant", "--duration", "0.01")
     assert box.returncode == 0, box.stderr
     assert box.stderr.splitlines()[0] == (
