@@ -11,6 +11,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 
 @dataclass(frozen=True)
 class RungDefinition:
@@ -50,3 +52,10 @@ def definition(name: str) -> RungDefinition:
         if rung.name == name:
             return rung
     raise KeyError(name)
+
+
+def control_steps(durations, h: float) -> list[int]:
+    """The steps a run takes for each control's duration at step h: round(duration / h), as
+    the rollout kernel counts them (`models.rollout.rollout_kernel`), so a control shorter than
+    h / 2 takes none."""
+    return [round(float(d) / h) for d in np.atleast_1d(durations)]

@@ -25,7 +25,7 @@ import numpy as np
 
 from models import geometry as geo
 from models.contact import CONTACT_MARGIN, has_script, pair_distance_buffers, pair_min_distances, pair_min_distances_into
-from models.family import FAMILY
+from models.family import FAMILY, control_steps
 from models.kernel_cache import compile_ahead
 from models.kinematics import PI_INERT, SceneData, compile_scene, kernel_array
 from models.predicates import OP_TOUCH, Program, compile_predicate, evaluate_with
@@ -490,7 +490,7 @@ class Rung:
         where the time has got to, so scripted obstacles move on)."""
         durations = np.atleast_1d(np.asarray(durations, float))
         controls = np.asarray(controls, float).reshape(len(durations), len(scenario.actuated))
-        per_control = [int(np.round(d / h)) for d in durations]
+        per_control = control_steps(durations, h)
         total = sum(per_control)
         record_every = max(1, int(np.round(durations.sum() / h)) // max(max_records - 2, 1))
         cold_starts = self.model is not None and self.solver.method != SOLVER_LEMKE

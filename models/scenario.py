@@ -26,7 +26,7 @@ from pydantic import ValidationError
 from models import geometry as geo
 from models import messages
 from models.expressions import ExpressionError, evaluate
-from models.family import RUNG_NAMES, definition
+from models.family import RUNG_NAMES, control_steps, definition
 from models.schema import (
     CONTROL_PLANNERS,
     DOF_NAMES,
@@ -807,7 +807,7 @@ def _check_expected_runs(spec: ScenarioSpec) -> list[Problem]:
     out = []
     for name in spec.expect.policy:
         h = resolve_rung_settings(spec.ladder, name).h
-        if h is not None and round(policy.duration / h) == 0:
+        if h is not None and control_steps(policy.duration, h)[0] == 0:
             out.append(
                 Problem(
                     key_path(("expect", "policy", name)),

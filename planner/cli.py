@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from models import perfmap
-from models.family import PROPAGATING_RUNGS, RUNG_NAMES
+from models.family import PROPAGATING_RUNGS, RUNG_NAMES, control_steps
 from models.kernel_cache import kernels_cached
 from models.scenario import Problem, Scenario, ScenarioError, load_scenario, parse_overrides
 from models.schema import CONTROL_PLANNERS
@@ -385,13 +385,6 @@ def cmd_schema(args: argparse.Namespace) -> int:
 
 #: The most steps one simulate run (or one sweep run) may take: more is a typo in --step.
 MAX_STEPS = 10**9
-
-
-def control_steps(durations, h: float) -> list[int]:
-    """The steps a run takes for each control's duration at step h: round(duration / h), as
-    the rollout kernel counts them (`models.rollout.rollout_kernel`), so a control shorter than
-    h / 2 takes none."""
-    return [round(float(d) / h) for d in np.atleast_1d(durations)]
 
 
 def read_plan(path: Path, scenario: Scenario) -> tuple[np.ndarray, np.ndarray]:
