@@ -513,8 +513,7 @@ def _run_simulation(args: argparse.Namespace, scenario: Scenario, plan_controls,
             # each control runs whole steps (`control_steps`): say so where that is not the duration asked for
             whole = abs(total * h - duration) <= 1e-9 * duration
             span = f"{duration:g} s" if whole else f"{duration:g} s run as {total * h:g} s of whole steps"
-            steps = f"{total:,} step{'' if total == 1 else 's'}"
-            print(f"simulating {steps} of {args.model} (h = {h:g}, {span}; Ctrl-C stops)", file=sys.stderr, flush=True)
+            print(f"simulating {counted(total, 'step')} of {args.model} (h = {h:g}, {span}; Ctrl-C stops)", file=sys.stderr, flush=True)
         try:
             interrupt.check()
             return run_with_progress(rung, scenario, state, controls, durations, h, live=live, laws=laws)
@@ -522,6 +521,11 @@ def _run_simulation(args: argparse.Namespace, scenario: Scenario, plan_controls,
             done = getattr(stop, "steps_done", 0)
             print(f"interrupted after {done:,} of {total:,} steps; nothing written", file=sys.stderr, flush=True)
             return None
+
+
+def counted(n: int, noun: str) -> str:
+    """`n noun`, the noun plural unless n is 1, the count with thousands separators: 1 step, 14,779 steps."""
+    return f"{n:,} {noun}{'' if n == 1 else 's'}"
 
 
 def unlisted_rung_note(scenario: Scenario, name: str, step_flag: bool = True) -> str | None:
@@ -857,9 +861,9 @@ def print_simulation(summary: dict[str, Any]) -> None:
     console.print(table)
     rate = summary["steps_per_s"]
     console.print(
-        f"{summary['steps']} steps in {summary['wall_s']:.3f} s"
+        f"{counted(summary['steps'], 'step')} in {summary['wall_s']:.3f} s"
         + (f" ({rate:,.0f} steps/s)" if rate else "")
-        + f"; {summary['lcp_solves']} LCP solves, {summary['pivots']} pivots, "
+        + f"; {counted(summary['lcp_solves'], 'LCP solve')}, {counted(summary['pivots'], 'pivot')}, "
         f"largest LCP {summary['max_lcp_size']}, max residual {summary['max_residual']:.2e}, "
         f"largest penetration {summary['max_penetration']:.2e} m"
     )

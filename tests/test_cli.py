@@ -5,6 +5,7 @@ from __future__ import annotations
 import errno
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -452,6 +453,9 @@ def test_simulate_says_how_many_steps_up_front():
     assert "simulating 4 steps of quasistatic-rigid (h = 0.7, 3 s run as 2.8 s of whole steps; Ctrl-C stops)" in rounded.stderr
     one = ladder("simulate", TRIANGLE, "--model", "quasistatic-rigid", "--step", "3.1")
     assert "simulating 1 step of quasistatic-rigid (h = 3.1, 3 s run as 3.1 s of whole steps; Ctrl-C stops)" in one.stderr
+    # the summary counts in the same words: "1 step", "1 LCP solve" (the only step's)
+    assert re.search(r"^1 step in [0-9.]+ s .*; 1 LCP solve, [0-9]+ pivots?, ", one.stdout, re.M), one.stdout
+    assert re.search(r"^[0-9,]+ steps in [0-9.]+ s .*; [0-9,]+ LCP solves, ", result.stdout, re.M), result.stdout
 
 
 def test_simulate_refuses_an_absurd_number_of_steps():

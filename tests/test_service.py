@@ -117,7 +117,18 @@ def test_bad_options_and_parameters_are_422_named_as_in_the_request(idle):
     assert r.status_code == 422 and r.json()["problems"][0]["key"] == "options.model"
     r = submit(idle, {"kind": "simulate", "scenario": FREE, "options": {"model": "dynamic-rigid", "step": 20.0}})
     assert r.status_code == 422 and [(p["key"], p["reason"]) for p in r.json()["problems"]] == [
-        ("options.step", "5 s at h = 20 is no step (a run takes round(duration / h) steps); use a smaller --step or a longer --duration")
+        (
+            "options.step",
+            "5 s at h = 20 is no step (a run takes round(duration / h) steps); use a smaller options.step or a longer options.duration",
+        )
+    ]
+    r = submit(idle, {"kind": "simulate", "scenario": FREE, "options": {"model": "dynamic-rigid", "step": 1e-9}})
+    assert r.status_code == 422 and [(p["key"], p["reason"]) for p in r.json()["problems"]] == [
+        (
+            "options.step",
+            "5 s at h = 1e-09 is 5e+09 steps, more than the 1e+09 one run may take; "
+            "use a larger options.step or a shorter options.duration",
+        )
     ]
     assert submit(idle, {"kind": "sweep", "scenario": FREE}).status_code == 422
     r = submit(idle, {"kind": "bogus", "scenario": FREE, "extra": 1})  # not what the API's description allows: the same shape

@@ -15,6 +15,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import re
 import tempfile
 import threading
 import tomllib
@@ -196,6 +197,17 @@ def _cli_key(key: str) -> str:
     return key
 
 
+def _cli_reason(kind: str, reason: str) -> str:
+    """A CLI problem's advice in the request's words: "use a smaller --step" -> "use a smaller
+    options.step", for the options this kind of job takes (other text is left as it is)."""
+
+    def key(match: re.Match) -> str:
+        name = _cli_key(match[0])
+        return name if name.removeprefix("options.") in OPTIONS[kind] else match[0]
+
+    return re.sub(r"(?<![\w-])--[a-z][a-z-]*", key, reason)
+
+
 def cli_args(kind: str, path: Path, parameters: dict, options: dict, out: Path) -> SimpleNamespace:
     """The namespace `ladder plan` / `ladder simulate` / `ladder sweep` would parse for this job."""
     param = [f"{k}={float(v)!r}" for k, v in parameters.items()]
@@ -268,7 +280,7 @@ def check(kind: str, path: Path, parameters: dict, options: dict, out: Path) -> 
         else:
             checked = cli._check_simulate_args(args)
     except ScenarioError as exc:
-        raise ScenarioError(exc.file, [Problem(_cli_key(p.key), p.reason) for p in exc.problems]) from None
+        raise ScenarioError(exc.file, [Problem(_cli_key(p.key), _cli_reason(kind, p.reason)) for p in exc.problems]) from None
     return args, checked
 
 
