@@ -10,6 +10,7 @@ added to `models.schema` needs nothing here.
 
 from __future__ import annotations
 
+import difflib
 import types
 from collections.abc import Callable, Mapping
 from typing import Annotated, Any, Literal, Union, get_args, get_origin
@@ -194,9 +195,35 @@ def _entries(n: Any) -> str:
     return f"{n} {'entry' if n == 1 else 'entries'}"
 
 
-def reason(err: Mapping[str, Any], annotation: Any, shown: Callable[[Any], str] = got) -> tuple[str, str]:
+def keys_at(root: type[BaseModel], loc: tuple) -> tuple[str, ...]:
+    """The keys the table at `loc` (an error location of `root`) takes, as a file spells them;
+    empty where that is not a table of fixed keys (a table of names, or a walk that lost its way)."""
+    _, tp = walk(root, loc)
+    if tp is None:
+        return ()
+    tp, _ = _strip(tp)
+    if _is_union(tp):
+        models = [m for m in _members(tp) if _is_model(_strip(m)[0])]
+        tp = _strip(models[0])[0] if len(models) == 1 else None
+    return tuple(f.alias or name for name, f in tp.model_fields.items()) if _is_model(tp) else ()
+
+
+def unknown_key(key: str, known: tuple[str, ...]) -> str:
+    """The reason for an unknown key, with the closest key the table takes, else its keys."""
+    close = difflib.get_close_matches(key, known, n=1, cutoff=0.6)
+    if close:
+        hint = f"did you mean {close[0]!r}?"
+    elif known:
+        hint = f"this table takes: {', '.join(known)}"
+    else:
+        hint = "check the spelling"
+    return f"unknown key ({hint} See docs/scenario-format.md)"
+
+
+def reason(err: Mapping[str, Any], annotation: Any, shown: Callable[[Any], str] = got, known: tuple[str, ...] = ()) -> tuple[str, str]:
     """(key suffix, reason) of one pydantic error; the suffix is appended to the key path
-    (a union's discriminator key, e.g. ``.type``, when that is what was wrong)."""
+    (a union's discriminator key, e.g. ``.type``, when that is what was wrong). known: the keys
+    the table of an unknown key takes (`keys_at`)."""
     kind = err["type"]
     ctx = err.get("ctx") or {}
     value = err.get("input")
@@ -205,7 +232,7 @@ def reason(err: Mapping[str, Any], annotation: Any, shown: Callable[[Any], str] 
     if kind == "missing":
         return "", "required key is missing"
     if kind == "extra_forbidden":
-        return "", "unknown key (check the spelling; see the scenario format in README)"
+        return "", unknown_key(str(err["loc"][-1]), known)
     if kind in ("value_error", "assertion_error"):
         for prefix in ("Value error, ", "Assertion failed, "):
             if message.startswith(prefix):

@@ -399,7 +399,8 @@ def _pydantic_problems(exc: ValidationError, parameters: Mapping[str, float]) ->
         if err["type"] in ("too_short", "too_long") and any(len(o) > len(loc) and o[: len(loc)] == loc for o in locs):
             continue  # entries that failed are reported themselves; the count pydantic then gives is not the user's
         clean, annotation = messages.walk(ScenarioSpec, loc)
-        suffix, reason = messages.reason(err, annotation, lambda value: _shown(value, parameters))
+        known = messages.keys_at(ScenarioSpec, loc[:-1]) if err["type"] == "extra_forbidden" else ()
+        suffix, reason = messages.reason(err, annotation, lambda value: _shown(value, parameters), known)
         key = key_path(clean) + suffix
         if key in seen:
             continue  # a union reports each member's complaint; one per key is clearer
@@ -511,9 +512,7 @@ def _derive(spec: ScenarioSpec, parameters: Mapping[str, float], path: Path) -> 
     start_velocity = [0.0] * len(velocities)
     for name, value in spec.task.velocity.items():
         if name not in velocities:
-            problems.append(
-                Problem(key_path(("task", "velocity", name)), _unknown_coordinate(name, velocities).replace("coordinate", "velocity"))
-            )
+            problems.append(Problem(key_path(("task", "velocity", name)), _unknown_coordinate(name, velocities, "velocity", "velocities")))
         else:
             start_velocity[velocities.index(name)] = value
 
@@ -521,6 +520,7 @@ def _derive(spec: ScenarioSpec, parameters: Mapping[str, float], path: Path) -> 
     problems += _check_touch_tolerance("contact.touch_tolerance", spec.contact.touch_tolerance)
     problems += _check_task(spec, coordinates, actuated, names, _pair_status(spec))
     problems += _check_ladder(spec)
+    problems += _check_rung_settings(spec)
     problems += _check_expected_runs(spec)
     problems += _check_limits(spec, coordinates, start, dim)
     if problems:
@@ -552,8 +552,8 @@ def _frozen(a: np.ndarray) -> np.ndarray:
     return a
 
 
-def _unknown_coordinate(name: str, coordinates: list[str]) -> str:
-    return f"no coordinate {name!r}; the coordinates are: {', '.join(coordinates) or 'none (nothing moves)'}"
+def _unknown_coordinate(name: str, coordinates: list[str], noun: str = "coordinate", plural: str = "coordinates") -> str:
+    return f"no {noun} {name!r}; the {plural} are: {', '.join(coordinates) or 'none (nothing moves)'}"
 
 
 def _check_body(body: BodySpec, key: str, dim: int) -> list[Problem]:
@@ -648,7 +648,21 @@ def _check_contacts(spec: ScenarioSpec, names: list[str]) -> list[Problem]:
         if frozen in seen:
             out.append(Problem(key, f"the pair {pair.bodies[0]}-{pair.bodies[1]} is given twice"))
         seen.add(frozen)
+        bodies = [b for b in spec.bodies if b.name in pair.bodies]
+        if len(bodies) == 2 and not any(_moves(b) for b in bodies):
+            out.append(
+                Problem(
+                    key,
+                    f"neither {pair.bodies[0]!r} nor {pair.bodies[1]!r} moves, so they are not a contact pair "
+                    "and this entry would set nothing",
+                )
+            )
     return out
+
+
+def _moves(body: BodySpec) -> bool:
+    """Whether a body can move: free DOFs or a scripted velocity (two that cannot never meet anew)."""
+    return bool(body.dofs or body.velocity)
 
 
 def _pair_status(spec: ScenarioSpec) -> Callable[[str, str], str | None]:
@@ -745,7 +759,7 @@ def _check_task(
     for name, (lo, hi) in task.control_bounds.items():
         key = key_path(("task", "control_bounds", name))
         if name not in actuated:
-            out.append(Problem(key, f"{name!r} is not an actuated coordinate (actuated: {', '.join(actuated) or 'none'})"))
+            out.append(Problem(key, _not_actuated(name, actuated, names)))
         elif lo >= hi:
             out.append(Problem(key, f"lower bound {lo} is not below upper bound {hi}"))
     policies = [(("task", "policy"), task.policy)] if task.policy is not None else []
@@ -755,15 +769,23 @@ def _check_task(
     return out
 
 
+def _not_actuated(name: str, actuated: list[str], bodies: list[str]) -> str:
+    """Why `name` is not an actuated coordinate: no such body, else not one of the drives."""
+    body = name.split(".", 1)[0]
+    if body not in bodies:
+        return f"no body named {body!r} (bodies: {', '.join(bodies)})"
+    return f"{name!r} is not an actuated coordinate (actuated: {', '.join(actuated) or 'none'})"
+
+
 def _check_policy(spec: ScenarioSpec, policy, loc: tuple, actuated: list[str]) -> list[Problem]:
     """A policy's speeds and laws name actuated coordinates; laws only in a feedback policy, and
     one at least; a law's body target names a body, a point of the scene's dimension, and a
     drive along x, y or z (whose world coordinate the point's position gives)."""
-    out, known = [], f"(actuated: {', '.join(actuated) or 'none'})"
+    out, names = [], [b.name for b in spec.bodies]
     for part in ("speeds", "laws"):
         for name in getattr(policy, part):
             if name not in actuated:
-                out.append(Problem(key_path((*loc, part, name)), f"{name!r} is not an actuated coordinate {known}"))
+                out.append(Problem(key_path((*loc, part, name)), _not_actuated(name, actuated, names)))
     if policy.type == "constant_speed" and policy.laws:
         out.append(Problem(key_path((*loc, "laws")), 'feedback laws need type = "feedback"'))
     if policy.type == "feedback" and not policy.laws:
@@ -852,6 +874,39 @@ def _check_ladder(spec: ScenarioSpec) -> list[Problem]:
     return out
 
 
+#: The `[[ladder.rungs]]` settings of the contact physics, which the geometric rung (no
+#: physics) does not read; the kinematic rung (no forces) reads none of them either.
+PHYSICS_SETTINGS = ("theta", "friction_directions", "friction_cone", "inertia", "regularization", "contact_solver")
+
+
+def _check_rung_settings(spec: ScenarioSpec) -> list[Problem]:
+    """A setting given to a rung that does not read it is refused: the run would not be what the
+    file says (an `inertia` on a dynamic rung, which keeps the bodies' own, would change nothing).
+    Which rung reads what follows its physics in the family (`models.family`)."""
+    out = []
+    planar = spec.scene.dimension == 2
+    for i, rung in enumerate(spec.ladder.rungs):
+        given = [n for n in PHYSICS_SETTINGS if n in rung.model_fields_set]
+        physics = definition(rung.model).physics
+        why: dict[str, str] = {}
+        if physics is None:
+            why = dict.fromkeys(given, "the geometric rung is a validity check, with no physics to set")
+        elif physics[0]:  # kinematic
+            why = dict.fromkeys(given, "the kinematic rung has no forces, friction or inertia: it does not read this")
+            why["contact_solver"] = "the kinematic rung always solves its contacts with Lemke"
+        else:
+            _, eps, compliant = physics[:3]
+            if eps != 0.0:
+                why["inertia"] = "a dynamic rung keeps the bodies' own inertia (this scales a quasistatic rung's)"
+            if compliant:
+                why["regularization"] = "rigid contact's setting: a compliant contact's K and C share a support's load already"
+            if planar:
+                why["friction_directions"] = "spatial scenes only: a planar friction cone has two directions"
+                why["friction_cone"] = 'spatial scenes only: a planar cone (two directions) is exact; for PGS, contact_solver = "pgs"'
+        out += [Problem(f"ladder.rungs[{i}].{name}", why[name]) for name in given if name in why]
+    return out
+
+
 def _check_limits(spec: ScenarioSpec, coordinates: list[str], start: list[float], dim: int) -> list[Problem]:
     """Start values within the drives' limits, reported where the value was written: the
     `[task] start` entry that overrides it, else the body's pose."""
@@ -893,7 +948,7 @@ def _contact_pairs(spec: ScenarioSpec) -> tuple[ContactPair, ...]:
     bodies = spec.bodies
     for i, a in enumerate(bodies):
         for b in bodies[i + 1 :]:
-            if not a.dofs and not b.dofs and not a.velocity and not b.velocity:
+            if not _moves(a) and not _moves(b):
                 continue  # two bodies that never move never meet anew
             o = overrides.get(frozenset((a.name, b.name)))
             if o is not None and not o.enabled:

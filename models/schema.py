@@ -294,7 +294,10 @@ class Drive(Strict):
 
     kp: Gain = Field(description="position gain, N/m (N m/rad for angles)")
     kd: NonNegativeGain = Field(description="velocity gain, N s/m")
-    max_speed: _bounded(Positive, "speed") = Field(description="largest commanded speed, m/s (rad/s)")
+    max_speed: _bounded(Positive, "speed") = Field(
+        description="largest speed a planner commands, m/s (rad/s): the default [task] control_bounds; a policy's "
+        "speeds are its own (the paper's sweep runs past it)"
+    )
     max_force: Gain | None = Field(None, description="actuator force limit, N (none: unlimited)")
     lower: Length | None = Field(None, description="lower position limit")
     upper: Length | None = Field(None, description="upper position limit")

@@ -3076,12 +3076,15 @@ def _passive_problem(nc, h, c_psi, c_bias, W_n, u_eff, actuated, nv):
 @numba.njit(cache=True, error_model="numpy")
 def _largest_feasible(Wp, MWp, psi_h, Wa_u, nc, residual):
     """A blocked kinematic command: the largest feasible fraction alpha of it, by bisection.
-    Returns (alpha, passive speeds, feasible: standing still is, pivots, residual: the last
-    feasible solve's, else the one passed in)."""
+    Returns (alpha, passive speeds, feasible: standing still is, pivots, residual: the accepted
+    (largest feasible) solve's, else, when not even standing still is feasible, the one passed in).
+    A command jammed outright keeps alpha = 0, and reports the standing-still solve's residual,
+    not the infeasible full command's."""
     lo, hi = 0.0, 1.0
     v_lo, ok_lo, pivots, res = _min_norm_passive(Wp, MWp, psi_h, Wa_u, 0.0, nc)
     if not ok_lo:
         return 0.0, v_lo, False, pivots, residual
+    residual = res
     for _ in range(BLOCKED_BISECTIONS):
         mid = 0.5 * (lo + hi)
         v_mid, ok_mid, piv, res = _min_norm_passive(Wp, MWp, psi_h, Wa_u, mid, nc)

@@ -385,6 +385,22 @@ def test_kinematic_rung_matches_the_qp_through_osqp():
     assert result.state.nu[0] < -0.5  # the triangle is pushed left
 
 
+def test_a_jammed_kinematic_command_reports_the_solve_it_took():
+    """Both fingers at one speed close on the triangle's faces together: form closure, which the
+    kinematic rung meets by moving the drives by the largest feasible fraction of each step, here
+    none (the world jams: a state, not an error). The fingers stop where their discs touch the
+    45-degree faces, y = 0.5 + r sqrt 2, the triangle unmoved, and every solve the run took is
+    exact: the reported residual is the accepted (standing-still) solve's, not that of the
+    infeasible full command's (0.414 before it was)."""
+    from models.stepper import LCP_TOLERANCE
+
+    result = run_triangle("kinematic", 1.0, 0.5, duration=3.0)
+    assert result.status == "ok"
+    assert result.state.q == pytest.approx([0.0, 0.5 + 0.05 * math.sqrt(2), 0.5 + 0.05 * math.sqrt(2)], abs=1e-6)
+    assert result.lcp_solves > 0
+    assert result.max_residual <= LCP_TOLERANCE
+
+
 def test_quasistatic_rungs_hold_their_accuracy_at_larger_steps():
     """x3 at the grasp at h = 1e-2 and 1e-3 stays within a few mm of h = 1e-4."""
     fine = run_triangle("quasistatic-rigid", 0.8, 0.5, h=1e-4).state.q[0]
