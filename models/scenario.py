@@ -762,6 +762,17 @@ def _check_task(
             out.append(Problem(key, _not_actuated(name, actuated, names)))
         elif lo >= hi:
             out.append(Problem(key, f"lower bound {lo} is not below upper bound {hi}"))
+        else:
+            body, dof = name.split(".", 1)
+            top = next(b for b in spec.bodies if b.name == body).actuators[dof].max_speed
+            if lo < -top or hi > top:
+                out.append(
+                    Problem(
+                        key,
+                        f"[{lo:g}, {hi:g}] reaches past the drive's max_speed {top:g} (the largest speed a planner "
+                        "commands, which also bounds how far a drive may lag its reference)",
+                    )
+                )
     policies = [(("task", "policy"), task.policy)] if task.policy is not None else []
     policies += [(("task", "policies", name), policy) for name, policy in task.policies.items()]
     for loc, policy in policies:

@@ -456,7 +456,7 @@ class TaskSpec(Strict):
     unsafe: Predicate | None = None
     control_bounds: dict[str, SpeedInterval] = Field(
         default_factory=dict,
-        description="commanded speed interval per actuated coordinate (default: +-max_speed)",
+        description="a planner's commanded speed interval per actuated coordinate, within +-max_speed (default: +-max_speed)",
     )
     policy: Policy | None = None
     policies: dict[Name, Policy] = Field(
