@@ -255,7 +255,7 @@ def _add_serve_parser(sub: argparse._SubParsersAction) -> None:
         help="run the jobs on a Dask distributed scheduler instead (its workers need the planner installed; one job per "
         "worker process at a time)",
     )
-    serve.add_argument("--token", help="require 'Authorization: Bearer TOKEN' on every request but /docs and /openapi.json")
+    serve.add_argument("--token", help="require 'Authorization: Bearer TOKEN' on every request but /, /docs and /openapi.json")
     serve.add_argument("--max-queued", type=int, default=100, help="jobs that may wait; more get 429 (default 100)")
     serve.add_argument("--max-job-seconds", type=float, help="stop a job after this many seconds of running (default: no limit)")
     serve.set_defaults(handler=cmd_serve)
@@ -1179,6 +1179,9 @@ LOOPBACK = ("127.0.0.1", "localhost", "::1")
 
 def cmd_serve(args: argparse.Namespace) -> int:
     """`ladder serve`: the planning service on uvicorn (imported only here)."""
+    if args.token is not None and not args.token.strip():
+        print("error: --token: an empty token would let every request in; give a secret, or leave --token out", file=sys.stderr)
+        return EXIT_BAD_INPUT
     if args.host not in LOOPBACK and not args.token and not args.host.startswith("127."):
         print(f"error: --host {args.host}: serving beyond this machine needs --token (every request must then carry it)", file=sys.stderr)
         return EXIT_BAD_INPUT
@@ -1208,7 +1211,12 @@ def cmd_serve(args: argparse.Namespace) -> int:
     )
     where = f"jobs on {args.executor}" if args.executor else f"{args.workers} worker process(es)"
     print(f"serving on http://{args.host}:{args.port} (jobs in {args.db}, {where}; API at /docs, viewer at /)", file=sys.stderr, flush=True)
-    uvicorn.run(app, host=args.host, port=args.port, log_level="info")
+    from planner import interrupt
+
+    uvicorn.run(app, host=args.host, port=args.port, log_level="info")  # on Ctrl-C it shuts down and returns
+    if interrupt.asked():  # uvicorn hands the SIGINT back to `interrupt.handler` after its shutdown, and swallows the rest
+        print("interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
     return EXIT_OK
 
 

@@ -101,6 +101,13 @@ def test_serve_beyond_loopback_needs_a_token():
     assert "--token" in result.stderr and len(result.stderr.strip().splitlines()) == 1 and "Traceback" not in result.stderr
 
 
+def test_serve_refuses_an_empty_token():
+    for host in ("127.0.0.1", "0.0.0.0"):
+        result = ladder("serve", "--host", host, "--token", "  ")
+        assert result.returncode == 2
+        assert result.stderr.startswith("error: --token: an empty token") and len(result.stderr.strip().splitlines()) == 1
+
+
 def test_serve_checks_its_options():
     result = ladder("serve", "--workers", "0", "--port", "70000")
     assert result.returncode == 2

@@ -201,6 +201,10 @@ def test_a_token_is_needed_everywhere_but_the_description(tmp_path):
         good = {"Authorization": "Bearer s3cret"}
         assert client.get("/jobs", headers=good).status_code == 200
         assert submit(client, **good).status_code == 201
+        # the scheme is case-insensitive; the credential is not, and another scheme is not a bearer token
+        assert client.get("/jobs", headers={"Authorization": "bearer s3cret"}).status_code == 200
+        for wrong in ("Bearer S3CRET", "Basic s3cret", "Bearer", "s3cret", "Bearers3cret"):
+            assert client.get("/jobs", headers={"Authorization": wrong}).status_code == 401, wrong
 
 
 def test_the_token_may_come_as_a_query_parameter_on_the_events_route_only(tmp_path):
@@ -442,65 +446,112 @@ def test_a_job_left_running_by_a_dead_server_runs_again_on_restart(tmp_path):
         assert {"state": "queued", "requeued": True} in [e["data"] for e in events]
 
 
-def test_kill_9_the_server_while_a_job_runs_and_restart(tmp_path):
-    """A real server killed with SIGKILL while a job runs: on restart the job runs again (here
-    it is then cancelled), the job queued behind it succeeds, none stays running."""
+def start_server(db, log=None):
+    """A real `ladder serve` on a free port, in a session of its own (so that a signal to its
+    process group is what a terminal's Ctrl-C sends): (process, client)."""
     import os
-    import signal
     import socket
     import subprocess
     import sys
 
     import httpx2
 
-    db = tmp_path / "jobs.sqlite"
-
-    def start():
-        with socket.socket() as s:
-            s.bind(("127.0.0.1", 0))
-            port = s.getsockname()[1]
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "planner", "serve", "--port", str(port), "--db", str(db)],
-            cwd=ROOT,
-            env=dict(os.environ, PYTHONPATH=str(ROOT)),
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.DEVNULL,
-        )
-        client = httpx2.Client(base_url=f"http://127.0.0.1:{port}", timeout=10)
-        for _ in range(300):
-            try:
-                client.get("/jobs")
-                return proc, client
-            except httpx2.TransportError:
-                time.sleep(0.1)
-        raise AssertionError("the server did not start")
-
-    def wait(client, job_id, states, timeout=JOB_TIMEOUT_S):
-        end = time.monotonic() + timeout
-        while (job := client.get(f"/jobs/{job_id}").json())["state"] not in states:
-            assert time.monotonic() < end, job
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "planner", "serve", "--port", str(port), "--db", str(db)],
+        cwd=ROOT,
+        env=dict(os.environ, PYTHONPATH=str(ROOT)),
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL if log is None else log,
+        start_new_session=True,
+    )
+    client = httpx2.Client(base_url=f"http://127.0.0.1:{port}", timeout=10)
+    for _ in range(300):
+        try:
+            client.get("/jobs")
+            return proc, client
+        except httpx2.TransportError:
             time.sleep(0.1)
-        return job
+    raise AssertionError("the server did not start")
 
-    proc, client = start()
+
+def wait_served(client, job_id, states, timeout=JOB_TIMEOUT_S):
+    """A real server's job once its state is one of `states`."""
+    end = time.monotonic() + timeout
+    while (job := client.get(f"/jobs/{job_id}").json())["state"] not in states:
+        assert time.monotonic() < end, job
+        time.sleep(0.1)
+    return job
+
+
+def test_kill_9_the_server_while_a_job_runs_and_restart(tmp_path):
+    """A real server killed with SIGKILL while a job runs: on restart the job runs again (here
+    it is then cancelled), the job queued behind it succeeds, none stays running."""
+    import signal
+
+    db = tmp_path / "jobs.sqlite"
+    proc, client = start_server(db)
     try:
         a = client.post("/jobs", json=STUCK).json()
         b = client.post(
             "/jobs", json={"kind": "plan", "scenario": FREE, "filename": "scenarios/free_transfer.toml", "options": {"seed": 3}}
         ).json()
-        wait(client, a["id"], ("running",))
+        wait_served(client, a["id"], ("running",))
     finally:
         proc.send_signal(signal.SIGKILL)
         proc.wait(timeout=10)
         client.close()
-    proc, client = start()
+    proc, client = start_server(db)
     try:
-        assert wait(client, a["id"], ("running",))["runs"] == 2
+        assert wait_served(client, a["id"], ("running",))["runs"] == 2
         client.delete(f"/jobs/{a['id']}")
-        assert wait(client, a["id"], ("succeeded", "failed", "cancelled"))["state"] == "cancelled"
-        assert wait(client, b["id"], ("succeeded", "failed", "cancelled"))["state"] == "succeeded"
+        assert wait_served(client, a["id"], ("succeeded", "failed", "cancelled"))["state"] == "cancelled"
+        assert wait_served(client, b["id"], ("succeeded", "failed", "cancelled"))["state"] == "succeeded"
         assert client.get("/jobs?state=running").json()["jobs"] == []
         assert client.get(f"/jobs/{b['id']}/result").text == cli_plan_json(SCENARIOS / "free_transfer.toml", seed=3)
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.wait(timeout=30)
+        client.close()
+
+
+@pytest.mark.parametrize("signum", ["SIGINT", "SIGTERM"])
+def test_a_signal_to_the_servers_process_group_while_a_job_runs_and_restart(tmp_path, signum):
+    """Ctrl-C in the terminal of `ladder serve` (SIGINT), or a service manager's stop (SIGTERM
+    to every process of the service), reaches the worker processes too. The server stops its
+    workers, and the job under way stays running and runs again on restart, as after a kill.
+    On Ctrl-C the server exits 130 with one line, no traceback; on SIGTERM it ends by the
+    signal, as uvicorn does. Before, the worker took the signal itself: the job ended `failed`
+    ("the worker stopped: KeyboardInterrupt", or BrokenProcessPool) and Ctrl-C exited 0."""
+    import os
+    import signal
+
+    db, log = tmp_path / "jobs.sqlite", tmp_path / "serve.log"
+    with log.open("w") as err:
+        proc, client = start_server(db, err)
+        try:
+            job = client.post("/jobs", json=STUCK).json()
+            wait_served(client, job["id"], ("running",))
+            time.sleep(1.0)  # the worker is planning
+        finally:
+            os.killpg(proc.pid, getattr(signal, signum))
+            code = proc.wait(timeout=60)
+            client.close()
+    text = log.read_text()
+    assert "Traceback" not in text, text
+    if signum == "SIGINT":
+        assert code == 130 and text.rstrip().endswith("interrupted"), text
+    else:
+        assert code == -signal.SIGTERM, text
+    with sqlite3.connect(db) as conn:
+        assert conn.execute("SELECT state, error FROM jobs").fetchone() == ("running", None)
+    proc, client = start_server(db)
+    try:
+        assert wait_served(client, job["id"], ("running",))["runs"] == 2
+        client.delete(f"/jobs/{job['id']}")
+        assert wait_served(client, job["id"], ("succeeded", "failed", "cancelled"))["state"] == "cancelled"
     finally:
         proc.send_signal(signal.SIGINT)
         proc.wait(timeout=30)

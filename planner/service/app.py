@@ -39,7 +39,7 @@ from models.scenario import Problem, ScenarioError
 from planner.service import jobs
 from planner.service.store import STATES, TERMINAL, Store, iso
 from planner.service.view import scene_view
-from planner.service.worker import run_job
+from planner.service.worker import ignore_stop_signals, run_job
 
 #: Paths that need no token (the API's description, and the viewer's page, which asks for it).
 OPEN_PATHS = frozenset({"/openapi.json", "/docs", "/docs/oauth2-redirect", "/redoc", "/"})
@@ -67,8 +67,8 @@ class JobRequest(BaseModel):
     parameters: dict[str, float] = Field(default_factory=dict, description="design-parameter overrides (the CLI's --param)")
     options: dict[str, Any] = Field(
         default_factory=dict,
-        description="plan: seed, iterations, time_limit, flat, rungs, top, planner, seed_roots, guide; simulate: model, duration, "
-        "step; sweep: grid (a list of `ladder sweep --grid` texts), model (the --model text), refine, tolerance, duration, step",
+        description="; ".join(f"{kind}: {', '.join(names)}" for kind, names in jobs.OPTIONS.items())
+        + " (a sweep's grid is a list of `ladder sweep --grid` texts, its model the --model text)",
     )
 
 
@@ -153,7 +153,9 @@ class _Guard:
             if not given and EVENTS_PATH.fullmatch(scope["path"]):
                 query = parse_qs(scope.get("query_string", b"").decode("latin-1"))
                 given = f"Bearer {query['token'][0]}" if query.get("token") else ""
-            if not hmac.compare_digest(given.encode(), f"Bearer {self.token}".encode()):
+            scheme, _, credentials = given.partition(" ")
+            # the scheme is case-insensitive (RFC 9110, 11.1): "bearer TOKEN" is the same credential
+            if scheme.lower() != "bearer" or not hmac.compare_digest(credentials.strip().encode(), self.token.encode()):
                 detail = "missing or wrong token: send 'Authorization: Bearer TOKEN'"
                 return await _send_json(send, 401, {"detail": detail}, [(b"www-authenticate", b"Bearer")])
         if scope["method"] not in ("POST", "PUT", "PATCH"):
@@ -240,7 +242,7 @@ class Service:
             processes = list((pool._processes or {}).values())  # noqa: SLF001 (no public way to stop a running task)
             pool.shutdown(wait=False, cancel_futures=True)
             for process in processes:
-                process.terminate()
+                process.kill()  # they ignore SIGTERM (`ignore_stop_signals`)
             for process in processes:
                 process.join(5)
         if self.runner is not None:
@@ -253,7 +255,9 @@ class Service:
         with self.lock:
             if self.pool is None:
                 # spawn, not fork: the server has threads; a worker imports the planner once
-                self.pool = ProcessPoolExecutor(self.workers, mp_context=multiprocessing.get_context("spawn"))
+                self.pool = ProcessPoolExecutor(
+                    self.workers, mp_context=multiprocessing.get_context("spawn"), initializer=ignore_stop_signals
+                )
             return self.pool
 
     def submit(self, job_id: str) -> None:

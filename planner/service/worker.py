@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import time
 from collections.abc import Callable
 from typing import Protocol
@@ -95,6 +96,16 @@ def execute(
     if state["timeout"] and not state["cancel"]:
         return "failed", text, f"stopped at the wall-time limit of {max_seconds:g} s (what was done is in the result)"
     return "cancelled", text, None
+
+
+def ignore_stop_signals() -> None:
+    """A local worker process's start: Ctrl-C in the server's terminal (SIGINT), or a service
+    manager's stop (SIGTERM to every process of the service: systemd, docker stop), reaches the
+    workers too, and the server alone answers it: it kills its workers (SIGKILL), leaving a job
+    under way `running`, to run again on restart. A worker that took the signal itself would
+    fail its job before the server stopped it (and print a traceback on SIGINT)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
 
 
 def run_job(db_path: str, job_id: str, max_seconds: float | None = None) -> str | None:
