@@ -109,6 +109,20 @@ def test_bad_file_is_rejected_with_key_and_reason(path):
     assert str(info.value).splitlines()[0].startswith(f"{path}: ")
 
 
+def test_loads_of_one_file_share_its_parse_and_nothing_else(tmp_path, triangle_file):
+    """`load_scenario` keeps the last few files' parsed text (a sweep loads one file at every
+    grid point): one load's overrides do not reach the next, and an edited file is read anew."""
+    fast = load_scenario(triangle_file, {"v1": 3.0, "mu": 0.9})
+    plain = load_scenario(triangle_file)
+    assert fast.spec.task.policy.speeds["finger1.y"] == -3.0 and plain.spec.task.policy.speeds["finger1.y"] == -1.0
+    assert plain.parameters["mu"] == 0.5 and fast.parameters["mu"] == 0.9
+    path = tmp_path / "edited.toml"
+    path.write_text(triangle_file.read_text())
+    assert load_scenario(path).body("triangle").mass == 1.0
+    path.write_text(triangle_file.read_text().replace("mass = 1.0", "mass = 2.5", 1))
+    assert load_scenario(path).body("triangle").mass == 2.5
+
+
 def test_missing_file_is_an_error(tmp_path):
     with pytest.raises(ScenarioError, match="no such file"):
         load_scenario(tmp_path / "nope.toml")
