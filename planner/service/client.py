@@ -114,6 +114,9 @@ def _message(response: httpx2.Response) -> str:
         detail = response.text.strip() or response.reason_phrase
     if response.status_code == 401:
         detail += " (ladder submit: --token, or the LADDER_TOKEN environment variable)"
+    elif response.status_code == 405 or (response.status_code == 404 and detail == "Not Found"):  # a route the service lacks
+        root = str(response.request.url.copy_with(path="/", query=None, fragment=None)).rstrip("/")
+        detail += f" at {response.request.url.path}: is {root} a ladder service, and the address its root? (ladder submit: --server)"
     return f"{detail}" if response.status_code == 422 else f"{response.status_code} {response.reason_phrase}: {detail}"
 
 
