@@ -880,12 +880,14 @@ def sweep_point_problems(scenario: Scenario, texts: list[str], axes, models, fix
     model's parameters applied must load (the file's validation), and the run must not take
     more than MAX_STEPS steps nor none. A problem names the --grid value(s) (or --model, or the step)
     responsible, the first point it holds at and how many more points it holds at."""
+    from planner import interrupt
     from planner import sweep as sw
 
     found: dict[tuple[str, str, str], list[str]] = {}  # (key, model, reason) -> the points
     seen, bad = set(), 0
     for model in models:
         for point in sw.grid_points(axes):
+            interrupt.check()  # a service job's cancel or wall-time limit (`planner.service.jobs.run`)
             params = {**fixed, **point, **dict(model.overrides)}
             signature = tuple(sorted(params.items()))
             if signature in seen:

@@ -377,6 +377,27 @@ def test_cancelling_a_running_sweep_job_keeps_the_runs_done(live):
     assert data["complete"] is False and 0 < len(data["points"]) < 400 and data["missing"] == 400 - len(data["points"])
 
 
+def test_cancelling_a_sweep_job_while_it_checks_its_grid_stops_the_check(live):
+    """A sweep's check loads the scenario at every grid point (3,600 here: seconds) before any
+    run. A cancel then ends it there, with no run done and no result; before, the check went on
+    to its end and the first run was taken and kept."""
+    options = {"grid": ["v1=0.25:4:60:log", "mu=0:1:60"], "model": "kinematic"}
+    job = submit(live, {"kind": "sweep", "scenario": TRIANGLE, "options": options}).json()
+    wait_for(live, job["id"], ("running",))
+    assert live.delete(f"/jobs/{job['id']}").json()["cancel_requested"] is True
+    ended = wait_for(live, job["id"])
+    assert ended["state"] == "cancelled" and ended["progress"] is None and not ended["result_available"], ended
+
+
+def test_a_sweep_job_past_the_wall_time_limit_in_its_check_fails_without_a_result(tmp_path):
+    options = {"grid": ["v1=0.25:4:60:log", "mu=0:1:60"], "model": "kinematic"}
+    with TestClient(create_app(tmp_path / "jobs.sqlite", workers=1, max_job_seconds=0.5)) as client:
+        job = submit(client, {"kind": "sweep", "scenario": TRIANGLE, "options": options}).json()
+        ended = wait_for(client, job["id"])
+        assert ended["state"] == "failed" and not ended["result_available"], ended
+        assert ended["error"] == "stopped at the wall-time limit of 0.5 s (before it had a result)"
+
+
 def test_bad_sweep_jobs_are_422_named_as_in_the_request(idle):
     def problems(options, scenario=TRIANGLE):
         r = submit(idle, {"kind": "sweep", "scenario": scenario, "options": options})

@@ -359,7 +359,11 @@ def run(
     from planner import cli
 
     with job_folder(inputs) as path:
-        args, checked = check(kind, path, inputs.get("parameters") or {}, options, Path(OUT))
+        try:  # a sweep's check loads the scenario at every grid point (seconds for 10,000): a stop ends it too
+            with _interrupt_when(stop):
+                args, checked = check(kind, path, inputs.get("parameters") or {}, options, Path(OUT))
+        except KeyboardInterrupt:
+            return None, False
         if kind == "plan":
             from planner.ladder import plan_json_text
 

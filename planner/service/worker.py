@@ -94,7 +94,8 @@ def execute(
     if complete:
         return "succeeded", text, None
     if state["timeout"] and not state["cancel"]:
-        return "failed", text, f"stopped at the wall-time limit of {max_seconds:g} s (what was done is in the result)"
+        kept = "what was done is in the result" if text is not None else "before it had a result"
+        return "failed", text, f"stopped at the wall-time limit of {max_seconds:g} s ({kept})"
     return "cancelled", text, None
 
 
