@@ -270,6 +270,8 @@ def plan_control(
     propagate = _Propagator(scenario, rung, layout, limits, h, reached)
     si.setStatePropagator(propagate)
     si.setStateValidityChecker(_valid_checker(layout))
+    if planner == "EST":
+        si.setValidStateSamplerAllocator(_running_sampler(ob, layout))
 
     ss = oc.SimpleSetup(si)
     roots = []
@@ -487,6 +489,42 @@ def _valid_checker(layout: _ControlLayout):
         return flag == FLAG_RUNNING or flag == FLAG_GOAL
 
     return valid
+
+
+def _running_sampler(ob, layout: _ControlLayout):
+    """The valid-state sampler control EST draws its expansion targets from (`sampleNear`, about
+    a thousand calls a search; RRT and KPIECE1 never call it: OMPL-CRIB section 5). OMPL's own
+    keeps drawing states until one is valid, but a drawn state's flag is a uniform number, never
+    exactly running or goal (`_valid_checker`), so EST never expanded its tree: no propagation
+    in any search. A target is a direction to grow toward, not a state the planner keeps, so
+    this one draws as OMPL's state sampler does and marks the draw running."""
+
+    class RunningSampler(ob.ValidStateSampler):
+        def __init__(self, si):
+            super().__init__(si)
+            self.inner = si.allocStateSampler()
+
+        def running(self, s) -> bool:
+            x = layout.read_by_address(s)
+            x[-1] = FLAG_RUNNING
+            layout.write(s, x)
+            return True
+
+        def sample(self, s) -> bool:
+            self.inner.sampleUniform(s)
+            return self.running(s)
+
+        def sampleNear(self, s, near, distance) -> bool:  # noqa: N802 (OMPL's name)
+            self.inner.sampleUniformNear(s, near, distance)
+            return self.running(s)
+
+    samplers = []  # OMPL holds the sampler by a shared pointer Python does not own: keep it alive here
+
+    def allocate(si):
+        samplers.append(RunningSampler(si))
+        return samplers[-1]
+
+    return allocate
 
 
 def _control_goal(ob, si, layout: _ControlLayout, goal_heuristic, guide_q, scenario: Scenario, start: State, seed: int):

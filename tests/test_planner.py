@@ -517,6 +517,28 @@ def test_every_planner_a_scenario_may_name_exists_and_the_geometric_ones_reach_t
         assert all(p.exact and p.goal_samples >= 1 for p in plans), name
 
 
+@pytest.mark.parametrize("planner", ["RRT", "KPIECE1", "EST"])
+@pytest.mark.parametrize("rung_name", ["kinematic", "quasistatic-rigid"])
+def test_every_control_planner_plans_the_paper_scene(planner, rung_name):
+    """Each control planner the format offers finds an exact plan on the paper's scene (seeds
+    1-3, 2000 iterations) that ends in the goal when replayed under the rung. EST grows toward
+    states from OMPL's valid-state sampler, which never drew a valid one (a drawn state's flag
+    is a uniform number): it propagated nothing and failed every search, on every scene."""
+    from planner.ompl_adapter import plan_control
+
+    scenario = load_scenario(TRIANGLE, {"v1": 0.8})
+    rung = rung_for(scenario, rung_name)
+    settings = scenario.rung_settings(rung_name)
+    start = rung.initial_state(scenario)
+    for seed in (1, 2, 3):
+        plan = plan_control(
+            scenario, rung, start, h=settings.h, control_period=settings.control_period, seed=seed, iterations=2000, planner=planner
+        )
+        assert plan.exact and plan.propagations > 0, (seed, plan.status, plan.propagations)
+        replay = rung.rollout(scenario, start, plan.controls, plan.durations, settings.h)
+        assert replay.ok and replay.outcome == "goal", (seed, replay.outcome)
+
+
 def test_a_rung_that_cannot_express_the_task_does_not_end_the_ladder():
     """tests/data/strike.toml: the pusher may not pass x = 0, the puck must reach x >= 0.5, so
     only momentum gets it there. The kinematic rung cannot (no inertia: the puck stops with
