@@ -626,10 +626,12 @@ def _check_plan_args(args: argparse.Namespace) -> tuple[Scenario, list[str]]:
     if args.top is not None:
         if args.top not in RUNG_NAMES:
             problems.append(Problem("--top", f"unknown rung {args.top!r}"))
+        elif args.top not in names and all(n in RUNG_NAMES for n in names):
+            # the ladder would stop below it, and report that rung as the top that holds
+            listed = "--rungs" if args.rungs is not None else "the scenario's ladder"
+            problems.append(Problem("--top", f"{args.top} is not in {listed} ({', '.join(names)}); add it with --rungs"))
         else:
             names = [n for n in names if n in RUNG_NAMES and RUNG_NAMES.index(n) <= RUNG_NAMES.index(args.top)]
-            if not names:
-                problems.append(Problem("--top", f"no rung of the ladder is at or below {args.top}"))
     if problems:
         raise ScenarioError(scenario.path, problems)
     return scenario, names

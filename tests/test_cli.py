@@ -514,7 +514,8 @@ def test_simulate_refuses_a_step_that_skips_a_plans_controls(tmp_path):
         (["plan", TRIANGLE, "--seed", "-1"], "--seed: must be between 0 and 4294967295, got -1"),
         (["plan", TRIANGLE, "--iterations", "0"], "--iterations: must be at least 1, got 0"),
         (["plan", TRIANGLE, "--time-limit", "0"], "--time-limit: must be a positive number, got 0.0"),
-        (["plan", TRIANGLE, "--top", "kinematic", "--rungs", "dynamic-rigid"], "--top: no rung of the ladder is at or below kinematic"),
+        (["plan", TRIANGLE, "--top", "kinematic", "--rungs", "dynamic-rigid"], "--top: kinematic is not in --rungs (dynamic-rigid)"),
+        (["plan", TRIANGLE, "--top", "dynamic-rigid"], "--top: dynamic-rigid is not in the scenario's ladder (geometric, kinematic,"),
         (
             ["plan", TRIANGLE, "--rungs", "dynamic-compliant,kinematic"],
             "--rungs: 'kinematic' after 'dynamic-compliant': rungs go from low to high fidelity (geometric < kinematic < "
