@@ -158,9 +158,10 @@ def _add_sweep_parser(sub: argparse._SubParsersAction) -> None:
         "failure stopped are outcome none, with their status), 2 bad input, 130 interrupted.",
         epilog="models (--model): comma-separated [LABEL=]RUNG[NAME=VALUE,...], a rung with optional\n"
         "design-parameter overrides in brackets (',' or ';' between them) and a label, each label once.\n"
-        "Example, the paper's plastic and elastic impacts at mu = 0.5:\n\n"
-        "  ladder sweep scenarios/two_finger_triangle.toml --grid v1=0.25:4:41:log --grid mu=0.5 --param v2=1 \\\n"
-        "      --model 'plastic=dynamic-compliant[C=1e4],elastic=dynamic-compliant[C=0,finger_mass=1e3]'",
+        "Example, the paper's plastic and elastic impacts at mu = 0.5 (Fig. 4 (b), (c): heavy, stiffly held fingers):\n\n"
+        "  F='finger_mass=1e3;finger_kp=1e9;finger_kd=2e6'\n"
+        "  ladder sweep scenarios/two_finger_triangle.toml --grid v1=0.25:4:41:log --grid mu=0.5 --param v2=1 --refine \\\n"
+        '      --model "plastic=dynamic-compliant[C=1e4;$F],elastic=dynamic-compliant[C=0;$F]"',
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     sweep.add_argument("file", type=Path, help="scenario file (TOML)")
