@@ -627,6 +627,11 @@ def _search(step: _Step, previous, replay, tracked, planner, seeded: bool, guide
     accepted = plan.exact and fields["outcome"] == GOAL and fields["status"] == OK
     if accepted:
         ended, reason = (PlanStatus.EXACT if previous is None else PlanStatus.REPLANNED), ""
+        if ended is PlanStatus.REPLANNED and guide is None:  # the status's words say "guided by it"
+            why = " (a geometric path is no guide for physics)" if previous.rung == "geometric" else "" if guided else " (--no-guide)"
+            reason = f"the previous plan did not hold; a search found a plan into the goal set{why}"
+        elif ended is PlanStatus.REPLANNED:
+            reason = ended.message
         if tracked is not None and j > 0:
             ended = PlanStatus.REPAIRED
             reason = _tracking_reason(ended, tracked) + f"; then a search from tracked state {j} of {len(seeds)} to the goal"

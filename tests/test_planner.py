@@ -539,6 +539,17 @@ def test_every_control_planner_plans_the_paper_scene(planner, rung_name):
         assert replay.ok and replay.outcome == "goal", (seed, replay.outcome)
 
 
+def test_every_rung_above_the_first_says_why_it_ended():
+    """A rung that planned again after the geometric path says so, and that the path did not
+    guide it (its reason was empty, and the status's words say "guided by it")."""
+    scenario = load_scenario(SCENARIOS / "four_finger_grasp.toml")
+    result = run_ladder(scenario, seed=1)
+    assert all(r.reason for r in result.rungs[1:]), [(r.rung, r.ended) for r in result.rungs]
+    kinematic = next(r for r in result.rungs if r.rung == "kinematic")
+    assert kinematic.ended is PlanStatus.REPLANNED
+    assert kinematic.reason.endswith("found a plan into the goal set (a geometric path is no guide for physics)")
+
+
 def test_a_rung_that_cannot_express_the_task_does_not_end_the_ladder():
     """tests/data/strike.toml: the pusher may not pass x = 0, the puck must reach x >= 0.5, so
     only momentum gets it there. The kinematic rung cannot (no inertia: the puck stops with
