@@ -102,15 +102,17 @@ def install() -> None:
         config.CACHE_LOCATOR_CLASSES = ",".join([*given, name, *([] if given else NUMBA_LOCATORS)])
 
 
-def kernels_cached() -> bool:
-    """Whether numba's on-disk cache holds the rollout kernel for this package's sources (its
-    index file, stamped by `package_stamp`): False on a first run or after an edit."""
+def kernels_cached(name: str = "rollout_kernel") -> bool:
+    """Whether numba's on-disk cache holds the kernel `name` of models.rollout for this
+    package's sources (its index file, stamped by `package_stamp`): False on a first run or
+    after an edit. The rollout kernel is every command's; the planners' `propagate_kernel` is
+    compiled by a first plan even where a simulation has run."""
     try:
-        from models.rollout import rollout_kernel
+        from models import rollout
 
-        return bool(rollout_kernel._cache._cache_file._load_index())  # numba internals: {} when cold or stale
+        return bool(getattr(rollout, name)._cache._cache_file._load_index())  # numba internals: {} when cold or stale
     except Exception:  # numba changed its internals: look in the default place
-        return any(Path(__file__).resolve().parent.joinpath("__pycache__").glob("rollout.rollout_kernel-*.nbi"))
+        return any(Path(__file__).resolve().parent.joinpath("__pycache__").glob(f"rollout.{name}-*.nbi"))
 
 
 #: The helper process's program (`_compile_from`).

@@ -669,7 +669,7 @@ def _run_plan(args: argparse.Namespace, scenario: Scenario, names: list[str]):
     from planner.ladder import check_start
 
     with interrupt.deferred():  # Ctrl-C ends the rung under way; the rungs done are kept
-        announce_compile()
+        announce_compile(planning=True)
         check_start(scenario)  # the start's checks (the ladder repeats them), before the folder is made
         problems = make_out_dir("--out", args.out)
         if problems:
@@ -831,14 +831,17 @@ def run_with_progress(rung, scenario, state, controls, durations, h, *, live: bo
 #: this 2-core machine, the venv's install included, its second core compiling the general contact
 #: step (`models.kernel_cache.compile_ahead`; ca7b1d2, docs/measurements.md).
 COMPILE_NOTE = "compiling the physics kernels (first run only: about 10 minutes on two cores)"
+PLAN_COMPILE_NOTE = "compiling the planners' kernels (first plan only: about a minute on two cores)"
 
 
-def announce_compile() -> None:
+def announce_compile(planning: bool = False) -> None:
     """Say so (on stderr, with --json too) before the first call compiles the physics kernels
-    (numba's cache is cold): otherwise the first run sits silent for minutes."""
-    if kernels_cached():
-        return
-    print(COMPILE_NOTE, file=sys.stderr, flush=True)
+    (numba's cache is cold): otherwise the first run sits silent for minutes. planning: a plan
+    also compiles the planners' propagation, which a first plan after a simulation still does."""
+    if not kernels_cached():
+        print(COMPILE_NOTE, file=sys.stderr, flush=True)
+    elif planning and not kernels_cached("propagate_kernel"):
+        print(PLAN_COMPILE_NOTE, file=sys.stderr, flush=True)
 
 
 def print_simulation(summary: dict[str, Any]) -> None:

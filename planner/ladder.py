@@ -460,6 +460,9 @@ def _coarse_first(
     rest = replace(step, iterations=step.iterations - stage.iterations, t0=time.perf_counter())
     if not stage.ended.holds:
         own = _climb(rest, previous, planner, seeded, guided, progress, coarse=False, replay=replay)
+        if own is not None and rest.iterations <= 0 and not own[-1].ended.holds:  # its search had no iteration to run
+            why = f"{own[-1].reason or own[-1].ended.message} (the coarse stage spent the rung's {step.iterations} iterations)"
+            own = [*own[:-1], replace(own[-1], reason=why)]
         return None if own is None else [stage, *own]
     tracked = _track_rounds(rest, stage, h)
     if step.stopped():

@@ -715,6 +715,14 @@ def test_a_cold_kernel_cache_is_announced(monkeypatch, capsys):
     assert cli.kernels_cached()  # the tests above compiled the rollout kernel
     cli.announce_compile()
     assert capsys.readouterr().err == ""
-    monkeypatch.setattr(cli, "kernels_cached", lambda: False)
+    monkeypatch.setattr(cli, "kernels_cached", lambda name="rollout_kernel": False)
     cli.announce_compile()
     assert capsys.readouterr().err == cli.COMPILE_NOTE + "\n" and cli.COMPILE_NOTE.startswith("compiling the physics kernels")
+    cli.announce_compile(planning=True)
+    assert capsys.readouterr().err == cli.COMPILE_NOTE + "\n"  # one note: the physics kernels' covers the first plan's too
+    # a first plan after a simulation: the planners' propagation alone is cold
+    monkeypatch.setattr(cli, "kernels_cached", lambda name="rollout_kernel": name == "rollout_kernel")
+    cli.announce_compile()
+    assert capsys.readouterr().err == ""
+    cli.announce_compile(planning=True)
+    assert capsys.readouterr().err == cli.PLAN_COMPILE_NOTE + "\n"

@@ -550,6 +550,17 @@ def test_every_rung_above_the_first_says_why_it_ended():
     assert kinematic.reason.endswith("found a plan into the goal set (a geometric path is no guide for physics)")
 
 
+def test_a_rung_whose_coarse_stage_spent_its_iterations_says_so():
+    """A coarse stage that finds no plan may spend all of its rung's iterations; the rung's own
+    search then runs none, and its reason says why (it read as an ordinary search that failed)."""
+    scenario = load_scenario(SCENARIOS / "four_finger_grasp.toml")
+    result = run_ladder(scenario, seed=7, iterations=30, planner="KPIECE1")
+    stage, top = result.rungs[-2], result.rungs[-1]
+    assert stage.stage == "coarse" and not stage.ended.holds
+    assert top.rung == stage.rung and top.iterations == 0 and not top.ended.holds
+    assert top.reason.endswith(f"(the coarse stage spent the rung's {stage.iterations} iterations)"), top.reason
+
+
 def test_a_rung_that_cannot_express_the_task_does_not_end_the_ladder():
     """tests/data/strike.toml: the pusher may not pass x = 0, the puck must reach x >= 0.5, so
     only momentum gets it there. The kinematic rung cannot (no inertia: the puck stops with

@@ -348,7 +348,12 @@ def test_sweep_help_shows_the_model_syntax():
     )
     text = " ".join(done.stdout.split())
     assert "[LABEL=]RUNG[NAME=VALUE,...]" in text
-    assert "elastic=dynamic-compliant[C=0,finger_mass=1e3]" in text
+    # the example's plastic and elastic models are the paper's, as `make paper` sweeps them
+    from planner.paper import MODELS, RIGID_FINGERS
+
+    assert f"F='{RIGID_FINGERS}'" in text
+    example = text.split('--model "', 1)[1].split('"', 1)[0].replace("$F", RIGID_FINGERS)
+    assert set(example.split(",")) <= set(MODELS.split(",")) and len(example.split(",")) == 2
 
 
 def test_grid_points_stream_and_the_pool_is_fed_a_bounded_window():
