@@ -500,9 +500,8 @@ def _run_simulation(args: argparse.Namespace, scenario: Scenario, plan_controls,
     from planner import interrupt
 
     rung = rung_for(scenario, args.model)
-    note = unlisted_rung_note(scenario, args.model)
-    if note and not args.json:
-        print(note, file=sys.stderr, flush=True)
+    if not args.json:
+        say_unlisted_rungs(scenario, [args.model])
     state = rung.initial_state(scenario)
     laws = plan_controls is None  # the policy's feedback laws (a plan's controls are open loop)
     controls, durations = plan_controls if plan_controls is not None else policy_controls(scenario, duration)
@@ -527,6 +526,14 @@ def _run_simulation(args: argparse.Namespace, scenario: Scenario, plan_controls,
 def counted(n: int, noun: str) -> str:
     """`n noun`, the noun plural unless n is 1, the count with thousands separators: 1 step, 14,779 steps."""
     return f"{n:,} {noun}{'' if n == 1 else 's'}"
+
+
+def say_unlisted_rungs(scenario: Scenario, names, step_flag: bool = True) -> None:
+    """`unlisted_rung_note` of each rung named (once each), on stderr."""
+    for name in dict.fromkeys(names):
+        note = unlisted_rung_note(scenario, name, step_flag)
+        if note:
+            print(note, file=sys.stderr, flush=True)
 
 
 def unlisted_rung_note(scenario: Scenario, name: str, step_flag: bool = True) -> str | None:
@@ -643,10 +650,7 @@ def _run_plan(args: argparse.Namespace, scenario: Scenario, names: list[str]):
 
     live = sys.stderr.isatty() and not args.json
     if not args.json:
-        for name in names:
-            note = unlisted_rung_note(scenario, name, step_flag=False)
-            if note:
-                print(note, file=sys.stderr, flush=True)
+        say_unlisted_rungs(scenario, names, step_flag=False)
     budgets = {n: args.iterations if args.iterations is not None else scenario.rung_settings(n).iterations for n in names}
     flat_budget = sum(budgets.values())
 
@@ -1054,10 +1058,7 @@ def _run_sweep(args: argparse.Namespace, scenario: Scenario, fixed: dict, axes, 
     where = args.executor or f"{args.workers or os.cpu_count() or 1} local workers"
     if not args.json:
         print(f"sweeping {runs} runs on {where} (Ctrl-C stops and keeps what is done)", file=sys.stderr, flush=True)
-        for name in dict.fromkeys(m.rung for m in models):
-            note = unlisted_rung_note(scenario, name)
-            if note:
-                print(note, file=sys.stderr, flush=True)
+        say_unlisted_rungs(scenario, [m.rung for m in models])
         announce_compile()
     try:
         with interrupt.deferred(), sw.Executor(args.workers, args.executor) as executor:

@@ -30,7 +30,8 @@ BROKEN = FREE.replace('name = "free_transfer"', "name = 3")
 STUCK = {"kind": "plan", "scenario": FREE, "parameters": {"gap": 0.05}, "options": {"iterations": 10**7, "time_limit": 600}}
 
 
-def wait_for(client: TestClient, job_id: str, states=("succeeded", "failed", "cancelled"), timeout: float = JOB_TIMEOUT_S) -> dict:
+def wait_for(client, job_id: str, states=("succeeded", "failed", "cancelled"), timeout: float = JOB_TIMEOUT_S) -> dict:
+    """The job once its state is one of `states` (client: a TestClient, or an httpx2 client of a real server)."""
     end = time.monotonic() + timeout
     while True:
         job = client.get(f"/jobs/{job_id}").json()
@@ -498,15 +499,6 @@ def start_server(db, log=None):
     raise AssertionError("the server did not start")
 
 
-def wait_served(client, job_id, states, timeout=JOB_TIMEOUT_S):
-    """A real server's job once its state is one of `states`."""
-    end = time.monotonic() + timeout
-    while (job := client.get(f"/jobs/{job_id}").json())["state"] not in states:
-        assert time.monotonic() < end, job
-        time.sleep(0.1)
-    return job
-
-
 def test_kill_9_the_server_while_a_job_runs_and_restart(tmp_path):
     """A real server killed with SIGKILL while a job runs: on restart the job runs again (here
     it is then cancelled), the job queued behind it succeeds, none stays running."""
@@ -519,17 +511,17 @@ def test_kill_9_the_server_while_a_job_runs_and_restart(tmp_path):
         b = client.post(
             "/jobs", json={"kind": "plan", "scenario": FREE, "filename": "scenarios/free_transfer.toml", "options": {"seed": 3}}
         ).json()
-        wait_served(client, a["id"], ("running",))
+        wait_for(client, a["id"], ("running",))
     finally:
         proc.send_signal(signal.SIGKILL)
         proc.wait(timeout=10)
         client.close()
     proc, client = start_server(db)
     try:
-        assert wait_served(client, a["id"], ("running",))["runs"] == 2
+        assert wait_for(client, a["id"], ("running",))["runs"] == 2
         client.delete(f"/jobs/{a['id']}")
-        assert wait_served(client, a["id"], ("succeeded", "failed", "cancelled"))["state"] == "cancelled"
-        assert wait_served(client, b["id"], ("succeeded", "failed", "cancelled"))["state"] == "succeeded"
+        assert wait_for(client, a["id"], ("succeeded", "failed", "cancelled"))["state"] == "cancelled"
+        assert wait_for(client, b["id"], ("succeeded", "failed", "cancelled"))["state"] == "succeeded"
         assert client.get("/jobs?state=running").json()["jobs"] == []
         assert client.get(f"/jobs/{b['id']}/result").text == cli_plan_json(SCENARIOS / "free_transfer.toml", seed=3)
     finally:
@@ -554,7 +546,7 @@ def test_a_signal_to_the_servers_process_group_while_a_job_runs_and_restart(tmp_
         proc, client = start_server(db, err)
         try:
             job = client.post("/jobs", json=STUCK).json()
-            wait_served(client, job["id"], ("running",))
+            wait_for(client, job["id"], ("running",))
             time.sleep(1.0)  # the worker is planning
         finally:
             os.killpg(proc.pid, getattr(signal, signum))
@@ -570,9 +562,9 @@ def test_a_signal_to_the_servers_process_group_while_a_job_runs_and_restart(tmp_
         assert conn.execute("SELECT state, error FROM jobs").fetchone() == ("running", None)
     proc, client = start_server(db)
     try:
-        assert wait_served(client, job["id"], ("running",))["runs"] == 2
+        assert wait_for(client, job["id"], ("running",))["runs"] == 2
         client.delete(f"/jobs/{job['id']}")
-        assert wait_served(client, job["id"], ("succeeded", "failed", "cancelled"))["state"] == "cancelled"
+        assert wait_for(client, job["id"], ("succeeded", "failed", "cancelled"))["state"] == "cancelled"
     finally:
         proc.send_signal(signal.SIGINT)
         proc.wait(timeout=30)
