@@ -1110,6 +1110,15 @@ def _print_sweep(args: argparse.Namespace, result, data: dict, plot, interrupted
         failed = sum(p is not None and p.status != "ok" for p in result.points)
         if failed:
             print(f"{failed} runs stopped on a solver failure (outcome none; their status is in the results)")
+        failed = sum(p.status != "ok" for p in result.refine_points)
+        if failed:
+            print(f"{failed} of the {len(result.refine_points)} refinement runs stopped on a solver failure")
+        against = sum(b["low_status"] != "ok" or b["high_status"] != "ok" for b in result.boundaries)
+        if against:
+            print(
+                f"{against} refined boundar{'y lies' if against == 1 else 'ies lie'} against a run a solver failure stopped, "
+                "not between two physical outcomes (low_status, high_status in sweep.json)"
+            )
         state = "INCOMPLETE (interrupted), " if interrupted else ""
         print(f"{state}results written to {args.out / 'sweep.json'}, {args.out / 'sweep.csv'}" + (f", {plot}" if plot else ""))
 

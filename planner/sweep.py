@@ -342,6 +342,7 @@ class SweepResult:
     boundaries: list[dict] = field(default_factory=list)
     complete: bool = True
     refine_tolerance: float | None = None
+    refine_points: list[Point] = field(default_factory=list)  # the bisection's runs, in the order they ran
 
     def to_json(self) -> dict:
         return {
@@ -356,6 +357,7 @@ class SweepResult:
             "missing": sum(p is None for p in self.points),
             "boundaries": self.boundaries,
             "refine_tolerance": self.refine_tolerance,
+            "refine_points": [asdict(p) for p in self.refine_points],
         }
 
     def to_csv(self) -> str:
@@ -423,8 +425,10 @@ def sweep(
 def refine(result: SweepResult, *, tolerance: float = 1e-3, executor: Executor | None = None, progress=None) -> SweepResult:
     """Bisect every pair of grid neighbours (along one axis) whose outcomes differ, until the
     bracket is below `tolerance` (relative on log axes, absolute otherwise). Each boundary
-    records the axis, the other parameters, the two outcomes and the bracket. Brackets of
-    all boundaries advance together, one batch of runs per bisection step."""
+    records the axis, the other parameters, the two outcomes and the bracket, and the status
+    of the two runs that bound it (`low_status`, `high_status`: a side a solver failure ended is
+    no physical outcome). Brackets of all boundaries advance together, one batch of runs per
+    bisection step; the runs are kept in `result.refine_points`."""
     by_key = {}
     for p in result.points:
         if p is not None:
@@ -456,6 +460,8 @@ def refine(result: SweepResult, *, tolerance: float = 1e-3, executor: Executor |
                             "high": axis.values[k + 1],
                             "low_outcome": p.outcome,
                             "high_outcome": q.outcome,
+                            "low_status": p.status,
+                            "high_status": q.status,
                         }
                     )
 
@@ -481,15 +487,16 @@ def refine(result: SweepResult, *, tolerance: float = 1e-3, executor: Executor |
             outcomes = [None] * len(tasks)
             for i, point in executor.map(tasks):
                 outcomes[i] = point
+            result.refine_points += outcomes
             for b, point in zip(active, outcomes):
                 mid = b.pop("mid")
                 if point.outcome == b["low_outcome"]:
-                    b["low"] = mid
+                    b["low"], b["low_status"] = mid, point.status
                 elif point.outcome == b["high_outcome"]:
-                    b["high"] = mid
+                    b["high"], b["high_status"] = mid, point.status
                 else:  # a third outcome in between: a boundary on each side of it
-                    brackets.append({**b, "low": mid, "low_outcome": point.outcome})
-                    b["high"], b["high_outcome"] = mid, point.outcome
+                    brackets.append({**b, "low": mid, "low_outcome": point.outcome, "low_status": point.status})
+                    b["high"], b["high_outcome"], b["high_status"] = mid, point.outcome, point.status
             step += 1
             if progress:
                 progress(step, len(active))

@@ -10,6 +10,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 
@@ -389,3 +390,37 @@ def test_parse_axis_says_what_it_expected(text, phrase):
         sw.parse_axis(text)
     assert phrase in info.value.problems[0].reason
     assert "invalid literal" not in str(info.value) and "could not convert" not in str(info.value)
+
+
+class _ScriptedRuns:
+    """An executor whose runs end as a script of the parameter x says: goal below 0.3, a solver
+    failure (outcome none) in [0.3, 0.35), none after: refine's bookkeeping without physics."""
+
+    def map(self, tasks):
+        for i, task in enumerate(tasks):
+            x = dict(task.parameters)["x"]
+            outcome, status = ("goal", "ok") if x < 0.3 else ("none", "lcp_failed" if x < 0.35 else "ok")
+            yield i, sw.Point(task.model.label, dict(task.parameters), outcome, 1.0, status, {}, 10, 0.0)
+
+
+def test_refinement_keeps_its_runs_and_names_a_boundary_a_solver_failure_bounds(capsys):
+    from types import SimpleNamespace
+
+    from planner import cli
+
+    axes, models = [sw.parse_axis("x=0:1:3")], sw.parse_models("kinematic")
+    runs = _ScriptedRuns()
+    result = sw.sweep(TRIANGLE, axes, models, executor=runs)
+    assert [(p.outcome, p.status) for p in result.points] == [("goal", "ok"), ("none", "ok"), ("none", "ok")]
+    sw.refine(result, tolerance=1e-3, executor=runs)
+    (boundary,) = result.boundaries
+    assert boundary["low"] < 0.3 <= boundary["high"] and boundary["high"] - boundary["low"] <= 1e-3
+    assert (boundary["low_status"], boundary["high_status"]) == ("ok", "lcp_failed")  # the none side is a failure, not physics
+    data = result.to_json()
+    assert len(data["refine_points"]) == len(result.refine_points) == 9  # 0.5 / 2**9 < 1e-3 <= 0.5 / 2**8
+    assert sum(p["status"] == "lcp_failed" for p in data["refine_points"]) >= 1
+    cli._print_sweep(SimpleNamespace(json=False, out=Path("out")), result, data, None, False)
+    said = capsys.readouterr().out
+    failed = sum(p.status != "ok" for p in result.refine_points)
+    assert f"{failed} of the 9 refinement runs stopped on a solver failure" in said
+    assert "1 refined boundary lies against a run a solver failure stopped" in said
