@@ -136,7 +136,7 @@ def run(out: Path, doc: Path, workers: int | None, progress=print) -> dict:
     fig5 = plot_feasible_sets_3d(
         out / "fig5.png",
         _fig5_panels(slices),
-        "Fig. 5 analogue: Z_F (green) and Z_A (red) over the finger speed set points and mu; "
+        "Fig. 5 analogue: Z_F (green) and Z_U (red) over the finger speed set points and mu; "
         f"finger speed 2 in {{{', '.join(f'{v:g}' for v in sorted(slices))}}}, finger speed 1 = rho x finger speed 2 "
         "(rho in [0.25, 4], 41 log-spaced), band edges refined to 1e-3",
     )
@@ -369,7 +369,7 @@ def _mlcp_section() -> list[str]:
 def _fig5_caption() -> list[str]:
     return [
         "Fig. 5 in the paper's axes (finger speed 1, finger speed 2, mu), one panel per model: every run is a dot,",
-        "green where it grasps (Z_F), red where the triangle slips out (Z_A); the green surfaces pass through the",
+        "green where it grasps (Z_F), red where the triangle slips out (Z_U, Fig. 5's Z_A); the green surfaces pass through the",
         "refined edges of Z_F (black dots) along finger speed 1 at each finger speed 2 and mu < 1. Finger speed 2",
         f"takes {', '.join(f'{v:g}' for v in sorted((1.0, *V2_SLICES)))} m/s (only the slice at 1 m/s is the band table above;",
         "the others are swept the same way for the figure). At mu = 1.2 every run grasps: no edge, the whole quadrant.",

@@ -18,8 +18,8 @@ PAPER_COORDINATES = ("finger1.y", "finger2.y", "triangle.x")
 
 #: Colour of each outcome (models.task.Outcome labels) in the sweep and fan plots.
 OUTCOME_COLOURS = {"goal": "tab:green", "unsafe": "tab:red", "none": "0.6"}
-#: What the paper calls each outcome's set (Fig. 5: Z_F and Z_A).
-OUTCOME_SETS = {"goal": "Z_F (grasp)", "unsafe": "Z_A (slipped out)", "none": "neither"}
+#: What the paper calls each outcome's set (its text: Z_F and Z_U; Fig. 5's caption calls Z_U Z_A).
+OUTCOME_SETS = {"goal": "Z_F (grasp)", "unsafe": "Z_U (slipped out)", "none": "neither"}
 #: The paper's Fig. 4 window along x3.
 FIG4_WINDOW = 1.5
 #: Colours of the four finger-face strata in Fig. 4.
@@ -400,7 +400,7 @@ def _span(axis) -> float:
 def plot_feasible_sets_3d(path: Path, panels: list[tuple[str, list[dict], list[dict]]], title: str) -> Path:
     """Fig. 5 in the paper's axes: per model a 3D panel over (finger speed 1, finger speed 2,
     mu). panels: [(model title, points, boundaries)] with points {v1, v2, mu, outcome} (every
-    run, coloured as its set: Z_F green, Z_A red) and boundaries {v1, v2, mu, side} (refined
+    run, coloured as its set: Z_F green, Z_U red) and boundaries {v1, v2, mu, side} (refined
     edges of Z_F along finger speed 1, side "low" or "high"), drawn as the green surfaces
     through them, each boundary point as a black dot."""
     plt = _pyplot()
