@@ -11,6 +11,7 @@ import atexit
 import importlib.util
 import json
 import os
+import stat
 import sys
 import tempfile
 from dataclasses import replace
@@ -1322,10 +1323,18 @@ def cmd_reserved(args: argparse.Namespace) -> int:
 def write_atomic(path: Path, text: str, key: str = "--out") -> None:
     """Write via a temporary file and a rename, so a failure never leaves half a file. The
     folder must exist (the commands check it up front); the file gets the mode any new file
-    gets (0666 less the umask), not mkstemp's 0600. A folder that passed the checks but takes
-    no file (root under /proc, a full disk) is bad input for `key`: a ScenarioError."""
+    gets (0666 less the umask), not mkstemp's 0600. A symbolic link is written through (the
+    file it names is replaced, the link kept), and so is a device, pipe or socket (/dev/stdout,
+    /dev/null: a stream, written in place; the rename would replace the node with a file). A
+    folder that passed the checks but takes no file (root under /proc, a full disk) is bad input
+    for `key`: a ScenarioError."""
     tmp = None
     try:
+        if _is_stream(path):  # opened by its own name: /dev/stdout's target may be a pipe's
+            with open(path, "w", encoding="utf-8") as handle:
+                handle.write(text)
+            return
+        path = Path(os.path.realpath(path))
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
         os.fchmod(fd, 0o666 & ~_umask())
         with os.fdopen(fd, "w", encoding="utf-8") as handle:
@@ -1337,6 +1346,15 @@ def write_atomic(path: Path, text: str, key: str = "--out") -> None:
         if isinstance(exc, OSError):
             raise ScenarioError(path, [Problem(key, f"cannot write the file: {exc.strerror or exc}")]) from None
         raise
+
+
+def _is_stream(path: Path) -> bool:
+    """Whether `path` is (or links to) a device, pipe or socket: written in place, not replaced."""
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:  # no such file (or a dangling link): a new file
+        return False
+    return not (stat.S_ISREG(mode) or stat.S_ISDIR(mode))
 
 
 def _umask() -> int:
@@ -1359,7 +1377,7 @@ def check_out_file(key: str, path: Path | None, suffixes: tuple[str, ...] = ()) 
     problems = []
     if suffixes and path.suffix.lower() not in suffixes:
         problems.append(Problem(key, f"{path}: unsupported file type {path.suffix or '(no suffix)'!r}; use {' or '.join(suffixes)}"))
-    parent = path.parent
+    parent = Path(os.path.realpath(path)).parent  # a link's file is written, in the link's target's folder
     if not parent.exists():
         problems.append(Problem(key, f"{path}: the folder {parent} does not exist"))
     elif not parent.is_dir():

@@ -681,6 +681,33 @@ def test_outputs_get_the_usual_file_mode(tmp_path):
     assert out.stat().st_mode & 0o777 == 0o644
 
 
+def test_an_out_link_is_written_through_and_a_pipe_in_place(tmp_path, capsys):
+    """--out onto a symbolic link writes the file it names (the link stays); onto a pipe or a
+    device it writes the stream (the rename of an atomic write replaced /dev/full with a file)."""
+    import stat
+    import threading
+
+    from planner.cli import main
+
+    (tmp_path / "link.json").symlink_to("target.json")
+    assert main(["check", TRIANGLE, "--out", str(tmp_path / "link.json")]) == 0
+    assert (tmp_path / "link.json").is_symlink() and json.loads((tmp_path / "target.json").read_text())["dimension"] == 2
+    fifo = tmp_path / "fifo"
+    os.mkfifo(fifo)
+    read = {}
+    reader = threading.Thread(target=lambda: read.setdefault("text", fifo.read_text()))
+    reader.start()
+    assert main(["check", TRIANGLE, "--out", str(fifo)]) == 0
+    reader.join(timeout=60)
+    assert json.loads(read["text"])["dimension"] == 2 and stat.S_ISFIFO(os.lstat(fifo).st_mode)
+    if os.path.exists("/dev/full"):  # Linux: a device that takes no byte
+        capsys.readouterr()
+        assert main(["check", TRIANGLE, "--out", "/dev/full"]) == 2
+        assert capsys.readouterr().err == "error: /dev/full: --out: cannot write the file: No space left on device\n"
+        assert stat.S_ISCHR(os.lstat("/dev/full").st_mode)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fifo", "link.json", "target.json"]  # no temporary file left
+
+
 def test_piped_output_is_not_wrapped():
     env = {k: v for k, v in os.environ.items() if k not in ("COLUMNS", "LINES")}
     env["PYTHONPATH"] = str(ROOT)
