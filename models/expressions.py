@@ -90,9 +90,12 @@ def _eval(node: ast.AST, text: str, parameters: Mapping[str, float]) -> float:
         left = _eval(node.left, text, parameters)
         right = _eval(node.right, text, parameters)
         try:
-            return float(_BINARY[type(node.op)](left, right))
+            value = _BINARY[type(node.op)](left, right)
         except (ZeroDivisionError, OverflowError) as exc:
             raise ExpressionError(f"{text!r}: {exc}") from None
+        if isinstance(value, complex):  # (-1) ** 0.5: Python's power of a negative base
+            raise ExpressionError(f"{text!r}: ({left:g}) ** {right:g} is not a real number (a negative base to a fractional power)")
+        return float(value)
     if isinstance(node, ast.UnaryOp) and type(node.op) in _UNARY:
         return float(_UNARY[type(node.op)](_eval(node.operand, text, parameters)))
     if (

@@ -81,9 +81,11 @@ def read_obj(path: Path) -> tuple[np.ndarray, list[list[int]]]:
     vertices: list[list[float]] = []
     faces: list[list[int]] = []
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise GeometryError(f"cannot read mesh file {str(path)!r}: {exc.strerror}") from None
+    except UnicodeDecodeError as exc:
+        raise GeometryError(f"{path.name}: not a Wavefront OBJ file (a text file; byte {exc.start} is not UTF-8)") from None
     for number, line in enumerate(text.splitlines(), start=1):
         parts = line.split()
         if not parts or parts[0].startswith("#"):
@@ -106,9 +108,14 @@ def read_obj(path: Path) -> tuple[np.ndarray, list[list[int]]]:
 
 
 def check_convex_mesh(v: np.ndarray, faces: list[list[int]], name: str) -> None:
-    """Raise GeometryError unless every vertex lies on the inner side of every face plane."""
+    """Raise GeometryError unless the vertices span a volume (a flat mesh bounds no solid: its
+    hull has no inside) and every vertex lies on the inner side of every face plane."""
     centre = v.mean(axis=0)
     scale = float(np.max(np.linalg.norm(v - centre, axis=1)))
+    # the vertices' extent across their flattest direction (the last singular value is its RMS, times sqrt(k))
+    thickness = float(np.linalg.svd(v - centre, compute_uv=False)[-1]) / math.sqrt(len(v))
+    if not thickness > 1e-9 * scale:
+        raise GeometryError(f"{name}: mesh is flat (its vertices lie in one plane): a solid needs volume")
     for face in faces:
         a, b, c = v[face[0]], v[face[1]], v[face[2]]
         n = np.cross(b - a, c - a)

@@ -59,16 +59,20 @@ MAX_PREDICATE_DEPTH = 32
 
 class Limit:
     """The range of one quantity class: |value| <= high, and for quantities that get
-    inverted (masses, inertias) value >= low. Keeps every derived quantity finite."""
+    inverted (masses, inertias) or counted in steps (times) value >= low. Keeps every derived
+    quantity finite. Its message names the bound a value passed (a positive quantity's type
+    refuses <= 0 before: "between -1e12 and 1e12" would mislead)."""
 
     def __init__(self, what: str, unit: str, high: float, low: float | None = None):
         self.what, self.unit, self.high, self.low = what, unit, high, low
 
     def __call__(self, value: float) -> float:
         low = -self.high if self.low is None else self.low
-        if not low <= value <= self.high:
-            unit = f" {self.unit}" if self.unit else ""
-            raise ValueError(f"{value:g} is out of range: {self.what} must be between {low:g} and {self.high:g}{unit}")
+        unit = f" {self.unit}" if self.unit else ""
+        if value > self.high:
+            raise ValueError(f"{value:g} is out of range: {self.what} must be at most {self.high:g}{unit}")
+        if not value >= low:  # (nan too)
+            raise ValueError(f"{value:g} is out of range: {self.what} must be at least {low:g}{unit}")
         return value
 
 
@@ -80,7 +84,7 @@ LIMITS = {
     "mass": Limit("masses", "kg", 1e6, low=1e-6),
     "inertia": Limit("inertias", "kg m^2", 1e6, low=1e-12),
     "gain": Limit("gains, stiffnesses, dampings and forces", "", 1e12),
-    "time": Limit("times", "s", 1e6),
+    "time": Limit("times", "s", 1e6, low=1e-9),  # (a step below a nanosecond is a typo: 1 s of it overflows a count)
     "ratio": Limit("friction coefficients, scales and quaternion components", "", 1e6),
 }
 #: Largest planner seed and iteration count (OMPL takes 32-bit seeds).
