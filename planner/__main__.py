@@ -1,3 +1,3 @@
-from planner.cli import main
+from planner import main
 
 raise SystemExit(main())

@@ -24,10 +24,10 @@ from models import perfmap
 from models.family import PROPAGATING_RUNGS, RUNG_NAMES, control_steps
 from models.kernel_cache import kernels_cached
 from models.scenario import Problem, Scenario, ScenarioError, load_scenario, parse_overrides
-from models.schema import CONTROL_PLANNERS
+from models.schema import CONTROL_PLANNERS, MAX_ITERATIONS, MAX_SEED
 from models.task import OUTCOME_LABELS
+from planner import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
 
-EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
 #: The most runs one sweep may do (planner.sweep.MAX_RUNS, without importing it for --help).
 MAX_RUNS = 1_000_000
 
@@ -389,6 +389,11 @@ def cmd_schema(args: argparse.Namespace) -> int:
 MAX_STEPS = 10**9
 
 
+def _many_steps(count: float) -> str:
+    """A run's step count past MAX_STEPS, in words: "1e+10 steps" (or, past a float, too many to count)."""
+    return f"{count:.3g} steps" if count < float("inf") else "too many steps to count"
+
+
 def read_plan(path: Path, scenario: Scenario) -> tuple[np.ndarray, np.ndarray]:
     """The top rung's controls and durations of a plan.json, which must be of this scene
     (same scenario name, contents after parameters, driven coordinates); else bad input."""
@@ -396,11 +401,24 @@ def read_plan(path: Path, scenario: Scenario) -> tuple[np.ndarray, np.ndarray]:
 
     try:
         data = json.loads(path.read_text())
-        last = [r for r in data["rungs"] if r.get("durations")][-1]
+        index = [i for i, r in enumerate(data["rungs"]) if r.get("durations")][-1]
+        last = data["rungs"][index]
         controls = np.array(last["controls"], float).reshape(len(last["durations"]), -1)
         durations = np.array(last["durations"], float)
     except (OSError, ValueError, KeyError, IndexError, TypeError, AttributeError) as exc:
         raise ScenarioError(path, [Problem("rungs", f"not a usable plan file: {exc}")]) from None
+    bad = [k for k, d in enumerate(durations) if not (0.0 < d < float("inf"))]
+    if bad:
+        k = bad[0]
+        more = f" ({len(bad) - 1} more)" if len(bad) > 1 else ""
+        raise ScenarioError(
+            path,
+            [
+                Problem(
+                    f"rungs[{index}].durations[{k}]", f"a control's duration must be a positive number of seconds, got {durations[k]}{more}"
+                )
+            ],
+        )
     reasons = scene_mismatch(data.get("scene"), scenario)
     if reasons:
         raise ScenarioError(path, [Problem("scene", f"not a plan of {scenario.path}: {reason}") for reason in reasons])
@@ -461,7 +479,19 @@ def _check_simulate_args(args: argparse.Namespace):
         problems.append(Problem("--duration", f"must be a positive number, got {duration}"))
         duration = None
     total = 0
-    if h is not None and duration is not None:
+    # the flag that set the run's length: --step, else --duration (or the plan's), else the policy's
+    length_key = "--step" if args.step is not None else "--duration" if args.duration is not None else "task.policy.duration"
+    if plan_controls is not None and args.step is None:
+        length_key = "--plan"
+    if h is not None and duration is not None and duration / h > MAX_STEPS:  # (before counting: 1e308 / 1e-3 is inf)
+        problems.append(
+            Problem(
+                length_key,
+                f"{duration:g} s at h = {h:g} is {_many_steps(duration / h)}, more than the {MAX_STEPS:.0e} "
+                "one run may take; use a larger --step or a shorter --duration",
+            )
+        )
+    elif h is not None and duration is not None:
         durations = plan_controls[1] if plan_controls is not None else [duration]
         per_control = control_steps(durations, h)
         total = sum(per_control)
@@ -485,7 +515,7 @@ def _check_simulate_args(args: argparse.Namespace):
         if total > MAX_STEPS:
             problems.append(
                 Problem(
-                    "--step",
+                    length_key,
                     f"{duration:g} s at h = {h:g} is {total:.3g} steps, more than the {MAX_STEPS:.0e} "
                     "one run may take; use a larger --step or a shorter --duration",
                 )
@@ -585,10 +615,6 @@ def _simulation_summary(args: argparse.Namespace, scenario: Scenario, result, h:
     }
 
 
-#: --seed's range (OMPL's and numpy's generators take it).
-MAX_SEED = 2**32 - 1
-
-
 def rung_order_problems(key: str, names: list[str]) -> list[Problem]:
     """The file's check of a ladder's order (low to high fidelity, each rung once), on a list
     of rung names from the command line, with its message."""
@@ -618,8 +644,10 @@ def _check_plan_args(args: argparse.Namespace) -> tuple[Scenario, list[str]]:
     """Load and check plan's arguments: (scenario, the rungs to plan with); else bad input."""
     problems = check_out_dir("--out", args.out)
     problems += positive("--iterations", args.iterations, integer=True)
+    if args.iterations is not None and args.iterations > MAX_ITERATIONS:  # (a scenario's `iterations` has the same bound)
+        problems.append(Problem("--iterations", f"must be at most {MAX_ITERATIONS:.0e}, got {args.iterations}"))
     problems += positive("--time-limit", args.time_limit)
-    if args.seed is not None and not 0 <= args.seed <= MAX_SEED:
+    if args.seed is not None and not 0 <= args.seed <= MAX_SEED:  # (a scenario's `seed` has the same range)
         problems.append(Problem("--seed", f"must be between 0 and {MAX_SEED}, got {args.seed}"))
     scenario = load_from_args(args, problems)
     names = [r.model for r in scenario.spec.ladder.rungs]
@@ -674,11 +702,11 @@ def _run_plan(args: argparse.Namespace, scenario: Scenario, names: list[str]):
     from planner.ladder import check_start
 
     with interrupt.deferred():  # Ctrl-C ends the rung under way; the rungs done are kept
-        announce_compile(planning=True)
         check_start(scenario)  # the start's checks (the ladder repeats them), before the folder is made
         problems = make_out_dir("--out", args.out)
         if problems:
             raise ScenarioError(scenario.path, problems)
+        announce_compile(planning=True)  # (after the checks: bad input is its one line)
         result = ladder_for(scenario, names, args, progress=progress, stop=interrupt.asked)
     if live:
         print("\r" + " " * 78 + "\r", end="", file=sys.stderr, flush=True)
@@ -837,16 +865,20 @@ def run_with_progress(rung, scenario, state, controls, durations, h, *, live: bo
 #: step (`models.kernel_cache.compile_ahead`; ca7b1d2, docs/measurements.md).
 COMPILE_NOTE = "compiling the physics kernels (first run only: about 10 minutes on two cores)"
 PLAN_COMPILE_NOTE = "compiling the planners' kernels (first plan only: about a minute on two cores)"
+BENCH_COMPILE_NOTE = "compiling the benchmark's kernels (first bench only: about a minute on two cores)"
 
 
-def announce_compile(planning: bool = False) -> None:
+def announce_compile(planning: bool = False, bench: bool = False) -> None:
     """Say so (on stderr, with --json too) before the first call compiles the physics kernels
     (numba's cache is cold): otherwise the first run sits silent for minutes. planning: a plan
-    also compiles the planners' propagation, which a first plan after a simulation still does."""
+    also compiles the planners' propagation, which a first plan after a simulation still does;
+    bench: `ladder bench` its cost split's (`models.rollout.stage_loop`)."""
     if not kernels_cached():
         print(COMPILE_NOTE, file=sys.stderr, flush=True)
     elif planning and not kernels_cached("propagate_kernel"):
         print(PLAN_COMPILE_NOTE, file=sys.stderr, flush=True)
+    elif bench and not kernels_cached("stage_loop"):
+        print(BENCH_COMPILE_NOTE, file=sys.stderr, flush=True)
 
 
 def print_simulation(summary: dict[str, Any]) -> None:
@@ -921,7 +953,7 @@ def sweep_point_problems(scenario: Scenario, texts: list[str], axes, models, fix
                 seconds = duration or (variant.spec.task.policy.duration if variant.spec.task.policy else 0.0)
                 key = "--step" if step else "--duration" if duration else "task.policy.duration"
                 if seconds / h > MAX_STEPS:
-                    steps = f"{seconds / h:.3g} steps"
+                    steps = _many_steps(seconds / h)
                     reason = f"a run of {seconds:g} s at h = {h:g} is {steps}, more than the {MAX_STEPS:.0e} one run may take"
                 elif control_steps(seconds, h)[0] == 0:
                     reason = f"a run of {seconds:g} s at h = {h:g} is no step (a run takes round(duration / h) steps)"
@@ -1159,7 +1191,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
     problems = problems or make_out_dir("--out", args.out)
     if problems:
         raise ScenarioError("ladder bench", problems)
-    announce_compile()
+    announce_compile(planning=True, bench=True)
 
     def progress(text: str) -> None:
         if not args.json:
@@ -1170,18 +1202,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(results, indent=2))
     else:
-        for row in results["throughput"]["rows"]:
-            print(f"throughput {row['rung']:22s} {row['steps_per_s']:>12,.0f} steps/s")
-        peer = results["throughput"]["peer"]
-        if "skipped" in peer:
-            print(f"peer MuJoCo: skipped: {peer['skipped']}")
-        else:
-            for row in peer["rows"]:
-                left_out = f", without {', '.join(row['inert_pairs_left_out'])}" if row["inert_pairs_left_out"] else ""
-                print(
-                    f"throughput MuJoCo {peer['version']} ({row['contact']}{left_out}) {row['steps_per_s']:>12,.0f} steps/s: "
-                    f"dynamic-compliant is {row['ratio']:.2f}x"
-                )
+        _print_throughput(results["throughput"])
         for scene, res in results["planning"].items():
             x = res["summary"]
             print(
@@ -1190,6 +1211,40 @@ def cmd_bench(args: argparse.Namespace) -> int:
             )
         print(f"results written to {args.out / 'bench.json'}" + "".join(f" and {p}" for p in (args.doc, args.readme) if p))
     return EXIT_OK
+
+
+def _print_throughput(throughput: dict) -> None:
+    """`ladder bench`'s throughput, each figure with what it counts: the free-flight runs per rung
+    and MuJoCo's beside them (a ratio is the median of per-round ratios, ours and MuJoCo's timed
+    in turns: it is not the quotient of two medians printed), then the runs with contact."""
+    rows = throughput["rows"]
+    free = f"{rows[0]['steps']:,} steps at h = {rows[0]['h']:g}" if rows else ""
+    print(
+        f"throughput in free flight, {throughput['scene']} ({free}; steps with contact force: {rows[0]['contact_steps'] if rows else 0}):"
+    )
+    for row in rows:
+        print(f"  {row['rung']:44s} {row['steps_per_s']:>12,.0f} steps/s")
+    peer = throughput["peer"]
+    if "skipped" in peer:
+        print(f"  peer MuJoCo: skipped: {peer['skipped']}")
+    else:
+        ours = peer["ours"]
+        for row in peer["rows"]:
+            left_out = f", without {', '.join(row['inert_pairs_left_out'])}" if row["inert_pairs_left_out"] else ""
+            label = f"MuJoCo {peer['version']} ({row['contact']}{left_out})"
+            print(
+                f"  {label:44s} {row['steps_per_s']:>12,.0f} steps/s: {ours['rung']} "
+                f"is {row['ratio']:.2f}x (median of per-round ratios, timed in turns)"
+            )
+    contact = throughput.get("contact") or {}
+    if contact.get("rows"):
+        peer_name = contact.get("peer", "MuJoCo")
+        print(f"throughput with contact, against {peer_name} on the same runs (median of per-round ratios, timed in turns):")
+        for row in contact["rows"]:
+            print(
+                f"  {row['scene']}, {row['rung']}, h = {row['h']:g}, {row['contact_steps']:,} of {row['steps']:,} steps with "
+                f"contact force: {row['us_per_step']:.2f} us/step, MuJoCo {row['mujoco_us_per_step']:.2f}: {row['speed_vs_mujoco']:.2f}x"
+            )
 
 
 #: Hosts `ladder serve` binds without a token.

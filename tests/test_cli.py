@@ -511,7 +511,7 @@ def test_simulate_refuses_a_step_that_skips_a_plans_controls(tmp_path):
 @pytest.mark.parametrize(
     "args, message",
     [
-        (["plan", TRIANGLE, "--seed", "-1"], "--seed: must be between 0 and 4294967295, got -1"),
+        (["plan", TRIANGLE, "--seed", "-1"], "--seed: must be between 0 and 1000000000, got -1"),
         (["plan", TRIANGLE, "--iterations", "0"], "--iterations: must be at least 1, got 0"),
         (["plan", TRIANGLE, "--time-limit", "0"], "--time-limit: must be a positive number, got 0.0"),
         (["plan", TRIANGLE, "--top", "kinematic", "--rungs", "dynamic-rigid"], "--top: kinematic is not in --rungs (dynamic-rigid)"),
@@ -665,6 +665,63 @@ def test_simulate_plan_of_another_scene_is_bad_input(tmp_path):
     assert unknown.returncode == 2 and "does not say which scene it is of" in unknown.stderr
 
 
+def test_a_plan_with_a_control_of_no_positive_duration_is_bad_input(tmp_path):
+    """(A negative duration was dropped without a word: the run went on, status ok.)"""
+    plan = _plan(tmp_path, "a")
+    data = json.loads(plan.read_text())
+    index = max(i for i, r in enumerate(data["rungs"]) if r.get("durations"))
+    for value in (-0.05, float("nan")):
+        data["rungs"][index]["durations"][1] = value
+        bad = tmp_path / "bad.json"
+        bad.write_text(json.dumps(data))
+        done = ladder("simulate", TRIANGLE, "--param", "v1=0.8", "--plan", str(bad), "--model", "kinematic")
+        assert done.returncode == 2 and done.stdout == "", done.stderr
+        assert done.stderr == (
+            f"error: {bad}: rungs[{index}].durations[1]: a control's duration must be a positive number of seconds, got {value}\n"
+        )
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--step", "1e-310"], "--step: 3 s at h = 1e-310 is too many steps to count, more than the 1e+09 one run may take"),
+        (["--duration", "1e308"], "--duration: 1e+308 s at h = 0.0001 is too many steps to count, more than the 1e+09"),
+        (["--duration", "1e7"], "--duration: 1e+07 s at h = 0.0001 is 1e+11 steps, more than the 1e+09 one run may take"),
+    ],
+)
+def test_a_run_past_the_step_count_names_the_flag_that_made_it(args, message):
+    """(A subnormal --step or a huge --duration overflowed the count: a traceback; --duration was named --step.)"""
+    done = ladder("simulate", TRIANGLE, "--model", "dynamic-rigid", *args)
+    assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr
+    assert done.stderr.startswith(f"error: {TRIANGLE}: {message}")
+
+
+def test_plan_iterations_share_the_scenarios_bound():
+    from models.schema import MAX_ITERATIONS
+
+    done = ladder("plan", TRIANGLE, "--iterations", str(10 * MAX_ITERATIONS))
+    assert done.returncode == 2 and done.stderr.endswith(f"--iterations: must be at most 1e+09, got {10 * MAX_ITERATIONS}\n")
+
+
+def test_ctrl_c_while_the_command_still_imports_is_interrupted_not_a_traceback():
+    """A Ctrl-C that lands while `ladder` imports numpy (the first half second of every run) is
+    "interrupted", exit 130, as later; it was a KeyboardInterrupt traceback. The interrupt is
+    raised by an import hook at numpy's import, where a terminal's SIGINT would land."""
+    program = (
+        "import sys, planner\n"
+        "class Interrupt:\n"
+        "    def find_spec(self, name, path=None, target=None):\n"
+        "        if name == 'numpy':\n"
+        "            raise KeyboardInterrupt\n"
+        "assert 'numpy' not in sys.modules\n"
+        "sys.meta_path.insert(0, Interrupt())\n"
+        f"raise SystemExit(planner.main(['check', {TRIANGLE!r}]))\n"
+    )
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    done = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, cwd=ROOT, env=env, timeout=120)
+    assert (done.returncode, done.stderr, done.stdout) == (130, "interrupted\n", "")
+
+
 def test_outputs_get_the_usual_file_mode(tmp_path):
     out = tmp_path / "summary.json"
     env = dict(os.environ, PYTHONPATH=str(ROOT))
@@ -753,3 +810,9 @@ def test_a_cold_kernel_cache_is_announced(monkeypatch, capsys):
     assert capsys.readouterr().err == ""
     cli.announce_compile(planning=True)
     assert capsys.readouterr().err == cli.PLAN_COMPILE_NOTE + "\n"
+    # a first bench after plans: its cost split's kernel alone is cold (it compiled silently)
+    monkeypatch.setattr(cli, "kernels_cached", lambda name="rollout_kernel": name != "stage_loop")
+    cli.announce_compile(planning=True)
+    assert capsys.readouterr().err == ""
+    cli.announce_compile(planning=True, bench=True)
+    assert capsys.readouterr().err == cli.BENCH_COMPILE_NOTE + "\n"
