@@ -840,13 +840,27 @@ def _exact_cone_problems(spec: ScenarioSpec, rung, key: str) -> list[Problem]:
 
 
 def _check_expected_runs(spec: ScenarioSpec) -> list[Problem]:
-    """Each `[expect.policy]` rung's run of the policy (at the rung's h, as `pytest scenarios/`
-    runs it) takes a step: a run takes round(duration / h), so a policy shorter than h / 2
+    """The `[expect]` table's items can run (as `pytest scenarios/` runs them): it names one at
+    least; a plan expectation has something to plan (`planner.ladder.check_start` refuses the
+    rest when it plans); a policy expectation has a policy, and each rung's run of it (at the
+    rung's h) takes a step: a run takes round(duration / h), so a policy shorter than h / 2
     would end where it starts and be judged there."""
-    policy = spec.task.policy
-    if spec.expect is None or policy is None:
+    if spec.expect is None:
         return []
     out = []
+    if not spec.expect.policy and spec.expect.plan is None:  # (a test that tests nothing passes unseen)
+        out.append(Problem("expect", "names no expectation: give policy = { RUNG = OUTCOME } and/or plan = true or false"))
+    if spec.expect.plan is not None:  # the plan item plans: as `ladder plan` would refuse the scene (`planner.ladder.check_start`)
+        if not any(b.actuators for b in spec.bodies):
+            out.append(Problem("expect.plan", "nothing to plan: no body has an actuated DOF (a robot's actuators)"))
+        moving = [b.name for b in spec.bodies if b.velocity]
+        if moving:
+            out.append(Problem("expect.plan", f"planning with a scripted (moving) obstacle is not supported: {', '.join(moving)}"))
+    policy = spec.task.policy
+    if policy is None:
+        if spec.expect.policy:
+            out.append(Problem("expect.policy", "runs the task's policy, and this file has no [task.policy]"))
+        return out
     for name in spec.expect.policy:
         h = resolve_rung_settings(spec.ladder, name).h
         if h is not None and control_steps(policy.duration, h)[0] == 0:

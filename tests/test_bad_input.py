@@ -7,7 +7,7 @@ from __future__ import annotations
 import pytest
 
 from models.scenario import ScenarioError, load_scenario
-from planner.pytest_plugin import _has_expectations
+from planner.pytest_plugin import _is_scenario_file
 from tests.conftest import DATA
 from tests.test_cli import ladder
 from tests.test_scenarios import expectation
@@ -178,8 +178,11 @@ def test_touch_on_an_enabled_pair_override_is_fine(tmp_path):
     load_scenario(_scene(tmp_path, text))
 
 
-def test_pytest_plugin_skips_files_too_deep_to_read():
-    assert _has_expectations(BAD / "nesting_too_deep.toml") is False
+def test_pytest_plugin_collects_a_scenario_too_deep_to_read_to_fail_its_load():
+    """(It once left such a file out: a scenario folder's file that does not load is a failure.)"""
+    assert _is_scenario_file(BAD / "nesting_too_deep.toml") is True
+    with pytest.raises(ScenarioError):
+        load_scenario(BAD / "nesting_too_deep.toml")
 
 
 def test_scenario_error_survives_a_process_boundary():

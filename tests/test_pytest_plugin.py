@@ -1,0 +1,105 @@
+"""The pytest plugin (planner/pytest_plugin.py) as a lab uses it: a folder of its own scenario
+files, run by pytest in a fresh process. Trials found files left out without a word, --lf that
+reran nothing, ids under -v that pytest would not take back, and a lab's own `models` package
+mixed with ladder's."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import pytest
+
+from tests.conftest import ROOT, SCENARIOS
+
+DISC = (SCENARIOS / "bouncing_disc.toml").read_text()
+_EXPECT = '[expect]\npolicy = { dynamic-rigid = "goal", dynamic-compliant = "goal" }'
+assert _EXPECT in DISC
+
+
+def _disc(expect: str) -> str:
+    """bouncing_disc with another [expect] table (its schema comment dropped: no schema beside it)."""
+    return DISC.replace("#:schema ./scenario.schema.json\n", "").replace(_EXPECT, expect)
+
+
+def run_pytest(folder, *args: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
+    """pytest in a fresh process on a folder of its own (no ini file: its own rootdir)."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT), **(env or {}))
+    env.pop("PYTEST_ADDOPTS", None)
+    return subprocess.run(
+        [sys.executable, "-m", "pytest", "-p", "no:randomly", *args], capture_output=True, text=True, cwd=folder, env=env, timeout=600
+    )
+
+
+@pytest.fixture
+def lab(tmp_path):
+    scenes = tmp_path / "scenes"
+    scenes.mkdir()
+    (scenes / "good.toml").write_text(_disc('[expect]\npolicy = { dynamic-rigid = "goal" }'))
+    (scenes / "wrong.toml").write_text(_disc('[expect]\npolicy = { dynamic-rigid = "unsafe" }'))
+    return tmp_path
+
+
+def test_a_scenario_file_that_does_not_load_is_a_failing_item_not_left_out(lab):
+    scenes = lab / "scenes"
+    (scenes / "syntax.toml").write_text(_disc('[expect]\npolicy = { dynamic-rigid = "goal" }').replace("drop = 1.0", "drop = 1.0 = 3"))
+    (scenes / "misspelt.toml").write_text(_disc('[expcet]\npolicy = { dynamic-rigid = "goal" }'))
+    (scenes / "empty.toml").write_text(_disc("[expect]"))
+    (scenes / "nothing_to_plan.toml").write_text(_disc("[expect]\nplan = true"))
+    (scenes / "no_test.toml").write_text(_disc(""))  # a scene with no expectations: no item
+    (scenes / "other.toml").write_text('[tool.other]\nkey = "not a scenario"\n')  # not a scenario: not collected
+    done = run_pytest(lab, "scenes", "-q", "-p", "no:cacheprovider", "-rf")
+    assert done.returncode == 1, done.stdout + done.stderr
+    failed = sorted(line.split(" ")[1] for line in done.stdout.splitlines() if line.startswith("FAILED "))
+    assert failed == [
+        "scenes/empty.toml::load",
+        "scenes/misspelt.toml::load",
+        "scenes/nothing_to_plan.toml::load",
+        "scenes/syntax.toml::load",
+        "scenes/wrong.toml::policy[dynamic-rigid]",
+    ], done.stdout
+    assert "5 failed, 1 passed" in done.stdout
+    text = done.stdout
+    assert "syntax.toml: not valid TOML" in text
+    assert "expcet: unknown key (did you mean 'expect'?" in text
+    assert "expect: names no expectation" in text
+    assert "expect.plan: nothing to plan: no body has an actuated DOF" in text
+    assert "dynamic-rigid: the policy ends in 'goal'" in text and "expected 'unsafe'" in text
+
+
+def test_last_failed_reruns_a_failed_policy_item_and_verbose_ids_paste_back(lab):
+    first = run_pytest(lab, "scenes", "-q")
+    assert first.returncode == 1 and "1 failed, 1 passed" in first.stdout, first.stdout
+    again = run_pytest(lab, "scenes", "-q", "--lf")
+    assert again.returncode == 1 and "1 failed" in again.stdout and "passed" not in again.stdout.splitlines()[-1], again.stdout
+    verbose = run_pytest(lab, "scenes", "-v", "-p", "no:cacheprovider")
+    assert "scenes/good.toml::policy[dynamic-rigid] PASSED" in verbose.stdout, verbose.stdout
+    one = run_pytest(lab, "scenes/good.toml::policy[dynamic-rigid]", "-q", "-p", "no:cacheprovider")
+    assert one.returncode == 0 and "1 passed" in one.stdout, one.stdout + one.stderr
+
+
+def test_a_labs_own_models_package_is_named_not_mixed_with_ladders(lab):
+    """`python -m` puts the working directory first on sys.path: a `models` package there would
+    stand in for ladder's physics package, with ladder's modules loaded into it."""
+    (lab / "models").mkdir()
+    (lab / "models" / "__init__.py").write_text('"""the lab\'s own models"""\n')
+    done = run_pytest(lab, "scenes/good.toml", "-q", "-p", "no:cacheprovider")
+    assert done.returncode == 1 and "a package of your own named `models` comes first on sys.path" in done.stdout, done.stdout
+    assert f"the package `models` is {lab / 'models' / '__init__.py'}" in done.stdout
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    cli = subprocess.run(
+        [sys.executable, "-m", "planner", "check", "scenes/good.toml"], capture_output=True, text=True, cwd=lab, env=env, timeout=120
+    )
+    assert cli.returncode == 2 and cli.stderr.startswith("error: the package `models` is ") and "Traceback" not in cli.stderr
+
+
+def test_items_that_will_compile_the_kernels_say_so_first(lab, tmp_path):
+    """A cold kernel cache (here an empty NUMBA_CACHE_DIR) meant minutes of silence before the
+    first item; the plugin prints the `ladder` command's notice once its items are collected."""
+    from planner.cli import COMPILE_NOTE
+
+    cold = run_pytest(lab, "scenes", "--collect-only", "-q", "-p", "no:cacheprovider", env={"NUMBA_CACHE_DIR": str(tmp_path / "empty")})
+    assert cold.returncode == 0 and COMPILE_NOTE in cold.stdout, cold.stdout + cold.stderr
+    warm = run_pytest(lab, "scenes", "--collect-only", "-q", "-p", "no:cacheprovider")
+    assert warm.returncode == 0 and COMPILE_NOTE not in warm.stdout, warm.stdout
