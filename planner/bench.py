@@ -1224,8 +1224,14 @@ def readme_blocks(r: dict) -> dict[str, str]:
     else:
         free = "free flight (the paper's scene until the grasp: no step carries a contact force)"
         said = [f"{peer['ratio']:.1f}x MuJoCo's steps per second in {free}"]
-        if squeeze:
-            said.append(f"{_ratio_range(squeeze)} while two fingers squeeze the triangle ({_contacts(r, 'two_finger_triangle')})")
+        if squeeze:  # its run starts in free flight: say how many of its steps carry force
+            forced = {(row["contact_steps"], row["steps"]) for row in timed if row["scene"].startswith("two_finger_triangle")}
+            share = ""
+            if len(forced) == 1:
+                ((forced_steps, steps),) = forced
+                share = f"{forced_steps:,} of its {steps:,} steps carry contact force"
+            what = "; ".join(x for x in (share, _contacts(r, "two_finger_triangle")) if x)
+            said.append(f"{_ratio_range(squeeze)} on the paper's scene through the squeeze ({what})")
         if push:
             said.append(
                 f"{_ratio_range(push)} on box_push_3d's push ({_contacts(r, 'box_push_3d')}; both friction cones, as a planner calls them)"
