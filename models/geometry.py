@@ -174,6 +174,21 @@ def make_geometry(shape, dimension: int, base_dir: Path | None = None, max_coord
     raise GeometryError(f"shape {t!r} is not spatial")
 
 
+def thickness(g: Geometry) -> float:
+    """How thick the shape is across its thinnest principal direction, m (inf for a half-plane
+    or plane): the core's extent along the last of its principal axes, plus twice the radius (a
+    disc's or sphere's diameter, a capsule's, a box's least side). A penetration past half of it
+    has pushed a body's middle through the other's surface: no contact model's result."""
+    if g.kind == "halfspace":
+        return math.inf
+    core = g.core - g.core.mean(axis=0)
+    extent = 0.0
+    if len(core) >= 2:
+        least = np.linalg.svd(core, full_matrices=True)[2][-1]  # the direction of least spread
+        extent = float(np.ptp(core @ least))
+    return extent + 2.0 * g.radius
+
+
 # ----------------------------------------------------------------------------- poses
 
 

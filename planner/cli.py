@@ -611,8 +611,28 @@ def _simulation_summary(args: argparse.Namespace, scenario: Scenario, result, h:
         "max_residual": result.max_residual,
         "max_lcp_size": result.max_lcp_size,
         "max_penetration": result.max_penetration,
+        "warnings": [w for w in (penetration_warning(scenario, result.max_penetration),) if w],
         "parameters": dict(scenario.parameters),
     }
+
+
+def penetration_warning(scenario: Scenario, depth: float) -> str:
+    """What a run's largest penetration says when it is past half the thickness of the thinnest
+    body in a contact pair ("" below): the contacts did not keep the bodies apart, whatever the
+    run's status (a solver can solve every step of a box sinking through a table)."""
+    from models.geometry import thickness
+
+    names = {name for pair in scenario.pairs for name in (pair.body_a, pair.body_b)}
+    sizes = sorted((thickness(scenario.geometries[name]), name) for name in names)
+    if not sizes or not depth > 0.5 * sizes[0][0]:
+        return ""
+    size, name = sizes[0]
+    return (
+        f"the largest penetration, {depth:.3g} m, is past half the thickness of the thinnest body in a contact pair "
+        f"({name}: {size:.3g} m): "
+        "the contacts did not keep the bodies apart (a contact too soft for its load, or a step too long for the motion); "
+        "the run is not physical"
+    )
 
 
 def rung_order_problems(key: str, names: list[str]) -> list[Problem]:
@@ -891,6 +911,8 @@ def print_simulation(summary: dict[str, Any]) -> None:
     )
     if summary["status"] != "ok":
         console.print(f"[red]{summary['message']}[/red]")
+    for warning in summary["warnings"]:
+        console.print(f"[yellow]warning: {warning}[/yellow]")
     table = Table(title="final state", title_justify="left")
     table.add_column("coordinate")
     table.add_column("q")

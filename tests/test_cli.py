@@ -816,3 +816,31 @@ def test_a_cold_kernel_cache_is_announced(monkeypatch, capsys):
     assert capsys.readouterr().err == ""
     cli.announce_compile(planning=True, bench=True)
     assert capsys.readouterr().err == cli.BENCH_COMPILE_NOTE + "\n"
+
+
+def test_a_run_whose_bodies_pass_through_each_other_says_so_whatever_its_status():
+    """A contact far too soft for its load (bouncing_disc at K = 1e-6 N/m under the quasistatic
+    compliant rung) lets the disc fall through the floor with every step solved, status ok; the
+    summary warns when the largest penetration is past half the thinnest body in a contact pair."""
+    from models.geometry import thickness
+    from models.scenario import load_scenario
+
+    scenes = {name: load_scenario(SCENARIOS / f"{name}.toml") for name in ("bouncing_disc", "box_push_3d")}
+    assert thickness(scenes["bouncing_disc"].geometries["disc"]) == pytest.approx(0.2)  # a disc: its diameter
+    assert thickness(scenes["bouncing_disc"].geometries["floor"]) == float("inf")
+    assert thickness(scenes["box_push_3d"].geometries["box"]) == pytest.approx(0.1)  # a box: its least side
+    assert thickness(scenes["box_push_3d"].geometries["pusher"]) == pytest.approx(0.06)
+    disc = str(SCENARIOS / "bouncing_disc.toml")
+    sunk = ladder("simulate", disc, "--model", "quasistatic-compliant", "--param", "K=1e-6", "--json")
+    summary = json.loads(sunk.stdout)
+    assert sunk.returncode == 0 and summary["status"] == "ok" and summary["max_penetration"] > 1.0, sunk.stderr
+    assert summary["warnings"] == [
+        f"the largest penetration, {summary['max_penetration']:.3g} m, is past half the thickness of the thinnest body "
+        "in a contact pair (disc: 0.2 m): "
+        "the contacts did not keep the bodies apart (a contact too soft for its load, or a step too long for the motion); "
+        "the run is not physical"
+    ]
+    said = ladder("simulate", disc, "--model", "quasistatic-compliant", "--param", "K=1e-6")
+    assert "warning: the largest penetration" in " ".join(said.stdout.split())
+    held = json.loads(ladder("simulate", disc, "--model", "dynamic-compliant", "--json").stdout)
+    assert held["status"] == "ok" and held["warnings"] == [] and held["max_penetration"] < 0.1  # K = 1e6: it stops at the goal

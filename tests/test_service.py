@@ -340,7 +340,7 @@ SWEEP = {"grid": ["v1=0.25:4:5:log"], "model": "kinematic,plastic=quasistatic-ri
 
 def without_wall_times(sweep_json: str) -> dict:
     data = json.loads(sweep_json)
-    for point in data["points"]:
+    for point in data["points"] + data["refine_points"]:
         del point["wall_s"]
     return data
 
@@ -413,7 +413,7 @@ def test_bad_sweep_jobs_are_422_named_as_in_the_request(idle):
     assert problems({"grid": ["v1=1:2:3"], "model": "kinematic", "step": 10.0}) == [
         "options.step: kinematic at v1=1 and 2 more grid points: a run of 3 s at h = 10 is no step (a run takes round(duration / h) steps)"
     ]
-    no_policy = TRIANGLE[: TRIANGLE.index("[task.policy]")] + TRIANGLE[TRIANGLE.index("[ladder]") :]
+    no_policy = TRIANGLE[: TRIANGLE.index("[task.policy]")] + TRIANGLE[TRIANGLE.index("[ladder]") : TRIANGLE.index("[expect]")]
     assert problems({"grid": ["v1=1:2:3"], "model": "kinematic"}, no_policy) == [
         "task.policy: a sweep runs the scenario's policy, and this file has none"
     ]
