@@ -268,6 +268,23 @@ def _parse_toml(text: str) -> dict:
     return tomllib.loads(text)
 
 
+def penetration_warning(scenario: Scenario, depth: float) -> str:
+    """What a run's largest penetration says when it is past half the thickness of the thinnest
+    body in a contact pair ("" below): the contacts did not keep the bodies apart, whatever the
+    run's status (a solver can solve every step of a box sinking through a table)."""
+    names = {name for pair in scenario.pairs for name in (pair.body_a, pair.body_b)}
+    sizes = sorted((geo.thickness(scenario.geometries[name]), name) for name in names)
+    if not sizes or not depth > 0.5 * sizes[0][0]:
+        return ""
+    size, name = sizes[0]
+    return (
+        f"the largest penetration, {depth:.3g} m, is more than half the thickness of the thinnest body in any contact pair "
+        f"({name}, {size:.3g} m thick; the run does not say which pair penetrated): "
+        "the contacts did not keep the bodies apart (a contact too soft for its load, or a step too long for the motion); "
+        "the run is not physical"
+    )
+
+
 def load_scenario(path: str | Path, overrides: Mapping[str, float] | None = None) -> Scenario:
     """Read, validate and derive a scenario; raise ScenarioError listing every problem."""
     path = Path(path)

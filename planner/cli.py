@@ -23,7 +23,7 @@ import numpy as np
 from models import perfmap
 from models.family import PROPAGATING_RUNGS, RUNG_NAMES, control_steps
 from models.kernel_cache import kernels_cached
-from models.scenario import Problem, Scenario, ScenarioError, load_scenario, parse_overrides
+from models.scenario import Problem, Scenario, ScenarioError, load_scenario, parse_overrides, penetration_warning
 from models.schema import CONTROL_PLANNERS, MAX_ITERATIONS, MAX_SEED
 from models.task import OUTCOME_LABELS
 from planner import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
@@ -616,25 +616,6 @@ def _simulation_summary(args: argparse.Namespace, scenario: Scenario, result, h:
     }
 
 
-def penetration_warning(scenario: Scenario, depth: float) -> str:
-    """What a run's largest penetration says when it is past half the thickness of the thinnest
-    body in a contact pair ("" below): the contacts did not keep the bodies apart, whatever the
-    run's status (a solver can solve every step of a box sinking through a table)."""
-    from models.geometry import thickness
-
-    names = {name for pair in scenario.pairs for name in (pair.body_a, pair.body_b)}
-    sizes = sorted((thickness(scenario.geometries[name]), name) for name in names)
-    if not sizes or not depth > 0.5 * sizes[0][0]:
-        return ""
-    size, name = sizes[0]
-    return (
-        f"the largest penetration, {depth:.3g} m, is past half the thickness of the thinnest body in a contact pair "
-        f"({name}: {size:.3g} m): "
-        "the contacts did not keep the bodies apart (a contact too soft for its load, or a step too long for the motion); "
-        "the run is not physical"
-    )
-
-
 def rung_order_problems(key: str, names: list[str]) -> list[Problem]:
     """The file's check of a ladder's order (low to high fidelity, each rung once), on a list
     of rung names from the command line, with its message."""
@@ -740,6 +721,8 @@ def _write_plan_outputs(args: argparse.Namespace, scenario: Scenario, result) ->
     from planner.plots import plot_rollouts
 
     report = result.to_json()
+    for entry, rung_report in zip(report["rungs"], result.rungs):  # (report.json only: plan.json is the plan)
+        entry["warnings"] = [w for w in (penetration_warning(scenario, rung_report.max_penetration),) if w]
     # plan.json is reproducible (no timings): the same seed gives the same bytes
     write_atomic(args.out / "plan.json", plan_json_text(result))
     write_atomic(args.out / "report.json", json.dumps(report, indent=1) + "\n")
@@ -804,8 +787,9 @@ def _print_plan(args: argparse.Namespace, scenario: Scenario, result, report: di
             "rollouts",
             "props",
             "iters",
-            "goal dist",
-            "max pen",
+            "goal dist m",
+            "max pen m",
+            "force steps",
             "fails",
             "controls",
         ):
@@ -823,14 +807,17 @@ def _print_plan(args: argparse.Namespace, scenario: Scenario, result, report: di
                 str(r.iterations),
                 distance,
                 f"{r.max_penetration:.1e}",
+                str(r.contact_steps),
                 str(r.solver_failures),
                 str(len(r.durations)),
             )
         console = _console(width=130)
         console.print(table)
-        for r in result.rungs:
+        for r, entry in zip(result.rungs, report["rungs"]):
             if r.reason:
                 console.print(f"{r.label}: {r.reason}")
+            for warning in entry["warnings"]:
+                console.print(f"[yellow]{r.label}: warning: {warning}[/yellow]")
         if result.complete:
             print(
                 f"top rung holds: {'yes' if result.top_holds else 'no'}; plan written to {args.out / 'plan.json'}; "
@@ -1168,6 +1155,12 @@ def _print_sweep(args: argparse.Namespace, result, data: dict, plot, interrupted
         failed = sum(p.status != "ok" for p in result.refine_points)
         if failed:
             print(f"{failed} of the {len(result.refine_points)} refinement runs stopped on a solver failure")
+        deep = sum(bool(p.warning) for p in (*result.points, *result.refine_points) if p is not None)
+        if deep:
+            print(
+                f"{counted(deep, 'run')} passed bodies through each other (a penetration past half the thinnest body in a "
+                "contact pair: not physical, whatever the outcome; `warning` in sweep.json)"
+            )
         against = sum(b["low_status"] != "ok" or b["high_status"] != "ok" for b in result.boundaries)
         if against:
             print(

@@ -88,6 +88,7 @@ class Point:
     steps: int
     wall_s: float
     max_penetration: float = 0.0  # the largest met at a step's start, m (`RolloutResult.max_penetration`)
+    warning: str = ""  # `models.scenario.penetration_warning` of it: the bodies passed through each other
 
 
 def _number(text: str, what: str) -> float:
@@ -224,7 +225,7 @@ def grid_size(axes: list[Axis]) -> int:
 def run_task(task: Task) -> Point:
     """One run of the policy (in a worker process, or here)."""
     from models.rungs import policy_controls, rung_for
-    from models.scenario import load_scenario
+    from models.scenario import load_scenario, penetration_warning
 
     params = dict(task.parameters)
     params.update(dict(task.model.overrides))
@@ -234,7 +235,10 @@ def run_task(task: Task) -> Point:
     controls, durations = policy_controls(scenario, task.duration)
     out = rung.rollout(scenario, rung.initial_state(scenario), controls, durations, h, max_records=2, laws=True)
     final = out.state.named(scenario)
-    return Point(task.model.label, dict(task.parameters), out.outcome, out.t, out.status, final, out.steps, out.wall_s, out.max_penetration)
+    warning = penetration_warning(scenario, out.max_penetration)
+    return Point(
+        task.model.label, dict(task.parameters), out.outcome, out.t, out.status, final, out.steps, out.wall_s, out.max_penetration, warning
+    )
 
 
 def _warm() -> None:
