@@ -878,11 +878,13 @@ BENCH_COMPILE_NOTE = "compiling the benchmark's kernels (first bench only: about
 def announce_compile(planning: bool = False, bench: bool = False) -> None:
     """Say so (on stderr, with --json too) before the first call compiles the physics kernels
     (numba's cache is cold): otherwise the first run sits silent for minutes. planning: a plan
-    also compiles the planners' propagation, which a first plan after a simulation still does;
-    bench: `ladder bench` its cost split's (`models.rollout.stage_loop`)."""
+    also compiles the planners' kernels, which a first plan after a simulation still does (every
+    plan replays and tracks with `models.rollout.rollout_each`; `propagate_kernel`, which only a
+    rung's own search calls, stayed cold on scenes whose plans track up the ladder, and looking at
+    it announced a compile on every plan); bench: `ladder bench` its cost split's (`stage_loop`)."""
     if not kernels_cached():
         print(COMPILE_NOTE, file=sys.stderr, flush=True)
-    elif planning and not kernels_cached("propagate_kernel"):
+    elif planning and not kernels_cached("rollout_each"):
         print(PLAN_COMPILE_NOTE, file=sys.stderr, flush=True)
     elif bench and not kernels_cached("stage_loop"):
         print(BENCH_COMPILE_NOTE, file=sys.stderr, flush=True)
