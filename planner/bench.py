@@ -1148,7 +1148,8 @@ def markdown(r: dict, doc_dir: Path, out: Path) -> str:
             f"| {row['scene']} | {row['rung']} | {row['h']:g} | {row['reference']} | {row['error']:.2e} "
             f"| {row['wall_s']:.4f} | {row['status']} |"
         )
-    lines += [""] + [f"![{Path(p).stem}]({rel(p)})" for p in r["plots"]]
+    # the plots are in `out` beside bench.json (their recorded paths are relative to where the run ran)
+    lines += [""] + [f"![{Path(p).stem}]({rel(out / Path(p).name)})" for p in r["plots"]]
     lines += [
         "",
         f"## Stability at large steps ({r['stability']['scene']})",

@@ -89,6 +89,7 @@ class Point:
     wall_s: float
     max_penetration: float = 0.0  # the largest met at a step's start, m (`RolloutResult.max_penetration`)
     warning: str = ""  # `models.scenario.penetration_warning` of it: the bodies passed through each other
+    h: float | None = None  # the step the run took, s (the sweep's --step, else its rung's in the scenario)
 
 
 def _number(text: str, what: str) -> float:
@@ -237,7 +238,17 @@ def run_task(task: Task) -> Point:
     final = out.state.named(scenario)
     warning = penetration_warning(scenario, out.max_penetration)
     return Point(
-        task.model.label, dict(task.parameters), out.outcome, out.t, out.status, final, out.steps, out.wall_s, out.max_penetration, warning
+        task.model.label,
+        dict(task.parameters),
+        out.outcome,
+        out.t,
+        out.status,
+        final,
+        out.steps,
+        out.wall_s,
+        out.max_penetration,
+        warning=warning,
+        h=h,
     )
 
 

@@ -138,3 +138,13 @@ def test_bench_refuses_what_it_cannot_use_and_writes_nothing(tmp_path):
         assert message in result.stderr and "Traceback" not in result.stderr, (args, result.stderr)
     assert not doc.exists()
     assert no_markers.read_text() == "# a README without the markers\n"
+
+
+def test_a_report_written_elsewhere_links_the_plots_where_they_are(saved, tmp_path):
+    """(A --doc outside docs/ linked docs/bench/x.png relative to itself: broken links.)"""
+    import re
+
+    text = markdown(saved, tmp_path, ROOT / "docs" / "bench")
+    links = re.findall(r"!\[[^]]*\]\(([^)]+)\)", text)
+    assert len(links) == len(saved["plots"]) > 0
+    assert all((tmp_path / link).resolve().is_file() for link in links), links

@@ -204,6 +204,10 @@ def test_sweep_command_writes_json_csv_and_plot(tmp_path):
     assert json.loads((out / "sweep.json").read_text())["points"] == data["points"]
     assert (out / "sweep.csv").read_text().splitlines()[0].startswith("model,v1,mu,outcome,t,status,steps,max_penetration,")
     assert all(0.0 <= p["max_penetration"] < 1e-6 for p in data["points"])  # quasistatic-rigid: contacts met to round-off
+    from models.scenario import load_scenario
+
+    h = load_scenario(TRIANGLE).rung_settings("quasistatic-rigid").h
+    assert data["h"] is None and {p["h"] for p in data["points"] + data["refine_points"]} == {h}  # each run's own step
     assert (out / "sweep.png").stat().st_size > 0 and (out / "sweep.svg").exists()
 
 
