@@ -112,9 +112,7 @@ def check_convex_mesh(v: np.ndarray, faces: list[list[int]], name: str) -> None:
     hull has no inside) and every vertex lies on the inner side of every face plane."""
     centre = v.mean(axis=0)
     scale = float(np.max(np.linalg.norm(v - centre, axis=1)))
-    # the vertices' extent across their flattest direction (the last singular value is its RMS, times sqrt(k))
-    thickness = float(np.linalg.svd(v - centre, compute_uv=False)[-1]) / math.sqrt(len(v))
-    if not thickness > 1e-9 * scale:
+    if not _least_extent(v) > 1e-9 * scale:
         raise GeometryError(f"{name}: mesh is flat (its vertices lie in one plane): a solid needs volume")
     for face in faces:
         a, b, c = v[face[0]], v[face[1]], v[face[2]]
@@ -181,12 +179,17 @@ def thickness(g: Geometry) -> float:
     has pushed a body's middle through the other's surface: no contact model's result."""
     if g.kind == "halfspace":
         return math.inf
-    core = g.core - g.core.mean(axis=0)
-    extent = 0.0
-    if len(core) >= 2:
-        least = np.linalg.svd(core, full_matrices=True)[2][-1]  # the direction of least spread
-        extent = float(np.ptp(core @ least))
-    return extent + 2.0 * g.radius
+    return _least_extent(g.core) + 2.0 * g.radius
+
+
+def _least_extent(points: np.ndarray) -> float:
+    """The points' extent along their direction of least spread (their last principal axis): 0
+    for one point, or for points on a line (in the plane) or in a plane (in space)."""
+    if len(points) < 2:
+        return 0.0
+    centred = points - points.mean(axis=0)
+    least = np.linalg.svd(centred, full_matrices=True)[2][-1]
+    return float(np.ptp(centred @ least))
 
 
 # ----------------------------------------------------------------------------- poses

@@ -856,10 +856,28 @@ def _exact_cone_problems(spec: ScenarioSpec, rung, key: str) -> list[Problem]:
     return out
 
 
+def plan_problems(spec: ScenarioSpec) -> list[Problem]:
+    """Why the scene cannot be planned (`planner.ladder.check_start`, and a file's `[expect]
+    plan`): nothing is actuated, or an obstacle moves on a script (plan states carry no time, so
+    its pose at a state is unknown; simulate and sweep run such scenes from t = 0)."""
+    if not any(b.actuators for b in spec.bodies):
+        return [
+            Problem("bodies", "nothing to plan: no body has an actuated DOF (a robot's actuators); `ladder simulate` runs such a scene")
+        ]
+    return [
+        Problem(
+            f"bodies[{i}].velocity",
+            "planning with a scripted (moving) obstacle is not supported: plan states carry no "
+            "time; `ladder simulate` and `ladder sweep` run such scenes",
+        )
+        for i, body in enumerate(spec.bodies)
+        if body.velocity
+    ]
+
+
 def _check_expected_runs(spec: ScenarioSpec) -> list[Problem]:
     """The `[expect]` table's items can run (as `pytest scenarios/` runs them): it names one at
-    least; a plan expectation has something to plan (`planner.ladder.check_start` refuses the
-    rest when it plans); a policy expectation has a policy, and each rung's run of it (at the
+    least; a plan expectation has something to plan (`plan_problems`); a policy expectation has a policy, and each rung's run of it (at the
     rung's h) takes a step: a run takes round(duration / h), so a policy shorter than h / 2
     would end where it starts and be judged there."""
     if spec.expect is None:
@@ -867,12 +885,8 @@ def _check_expected_runs(spec: ScenarioSpec) -> list[Problem]:
     out = []
     if not spec.expect.policy and spec.expect.plan is None:  # (a test that tests nothing passes unseen)
         out.append(Problem("expect", "names no expectation: give policy = { RUNG = OUTCOME } and/or plan = true or false"))
-    if spec.expect.plan is not None:  # the plan item plans: as `ladder plan` would refuse the scene (`planner.ladder.check_start`)
-        if not any(b.actuators for b in spec.bodies):
-            out.append(Problem("expect.plan", "nothing to plan: no body has an actuated DOF (a robot's actuators)"))
-        moving = [b.name for b in spec.bodies if b.velocity]
-        if moving:
-            out.append(Problem("expect.plan", f"planning with a scripted (moving) obstacle is not supported: {', '.join(moving)}"))
+    if spec.expect.plan is not None:  # the plan item plans: what `ladder plan` would refuse, under this key
+        out += [Problem("expect.plan", reason) for reason in dict.fromkeys(p.reason for p in plan_problems(spec))]
     policy = spec.task.policy
     if policy is None:
         if spec.expect.policy:

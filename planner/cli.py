@@ -484,13 +484,7 @@ def _check_simulate_args(args: argparse.Namespace):
     if plan_controls is not None and args.step is None:
         length_key = "--plan"
     if h is not None and duration is not None and duration / h > MAX_STEPS:  # (before counting: 1e308 / 1e-3 is inf)
-        problems.append(
-            Problem(
-                length_key,
-                f"{duration:g} s at h = {h:g} is {_many_steps(duration / h)}, more than the {MAX_STEPS:.0e} "
-                "one run may take; use a larger --step or a shorter --duration",
-            )
-        )
+        total = duration / h
     elif h is not None and duration is not None:
         durations = plan_controls[1] if plan_controls is not None else [duration]
         per_control = control_steps(durations, h)
@@ -499,7 +493,7 @@ def _check_simulate_args(args: argparse.Namespace):
         if idle and plan_controls is not None:
             problems.append(
                 Problem(
-                    "--step" if args.step is not None else "--plan",
+                    length_key,
                     f"at h = {h:g}, {len(idle)} of the plan's {len(durations)} controls (the shortest {min(idle):g} s) "
                     "would take no step (a control takes round(duration / h) steps); use a smaller --step",
                 )
@@ -507,19 +501,19 @@ def _check_simulate_args(args: argparse.Namespace):
         elif idle:
             problems.append(
                 Problem(
-                    "--step" if args.step is not None else "--duration" if args.duration is not None else "task.policy.duration",
+                    length_key,
                     f"{duration:g} s at h = {h:g} is no step (a run takes round(duration / h) steps); "
                     "use a smaller --step or a longer --duration",
                 )
             )
-        if total > MAX_STEPS:
-            problems.append(
-                Problem(
-                    length_key,
-                    f"{duration:g} s at h = {h:g} is {total:.3g} steps, more than the {MAX_STEPS:.0e} "
-                    "one run may take; use a larger --step or a shorter --duration",
-                )
+    if total > MAX_STEPS:
+        problems.append(
+            Problem(
+                length_key,
+                f"{duration:g} s at h = {h:g} is {_many_steps(total)}, more than the {MAX_STEPS:.0e} "
+                "one run may take; use a larger --step or a shorter --duration",
             )
+        )
     if problems:
         raise ScenarioError(scenario.path, problems)
     return scenario, plan_controls, h, duration, total

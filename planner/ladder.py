@@ -55,7 +55,7 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 
 from models.rungs import State, rung_for
-from models.scenario import Problem, Scenario, ScenarioError
+from models.scenario import Problem, Scenario, ScenarioError, plan_problems
 from models.task import Outcome, classify, goal_distance
 from planner.clock import planning_clock
 from planner.ompl_adapter import plan_control, plan_geometric, steered_coordinates
@@ -177,24 +177,9 @@ def check_start(scenario: Scenario) -> None:
     """A start inside the unsafe set is bad input (penetration is caught by the loader), and so
     is a scripted obstacle: plan states carry no time, so a moving obstacle's pose at a state is
     unknown (simulate and sweep run such scenes from t = 0)."""
-    if not scenario.actuated:
-        raise ScenarioError(
-            scenario.path,
-            [Problem("bodies", "nothing to plan: no body has an actuated DOF (a robot's actuators); `ladder simulate` runs such a scene")],
-        )
-    moving = [i for i, body in enumerate(scenario.spec.bodies) if body.velocity]
-    if moving:
-        raise ScenarioError(
-            scenario.path,
-            [
-                Problem(
-                    f"bodies[{i}].velocity",
-                    "planning with a scripted (moving) obstacle is not supported: plan states carry no "
-                    "time; `ladder simulate` and `ladder sweep` run such scenes",
-                )
-                for i in moving
-            ],
-        )
+    problems = plan_problems(scenario.spec)
+    if problems:
+        raise ScenarioError(scenario.path, problems)
     if classify(scenario, scenario.start) is Outcome.UNSAFE:
         raise ScenarioError(
             scenario.path, [Problem("task.start", "the start state is inside the unsafe set; nothing can be planned from it")]
