@@ -30,7 +30,7 @@ from models.kernel_cache import compile_ahead
 from models.kinematics import PI_INERT, SceneData, compile_scene, kernel_array
 from models.predicates import OP_TOUCH, Program, compile_predicate, evaluate_with
 from models.rollout import bind, general_step_types, propagate_kernel, rollout_bound, rollout_each, rollout_kernel, warm_period_steps
-from models.scenario import Scenario
+from models.scenario import Scenario, penetration_warning
 from models.stepper import (
     LAW_ACTIVE,
     LAW_AXIS,
@@ -855,3 +855,87 @@ def rung_for(scenario: Scenario, name: str) -> Rung:
     if settings.inertia is not None and model.eps == 0.0:
         model = model._replace(quasistatic_inertia=settings.inertia)
     return replace(rung, model=model, solver=contact_solver(settings.contact_solver))
+
+
+#: The share of a body's weight a quasistatic run may leave unbalanced before `unbalanced_motion`
+#: calls its motion unphysical: the quasistatic steps push the pushed bodies with far less (a
+#: box pushed at 1 m/s at h = 1e-3 with the default inertia scale leaves 1e-4 of its weight).
+UNBALANCED_SHARE = 0.01
+
+_TRANSLATIONS = ("x", "y", "z")
+
+
+@dataclass(frozen=True)
+class Unbalanced:
+    """A body a quasistatic run moved without equilibrium (`unbalanced_motion`)."""
+
+    body: str
+    share: float  # the largest unbalanced force met, as a share of the body's weight
+    speed: float  # the speed that moved it at, m/s (a rotation counted at the radius of gyration)
+    real_speed: float  # what that force would give the real body, from rest, over the run's steps, m/s
+    steps: int  # the run's steps
+
+
+def unbalanced_motion(scenario: Scenario, rung: Rung, h: float, result: RolloutResult) -> Unbalanced | None:
+    """The passive body a quasistatic run moved furthest from equilibrium, where it left more
+    than UNBALANCED_SHARE of the body's weight unbalanced (None otherwise, and for the other rungs).
+
+    The quasistatic step is memoryless: eps M nu = h (forces), with eps the rung's inertia scale.
+    A body the contacts hold in equilibrium moves as the bodies pushing it do, with a tiny
+    eps M nu / h; a body nothing balances (a block on a frictionless incline, a box off its table)
+    moves at h F / (eps m), as fast as eps is small: its motion is the regularization's, not
+    physics'. The unbalanced force of a step is eps m v / h for a speed v (|v|^2 plus the least
+    principal inertia over m times |omega|^2, for a rotation). It is measured at the recorded steps
+    (`RolloutResult.velocities`) and, as average speeds, over the intervals between records: both
+    at most the largest step's, so what is reported was met. Only where the run outruns what the
+    force would do to the real body, eps * steps < 1 (the default scale, 1e-6, not a quasi-dynamic
+    rung's full inertia), and only with gravity (the weight is the scale)."""
+    model = rung.model
+    if model is None or model.kinematic or model.eps != 0.0:
+        return None
+    eps, g, steps = model.quasistatic_inertia, float(np.linalg.norm(scenario.spec.scene.gravity)), result.steps
+    if g == 0.0 or steps == 0 or eps * steps >= 1.0 or len(result.times) == 0:
+        return None
+    dt = np.diff(result.times)
+    moving = dt > 0.0
+    worst = None
+    for body in scenario.spec.bodies:
+        prefix = body.name + "."
+        passive = [(i, n[len(prefix) :]) for i, n in enumerate(scenario.velocities) if n.startswith(prefix) and n not in scenario.actuated]
+        if not passive or not body.mass:
+            continue
+        trans = [i for i, dof in passive if dof in _TRANSLATIONS]
+        rot = [i for i, dof in passive if dof not in _TRANSLATIONS]
+        gyration = min(body.inertia) / body.mass if rot and body.inertia else 0.0
+        nu = result.velocities
+        speed2 = np.sum(nu[:, trans] ** 2, axis=1) + gyration * np.sum(nu[:, rot] ** 2, axis=1)
+        speed = float(np.sqrt(np.max(speed2)))
+        if trans and np.any(moving):
+            q = result.trajectory[:, [scenario.coordinates.index(scenario.velocities[i]) for i in trans]]
+            travelled = np.linalg.norm(np.diff(q, axis=0), axis=1)
+            speed = max(speed, float(np.max(travelled[moving] / dt[moving])))
+        share = eps * speed / (h * g)
+        if share > UNBALANCED_SHARE and (worst is None or share > worst.share):
+            worst = Unbalanced(body.name, share, speed, share * g * steps * h, steps)
+    return worst
+
+
+def unbalanced_warning(scenario: Scenario, rung: Rung, h: float, result: RolloutResult) -> str:
+    """What `unbalanced_motion` says, in words ("" where it finds nothing)."""
+    found = unbalanced_motion(scenario, rung, h, result)
+    if found is None:
+        return ""
+    return (
+        f"{found.body} was not held in equilibrium: quasistatic steps moved it at up to {found.speed:.3g} m/s, which leaves "
+        f"{100 * found.share:.3g}% of its weight unbalanced (inertia scale {rung.model.quasistatic_inertia:g} x mass x speed / "
+        f"step {h:g} s); the quasistatic model does not say how fast an unbalanced body moves (from rest, the real body would "
+        f"reach {found.real_speed:.3g} m/s in the run's {found.steps:,} step{'s' if found.steps != 1 else ''}): "
+        f"{found.body}'s motion is not physical (a dynamic rung models it)"
+    )
+
+
+def run_warnings(scenario: Scenario, rung: Rung, h: float, result: RolloutResult) -> list[str]:
+    """What a rollout's result says beside its status (a solver can solve every step of a run
+    that is not physical): the bodies passed through each other (`models.scenario.penetration_warning`),
+    a quasistatic run moved a body nothing held (`unbalanced_warning`)."""
+    return [w for w in (penetration_warning(scenario, result.max_penetration), unbalanced_warning(scenario, rung, h, result)) if w]

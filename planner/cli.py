@@ -584,7 +584,10 @@ def unlisted_rung_note(scenario: Scenario, name: str, step_flag: bool = True) ->
 def _simulation_summary(args: argparse.Namespace, scenario: Scenario, result, h: float, duration: float) -> dict[str, Any]:
     """The simulate report: the run's outcome, final state, solver counters, the largest
     penetration met at a step's start (m: a compliant contact's deformation, or a rigid contact's
-    first-order error at a large step) and parameters."""
+    first-order error at a large step), what the result says beside its status
+    (`models.rungs.run_warnings`) and parameters."""
+    from models.rungs import run_warnings, rung_for
+
     return {
         "file": str(scenario.path),
         "model": args.model,
@@ -605,7 +608,7 @@ def _simulation_summary(args: argparse.Namespace, scenario: Scenario, result, h:
         "max_residual": result.max_residual,
         "max_lcp_size": result.max_lcp_size,
         "max_penetration": result.max_penetration,
-        "warnings": [w for w in (penetration_warning(scenario, result.max_penetration),) if w],
+        "warnings": run_warnings(scenario, rung_for(scenario, args.model), h, result),
         "parameters": dict(scenario.parameters),
     }
 
@@ -709,31 +712,34 @@ def _run_plan(args: argparse.Namespace, scenario: Scenario, names: list[str]):
 
 
 def _write_plan_outputs(args: argparse.Namespace, scenario: Scenario, result) -> tuple[dict, list[str]]:
-    """Write plan.json, report.json and a plot per planned rung: (the report, the plots' paths)."""
-    from models.rungs import rung_for
+    """Write plan.json, report.json and a plot per planned rung: (the report, the plots' paths).
+    Each rung's plan is replayed under it from the start for its plot, and report.json gives
+    what that replay says beside its status (`models.rungs.run_warnings`)."""
+    from models.rungs import run_warnings, rung_for
     from planner.ladder import plan_json_text
     from planner.plots import plot_rollouts
 
     report = result.to_json()
+    runs = []
     for entry, rung_report in zip(report["rungs"], result.rungs):  # (report.json only: plan.json is the plan)
+        rung = rung_for(scenario, rung_report.rung)
         entry["warnings"] = [w for w in (penetration_warning(scenario, rung_report.max_penetration),) if w]
-    # plan.json is reproducible (no timings): the same seed gives the same bytes
-    write_atomic(args.out / "plan.json", plan_json_text(result))
-    write_atomic(args.out / "report.json", json.dumps(report, indent=1) + "\n")
-    plots = []
-    for rung_report in result.rungs:
         if not rung_report.durations:
             continue
-        rung = rung_for(scenario, rung_report.rung)
         if rung.propagates:
             h = rung_report.h
             replay = rung.rollout(
                 scenario, rung.initial_state(scenario), np.array(rung_report.controls), np.array(rung_report.durations), h
             )
-            times, trajectory = replay.times, replay.trajectory
+            entry["warnings"] = run_warnings(scenario, rung, h, replay)
+            runs.append((rung_report, replay.times, replay.trajectory))
         else:  # the geometric path itself
-            times = np.concatenate([[0.0], np.cumsum(rung_report.durations)])
-            trajectory = np.array(rung_report.states)
+            runs.append((rung_report, np.concatenate([[0.0], np.cumsum(rung_report.durations)]), np.array(rung_report.states)))
+    # plan.json is reproducible (no timings): the same seed gives the same bytes
+    write_atomic(args.out / "plan.json", plan_json_text(result))
+    write_atomic(args.out / "report.json", json.dumps(report, indent=1) + "\n")
+    plots = []
+    for rung_report, times, trajectory in runs:
         path = plot_rollouts(
             args.out / f"plan.{rung_report.label}.png",
             scenario,
@@ -1151,11 +1157,14 @@ def _print_sweep(args: argparse.Namespace, result, data: dict, plot, interrupted
         failed = sum(p.status != "ok" for p in result.refine_points)
         if failed:
             print(f"{failed} of the {len(result.refine_points)} refinement runs stopped on a solver failure")
-        deep = sum(bool(p.warning) for p in (*result.points, *result.refine_points) if p is not None)
-        if deep:
+        flagged = sum(bool(p.warnings) for p in (*result.points, *result.refine_points) if p is not None)
+        if flagged:
+            from models.rungs import UNBALANCED_SHARE
+
             print(
-                f"{counted(deep, 'run')} passed bodies through each other (a penetration past half the thinnest body in a "
-                "contact pair: not physical, whatever the outcome; `warning` in sweep.json)"
+                f"{counted(flagged, 'run')} {'is' if flagged == 1 else 'are'} not physical, whatever the outcome (`warnings` in "
+                "sweep.json): bodies passed through each other (a penetration past half the thinnest body in a contact pair), "
+                f"or a quasistatic run moved a body nothing held (more than {UNBALANCED_SHARE:.0%} of its weight unbalanced)"
             )
         against = sum(b["low_status"] != "ok" or b["high_status"] != "ok" for b in result.boundaries)
         if against:

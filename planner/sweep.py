@@ -88,7 +88,7 @@ class Point:
     steps: int
     wall_s: float
     max_penetration: float = 0.0  # the largest met at a step's start, m (`RolloutResult.max_penetration`)
-    warning: str = ""  # `models.scenario.penetration_warning` of it: the bodies passed through each other
+    warnings: list[str] = field(default_factory=list)  # what the run says beside its status (`models.rungs.run_warnings`)
     h: float | None = None  # the step the run took, s (the sweep's --step, else its rung's in the scenario)
 
 
@@ -225,8 +225,8 @@ def grid_size(axes: list[Axis]) -> int:
 
 def run_task(task: Task) -> Point:
     """One run of the policy (in a worker process, or here)."""
-    from models.rungs import policy_controls, rung_for
-    from models.scenario import load_scenario, penetration_warning
+    from models.rungs import policy_controls, run_warnings, rung_for
+    from models.scenario import load_scenario
 
     params = dict(task.parameters)
     params.update(dict(task.model.overrides))
@@ -236,7 +236,6 @@ def run_task(task: Task) -> Point:
     controls, durations = policy_controls(scenario, task.duration)
     out = rung.rollout(scenario, rung.initial_state(scenario), controls, durations, h, max_records=2, laws=True)
     final = out.state.named(scenario)
-    warning = penetration_warning(scenario, out.max_penetration)
     return Point(
         task.model.label,
         dict(task.parameters),
@@ -247,7 +246,7 @@ def run_task(task: Task) -> Point:
         out.steps,
         out.wall_s,
         out.max_penetration,
-        warning=warning,
+        warnings=run_warnings(scenario, rung, h, out),
         h=h,
     )
 
