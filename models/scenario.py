@@ -235,7 +235,18 @@ class Scenario:
                 "seed": spec.ladder.seed,
                 "time_limit": spec.ladder.time_limit,
             },
+            "task": {
+                "horizon": spec.task.horizon,
+                "policy": None if spec.task.policy is None else _policy_summary(spec.task.policy),
+                "policies": {name: _policy_summary(p) for name, p in spec.task.policies.items()},
+            },
+            "expect": None if spec.expect is None else spec.expect.model_dump(mode="json"),
         }
+
+
+def _policy_summary(policy) -> dict[str, Any]:
+    """A policy as `Scenario.summary` gives it: its type, duration and what it drives."""
+    return {"type": policy.type, "duration": policy.duration, "speeds": dict(policy.speeds), "laws": sorted(policy.laws)}
 
 
 # ----------------------------------------------------------------------------- entry point
@@ -285,8 +296,10 @@ def penetration_warning(scenario: Scenario, depth: float) -> str:
     )
 
 
-def load_scenario(path: str | Path, overrides: Mapping[str, float] | None = None) -> Scenario:
-    """Read, validate and derive a scenario; raise ScenarioError listing every problem."""
+def load_scenario(path: str | Path, overrides: Mapping[str, float] | None = None, *, override_key: str = "overrides[{!r}]") -> Scenario:
+    """Read, validate and derive a scenario, with overrides of its parameters (name -> value);
+    raise ScenarioError listing every problem. override_key: how a problem names an override,
+    a format of its name (the library's dict by default; the CLI's "--param {}")."""
     path = Path(path)
     try:
         raw = _parse_toml(path.read_text(encoding="utf-8"))
@@ -310,7 +323,7 @@ def load_scenario(path: str | Path, overrides: Mapping[str, float] | None = None
     # structure still be too deep for the checks below), the file is what is wrong with it.
     try:
         with np.errstate(over="raise", invalid="raise", divide="raise"):
-            parameters = _parameters(raw, overrides or {}, path)
+            parameters = _parameters(raw, overrides or {}, path, override_key)
             try:
                 spec = ScenarioSpec.model_validate(raw, context={"parameters": parameters})
             except ValidationError as exc:
@@ -373,7 +386,7 @@ def _check_predicate_depth(raw: dict) -> list[Problem]:
     return out
 
 
-def _parameters(raw: dict, overrides: Mapping[str, float], path: Path) -> dict[str, float]:
+def _parameters(raw: dict, overrides: Mapping[str, float], path: Path, override_key: str) -> dict[str, float]:
     table = raw.get("parameters", {})
     if not isinstance(table, dict):
         raise ScenarioError(path, [Problem("parameters", "must be a table of name = number")])
@@ -382,7 +395,8 @@ def _parameters(raw: dict, overrides: Mapping[str, float], path: Path) -> dict[s
     if unknown:
         known = ", ".join(sorted(table)) or "none defined"
         raise ScenarioError(
-            path, [Problem(f"--param {name}", f"the file has no parameter {name!r} (parameters: {known})") for name in unknown]
+            path,
+            [Problem(override_key.format(name), f"the file has no parameter {name!r} (parameters: {known})") for name in unknown],
         )
     params.update({k: float(v) for k, v in overrides.items()})
     return params

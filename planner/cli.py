@@ -346,7 +346,8 @@ def load_from_args(args: argparse.Namespace, problems: list[Problem] | None = No
     """The scenario of the command line; when it does not load, its problems and `problems`
     (the other arguments' checked so far) are reported together."""
     try:  # --policy (simulate, sweep): run one of [task.policies] instead of [task.policy]
-        return load_scenario(args.file, parse_overrides(args.param)).with_policy(getattr(args, "policy", None))
+        scenario = load_scenario(args.file, parse_overrides(args.param), override_key="--param {}")
+        return scenario.with_policy(getattr(args, "policy", None))
     except ScenarioError as exc:
         if not problems:
             raise
@@ -1549,3 +1550,22 @@ def print_summary(summary: dict[str, Any]) -> None:
     ladder = summary["ladder"]
     steps = ", ".join(f"{m} (h={h:g})" if h else m for m, h in ladder["steps"].items())
     console.print(f"ladder: {steps}; planner {ladder['planner']}, seed {ladder['seed']}, {ladder['time_limit']:g} s per rung")
+    task = summary["task"]
+    policies = [f"policy {_policy_words(task['policy'])}"] if task["policy"] else ["no policy"]
+    policies += [f"policy {name!r} {_policy_words(p)}" for name, p in task["policies"].items()]
+    console.print(f"task: plans of at most {task['horizon']:g} s; " + "; ".join(policies))
+    expect = summary["expect"]
+    if expect:
+        said = [f"the policy under {rung} ends in {outcome}" for rung, outcome in expect["policy"].items()]
+        if expect["plan"] is not None:
+            budget = f", {expect['plan_iterations']:,} iterations per rung" if expect["plan_iterations"] else ""
+            said.append(f"a plan {'holds' if expect['plan'] else 'does not hold'} at the top rung{budget}")
+        console.print("expect (`pytest` on the file): " + "; ".join(said))
+
+
+def _policy_words(policy: dict) -> str:
+    """A policy of `Scenario.summary` in words: its type, what it drives and for how long."""
+    unit = lambda name: "rad/s" if name.rpartition(".")[2] in ("theta", "yaw") else "m/s"  # noqa: E731
+    drives = [f"{name} at {speed:g} {unit(name)}" for name, speed in policy["speeds"].items()]
+    drives += [f"{name} by its law" for name in policy["laws"]]
+    return f"({policy['type']}: {', '.join(drives) or 'nothing driven'}) for {policy['duration']:g} s"

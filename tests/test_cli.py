@@ -46,6 +46,19 @@ def test_check_json_on_the_paper_scene():
     assert summary["start"] == {"triangle.x": 0.0, "finger1.y": 2.05, "finger2.y": 2.05}
     assert summary["parameters"]["v1"] == 0.8
     assert summary["ladder"]["rungs"][0] == "geometric"
+    # the task's policies and what `pytest` checks of the file, as the file gives them
+    assert summary["task"]["horizon"] == 4.0 and summary["task"]["policy"]["speeds"] == {"finger1.y": -0.8, "finger2.y": -1.0}  # v1 = 0.8
+    assert summary["task"]["policies"]["potential"]["laws"] == ["finger1.y", "finger2.y"]
+    assert summary["expect"]["policy"]["quasistatic-rigid"] == "goal" and summary["expect"]["plan"] is True
+
+
+def test_check_says_the_task_and_the_expectations():
+    said = " ".join(ladder("check", str(SCENARIOS / "two_finger_triangle.toml")).stdout.split())
+    assert "task: plans of at most 4 s; policy (constant_speed: finger1.y at -1 m/s, finger2.y at -1 m/s) for 3 s;" in said
+    assert "policy 'potential' (feedback: finger1.y by its law, finger2.y by its law) for 3 s" in said
+    assert "the policy under kinematic ends in goal;" in said and "a plan holds at the top rung" in said
+    said = " ".join(ladder("check", str(SCENARIOS / "box_rotate_3d.toml")).stdout.split())
+    assert "task: plans of at most 12 s; no policy" in said and "expect" not in said
 
 
 def test_check_human_output_names_bodies_and_coordinates():

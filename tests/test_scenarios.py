@@ -79,8 +79,11 @@ def test_expressions_in_the_incline():
 def test_unknown_override_is_rejected(triangle_file):
     with pytest.raises(ScenarioError) as info:
         load_scenario(triangle_file, {"nope": 1.0})
-    assert info.value.problems[0].key == "--param nope"
+    assert info.value.problems[0].key == "overrides['nope']"  # the library's own argument
     assert "no parameter 'nope'" in info.value.problems[0].reason
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(triangle_file, {"nope": 1.0}, override_key="--param {}")
+    assert info.value.problems[0].key == "--param nope"  # as the CLI names it
 
 
 @pytest.mark.parametrize("item", ["mu", "mu=", "=1", "mu=abc", "mu=inf", "mu=nan"])
