@@ -10,6 +10,7 @@ import argparse
 import atexit
 import importlib.util
 import json
+import math
 import os
 import stat
 import sys
@@ -475,7 +476,7 @@ def _check_simulate_args(args: argparse.Namespace):
         h = None
     duration = args.duration if args.duration is not None else (policy.duration if policy else None)
     if plan_controls is not None:
-        duration = float(plan_controls[1].sum())
+        duration = math.fsum(plan_controls[1])  # (correctly rounded: 90 controls of 0.05 s are 4.5 s, not 4.499999999999998)
     if duration is not None and not (duration > 0 and duration < float("inf")):
         problems.append(Problem("--duration", f"must be a positive number, got {duration}"))
         duration = None

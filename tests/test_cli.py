@@ -895,3 +895,18 @@ def test_sweep_and_plan_reports_warn_of_bodies_passing_through_each_other(tmp_pa
     said = " ".join(capsys.readouterr().out.split())
     assert "dynamic-compliant: warning: the largest penetration, 0.5 m" in said
     assert "force steps" in said and "4321" in said  # the rung's contact_steps, as the README says the table gives them
+
+
+def test_simulate_of_a_plan_sums_its_durations_correctly_rounded(tmp_path, capsys):
+    """90 controls of 0.05 s run 4.5 s (a float sum gives 4.499999999999992)."""
+    from models.scenario import load_scenario
+    from planner.cli import main
+    from planner.ladder import scene_record
+
+    scenario = load_scenario(TRIANGLE)
+    plan = {"scene": scene_record(scenario), "rungs": [{"rung": "kinematic", "controls": [[0.0, 0.0]] * 90, "durations": [0.05] * 90}]}
+    (tmp_path / "plan.json").write_text(json.dumps(plan))
+    assert sum([0.05] * 90) != 4.5
+    assert main(["simulate", TRIANGLE, "--plan", str(tmp_path / "plan.json"), "--model", "kinematic", "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["duration"] == 4.5 and summary["steps"] == 450
