@@ -815,6 +815,9 @@ def _print_plan(args: argparse.Namespace, scenario: Scenario, result, report: di
             )
         console = _console(width=130)
         console.print(table)
+        compiling = sum(r.compile_s for r in result.rungs)
+        if compiling >= 0.1:
+            console.print(f"(wall s includes {compiling:.1f} s compiling or loading the physics kernels: `compile_s` in report.json)")
         for r, entry in zip(result.rungs, report["rungs"]):
             if r.reason:
                 console.print(f"{r.label}: {r.reason}")

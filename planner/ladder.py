@@ -57,7 +57,7 @@ import numpy as np
 from models.rungs import State, rung_for
 from models.scenario import Problem, Scenario, ScenarioError, plan_problems
 from models.task import Outcome, classify, goal_distance
-from planner.clock import planning_clock
+from planner.clock import compiler_seconds, planning_clock
 from planner.ompl_adapter import plan_control, plan_geometric, steered_coordinates
 from planner.plan_status import PlanStatus
 from planner.pushing import free_turn, push_reference
@@ -74,6 +74,7 @@ class RungReport:
     reason: str = ""  # why, in words ("" for a plan found with nothing to add)
     outcome: str = NONE  # what the accepted controls reach under this rung (an Outcome label)
     wall_s: float = 0.0
+    compile_s: float = 0.0  # of wall_s, the time spent compiling (or loading) the physics kernels (a fresh clone's first plan)
     propagations: int = 0
     iterations: int = 0
     goal_distance: float | None = None  # of the accepted plan's last state (0 in the goal)
@@ -125,11 +126,11 @@ class LadderResult:
 def rung_json(report: RungReport, timings: bool = True) -> dict:
     """A rung's report as plan.json and the service's rung_ended events write it: its fields,
     `label` after `rung` (a coarse stage's "dynamic-rigid@0.002", which tells it from the rung
-    itself), how it ended by its label; without timings, no wall_s."""
+    itself), how it ended by its label; without timings, no wall_s or compile_s."""
     data = asdict(report)
     data = {"rung": data.pop("rung"), "label": report.label, **data, "ended": report.ended.label}
     if not timings:
-        del data["wall_s"]
+        del data["wall_s"], data["compile_s"]
     return data
 
 
@@ -323,6 +324,11 @@ class _Step:
     stop: object
     t0: float
     step: float | None = None  # a coarse stage's time step (None: the rung's own)
+    c0: float = field(default_factory=compiler_seconds)  # `compiler_seconds` at t0
+
+    def spent(self) -> dict:
+        """A report's timings: wall_s since t0 and compile_s, the part of it in numba's compiler."""
+        return {"wall_s": time.perf_counter() - self.t0, "compile_s": compiler_seconds() - self.c0}
 
     @property
     def h(self) -> float:
@@ -442,7 +448,7 @@ def _coarse_first(
         reason=f"at h = {h:g} s ({h / step.h:g} x the rung's step, whose replay of the previous plan it agrees with): "
         + (climbed[0].reason or climbed[0].ended.message),
     )
-    rest = replace(step, iterations=step.iterations - stage.iterations, t0=time.perf_counter())
+    rest = replace(step, iterations=step.iterations - stage.iterations, t0=time.perf_counter(), c0=compiler_seconds())
     if not stage.ended.holds:
         own = _climb(rest, previous, planner, seeded, guided, progress, coarse=False, replay=replay)
         if own is not None and rest.iterations <= 0 and not own[-1].ended.holds:  # its search had no iteration to run
@@ -520,7 +526,7 @@ def _skipped(step: _Step, previous: RungReport, reason: str) -> RungReport:
         rung=step.name,
         ended=PlanStatus.SKIPPED,
         reason=reason,
-        wall_s=time.perf_counter() - step.t0,
+        **step.spent(),
         propagations=0,
         iterations=0,
         solver_failures=0,
@@ -535,7 +541,7 @@ def _tracked(step: _Step, tracked: Tracked, replay: _Replay, pushed: bool = Fals
         step.name,
         ended,
         _tracking_reason(ended, tracked, pushed),
-        wall_s=time.perf_counter() - step.t0,
+        **step.spent(),
         propagations=tracked.repair_propagations,
         iterations=tracked.repair_iterations,
         controls=list(tracked.controls),
@@ -559,7 +565,7 @@ def _replayed(step: _Step, previous: RungReport, replay: _Replay) -> RungReport:
         step.name,
         PlanStatus.REPLAYED,
         reason,
-        wall_s=time.perf_counter() - step.t0,
+        **step.spent(),
         controls=list(previous.controls) + hold,
         durations=list(previous.durations) + [step.period] * replay.held,
         states=replay.configurations(step.start()),
@@ -639,7 +645,7 @@ def _search(step: _Step, previous, replay, tracked, planner, seeded: bool, guide
         step.name,
         ended,
         reason,
-        wall_s=time.perf_counter() - step.t0,
+        **step.spent(),
         propagations=plan.propagations + (spent.repair_propagations if spent else 0),
         iterations=plan.iterations + (spent.repair_iterations if spent else 0),
         solver_failures=plan.failures,

@@ -605,3 +605,25 @@ def test_ompl_states_read_back_what_was_written_by_either_path():
     assert np.array_equal(layout.read_by_address(state), x)
     assert layout.flag(state) == x[-1]
     assert [state[0][k] for k in range(layout.ns)] == x[layout.steered].tolist()
+
+
+def test_a_rungs_report_says_how_much_of_its_wall_time_went_to_compiling():
+    """`compile_s`: the part of a rung's wall_s spent in numba's compiler (a fresh clone's first
+    plan compiles the kernels inside whichever rung calls them first); plan.json has neither."""
+    import time
+
+    import numba
+
+    from planner.ladder import RungReport, _Step, rung_json
+
+    step = _Step(*[None] * 9, t0=time.perf_counter())
+    increment = numba.njit(lambda x: x + 1)  # a function nothing has compiled
+    assert increment(1) == 2
+    spent = step.spent()
+    assert 0.0 < spent["compile_s"] <= spent["wall_s"]
+    warm = _Step(*[None] * 9, t0=time.perf_counter())
+    assert increment(2) == 3
+    assert warm.spent()["compile_s"] == 0.0
+    report = RungReport("kinematic", PlanStatus.EXACT, **spent)
+    assert rung_json(report)["compile_s"] == spent["compile_s"]
+    assert "compile_s" not in rung_json(report, timings=False)

@@ -259,7 +259,7 @@ def test_a_coarse_stage_is_told_from_its_rung_by_its_label_in_plan_json_events_v
     plan = json.loads(plan_json_text(LadderResult("free_transfer", 1, reports)))
     assert [r["label"] for r in plan["rungs"]] == labels and [r["rung"] for r in plan["rungs"]] == ["geometric", "kinematic", "kinematic"]
     assert list(plan["rungs"][1])[:3] == ["rung", "label", "ended"] and plan["rungs"][1]["ended"] == "repaired"
-    assert "wall_s" not in plan["rungs"][1]  # plan.json: a pure function of the scenario and the seed
+    assert "wall_s" not in plan["rungs"][1] and "compile_s" not in plan["rungs"][1]  # plan.json: a function of scene and seed
     event = rung_view(reports[1])
     assert event["label"] == "kinematic@0.02" and event["wall_s"] == 1.5 and event["controls"] == 0
     assert "durations" not in event and "states" not in event
