@@ -296,10 +296,14 @@ def penetration_warning(scenario: Scenario, depth: float) -> str:
     )
 
 
-def load_scenario(path: str | Path, overrides: Mapping[str, float] | None = None, *, override_key: str = "overrides[{!r}]") -> Scenario:
+def load_scenario(
+    path: str | Path, overrides: Mapping[str, float] | None = None, *, override_key: str = "overrides[{!r}]", check_expect: bool = True
+) -> Scenario:
     """Read, validate and derive a scenario, with overrides of its parameters (name -> value);
     raise ScenarioError listing every problem. override_key: how a problem names an override,
-    a format of its name (the library's dict by default; the CLI's "--param {}")."""
+    a format of its name (the library's dict by default; the CLI's "--param {}"). check_expect
+    False: the [expect] table's runs are not checked on this variant (the pytest plugin loads an
+    [[expect.cases]] entry's variant so, and checks the case's runs on it: `expected_run_problems`)."""
     path = Path(path)
     try:
         raw = _parse_toml(path.read_text(encoding="utf-8"))
@@ -328,7 +332,7 @@ def load_scenario(path: str | Path, overrides: Mapping[str, float] | None = None
                 spec = ScenarioSpec.model_validate(raw, context={"parameters": parameters})
             except ValidationError as exc:
                 raise ScenarioError(path, _pydantic_problems(exc, parameters)) from None
-            return _derive(spec, MappingProxyType(parameters), path)
+            return _derive(spec, MappingProxyType(parameters), path, check_expect)
     except (OverflowError, FloatingPointError, ZeroDivisionError) as exc:
         raise ScenarioError(path, [Problem("", f"a number is too large (or small) to compute with: {exc}")]) from None
     except RecursionError:
@@ -509,7 +513,7 @@ def _start_values(body: BodySpec, dimension: int) -> dict[str, float]:
     return values
 
 
-def _derive(spec: ScenarioSpec, parameters: Mapping[str, float], path: Path) -> Scenario:
+def _derive(spec: ScenarioSpec, parameters: Mapping[str, float], path: Path, check_expect: bool = True) -> Scenario:
     problems: list[Problem] = []
     dim = spec.scene.dimension
     if len(spec.scene.gravity) != dim:
@@ -561,7 +565,7 @@ def _derive(spec: ScenarioSpec, parameters: Mapping[str, float], path: Path) -> 
     problems += _check_task(spec, coordinates, actuated, names, _pair_status(spec))
     problems += _check_ladder(spec)
     problems += _check_rung_settings(spec)
-    problems += _check_expected_runs(spec)
+    problems += _check_expected_runs(spec) if check_expect else []
     problems += _check_limits(spec, coordinates, start, dim)
     if problems:
         raise ScenarioError(path, problems)
@@ -890,28 +894,58 @@ def plan_problems(spec: ScenarioSpec) -> list[Problem]:
 
 
 def _check_expected_runs(spec: ScenarioSpec) -> list[Problem]:
-    """The `[expect]` table's items can run (as `pytest scenarios/` runs them): it names one at
-    least; a plan expectation has something to plan (`plan_problems`); a policy expectation has a policy, and each rung's run of it (at the
-    rung's h) takes a step: a run takes round(duration / h), so a policy shorter than h / 2
-    would end where it starts and be judged there."""
+    """The `[expect]` table's items can run (as `pytest` on the file runs them): its own runs
+    (`expected_run_problems`) and its cases' names, parameters and policies. A case's runs are
+    checked on its variant, which the plugin loads (a case's parameters may change what runs)."""
     if spec.expect is None:
         return []
+    expect = spec.expect
+    out = expected_run_problems(spec, expect, "expect", cases=len(expect.cases))
+    names = [case.name for case in expect.cases]
+    for i, case in enumerate(expect.cases):
+        key = f"expect.cases[{i}]"
+        if names.index(case.name) != i:
+            out.append(Problem(f"{key}.name", f"case name {case.name!r} is used twice"))
+        known = ", ".join(sorted(spec.parameters)) or "none defined"
+        out += [
+            Problem(f"{key}.parameters.{name}", f"the file has no parameter {name!r} (parameters: {known})")
+            for name in case.parameters
+            if name not in spec.parameters
+        ]
+        if case.task_policy is not None and case.task_policy not in spec.task.policies:
+            policies = ", ".join(spec.task.policies) or "none"
+            out.append(Problem(f"{key}.task_policy", f"no policy named {case.task_policy!r} in [task.policies] (policies: {policies})"))
+        if not case.policy and case.plan is None:
+            out.append(Problem(key, "names no expectation: give policy = { RUNG = OUTCOME } and/or plan = true or false"))
+    return out
+
+
+def expected_run_problems(spec: ScenarioSpec, runs, key: str, *, cases: int = 0) -> list[Problem]:
+    """What keeps runs (`models.schema.ExpectRuns`: the [expect] table's own, or a case's, under
+    key) from running on spec: it names one at least (or the table has cases); a seed or budget
+    is for a plan check; a plan expectation has something to plan (`plan_problems`); a policy
+    expectation has a policy, and each rung's run of it (at the rung's h) takes a step: a run
+    takes round(duration / h), so a policy shorter than h / 2 would end where it starts and be
+    judged there."""
     out = []
-    if not spec.expect.policy and spec.expect.plan is None:  # (a test that tests nothing passes unseen)
-        out.append(Problem("expect", "names no expectation: give policy = { RUNG = OUTCOME } and/or plan = true or false"))
-    if spec.expect.plan is not None:  # the plan item plans: what `ladder plan` would refuse, under this key
-        out += [Problem("expect.plan", reason) for reason in dict.fromkeys(p.reason for p in plan_problems(spec))]
+    if not runs.policy and runs.plan is None and not cases:  # (a test that tests nothing passes unseen)
+        out.append(Problem(key, "names no expectation: give policy = { RUNG = OUTCOME } and/or plan = true or false, or [[expect.cases]]"))
+    for setting in ("seed", "plan_iterations"):
+        if getattr(runs, setting) is not None and runs.plan is None:
+            out.append(Problem(f"{key}.{setting}", "is the plan check's, and there is none (plan = true or false)"))
+    if runs.plan is not None:  # the plan item plans: what `ladder plan` would refuse, under this key
+        out += [Problem(f"{key}.plan", reason) for reason in dict.fromkeys(p.reason for p in plan_problems(spec))]
     policy = spec.task.policy
     if policy is None:
-        if spec.expect.policy:
-            out.append(Problem("expect.policy", "runs the task's policy, and this file has no [task.policy]"))
+        if runs.policy:
+            out.append(Problem(f"{key}.policy", "runs the task's policy, and this file has no [task.policy]"))
         return out
-    for name in spec.expect.policy:
+    for name in runs.policy:
         h = resolve_rung_settings(spec.ladder, name).h
         if h is not None and control_steps(policy.duration, h)[0] == 0:
             out.append(
                 Problem(
-                    key_path(("expect", "policy", name)),
+                    f"{key}.{key_path(('policy', name))}",
                     f"the policy's {policy.duration:g} s (task.policy.duration) at {name}'s h = {h:g} is no step "
                     "(a run takes round(duration / h) steps)",
                 )

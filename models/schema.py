@@ -527,8 +527,9 @@ class LadderSpec(Strict):
     control_period: Time = Field(0.05, description="default duration of one control, s")
 
 
-class ExpectSpec(Strict):
-    """What the scenario must do with its default parameters (run by `pytest scenarios/`)."""
+class ExpectRuns(Strict):
+    """What runs of the scenario must do (run by `pytest` on the file): the policy's outcome
+    under rungs, and whether a plan holds."""
 
     policy: dict[Literal[PROPAGATING_RUNGS], Literal[OUTCOME_LABELS]] = Field(  # type: ignore[valid-type]
         default_factory=dict, description="outcome of the task's policy under each named rung"
@@ -537,6 +538,22 @@ class ExpectSpec(Strict):
     plan_iterations: _int(gt=0, le=MAX_ITERATIONS) | None = Field(
         None, description="planner iterations per rung for the plan check (default: the ladder's budgets)"
     )
+    seed: _int(ge=0, le=MAX_SEED) | None = Field(None, description="the plan check's seed (default: the ladder's)")
+
+
+class ExpectCase(ExpectRuns):
+    """Expectations of the scenario with other parameters or another of its policies."""
+
+    name: Name = Field(description="the case's name: its items are FILE::NAME::policy[RUNG] and FILE::NAME::plan")
+    parameters: dict[Name, ParameterValue] = Field(default_factory=dict, description="overrides of [parameters] for this case")
+    task_policy: Name | None = Field(None, description="a [task.policies] entry the case runs instead of [task.policy]")
+
+
+class ExpectSpec(ExpectRuns):
+    """What the scenario must do with its default parameters (run by `pytest scenarios/`), and
+    in cases with other parameters or policies."""
+
+    cases: tuple[ExpectCase, ...] = Field(default_factory=tuple, description="[[expect.cases]]: expectations of variants")
 
 
 class ScenarioSpec(Strict):

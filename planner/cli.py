@@ -1560,11 +1560,23 @@ def print_summary(summary: dict[str, Any]) -> None:
     console.print(f"task: plans of at most {task['horizon']:g} s; " + "; ".join(policies))
     expect = summary["expect"]
     if expect:
-        said = [f"the policy under {rung} ends in {outcome}" for rung, outcome in expect["policy"].items()]
-        if expect["plan"] is not None:
-            budget = f", {expect['plan_iterations']:,} iterations per rung" if expect["plan_iterations"] else ""
-            said.append(f"a plan {'holds' if expect['plan'] else 'does not hold'} at the top rung{budget}")
-        console.print("expect (`pytest` on the file): " + "; ".join(said))
+        if expect["policy"] or expect["plan"] is not None:
+            console.print(f"expect (`pytest` on the file): {_expect_words(expect)}")
+        for case in expect["cases"]:
+            given = [f"{name} = {value:g}" for name, value in case["parameters"].items()]
+            given += [f"policy {case['task_policy']!r}"] if case["task_policy"] else []
+            console.print(f"expect, case {case['name']} ({', '.join(given) or 'as the file is'}): {_expect_words(case)}")
+
+
+def _expect_words(runs: dict) -> str:
+    """What an [expect] table (or one of its cases) checks, in words."""
+    said = [f"the policy under {rung} ends in {outcome}" for rung, outcome in runs["policy"].items()]
+    if runs["plan"] is not None:
+        settings = [f"seed {runs['seed']}"] if runs["seed"] is not None else []
+        settings += [f"{runs['plan_iterations']:,} iterations per rung"] if runs["plan_iterations"] else []
+        budget = f" ({', '.join(settings)})" if settings else ""
+        said.append(f"a plan {'holds' if runs['plan'] else 'does not hold'} at the top rung{budget}")
+    return "; ".join(said)
 
 
 def _policy_words(policy: dict) -> str:

@@ -3,10 +3,12 @@
     pytest scenarios/            # or any folder of your own scenario files
 
 Each expectation is one item: `policy[RUNG]` simulates the task's policy under that rung
-and checks the outcome; `plan` runs the ladder with the scenario's seed and checks that the
-top rung holds. A scenario file (one with a `[scenario]` or an `[expect]` table) that fails to
-load is one failing item, `load`, that shows the loader's message: a TOML syntax error or a
-misspelt `[expect]` is a failure, not a file left out. A scenario that loads with no `[expect]`
+and checks the outcome; `plan` runs the ladder with the scenario's seed (or the expectation's
+`seed`) and checks whether the top rung holds. Each `[[expect.cases]]` entry is a collector,
+FILE::NAME, of the same items on the scenario with the case's `parameters` and `task_policy`.
+A scenario file (one with a `[scenario]` or an `[expect]` table) that fails to load is one
+failing item, `load`, that shows the loader's message: a TOML syntax error or a misspelt
+`[expect]` is a failure, not a file left out (a case's variant that does not load: NAME::load). A scenario that loads with no `[expect]`
 table is no test. Registered through the `pytest11` entry point of the contact-ladder distribution.
 """
 
@@ -75,13 +77,45 @@ class ScenarioFile(pytest.File):
         expect = scenario.spec.expect
         if expect is None:
             return
-        for rung, outcome in expect.policy.items():
-            # the id given whole: pytest (9) reads a cached "policy[RUNG]" as a name and parameters,
-            # and an id built from the name alone never matched it (--lf, --sw ran none of these)
-            name = f"policy[{rung}]"
-            yield PolicyItem.from_parent(self, name=name, nodeid=f"{self.nodeid}::{name}", scenario=scenario, rung=rung, outcome=outcome)
-        if expect.plan is not None:
-            yield PlanItem.from_parent(self, name="plan", scenario=scenario, holds=expect.plan, iterations=expect.plan_iterations)
+        yield from _run_items(self, scenario, expect)
+        for i, case in enumerate(expect.cases):
+            yield ScenarioCase.from_parent(self, name=case.name, case=case, index=i)
+
+
+def _run_items(parent, scenario, runs):
+    """The items of runs (the [expect] table's own, or a case's) on scenario, under parent."""
+    for rung, outcome in runs.policy.items():
+        # the id given whole: pytest (9) reads a cached "policy[RUNG]" as a name and parameters,
+        # and an id built from the name alone never matched it (--lf, --sw ran none of these)
+        name = f"policy[{rung}]"
+        yield PolicyItem.from_parent(parent, name=name, nodeid=f"{parent.nodeid}::{name}", scenario=scenario, rung=rung, outcome=outcome)
+    if runs.plan is not None:
+        yield PlanItem.from_parent(parent, name="plan", scenario=scenario, holds=runs.plan, iterations=runs.plan_iterations, seed=runs.seed)
+
+
+class ScenarioCase(pytest.Collector):
+    """An [[expect.cases]] entry: the scenario with the case's parameters and policy, and its
+    items (FILE::NAME::policy[RUNG], FILE::NAME::plan); a variant that does not load, or whose
+    runs cannot run, is one failing item, FILE::NAME::load."""
+
+    def __init__(self, *, case, index, **kwargs):
+        super().__init__(**kwargs)
+        self.case, self.index = case, index
+
+    def collect(self):
+        from models.scenario import ScenarioError, expected_run_problems, load_scenario
+
+        key = f"expect.cases[{self.index}]"
+        try:
+            scenario = load_scenario(self.path, self.case.parameters, override_key=f"{key}.parameters.{{}}", check_expect=False)
+            scenario = scenario.with_policy(self.case.task_policy)
+            problems = expected_run_problems(scenario.spec, self.case, key)
+            if problems:
+                raise ScenarioError(self.path, problems)
+        except ScenarioError as exc:
+            yield LoadFailure.from_parent(self, name="load", message=f"case {self.case.name!r}: {exc}")
+            return
+        yield from _run_items(self, scenario, self.case)
 
 
 class LoadFailure(pytest.Item):
@@ -142,14 +176,14 @@ class PolicyItem(pytest.Item):
 
 
 class PlanItem(pytest.Item):
-    def __init__(self, *, scenario, holds, iterations, **kwargs):
+    def __init__(self, *, scenario, holds, iterations, seed, **kwargs):
         super().__init__(**kwargs)
-        self.scenario, self.holds, self.iterations = scenario, holds, iterations
+        self.scenario, self.holds, self.iterations, self.seed = scenario, holds, iterations, seed
 
     def runtest(self):
         from planner.ladder import run_ladder
 
-        result = run_ladder(self.scenario, iterations=self.iterations)
+        result = run_ladder(self.scenario, iterations=self.iterations, seed=self.seed)
         if result.top_holds != self.holds:
             ended = "; ".join(f"{r.label}: {r.ended.label}" + (f" ({r.reason})" if r.reason else "") for r in result.rungs)
             raise ScenarioExpectationFailed(f"top rung holds: {result.top_holds}, expected {self.holds} ({ended})")

@@ -48,6 +48,10 @@ FILES = [
     "wrong_type",
     "geometric_planner_est",
     "geometric_planner_prm",
+    "expect_case_unknown_parameter",
+    "expect_case_unknown_policy",
+    "expect_case_name_twice",
+    "expect_seed_without_plan",
 ]
 
 

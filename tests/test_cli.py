@@ -59,6 +59,8 @@ def test_check_says_the_task_and_the_expectations():
     assert "the policy under kinematic ends in goal;" in said and "a plan holds at the top rung" in said
     said = " ".join(ladder("check", str(SCENARIOS / "box_rotate_3d.toml")).stdout.split())
     assert "task: plans of at most 12 s; no policy" in said and "expect" not in said
+    said = " ".join(ladder("check", str(SCENARIOS / "incline_block.toml")).stdout.split())
+    assert "expect, case sticks (mu = 0.7): the policy under dynamic-rigid ends in none;" in said
 
 
 def test_check_human_output_names_bodies_and_coordinates():

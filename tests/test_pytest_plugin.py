@@ -103,3 +103,35 @@ def test_items_that_will_compile_the_kernels_say_so_first(lab, tmp_path):
     assert cold.returncode == 0 and COMPILE_NOTE in cold.stdout, cold.stdout + cold.stderr
     warm = run_pytest(lab, "scenes", "--collect-only", "-q", "-p", "no:cacheprovider")
     assert warm.returncode == 0 and COMPILE_NOTE not in warm.stdout, warm.stdout
+
+
+INCLINE = (SCENARIOS / "incline_block.toml").read_text().replace("#:schema ./scenario.schema.json\n", "")
+assert '[[expect.cases]]\nname = "sticks"' in INCLINE
+
+
+def test_expect_cases_run_the_scene_with_other_parameters(tmp_path):
+    """[[expect.cases]]: FILE::NAME::policy[RUNG] on the scene with the case's parameters; a case
+    whose variant does not load is FILE::NAME::load; --lf reruns a failed case's item."""
+    scenes = tmp_path / "scenes"
+    scenes.mkdir()
+    cases = [
+        '[[expect.cases]]\nname = "claims_a_slide"\nparameters = { mu = 0.7 }\npolicy = { dynamic-rigid = "goal" }',
+        '[[expect.cases]]\nname = "no_contact"\nparameters = { K = -1.0 }\npolicy = { dynamic-rigid = "goal" }',
+    ]
+    (scenes / "incline.toml").write_text(INCLINE + "\n" + "\n\n".join(cases) + "\n")
+    done = run_pytest(tmp_path, "scenes", "-v", "-rf")
+    assert done.returncode == 1, done.stdout + done.stderr
+    passed = sorted(line.split(" ")[0] for line in done.stdout.splitlines() if line.endswith("]") and " PASSED " in line)
+    assert passed == [
+        "scenes/incline.toml::policy[dynamic-compliant]",
+        "scenes/incline.toml::policy[dynamic-rigid]",
+        "scenes/incline.toml::sticks::policy[dynamic-compliant]",
+        "scenes/incline.toml::sticks::policy[dynamic-rigid]",
+    ], done.stdout
+    failed = sorted(line.split(" ")[1] for line in done.stdout.splitlines() if line.startswith("FAILED "))
+    assert failed == ["scenes/incline.toml::claims_a_slide::policy[dynamic-rigid]", "scenes/incline.toml::no_contact::load"], done.stdout
+    text = " ".join(done.stdout.split())
+    assert "dynamic-rigid: the policy ends in 'none'" in text and "expected 'goal'" in text  # mu = 0.7 > tan 30: it sticks
+    assert "case 'no_contact':" in text and "contact.K" in text
+    again = run_pytest(tmp_path, "scenes", "-q", "--lf")
+    assert again.returncode == 1 and "2 failed" in again.stdout and "passed" not in again.stdout.splitlines()[-1], again.stdout
