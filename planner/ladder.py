@@ -50,7 +50,7 @@ from __future__ import annotations
 import hashlib
 import json
 import time
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import KW_ONLY, asdict, dataclass, field, replace
 
 import numpy as np
 
@@ -72,6 +72,7 @@ class RungReport:
     rung: str
     ended: PlanStatus  # how the rung ended; its `label` is what the JSON files write
     reason: str = ""  # why, in words ("" for a plan found with nothing to add)
+    _: KW_ONLY  # (the rest by name: a field added among them shifted a caller's positional counts)
     outcome: str = NONE  # what the accepted controls reach under this rung (an Outcome label)
     wall_s: float = 0.0
     compile_s: float = 0.0  # of wall_s, the time spent compiling (or loading) the physics kernels (a fresh clone's first plan)
@@ -754,7 +755,7 @@ def _geometric(scenario: Scenario, seed: int, iterations: int, time_limit: float
     exceeding any drive's max_speed. An approximate path (the goal set is thin: touching
     within a tolerance) is still offered to the next rung as a seed."""
     settings = scenario.rung_settings("geometric")
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), compiler_seconds()
     path = plan_geometric(scenario, seed=seed, iterations=iterations, time_limit=time_limit, stop=stop, planner=settings.planner)
     period = settings.control_period
     index = [scenario.coordinates.index(n) for n in scenario.actuated]
@@ -777,10 +778,11 @@ def _geometric(scenario: Scenario, seed: int, iterations: int, time_limit: float
         "geometric",
         ended,
         reason,
-        GOAL if path.exact else NONE,
-        time.perf_counter() - t0,
-        0,
-        path.iterations,
+        outcome=GOAL if path.exact else NONE,
+        wall_s=time.perf_counter() - t0,
+        compile_s=compiler_seconds() - c0,
+        propagations=0,
+        iterations=path.iterations,
         goal_distance=goal_distance(scenario, path.states[-1]),
         controls=controls,
         durations=durations,

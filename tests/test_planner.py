@@ -627,3 +627,15 @@ def test_a_rungs_report_says_how_much_of_its_wall_time_went_to_compiling():
     report = RungReport("kinematic", PlanStatus.EXACT, **spent)
     assert rung_json(report)["compile_s"] == spent["compile_s"]
     assert "compile_s" not in rung_json(report, timings=False)
+
+
+def test_the_geometric_rungs_iterations_count_against_the_ladders_budget():
+    """The geometric search spends iterations (no propagations), and the whole ladder never
+    spends more than --flat gets (the rungs' budgets summed). A report built by position once
+    put the geometric iterations under propagations, and the next rung spent them again."""
+    scenario = load_scenario(SCENARIOS / "free_transfer.toml")
+    result = run_ladder(scenario, seed=1, iterations=200)
+    geometric = result.rungs[0]
+    assert geometric.rung == "geometric" and geometric.propagations == 0 and geometric.iterations > 0
+    assert isinstance(geometric.compile_s, float)
+    assert sum(r.iterations for r in result.rungs) <= 200 * len(result.rungs)
