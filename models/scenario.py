@@ -586,9 +586,33 @@ def _derive(spec: ScenarioSpec, parameters: Mapping[str, float], path: Path, che
         start_velocity=_frozen(np.array(start_velocity, dtype=float)),
     )
     problems = _check_penetration(scenario, start_overridden)
+    problems += _check_cases(scenario) if check_expect and not problems else []
     if problems:
         raise ScenarioError(path, problems)
     return scenario
+
+
+def _check_cases(scenario: Scenario) -> list[Problem]:
+    """Each [[expect.cases]] entry's runs can run on its variant (the scenario with the case's
+    parameters and policy, as the pytest plugin loads it): the variant loads, and
+    `expected_run_problems` finds nothing in the case's runs on it."""
+    out = []
+    for i, case in enumerate(scenario.spec.expect.cases if scenario.spec.expect else ()):
+        key = f"expect.cases[{i}]"
+        try:
+            variant = case_variant(scenario.path, case, i)
+        except ScenarioError as exc:
+            out += [Problem(key, f"the scene with the case's parameters does not load: {p.key}: {p.reason}") for p in exc.problems]
+            continue
+        out += expected_run_problems(variant.spec, case, key)
+    return out
+
+
+def case_variant(path: Path, case, index: int) -> Scenario:
+    """The scenario an [[expect.cases]] entry (index in the file's list) runs on: the file with
+    the case's parameters and its `task_policy`; its [expect] runs are not checked again."""
+    scenario = load_scenario(path, case.parameters, override_key=f"expect.cases[{index}].parameters.{{}}", check_expect=False)
+    return scenario.with_policy(case.task_policy)
 
 
 def _frozen(a: np.ndarray) -> np.ndarray:
@@ -893,10 +917,14 @@ def plan_problems(spec: ScenarioSpec) -> list[Problem]:
     ]
 
 
+#: Item names of a scenario file's own (the pytest plugin's FILE::plan, FILE::load), which a case's name would shadow.
+RESERVED_CASE_NAMES = ("plan", "load")
+
+
 def _check_expected_runs(spec: ScenarioSpec) -> list[Problem]:
     """The `[expect]` table's items can run (as `pytest` on the file runs them): its own runs
     (`expected_run_problems`) and its cases' names, parameters and policies. A case's runs are
-    checked on its variant, which the plugin loads (a case's parameters may change what runs)."""
+    checked on its variant once the file's scenario is whole (`_check_cases`)."""
     if spec.expect is None:
         return []
     expect = spec.expect
@@ -906,6 +934,10 @@ def _check_expected_runs(spec: ScenarioSpec) -> list[Problem]:
         key = f"expect.cases[{i}]"
         if names.index(case.name) != i:
             out.append(Problem(f"{key}.name", f"case name {case.name!r} is used twice"))
+        if case.name in RESERVED_CASE_NAMES:
+            out.append(
+                Problem(f"{key}.name", f"{case.name!r} names the file's own {case.name} item (FILE::{case.name}); name the case otherwise")
+            )
         known = ", ".join(sorted(spec.parameters)) or "none defined"
         out += [
             Problem(f"{key}.parameters.{name}", f"the file has no parameter {name!r} (parameters: {known})")

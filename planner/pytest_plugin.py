@@ -8,7 +8,8 @@ and checks the outcome; `plan` runs the ladder with the scenario's seed (or the 
 FILE::NAME, of the same items on the scenario with the case's `parameters` and `task_policy`.
 A scenario file (one with a `[scenario]` or an `[expect]` table) that fails to load is one
 failing item, `load`, that shows the loader's message: a TOML syntax error or a misspelt
-`[expect]` is a failure, not a file left out (a case's variant that does not load: NAME::load). A scenario that loads with no `[expect]`
+`[expect]` is a failure, not a file left out (and so is a case whose scene does not load with
+its parameters, or cannot run its expectations). A scenario that loads with no `[expect]`
 table is no test. Registered through the `pytest11` entry point of the contact-ladder distribution.
 """
 
@@ -95,23 +96,18 @@ def _run_items(parent, scenario, runs):
 
 class ScenarioCase(pytest.Collector):
     """An [[expect.cases]] entry: the scenario with the case's parameters and policy, and its
-    items (FILE::NAME::policy[RUNG], FILE::NAME::plan); a variant that does not load, or whose
-    runs cannot run, is one failing item, FILE::NAME::load."""
+    items (FILE::NAME::policy[RUNG], FILE::NAME::plan). The file's load checks each case's
+    variant: a case that cannot run fails the file's load (FILE::load, naming the case)."""
 
     def __init__(self, *, case, index, **kwargs):
         super().__init__(**kwargs)
         self.case, self.index = case, index
 
     def collect(self):
-        from models.scenario import ScenarioError, expected_run_problems, load_scenario
+        from models.scenario import ScenarioError, case_variant
 
-        key = f"expect.cases[{self.index}]"
-        try:
-            scenario = load_scenario(self.path, self.case.parameters, override_key=f"{key}.parameters.{{}}", check_expect=False)
-            scenario = scenario.with_policy(self.case.task_policy)
-            problems = expected_run_problems(scenario.spec, self.case, key)
-            if problems:
-                raise ScenarioError(self.path, problems)
+        try:  # (the file's load checked it: a file changed since is what fails here)
+            scenario = case_variant(self.path, self.case, self.index)
         except ScenarioError as exc:
             yield LoadFailure.from_parent(self, name="load", message=f"case {self.case.name!r}: {exc}")
             return
@@ -137,13 +133,18 @@ class ScenarioExpectationFailed(AssertionError):
     pass
 
 
-def _failure(path, excinfo) -> str:
-    """An item's failure: the file and what went wrong (a ScenarioError names its file itself);
-    anything else as pytest shows it."""
+def _failure(item, excinfo) -> str:
+    """An item's failure: the file, the case it is of and what went wrong (a ScenarioError names
+    its file itself); anything else as pytest shows it."""
     from models.scenario import ScenarioError
 
     if isinstance(excinfo.value, ScenarioExpectationFailed):
-        return f"{path}: {excinfo.value}"
+        case = item.parent.case if isinstance(item.parent, ScenarioCase) else None
+        if case is None:
+            return f"{item.path}: {excinfo.value}"
+        given = [f"{name} = {value:g}" for name, value in case.parameters.items()]
+        given += [f"policy {case.task_policy!r}"] if case.task_policy else []
+        return f"{item.path}: case {case.name!r} ({', '.join(given) or 'as the file is'}): {excinfo.value}"
     if isinstance(excinfo.value, ScenarioError):
         return str(excinfo.value)
     return str(excinfo.getrepr(style="short"))
@@ -169,7 +170,7 @@ class PolicyItem(pytest.Item):
             )
 
     def repr_failure(self, excinfo):
-        return _failure(self.path, excinfo)
+        return _failure(self, excinfo)
 
     def reportinfo(self):
         return self.path, None, self.name  # (a domain with the file's name printed "x::toml::plan" under -v)
@@ -189,7 +190,7 @@ class PlanItem(pytest.Item):
             raise ScenarioExpectationFailed(f"top rung holds: {result.top_holds}, expected {self.holds} ({ended})")
 
     def repr_failure(self, excinfo):
-        return _failure(self.path, excinfo)
+        return _failure(self, excinfo)
 
     def reportinfo(self):
         return self.path, None, self.name  # (a domain with the file's name printed "x::toml::plan" under -v)

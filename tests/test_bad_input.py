@@ -52,6 +52,9 @@ FILES = [
     "expect_case_unknown_policy",
     "expect_case_name_twice",
     "expect_seed_without_plan",
+    "expect_case_reserved_name",
+    "expect_case_seed_without_plan",
+    "expect_case_invalid_variant",
 ]
 
 

@@ -111,14 +111,14 @@ assert '[[expect.cases]]\nname = "sticks"' in INCLINE
 
 def test_expect_cases_run_the_scene_with_other_parameters(tmp_path):
     """[[expect.cases]]: FILE::NAME::policy[RUNG] on the scene with the case's parameters; a case
-    whose variant does not load is FILE::NAME::load; --lf reruns a failed case's item."""
+    whose scene does not load with them fails the file's load, naming the case; --lf reruns a
+    failed case's item."""
     scenes = tmp_path / "scenes"
     scenes.mkdir()
-    cases = [
-        '[[expect.cases]]\nname = "claims_a_slide"\nparameters = { mu = 0.7 }\npolicy = { dynamic-rigid = "goal" }',
-        '[[expect.cases]]\nname = "no_contact"\nparameters = { K = -1.0 }\npolicy = { dynamic-rigid = "goal" }',
-    ]
-    (scenes / "incline.toml").write_text(INCLINE + "\n" + "\n\n".join(cases) + "\n")
+    claim = '[[expect.cases]]\nname = "claims_a_slide"\nparameters = { mu = 0.7 }\npolicy = { dynamic-rigid = "goal" }'
+    broken = '[[expect.cases]]\nname = "no_contact"\nparameters = { K = -1.0 }\npolicy = { dynamic-rigid = "goal" }'
+    (scenes / "incline.toml").write_text(INCLINE + "\n" + claim + "\n")
+    (scenes / "broken.toml").write_text(INCLINE + "\n" + broken + "\n")
     done = run_pytest(tmp_path, "scenes", "-v", "-rf")
     assert done.returncode == 1, done.stdout + done.stderr
     passed = sorted(line.split(" ")[0] for line in done.stdout.splitlines() if line.endswith("]") and " PASSED " in line)
@@ -129,9 +129,11 @@ def test_expect_cases_run_the_scene_with_other_parameters(tmp_path):
         "scenes/incline.toml::sticks::policy[dynamic-rigid]",
     ], done.stdout
     failed = sorted(line.split(" ")[1] for line in done.stdout.splitlines() if line.startswith("FAILED "))
-    assert failed == ["scenes/incline.toml::claims_a_slide::policy[dynamic-rigid]", "scenes/incline.toml::no_contact::load"], done.stdout
+    assert failed == ["scenes/broken.toml::load", "scenes/incline.toml::claims_a_slide::policy[dynamic-rigid]"], done.stdout
     text = " ".join(done.stdout.split())
-    assert "dynamic-rigid: the policy ends in 'none'" in text and "expected 'goal'" in text  # mu = 0.7 > tan 30: it sticks
-    assert "case 'no_contact':" in text and "contact.K" in text
+    assert (
+        "case 'claims_a_slide' (mu = 0.7): dynamic-rigid: the policy ends in 'none'" in text and "expected 'goal'" in text
+    )  # mu = 0.7 > tan 30
+    assert "expect.cases[1]: the scene with the case's parameters does not load: contact.K" in text
     again = run_pytest(tmp_path, "scenes", "-q", "--lf")
     assert again.returncode == 1 and "2 failed" in again.stdout and "passed" not in again.stdout.splitlines()[-1], again.stdout
