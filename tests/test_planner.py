@@ -212,7 +212,8 @@ def test_scenario_expectations_run_as_pytest_items_and_can_fail(tmp_path):
         cwd=tmp_path,
     )
     assert done.returncode == 1, done.stdout + done.stderr
-    assert "2 passed" in done.stdout and "1 failed" in done.stdout
+    # good: its two policy items and its `sticks` case's two; wrong: its case's two
+    assert "6 passed" in done.stdout and "1 failed" in done.stdout
     assert "expected 'unsafe'" in done.stdout
 
 
