@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import functools
 import math
+import numbers
 import tomllib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
@@ -402,6 +403,9 @@ def _parameters(raw: dict, overrides: Mapping[str, float], path: Path, override_
             path,
             [Problem(override_key.format(name), f"the file has no parameter {name!r} (parameters: {known})") for name in unknown],
         )
+    bad = [(k, v) for k, v in overrides.items() if isinstance(v, bool) or not isinstance(v, numbers.Real) or not math.isfinite(v)]
+    if bad:  # (float() would take "0.3" and True; a nan would be blamed on the key that uses it)
+        raise ScenarioError(path, [Problem(override_key.format(k), f"must be a finite number, got {v!r}") for k, v in bad])
     params.update({k: float(v) for k, v in overrides.items()})
     return params
 

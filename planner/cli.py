@@ -1104,7 +1104,7 @@ def _run_sweep(args: argparse.Namespace, scenario: Scenario, fixed: dict, axes, 
             on_progress({"refine_step": step, "brackets": active})
         interrupt.check()
 
-    where = args.executor or f"{args.workers or os.cpu_count() or 1} local workers"
+    where = args.executor or counted(args.workers or os.cpu_count() or 1, "local worker")
     if not args.json:
         print(f"sweeping {runs} runs on {where} (Ctrl-C stops and keeps what is done)", file=sys.stderr, flush=True)
         say_unlisted_rungs(scenario, [m.rung for m in models])

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import re
 import tomllib
+import warnings
 
 import pytest
 
@@ -133,6 +134,10 @@ class ScenarioExpectationFailed(AssertionError):
     pass
 
 
+class ScenarioRunWarning(UserWarning):
+    """A policy item's run is not physical, whatever its outcome (`models.rungs.run_warnings`)."""
+
+
 def _failure(item, excinfo) -> str:
     """An item's failure: the file, the case it is of and what went wrong (a ScenarioError names
     its file itself); anything else as pytest shows it."""
@@ -156,12 +161,14 @@ class PolicyItem(pytest.Item):
         self.scenario, self.rung, self.outcome = scenario, rung, outcome
 
     def runtest(self):
-        from models.rungs import policy_controls, rung_for
+        from models.rungs import policy_controls, run_warnings, rung_for
 
         rung = rung_for(self.scenario, self.rung)
         step = self.scenario.rung_settings(self.rung).h
         controls, durations = policy_controls(self.scenario)
         result = rung.rollout(self.scenario, rung.initial_state(self.scenario), controls, durations, step, laws=True)
+        for text in run_warnings(self.scenario, rung, step, result):  # (in pytest's warnings summary, whatever the outcome)
+            warnings.warn(ScenarioRunWarning(f"{self.nodeid}: {text}"), stacklevel=1)
         if not result.ok:
             raise ScenarioExpectationFailed(f"{self.rung}: the run failed: {result.message}")
         if result.outcome != self.outcome:

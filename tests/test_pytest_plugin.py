@@ -137,3 +137,17 @@ def test_expect_cases_run_the_scene_with_other_parameters(tmp_path):
     assert "expect.cases[1]: the scene with the case's parameters does not load: contact.K" in text
     again = run_pytest(tmp_path, "scenes", "-q", "--lf")
     assert again.returncode == 1 and "2 failed" in again.stdout and "passed" not in again.stdout.splitlines()[-1], again.stdout
+
+
+def test_a_passing_item_whose_run_is_not_physical_says_so(tmp_path):
+    """The frictionless incline under the quasistatic rung reaches its goal, sliding at 4.9 km/s:
+    the item passes (the outcome is what the file expects) with the run's warning in pytest's
+    warnings summary."""
+    scenes = tmp_path / "scenes"
+    scenes.mkdir()
+    case = '[[expect.cases]]\nname = "frictionless"\nparameters = { mu = 0.0 }\npolicy = { quasistatic-rigid = "goal" }'
+    (scenes / "incline.toml").write_text(INCLINE + "\n" + case + "\n")
+    done = run_pytest(tmp_path, "scenes", "-q", "-p", "no:cacheprovider")
+    assert done.returncode == 0 and "5 passed, 1 warning" in done.stdout, done.stdout + done.stderr
+    text = " ".join(done.stdout.split())
+    assert "ScenarioRunWarning: scenes/incline.toml::frictionless::policy[quasistatic-rigid]: block was not held in equilibrium" in text

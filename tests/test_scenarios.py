@@ -86,6 +86,14 @@ def test_unknown_override_is_rejected(triangle_file):
     assert info.value.problems[0].key == "--param nope"  # as the CLI names it
 
 
+@pytest.mark.parametrize("value", ["0.3", True, float("nan"), float("inf"), None])
+def test_an_override_that_is_not_a_finite_number_is_refused_under_its_name(triangle_file, value):
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(triangle_file, {"mu": value})
+    assert [(p.key, p.reason) for p in info.value.problems] == [("overrides['mu']", f"must be a finite number, got {value!r}")]
+    assert load_scenario(triangle_file, {"mu": np.float64(0.3), "v1": 2}).parameters["mu"] == 0.3  # numpy's numbers and ints are numbers
+
+
 @pytest.mark.parametrize("item", ["mu", "mu=", "=1", "mu=abc", "mu=inf", "mu=nan"])
 def test_malformed_override_items(item):
     with pytest.raises(ScenarioError):
