@@ -955,8 +955,25 @@ def unbalanced_warning(scenario: Scenario, rung: Rung, h: float, result: Rollout
     )
 
 
+def penetrating_pair(scenario: Scenario, result: RolloutResult) -> int | None:
+    """The contact pair (its index in `scenario.pairs`) of a run's largest penetration, where a
+    recorded state shows it (to 1% of its depth); None where none does (a sweep keeps two
+    states; the step of the largest may go unrecorded) or obstacles move on a script (the
+    recorded q does not place them)."""
+    depth = result.max_penetration
+    if not depth > 0.0 or not scenario.pairs or not len(result.trajectory) or compiled(scenario).scripted:
+        return None
+    psi = pair_signed_distances_many(scenario, result.trajectory)
+    record, pair = np.unravel_index(np.argmin(psi), psi.shape)
+    return int(pair) if -psi[record, pair] >= 0.99 * depth else None
+
+
 def run_warnings(scenario: Scenario, rung: Rung, h: float, result: RolloutResult) -> list[str]:
     """What a rollout's result says beside its status (a solver can solve every step of a run
-    that is not physical): the bodies passed through each other (`models.scenario.penetration_warning`),
-    a quasistatic run moved a body nothing held (`unbalanced_warning`)."""
-    return [w for w in (penetration_warning(scenario, result.max_penetration), unbalanced_warning(scenario, rung, h, result)) if w]
+    that is not physical): the bodies passed through each other (`models.scenario.penetration_warning`,
+    of the pair that penetrated where the records show it: `penetrating_pair`), a quasistatic run
+    moved a body nothing held or drove (`unbalanced_warning`)."""
+    deep = penetration_warning(scenario, result.max_penetration)
+    if deep:  # (the pair, only where the thinnest of all is passed)
+        deep = penetration_warning(scenario, result.max_penetration, penetrating_pair(scenario, result))
+    return [w for w in (deep, unbalanced_warning(scenario, rung, h, result)) if w]

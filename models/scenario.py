@@ -280,18 +280,24 @@ def _parse_toml(text: str) -> dict:
     return tomllib.loads(text)
 
 
-def penetration_warning(scenario: Scenario, depth: float) -> str:
-    """What a run's largest penetration says when it is past half the thickness of the thinnest
-    body in a contact pair ("" below): the contacts did not keep the bodies apart, whatever the
-    run's status (a solver can solve every step of a box sinking through a table)."""
-    names = {name for pair in scenario.pairs for name in (pair.body_a, pair.body_b)}
+def penetration_warning(scenario: Scenario, depth: float, pair: int | None = None) -> str:
+    """What a run's largest penetration says when it is past half the thickness of the thinner
+    body of the pair that penetrated (pair: its index in `scenario.pairs`; None where the run does
+    not say which: the thinnest body in any contact pair), "" below: the contacts did not keep the
+    bodies apart, whatever the run's status (a solver can solve every step of a box sinking
+    through a table)."""
+    pairs = scenario.pairs if pair is None else [scenario.pairs[pair]]
+    names = {name for p in pairs for name in (p.body_a, p.body_b)}
     sizes = sorted((geo.thickness(scenario.geometries[name]), name) for name in names)
     if not sizes or not depth > 0.5 * sizes[0][0]:
         return ""
     size, name = sizes[0]
+    if pair is None:
+        where = f"the thinnest body in any contact pair ({name}, {size:.3g} m thick; the run does not say which pair penetrated)"
+    else:
+        where = f"the thinner body of the pair that penetrated, {pairs[0].body_a} and {pairs[0].body_b} ({name}, {size:.3g} m thick)"
     return (
-        f"the largest penetration, {depth:.3g} m, is more than half the thickness of the thinnest body in any contact pair "
-        f"({name}, {size:.3g} m thick; the run does not say which pair penetrated): "
+        f"the largest penetration, {depth:.3g} m, is more than half the thickness of {where}: "
         "the contacts did not keep the bodies apart (a contact too soft for its load, or a step too long for the motion); "
         "the run is not physical"
     )

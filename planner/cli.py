@@ -1166,7 +1166,7 @@ def _print_sweep(args: argparse.Namespace, result, data: dict, plot, interrupted
         if flagged:
             print(
                 f"{counted(flagged, 'run')} {'is' if flagged == 1 else 'are'} not physical, whatever the outcome (`warnings` in "
-                "sweep.json): bodies passed through each other (a penetration past half the thinnest body in a contact pair), "
+                "sweep.json): bodies passed through each other (a penetration past half the thickness of a body in contact), "
                 "or a quasistatic run moved a body that nothing held or drove"
             )
         against = sum(b["low_status"] != "ok" or b["high_status"] != "ok" for b in result.boundaries)

@@ -852,8 +852,8 @@ def test_a_run_whose_bodies_pass_through_each_other_says_so_whatever_its_status(
     summary = json.loads(capsys.readouterr().out)
     assert summary["status"] == "ok" and summary["max_penetration"] > 1.0
     assert summary["warnings"][0] == (
-        f"the largest penetration, {summary['max_penetration']:.3g} m, is more than half the thickness of the thinnest body "
-        "in any contact pair (disc, 0.2 m thick; the run does not say which pair penetrated): "
+        f"the largest penetration, {summary['max_penetration']:.3g} m, is more than half the thickness of the thinner body "
+        "of the pair that penetrated, floor and disc (disc, 0.2 m thick): "
         "the contacts did not keep the bodies apart (a contact too soft for its load, or a step too long for the motion); "
         "the run is not physical"
     )
@@ -864,6 +864,69 @@ def test_a_run_whose_bodies_pass_through_each_other_says_so_whatever_its_status(
     assert main(["simulate", disc, "--model", "dynamic-compliant", "--json"]) == 0
     held = json.loads(capsys.readouterr().out)
     assert held["status"] == "ok" and held["warnings"] == [] and held["max_penetration"] < 0.1  # K = 1e6: it stops at the goal
+
+
+SHELF_SCENE = """
+version = 1
+[scenario]
+name = "ball_on_a_soft_floor"
+[scene]
+dimension = 2
+gravity = [0.0, -9.81]
+[parameters]
+shelf = 0.01
+[contact]
+mu = 0.5
+K = 1e3
+C = 1e2
+[[bodies]]
+name = "floor"
+role = "obstacle"
+shape = { type = "halfplane", normal = [0.0, 1.0] }
+[[bodies]]
+name = "shelf"
+role = "obstacle"
+shape = { type = "box", size = [1.0, "shelf"] }
+pose = { x = 10.0, y = 3.0 }
+[[bodies]]
+name = "ball"
+role = "object"
+mass = 1.0
+shape = { type = "disc", radius = 0.5 }
+pose = { x = 0.0, y = 0.5 }
+dofs = ["x", "y"]
+[task]
+horizon = 1.0
+goal = { box = { "ball.x" = [5.0, 6.0] } }
+[task.policy]
+type = "constant_speed"
+duration = 1.0
+[ladder]
+time_limit = 5.0
+[[ladder.rungs]]
+model = "dynamic-compliant"
+h = 1e-3
+"""
+
+
+def test_the_penetration_warning_measures_the_pair_that_penetrated(tmp_path, capsys):
+    """A ball resting on a soft floor sinks m g / K = 9.8 mm, a physical static deflection; a
+    1 cm shelf 10 m away, never touched, is the thinnest body in any pair. The records show the
+    ball and floor penetrated: their thinner body (the ball, 1 m) is the scale, and nothing is said."""
+    from models.rungs import penetrating_pair, rung_for
+    from models.scenario import load_scenario, penetration_warning
+    from planner.cli import main
+
+    path = tmp_path / "ball.toml"
+    path.write_text(SHELF_SCENE)
+    assert main(["simulate", str(path), "--model", "dynamic-compliant", "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["max_penetration"] == pytest.approx(9.81e-3, rel=0.02) and summary["warnings"] == []
+    scenario = load_scenario(path)
+    assert penetration_warning(scenario, summary["max_penetration"]).startswith("the largest penetration")  # (shelf, 0.01 m)
+    rung = rung_for(scenario, "dynamic-compliant")
+    out = rung.rollout(scenario, rung.initial_state(scenario), np.zeros((1, 0)), [1.0], 1e-3)
+    assert scenario.pairs[penetrating_pair(scenario, out)].body_b == "ball"
 
 
 def test_sweep_and_plan_reports_warn_of_bodies_passing_through_each_other(tmp_path, capsys):
