@@ -30,7 +30,7 @@ from models.kernel_cache import compile_ahead
 from models.kinematics import PI_INERT, SceneData, compile_scene, kernel_array
 from models.predicates import OP_TOUCH, Program, compile_predicate, evaluate_with
 from models.rollout import bind, general_step_types, propagate_kernel, rollout_bound, rollout_each, rollout_kernel, warm_period_steps
-from models.scenario import Scenario, penetration_warning
+from models.scenario import TRANSLATIONAL_DOFS, Scenario, penetration_warning
 from models.stepper import (
     LAW_ACTIVE,
     LAW_AXIS,
@@ -864,8 +864,6 @@ UNBALANCED_SHARE = 1e-4
 #: nothing pushed it there (a wedge or a lever drives a body a few times faster than its pusher).
 DRIVEN_RATIO = 100.0
 
-_TRANSLATIONS = ("x", "y", "z")
-
 
 @dataclass(frozen=True)
 class Unbalanced:
@@ -885,7 +883,7 @@ def _peak_speed(scenario: Scenario, result: RolloutResult, velocities: list[int]
     coordinates that are positions too: translations, a planar or yaw angle), which are no
     more than the largest step's: what is returned was met."""
     body = gyration is not None
-    turning = [i for i in velocities if body and scenario.velocities[i].rpartition(".")[2] not in _TRANSLATIONS]
+    turning = [i for i in velocities if body and scenario.velocities[i].rpartition(".")[2] not in TRANSLATIONAL_DOFS]
     moving = [i for i in velocities if i not in turning]
     nu = result.velocities
     if body:
@@ -928,7 +926,7 @@ def unbalanced_motion(scenario: Scenario, rung: Rung, h: float, result: RolloutR
         passive = [i for i, n in enumerate(scenario.velocities) if n.startswith(prefix) and n not in scenario.actuated]
         if not passive or not body.mass:
             continue
-        turns = any(scenario.velocities[i].rpartition(".")[2] not in _TRANSLATIONS for i in passive)
+        turns = any(scenario.velocities[i].rpartition(".")[2] not in TRANSLATIONAL_DOFS for i in passive)
         gyration = min(body.inertia) / body.mass if turns and body.inertia else 0.0
         speed = _peak_speed(scenario, result, passive, gyration)
         share = eps * speed / (h * g)

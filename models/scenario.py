@@ -52,6 +52,7 @@ QUATERNION_NORM_TOLERANCE = 1e-6
 MAX_PROBLEMS = 20
 
 ROTATIONAL_DOFS = ("theta", "yaw", "rotation")
+TRANSLATIONAL_DOFS = ("x", "y", "z")
 
 
 @dataclass(frozen=True)
@@ -892,7 +893,7 @@ def _check_policy(spec: ScenarioSpec, policy, loc: tuple, actuated: list[str]) -
             out.append(Problem(f"{key}.body", f"no body named {target.body!r} (bodies: {', '.join(bodies)})"))
         if len(target.point) != spec.scene.dimension:
             out.append(Problem(f"{key}.point", f"a point of {spec.scene.dimension} coordinates, not {len(target.point)}"))
-        if name.rsplit(".", 1)[-1] not in ("x", "y", "z"):
+        if name.rsplit(".", 1)[-1] not in TRANSLATIONAL_DOFS:
             out.append(Problem(key, f"a body's point is a target only for a drive along x, y or z, not {name!r}"))
     return out
 

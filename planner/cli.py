@@ -24,7 +24,7 @@ import numpy as np
 from models import perfmap
 from models.family import PROPAGATING_RUNGS, RUNG_NAMES, control_steps
 from models.kernel_cache import kernels_cached
-from models.scenario import Problem, Scenario, ScenarioError, load_scenario, parse_overrides, penetration_warning
+from models.scenario import TRANSLATIONAL_DOFS, Problem, Scenario, ScenarioError, load_scenario, parse_overrides, penetration_warning
 from models.schema import CONTROL_PLANNERS, MAX_ITERATIONS, MAX_SEED
 from models.task import OUTCOME_LABELS
 from planner import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
@@ -1579,7 +1579,7 @@ def _expect_words(runs: dict) -> str:
 
 def _policy_words(policy: dict) -> str:
     """A policy of `Scenario.summary` in words: its type, what it drives and for how long."""
-    unit = lambda name: "rad/s" if name.rpartition(".")[2] in ("theta", "yaw") else "m/s"  # noqa: E731
+    unit = lambda name: "m/s" if name.rpartition(".")[2] in TRANSLATIONAL_DOFS else "rad/s"  # noqa: E731
     drives = [f"{name} at {speed:g} {unit(name)}" for name, speed in policy["speeds"].items()]
     drives += [f"{name} by its law" for name in policy["laws"]]
     return f"({policy['type']}: {', '.join(drives) or 'nothing driven'}) for {policy['duration']:g} s"

@@ -27,7 +27,7 @@ import numpy as np
 
 from models.rollout import FLAG_GOAL, FLAG_INVALID, FLAG_RUNNING
 from models.rungs import Rung, State
-from models.scenario import Scenario
+from models.scenario import TRANSLATIONAL_DOFS, Scenario
 from models.stepper import StepStatus
 from models.task import goal_distance
 from planner.clock import planning_clock
@@ -175,7 +175,7 @@ def _projection_coordinates(scenario: Scenario, most: int = 3) -> list[int]:
     translational coordinates, passive bodies first."""
     steered = steered_coordinates(scenario)
     names = [scenario.coordinates[i] for i in steered]
-    passive = [k for k, n in enumerate(names) if n not in scenario.actuated and n.split(".")[1] in ("x", "y", "z")]
+    passive = [k for k, n in enumerate(names) if n not in scenario.actuated and n.split(".")[1] in TRANSLATIONAL_DOFS]
     active = [k for k, n in enumerate(names) if n in scenario.actuated]
     return (passive + active)[:most] or [0]
 
