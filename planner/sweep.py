@@ -377,7 +377,7 @@ class SweepResult:
     def to_csv(self) -> str:
         names = [a.name for a in self.axes]
         coords = sorted({k for p in self.points if p is not None for k in p.final})
-        lines = [",".join(["model", *names, "outcome", "t", "status", "steps", "max_penetration", *coords])]
+        lines = [",".join(["model", *names, "outcome", "t", "status", "steps", "max_penetration", "warnings", *coords])]
         for p in self.points:
             if p is None:
                 continue
@@ -391,6 +391,7 @@ class SweepResult:
                         p.status,
                         str(p.steps),
                         repr(p.max_penetration),
+                        str(len(p.warnings)),  # (how many: their words are in sweep.json)
                         *(repr(p.final.get(c, float("nan"))) for c in coords),
                     ]
                 )

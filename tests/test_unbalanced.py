@@ -124,6 +124,9 @@ def test_simulate_sweep_and_plan_report_it(tmp_path, capsys):
     assert "1 run is not physical, whatever the outcome" in " ".join(capsys.readouterr().out.split())
     points = {p["parameters"]["mu"]: p for p in json.loads((tmp_path / "s" / "sweep.json").read_text())["points"]}
     assert points[0.0]["warnings"][0].startswith("block was not held") and points[0.7]["warnings"] == []
+    rows = [line.split(",") for line in (tmp_path / "s" / "sweep.csv").read_text().splitlines()]
+    column = rows[0].index("warnings")
+    assert {float(r[1]): r[column] for r in rows[1:]} == {0.0: "1", 0.7: "0"}  # (sweep.csv counts them)
 
     # a plan's rung is replayed for its plot, and report.json gives what the replay says
     scenario = load_scenario(INCLINE, {"mu": 0.0})
