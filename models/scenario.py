@@ -314,7 +314,8 @@ def load_scenario(
     [[expect.cases]] entry's variant so, and checks the case's runs on it: `expected_run_problems`)."""
     path = Path(path)
     try:
-        raw = _parse_toml(path.read_text(encoding="utf-8"))
+        text = path.read_text(encoding="utf-8")
+        raw = _parse_toml(text)
     except FileNotFoundError:
         raise ScenarioError(path, [Problem("", "no such file")]) from None
     except IsADirectoryError:
@@ -340,7 +341,7 @@ def load_scenario(
                 spec = ScenarioSpec.model_validate(raw, context={"parameters": parameters})
             except ValidationError as exc:
                 raise ScenarioError(path, _pydantic_problems(exc, parameters)) from None
-            return _derive(spec, MappingProxyType(parameters), path, check_expect)
+            return _derive(spec, MappingProxyType(parameters), path, text if check_expect else None)
     except (OverflowError, FloatingPointError, ZeroDivisionError) as exc:
         raise ScenarioError(path, [Problem("", f"a number is too large (or small) to compute with: {exc}")]) from None
     except RecursionError:
@@ -524,7 +525,9 @@ def _start_values(body: BodySpec, dimension: int) -> dict[str, float]:
     return values
 
 
-def _derive(spec: ScenarioSpec, parameters: Mapping[str, float], path: Path, check_expect: bool = True) -> Scenario:
+def _derive(spec: ScenarioSpec, parameters: Mapping[str, float], path: Path, text: str | None) -> Scenario:
+    """The scenario of a validated spec; text: the file's contents, for [expect]'s checks (None:
+    not checked, `load_scenario`'s check_expect)."""
     problems: list[Problem] = []
     dim = spec.scene.dimension
     if len(spec.scene.gravity) != dim:
@@ -576,7 +579,7 @@ def _derive(spec: ScenarioSpec, parameters: Mapping[str, float], path: Path, che
     problems += _check_task(spec, coordinates, actuated, names, _pair_status(spec))
     problems += _check_ladder(spec)
     problems += _check_rung_settings(spec)
-    problems += _check_expected_runs(spec) if check_expect else []
+    problems += _check_expected_runs(spec) if text is not None else []
     problems += _check_limits(spec, coordinates, start, dim)
     if problems:
         raise ScenarioError(path, problems)
@@ -597,18 +600,22 @@ def _derive(spec: ScenarioSpec, parameters: Mapping[str, float], path: Path, che
         start_velocity=_frozen(np.array(start_velocity, dtype=float)),
     )
     problems = _check_penetration(scenario, start_overridden)
-    problems += _check_cases(scenario) if check_expect and not problems else []
+    problems += list(_check_cases(str(path), text)) if text is not None and spec.expect and spec.expect.cases and not problems else []
     if problems:
         raise ScenarioError(path, problems)
     return scenario
 
 
-def _check_cases(scenario: Scenario) -> list[Problem]:
-    """Each [[expect.cases]] entry's runs can run on its variant (the scenario with the case's
-    parameters and policy, as the pytest plugin loads it): the variant loads, and
-    `expected_run_problems` finds nothing in the case's runs on it."""
+@functools.lru_cache(maxsize=8)
+def _check_cases(path: str, text: str) -> tuple[Problem, ...]:
+    """Each [[expect.cases]] entry of the file at path (its contents `text`) can run on its
+    variant (the scenario with the case's parameters and policy, as the pytest plugin loads it):
+    the variant loads, and `expected_run_problems` finds nothing in the case's runs on it. The
+    last few files' answers are kept: a case's variant does not depend on a load's overrides,
+    and a sweep loads one file at every grid point."""
+    scenario = load_scenario(path, check_expect=False)
     out = []
-    for i, case in enumerate(scenario.spec.expect.cases if scenario.spec.expect else ()):
+    for i, case in enumerate(scenario.spec.expect.cases):
         key = f"expect.cases[{i}]"
         try:
             variant = case_variant(scenario.path, case, i)
@@ -616,7 +623,7 @@ def _check_cases(scenario: Scenario) -> list[Problem]:
             out += [Problem(key, f"the scene with the case's parameters does not load: {p.key}: {p.reason}") for p in exc.problems]
             continue
         out += expected_run_problems(variant.spec, case, key)
-    return out
+    return tuple(out)
 
 
 def case_variant(path: Path, case, index: int) -> Scenario:
