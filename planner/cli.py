@@ -707,7 +707,8 @@ def _run_plan(args: argparse.Namespace, scenario: Scenario, names: list[str]):
         if problems:
             raise ScenarioError(scenario.path, problems)
         announce_compile(planning=True)  # (after the checks: bad input is its one line)
-        result = ladder_for(scenario, names, args, progress=progress, stop=interrupt.asked)
+        with announcing_search_compile():
+            result = ladder_for(scenario, names, args, progress=progress, stop=interrupt.asked)
     if live:
         print("\r" + " " * 78 + "\r", end="", file=sys.stderr, flush=True)
     return result
@@ -725,17 +726,17 @@ def _write_plan_outputs(args: argparse.Namespace, scenario: Scenario, result) ->
     runs = []
     for entry, rung_report in zip(report["rungs"], result.rungs):  # (report.json only: plan.json is the plan)
         rung = rung_for(scenario, rung_report.rung)
-        entry["warnings"] = [w for w in (penetration_warning(scenario, rung_report.max_penetration),) if w]
-        if not rung_report.durations:
-            continue
-        if rung.propagates:
+        if rung.propagates and rung_report.durations:
             h = rung_report.h
             replay = rung.rollout(
                 scenario, rung.initial_state(scenario), np.array(rung_report.controls), np.array(rung_report.durations), h
             )
             entry["warnings"] = run_warnings(scenario, rung, h, replay)
             runs.append((rung_report, replay.times, replay.trajectory))
-        else:  # the geometric path itself
+            continue
+        # no plan to replay, or the geometric path: what the rung's own runs recorded
+        entry["warnings"] = [w for w in (penetration_warning(scenario, rung_report.max_penetration),) if w]
+        if rung_report.durations:  # the geometric path itself
             runs.append((rung_report, np.concatenate([[0.0], np.cumsum(rung_report.durations)]), np.array(rung_report.states)))
     # plan.json is reproducible (no timings): the same seed gives the same bytes
     write_atomic(args.out / "plan.json", plan_json_text(result))
@@ -878,6 +879,7 @@ def run_with_progress(rung, scenario, state, controls, durations, h, *, live: bo
 COMPILE_NOTE = "compiling the physics kernels (first run only: about 10 minutes on two cores)"
 PLAN_COMPILE_NOTE = "compiling the planners' kernels (first plan only: about a minute on two cores)"
 BENCH_COMPILE_NOTE = "compiling the benchmark's kernels (first bench only: about a minute on two cores)"
+SEARCH_COMPILE_NOTE = "compiling the control search's kernel (first search only: about half a minute on two cores)"
 
 
 def announce_compile(planning: bool = False, bench: bool = False) -> None:
@@ -893,6 +895,32 @@ def announce_compile(planning: bool = False, bench: bool = False) -> None:
         print(PLAN_COMPILE_NOTE, file=sys.stderr, flush=True)
     elif bench and not kernels_cached("stage_loop"):
         print(BENCH_COMPILE_NOTE, file=sys.stderr, flush=True)
+
+
+def announcing_search_compile():
+    """A context in which SEARCH_COMPILE_NOTE is printed, once, as the control search's kernel,
+    `models.rollout.propagate_kernel`, starts compiling (numba's `numba:compile` event, which
+    fires where a kernel is compiled, not where it is loaded from the cache). Only a rung's own
+    search calls that kernel, so `announce_compile` cannot tell before a plan whether it will: a
+    first plan that searched sat silent while it compiled (23 s on free_transfer)."""
+    from numba.core import event
+
+    from models import rollout
+
+    kernel = rollout.propagate_kernel
+
+    class SearchCompileNotice(event.Listener):
+        said = False
+
+        def on_start(self, ev) -> None:
+            if not self.said and (ev.data or {}).get("dispatcher") is kernel:
+                self.said = True
+                print(SEARCH_COMPILE_NOTE, file=sys.stderr, flush=True)
+
+        def on_end(self, ev) -> None:
+            pass
+
+    return event.install_listener("numba:compile", SearchCompileNotice())
 
 
 def print_simulation(summary: dict[str, Any]) -> None:

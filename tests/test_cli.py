@@ -833,6 +833,39 @@ def test_a_cold_kernel_cache_is_announced(monkeypatch, capsys):
     assert capsys.readouterr().err == cli.BENCH_COMPILE_NOTE + "\n"
 
 
+def test_a_compile_of_the_control_search_kernel_is_announced_as_it_starts(monkeypatch, capsys):
+    """Only a rung's own search calls `propagate_kernel`, so a plan cannot tell before it runs
+    whether it will compile it: the notice comes from numba's compile event, once, and only for
+    that kernel. A fresh kernel stands in for it here, so that numba really compiles it."""
+    import numba
+    from numba.core import event
+
+    from models import rollout
+    from planner import cli
+
+    @numba.njit(cache=False)
+    def stand_in(x):
+        return x + 1
+
+    @numba.njit(cache=False)
+    def other(x):
+        return x - 1
+
+    monkeypatch.setattr(rollout, "propagate_kernel", stand_in)
+    with cli.announcing_search_compile():
+        assert other(1) == 0  # another kernel's compile: no notice
+        assert capsys.readouterr().err == ""
+        assert stand_in(1) == 2  # compiled for int64: the notice, as the compile starts
+        assert capsys.readouterr().err == cli.SEARCH_COMPILE_NOTE + "\n"
+        assert stand_in(1.5) == 2.5  # compiled again for float64: said once
+        assert stand_in(2) == 3  # no compile
+    assert capsys.readouterr().err == ""
+    with event.install_listener("numba:compile", event.RecordingListener()) as heard:
+        assert stand_in(True) == 2  # a compile after the context: heard by numba, no notice
+    assert [ev.data["dispatcher"] for _, ev in heard.buffer] == [stand_in, stand_in]
+    assert capsys.readouterr().err == ""
+
+
 def test_a_run_whose_bodies_pass_through_each_other_says_so_whatever_its_status(capsys):
     """A contact far too soft for its load (bouncing_disc at K = 1e-6 N/m under the quasistatic
     compliant rung) lets the disc fall through the floor with every step solved, status ok; the
