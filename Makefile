@@ -51,7 +51,7 @@ lint: $(VENV)/.installed-test
 schema: $(VENV)/.installed
 	$(VENV)/bin/ladder schema --out scenarios/scenario.schema.json
 
-# The paper's Figs. 4-5 reproduced: sweeps, plots and docs/paper-reproduction.md (about a minute).
+# The paper's Figs. 4-5 reproduced: sweeps, plots and docs/paper-reproduction.md (about 3 minutes on two cores).
 paper: $(VENV)/.installed
 	$(PY) -m planner.paper --out docs/paper --doc docs/paper-reproduction.md
 
