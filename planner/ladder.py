@@ -49,6 +49,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import time
 from dataclasses import KW_ONLY, asdict, dataclass, field, replace
 
@@ -58,7 +59,7 @@ from models.rungs import State, rung_for
 from models.scenario import Problem, Scenario, ScenarioError, plan_problems
 from models.task import Outcome, classify, goal_distance
 from planner.clock import compiler_seconds, planning_clock
-from planner.ompl_adapter import plan_control, plan_geometric, steered_coordinates
+from planner.ompl_adapter import HORIZON_SLACK, plan_control, plan_geometric, steered_coordinates
 from planner.plan_status import PlanStatus
 from planner.pushing import free_turn, push_reference
 from planner.tracking import TRACK_TOLERANCE, PoseError, Reference, Tracked, track
@@ -109,7 +110,8 @@ class LadderResult:
 
     @property
     def top_holds(self) -> bool:
-        return self.complete and bool(self.rungs) and self.rungs[-1].outcome == GOAL
+        """The ladder's answer: its last rung accepted a plan that reaches the goal under it."""
+        return self.complete and bool(self.rungs) and self.rungs[-1].ended.holds and self.rungs[-1].outcome == GOAL
 
     def to_json(self, timings: bool = True) -> dict:
         """The plan; without timings it is a pure function of the scenario and the seed."""
@@ -262,6 +264,10 @@ def run_ladder(
         own_h = step.h if step.rung.propagates else None
         climbed = [r if r.stage else replace(r, h=own_h) for r in climbed]
         report = climbed[-1]
+        if report.ended.holds and not step.rung.propagates and math.fsum(report.durations) > scenario.spec.task.horizon + HORIZON_SLACK:
+            # a geometric path reaches the goal at its end (a propagating rung's plans are held to it as they are accepted: `_in_time`)
+            reason = _past_horizon_reason(scenario, math.fsum(report.durations))
+            climbed[-1] = report = replace(report, ended=PlanStatus.PAST_HORIZON, reason=reason)
         if not report.ended.holds and step.rung.propagates and name != names[-1]:
             climbed[-1] = report = _goes_on(report)
         for done in climbed:
@@ -366,16 +372,19 @@ def _climb(
         replay = _replay(step.scenario, step.rung, step.start(), previous, step.h, step.period)
         if step.stopped():
             return None
-    if carried and replay.outcome == GOAL and replay.status == OK:
-        return [_replayed(step, previous, replay)]
+    if carried and _reaches(replay):
+        report = _replayed(step, previous, replay)
+        if _in_time(step, report):
+            return [report]
     if carried and previous.rung == "geometric":  # the object's path, pushed (planner.pushing)
         pushed = _push(step, previous)
         if step.stopped():
             return None
         if pushed is not None:
             pushed_replay = _Replay.of(pushed)
-            if pushed_replay.outcome == GOAL and pushed_replay.status == OK:
-                return [_tracked(step, pushed, pushed_replay, pushed=True)]
+            report = _tracked(step, pushed, pushed_replay, pushed=True) if _reaches(pushed_replay) else None
+            if report is not None and _in_time(step, report):
+                return [report]
             # where the push is lost, the search is the one without it: seeded with the geometric
             # plan's replay (seeded with the pushed states instead, 2 of 20 box_rotate_3d seeds failed)
             report = _search(step, previous, replay, None, planner, seeded, guided, progress, pushed=pushed)
@@ -389,8 +398,9 @@ def _climb(
         replay = _Replay.of(tracked)
         if step.stopped():
             return None
-        if replay.outcome == GOAL and replay.status == OK:
-            return [_tracked(step, tracked, replay)]
+        report = _tracked(step, tracked, replay) if _reaches(replay) else None
+        if report is not None and _in_time(step, report):
+            return [report]
     report = _search(step, previous, replay, tracked, planner, seeded, guided, progress)
     return None if report is None else [report]
 
@@ -460,8 +470,9 @@ def _coarse_first(
     if step.stopped():
         return None
     replay = _Replay.of(tracked)
-    if replay.outcome == GOAL and replay.status == OK:
-        return [stage, _tracked(rest, tracked, replay)]
+    report = _tracked(rest, tracked, replay) if _reaches(replay) else None
+    if report is not None and _in_time(rest, report):
+        return [stage, report]
     own = _search(rest, stage, replay, tracked, planner, seeded, guided, progress)
     return None if own is None else [stage, own]
 
@@ -505,6 +516,8 @@ def _track_rounds(step: _Step, stage: RungReport, h: float) -> Tracked:
             guide=guide if len(guide) else None,
             time_limit=step.budget.seconds(),
             stop=step.stop,
+            horizon=scenario.spec.task.horizon,
+            start_times=[math.fsum(run.durations)],
         )
         left -= plan.iterations
         run.repairs += 1
@@ -605,6 +618,8 @@ def _search(step: _Step, previous, replay, tracked, planner, seeded: bool, guide
         time_limit=step.budget.seconds(),
         stop=step.stop,
         progress=(lambda i, n, _name=step.name: progress(_name, i, n)) if progress else None,
+        horizon=scenario.spec.task.horizon,
+        start_times=[0.0, *np.cumsum(prefix_durations)[: len(seeds)].tolist()],
     )
     if step.stopped():
         return None
@@ -619,7 +634,8 @@ def _search(step: _Step, previous, replay, tracked, planner, seeded: bool, guide
     head = replay.head(j) if j > 0 else _Replay.empty(start)
     tail = _replay_controls(scenario, step.rung, head.state, plan.controls[j:], plan.durations[j:], step.h, head)
     fields = tail.fields(scenario)
-    accepted = plan.exact and fields["outcome"] == GOAL and fields["status"] == OK
+    reaches = _reaches(tail)
+    accepted = plan.exact and reaches and _in_time(step, plan)
     if accepted:
         ended, reason = (PlanStatus.EXACT if previous is None else PlanStatus.REPLANNED), ""
         if ended is PlanStatus.REPLANNED and guide is None:  # the status's words say "guided by it"
@@ -635,6 +651,13 @@ def _search(step: _Step, previous, replay, tracked, planner, seeded: bool, guide
     elif not plan.exact:
         ended = plan.status
         reason = ended.message + (f" ({plan.iterations} of {budget} iterations)" if ended is PlanStatus.TIMEOUT else "")
+        if plan.past_horizon:
+            from planner.cli import counted
+
+            reason += f"; {counted(plan.past_horizon, 'control')} would have ended past the task's horizon ({_horizon_words(scenario)})"
+    elif reaches:  # the prefix of the previous plan to the root it starts at ran past the horizon
+        ended = PlanStatus.PAST_HORIZON
+        reason = _past_horizon_reason(scenario, _goal_time(step, plan))
     else:
         ended = PlanStatus.FAILED
         reason = f"{ended.message} ({fields['outcome']}, {fields['status']})"
@@ -659,6 +682,38 @@ def _search(step: _Step, previous, replay, tracked, planner, seeded: bool, guide
         rollouts=0 if spent is None else spent.rollouts,
         **fields,
     )
+
+
+def _horizon_words(scenario: Scenario) -> str:
+    return f"the task's horizon, {scenario.spec.task.horizon:g} s"
+
+
+def _past_horizon_reason(scenario: Scenario, t: float) -> str:
+    return f"{PlanStatus.PAST_HORIZON.message}: it reaches the goal at t = {t:.4g} s ({_horizon_words(scenario)})"
+
+
+def _goal_time(step: _Step, plan) -> float:
+    """When a plan (its `controls` and `durations`) that reaches the goal under the step's rung
+    reaches it: at most its durations' sum (the planners' last control runs on past the goal, 1 to
+    10 periods, where a rollout stops), else its rollout from the start, which stops there."""
+    total = math.fsum(plan.durations)
+    if total <= step.scenario.spec.task.horizon + HORIZON_SLACK:
+        return total
+    out = step.rung.rollout(step.scenario, step.start(), np.array(plan.controls, float), np.array(plan.durations, float), step.h)
+    return out.t
+
+
+def _in_time(step: _Step, plan) -> bool:
+    """Whether a plan reaches the goal within the task's horizon (`[task] horizon`). The search
+    keeps its own states within it (`planner.ompl_adapter._Propagator`), but the previous rung's
+    plan, replayed with the drives held still at its end or tracked with repairs, or a search's
+    path from a root part-way along it, can come out later."""
+    return _goal_time(step, plan) <= step.scenario.spec.task.horizon + HORIZON_SLACK
+
+
+def _reaches(replay: _Replay) -> bool:
+    """Whether a replayed (or tracked) plan ends in the goal with every step solved."""
+    return replay.outcome == GOAL and replay.status == OK
 
 
 def _goes_on(report: RungReport) -> RungReport:
@@ -687,7 +742,7 @@ def _plan_with_restarts(scenario, rung, start, *, seed: int, iterations: int, ti
     searches = max(1, min(RESTARTS if kwargs.get("guide") is None else 1, iterations))
     # equal shares that sum to the budget (a ceiling each would overspend it by up to searches - 1)
     shares = [iterations // searches + (k < iterations % searches) for k in range(searches)]
-    t0, used = planning_clock(), {"propagations": 0, "iterations": 0, "failures": 0}
+    t0, used = planning_clock(), {"propagations": 0, "iterations": 0, "failures": 0, "past_horizon": 0}
     plan = None
     for attempt in range(searches):
         left = None if time_limit is None else max(0.0, time_limit - (planning_clock() - t0))

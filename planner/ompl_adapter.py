@@ -37,6 +37,8 @@ from planner.plan_status import PlanStatus
 AUXILIARY_WEIGHT = 1e-6
 #: Half-width of the sampling box of passive coordinates around the start (m or rad).
 PASSIVE_RANGE = 2.0
+#: A plan may last this much (s) past the horizon: a sum of control durations' rounding.
+HORIZON_SLACK = 1e-9
 #: Each control is held for 1 to this many control periods.
 MAX_CONTROL_PERIODS = 10
 #: Fraction of RRT's samples drawn near the previous rung's plan when one guides it.
@@ -57,6 +59,7 @@ class ControlPlan:
     iterations: int
     start_index: int = 0  # which start the path begins at (0: the real start; i: extra_starts[i - 1])
     failures: int = 0  # propagations that ended in a numerical failure (a status, pruned from the tree)
+    past_horizon: int = 0  # states the search made invalid as their plan would end past the horizon
 
     @property
     def exact(self) -> bool:
@@ -236,6 +239,8 @@ def plan_control(
     progress=None,
     stop=None,
     reached=None,
+    horizon: float | None = None,
+    start_times=None,
 ) -> ControlPlan:
     """Plan commanded speeds from `start` under `rung` with OMPL's control planner.
 
@@ -254,6 +259,10 @@ def plan_control(
     stop: a function -> True (Ctrl-C) that ends the search early.
     reached: q -> bool, a subgoal: a propagation ending where it is True ends the search as the
     goal does (the tracker's local repair: a state near the previous plan further along).
+    horizon: the task's longest plan, s (`[task] horizon`): a control that would end past it
+    makes an invalid state (`_Propagator`). None: no bound.
+    start_times: the time (s) at which the plan is at each root, [start] + extra_starts, where
+    they are states along an earlier plan (default: 0 for each).
     """
     from ompl import base as ob
     from ompl import control as oc
@@ -267,7 +276,7 @@ def plan_control(
     si = oc.SpaceInformation(space, _control_space(ob, oc, space, scenario))
     si.setPropagationStepSize(control_period)
     si.setMinMaxControlDuration(1, MAX_CONTROL_PERIODS)
-    propagate = _Propagator(scenario, rung, layout, limits, h, reached)
+    propagate = _Propagator(scenario, rung, layout, limits, h, reached, horizon)
     si.setStatePropagator(propagate)
     si.setStateValidityChecker(_valid_checker(layout))
     if planner == "EST":
@@ -279,6 +288,7 @@ def plan_control(
         root = space.allocState()
         layout.write(root, flatten(st, limits.flag(st, FLAG_RUNNING)))
         roots.append(layout.read(root))
+        propagate.at(roots[-1], 0.0 if start_times is None else float(start_times[k]))
         if k == 0:
             ss.setStartState(root)
         else:
@@ -456,14 +466,30 @@ class _Propagator:
     """OMPL's state propagator: one compiled propagation of the rung per control
     (`Rung.propagator`: the rollout, its outcome and the limits, `_Limits`, as the flag of the
     state it makes; see the module docstring), and a `reached` subgoal checked on a running
-    state; numerical failures are counted."""
+    state; numerical failures are counted.
 
-    def __init__(self, scenario: Scenario, rung: Rung, layout: _ControlLayout, limits: _Limits, h: float, reached=None):
-        self.layout, self.reached = layout, reached
+    The horizon: each state the search makes is at a time along its plan, its parent's plus
+    the control's duration, and one past `horizon` is invalid (FLAG_INVALID), as the plan that
+    reaches it would last longer than the task allows. The times are kept here, by the state's
+    exact values (`times`: OMPL copies a state's values exactly, and the search propagates only
+    from roots and states this propagator made), not as a coordinate of OMPL's state: one more
+    coordinate would change every sampler's random stream, so the same seed would plan something
+    else where the horizon never binds. A state whose time is not known (`untimed`) is not held
+    to the horizon; the ladder checks every plan's length after the search."""
+
+    def __init__(self, scenario: Scenario, rung: Rung, layout: _ControlLayout, limits: _Limits, h: float, reached=None, horizon=None):
+        self.layout, self.reached, self.horizon = layout, reached, horizon
         self.na = len(scenario.actuated)
         self.step = _bound_propagation(scenario, rung, layout.sizes, limits, h)
         self.propagations = 0
         self.failures = 0
+        self.times: dict[bytes, float] = {}
+        self.untimed = 0  # propagations from a state whose time was not known
+        self.past_horizon = 0  # states made invalid by the horizon
+
+    def at(self, x: np.ndarray, t: float) -> None:
+        """Record that the flattened state x is at time t along its plan."""
+        self.times[x.tobytes()] = t
 
     def __call__(self, s, control, duration, result) -> None:
         self.propagations += 1
@@ -476,6 +502,16 @@ class _Propagator:
             self.failures += 1
         if self.reached is not None and y[-1] == FLAG_RUNNING and self.reached(y[: self.layout.nq]):
             y[-1] = FLAG_GOAL
+        if self.horizon is not None:
+            t = self.times.get(x.tobytes())
+            if t is None:
+                self.untimed += 1
+            else:
+                t += float(duration)
+                if t > self.horizon + HORIZON_SLACK and (y[-1] == FLAG_RUNNING or y[-1] == FLAG_GOAL):
+                    y[-1] = FLAG_INVALID
+                    self.past_horizon += 1
+                self.at(y, t)
         self.layout.write(result, y)
 
 
@@ -596,6 +632,7 @@ def _control_result(
             propagate.propagations,
             done["iterations"],
             failures=propagate.failures,
+            past_horizon=propagate.past_horizon,
         )
     path = ss.getSolutionPath()
     controls = np.array([[c[j] for j in range(na)] for c in path.getControls()]).reshape(-1, na)
@@ -604,7 +641,15 @@ def _control_result(
     first = layout.read(path.getState(0))
     start_index = int(np.argmin([np.max(np.abs(first - r)) for r in roots]))
     result = ControlPlan(
-        controls, durations, states, status, propagate.propagations, done["iterations"], start_index, failures=propagate.failures
+        controls,
+        durations,
+        states,
+        status,
+        propagate.propagations,
+        done["iterations"],
+        start_index,
+        failures=propagate.failures,
+        past_horizon=propagate.past_horizon,
     )
     del path
     return result

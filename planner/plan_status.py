@@ -31,6 +31,7 @@ class PlanStatus(Enum):
     TIMEOUT = "no exact plan before the time limit ran out"
     BUDGET_EXHAUSTED = "no exact plan within the iteration budget"
     FAILED = "the plan found does not hold when replayed"
+    PAST_HORIZON = "the plan reaches the goal but lasts longer than the task allows"
     STOPPED = "the search was stopped before it ended (interrupted)"
     ABORTED = "the planner ended the search by itself, with no plan (OMPL refused the start or the goal)"
 
@@ -67,6 +68,7 @@ _LABELS = {
     PlanStatus.TIMEOUT: "failed",
     PlanStatus.BUDGET_EXHAUSTED: "failed",
     PlanStatus.FAILED: "failed",
+    PlanStatus.PAST_HORIZON: "failed",
     PlanStatus.STOPPED: "stopped",
     PlanStatus.ABORTED: "failed",
 }

@@ -640,3 +640,60 @@ def test_the_geometric_rungs_iterations_count_against_the_ladders_budget():
     assert geometric.rung == "geometric" and geometric.propagations == 0 and geometric.iterations > 0
     assert isinstance(geometric.compile_s, float)
     assert sum(r.iterations for r in result.rungs) <= 200 * len(result.rungs)
+
+
+def test_a_search_keeps_its_plans_within_the_tasks_horizon():
+    """`[task] horizon` is the longest plan: a control that would end past it makes an invalid
+    state (`planner.ompl_adapter._Propagator`). The times are kept outside OMPL's state, so a
+    horizon that never binds plans exactly what no horizon plans (the same random stream)."""
+    from planner.ompl_adapter import plan_control
+
+    scenario = load_scenario(TRIANGLE, {"v1": 0.8})
+    rung = rung_for(scenario, "kinematic")
+    settings = scenario.rung_settings("kinematic")
+    start = rung.initial_state(scenario)
+
+    def plan(seed, **kwargs):
+        return plan_control(
+            scenario, rung, start, h=settings.h, control_period=settings.control_period, seed=seed, iterations=2000, **kwargs
+        )
+
+    for seed in (1, 2):
+        free, loose = plan(seed), plan(seed, horizon=1e6)
+        assert free.exact and loose.exact and loose.past_horizon == 0
+        assert np.array_equal(free.controls, loose.controls) and np.array_equal(free.durations, loose.durations)
+        # the fingers need 0.74 s at full speed (2 m/s) to close on the triangle: 1.2 s binds some branches
+        tight = plan(seed, horizon=1.2)
+        assert tight.exact and tight.past_horizon > 0
+        # it reaches the goal within the horizon (its last control runs on past the goal, where a rollout stops)
+        run = rung.rollout(scenario, start, tight.controls, tight.durations, settings.h)
+        assert run.outcome == "goal" and run.t <= 1.2 + 1e-9 and sum(tight.durations[:-1]) < 1.2, (seed, run.t)
+    # too short for any plan: every propagation ends past it
+    short = plan(1, horizon=0.3)
+    assert not short.exact and short.past_horizon > 0 and sum(short.durations) <= 0.3 + 1e-9  # (its closest path)
+    # a root already at the horizon (a state along an earlier plan) makes nothing valid
+    late = plan(1, horizon=4.0, start_times=[4.0])
+    assert not late.exact and 0 < late.past_horizon <= late.propagations
+
+
+def test_a_plan_longer_than_the_horizon_does_not_hold(tmp_path):
+    """A plan that reaches the goal but lasts longer than `[task] horizon` is not accepted: the
+    rung ends PAST_HORIZON (a geometric path, a replayed or tracked plan) or its search finds none
+    within it, the reason says so, and the top rung does not hold. It had been ignored: plans
+    of 16.6 s were accepted for a horizon of 10 s."""
+    text = TRIANGLE.read_text()
+    assert "horizon = 4.0" in text
+    path = tmp_path / "short.toml"
+    path.write_text(text.replace("horizon = 4.0", "horizon = 0.5"))
+    scenario = load_scenario(path, {"v1": 0.8})
+    result = run_ladder(scenario, rungs=["geometric", "kinematic"], seed=1, iterations=400, time_limit=600.0)
+    geometric, kinematic = result.rungs
+    assert geometric.ended is PlanStatus.PAST_HORIZON and geometric.ended.label == "failed" and geometric.outcome == "goal"
+    assert geometric.reason == (
+        f"{PlanStatus.PAST_HORIZON.message}: it reaches the goal at t = {sum(geometric.durations):.4g} s (the task's horizon, 0.5 s)"
+    )
+    assert not kinematic.ended.holds and "would have ended past the task's horizon (the task's horizon, 0.5 s)" in kinematic.reason
+    assert not result.top_holds and result.to_json()["top_holds"] is False
+    # at the file's own horizon the same ladder holds
+    held = run_ladder(load_scenario(TRIANGLE, {"v1": 0.8}), rungs=["geometric", "kinematic"], seed=1, iterations=400, time_limit=600.0)
+    assert held.top_holds and all(sum(r.durations) <= 4.0 for r in held.rungs)
