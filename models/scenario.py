@@ -42,6 +42,7 @@ from models.schema import (
     LadderSpec,
     Predicate,
     ScenarioSpec,
+    _plain_number,
 )
 
 #: A body may start this far inside another (m) without being reported as penetrating.
@@ -403,7 +404,15 @@ def _parameters(raw: dict, overrides: Mapping[str, float], path: Path, override_
     table = raw.get("parameters", {})
     if not isinstance(table, dict):
         raise ScenarioError(path, [Problem("parameters", "must be a table of name = number")])
-    params = {k: v for k, v in table.items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
+    values = []
+    for name, value in table.items():  # each on its own: the keys that use a bad one would say it is unknown
+        try:
+            _plain_number(value)
+        except ValueError as exc:
+            values.append(Problem(key_path(("parameters", name)), str(exc)))
+    if values:
+        raise ScenarioError(path, values)
+    params = dict(table)
     unknown = [name for name in overrides if name not in table]
     if unknown:
         known = ", ".join(sorted(table)) or "none defined"

@@ -120,6 +120,23 @@ def test_bad_file_is_rejected_with_key_and_reason(path):
     assert str(info.value).splitlines()[0].startswith(f"{path}: ")
 
 
+def test_a_bad_parameter_value_is_its_one_problem(tmp_path, triangle_file):
+    """A parameter given as text is refused under its own key, and the keys that use it are not
+    also said to name an unknown parameter (they had been: a second and third line blaming
+    contact.pairs[0].mu for the parameter's own fault)."""
+    text = triangle_file.read_text()
+    assert "\nmu = 0.5 " in text
+    path = tmp_path / "text_mu.toml"
+    path.write_text(text.replace("\nmu = 0.5 ", '\nmu = "0.5" ', 1))
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    assert [(p.key, p.reason) for p in info.value.problems] == [("parameters.mu", "a parameter value must be a number, got '0.5'")]
+    path.write_text(text.replace("\nmu = 0.5 ", "\nmu = inf ", 1))
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    assert [(p.key, p.reason) for p in info.value.problems] == [("parameters.mu", "must be a finite number, got inf")]
+
+
 def test_loads_of_one_file_share_its_parse_and_nothing_else(tmp_path, triangle_file):
     """`load_scenario` keeps the last few files' parsed text (a sweep loads one file at every
     grid point): one load's overrides do not reach the next, and an edited file is read anew."""
