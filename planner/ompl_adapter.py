@@ -475,7 +475,8 @@ class _Propagator:
     from roots and states this propagator made), not as a coordinate of OMPL's state: one more
     coordinate would change every sampler's random stream, so the same seed would plan something
     else where the horizon never binds. A state whose time is not known (`untimed`) is not held
-    to the horizon; the ladder checks every plan's length after the search."""
+    to the horizon; the ladder checks every plan's length after the search. A goal reached part
+    way through a control period counts at the period's end here."""
 
     def __init__(self, scenario: Scenario, rung: Rung, layout: _ControlLayout, limits: _Limits, h: float, reached=None, horizon=None):
         self.layout, self.reached, self.horizon = layout, reached, horizon
@@ -488,8 +489,11 @@ class _Propagator:
         self.past_horizon = 0  # states made invalid by the horizon
 
     def at(self, x: np.ndarray, t: float) -> None:
-        """Record that the flattened state x is at time t along its plan."""
-        self.times[x.tobytes()] = t
+        """Record that the flattened state x is at time t along its plan, unless it has a time:
+        a control that moves nothing (a drive pressed into its limit) makes a state with its
+        parent's exact values, and a later time would hold the parent, still in the tree, to it.
+        The earliest time is the lenient one; `planner.ladder._in_time` checks the plan found."""
+        self.times.setdefault(x.tobytes(), t)
 
     def __call__(self, s, control, duration, result) -> None:
         self.propagations += 1

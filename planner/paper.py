@@ -471,22 +471,32 @@ def _jam_words(fan: dict) -> list[str]:
     runs, low = fan.get("quasistatic", []), fan.get(f"quasistatic at mu = {LOW_MU:g}", [])
     stopped = [r for r in runs if r.outcome == "unsafe" and min(r.end[:2]) < 1.9]
     words = [f"Under (a) the runs that slipped out end at {_ends(runs)}."]
+    jammed = False
     if stopped:
         r = stopped[0]
         finger = 0 if r.end[0] < r.end[1] else 1
         d = abs(FINGER_X[finger] - r.end[2])
         lean = math.asin(min(d / FINGER_R, 1.0))
+        jammed = d < FINGER_R and math.tan(lean) < FAN_MU  # the vertex's normal inside the friction cone
+        where = (
+            f"rests on the triangle's peak vertex, {d:.3f} m to its side: the contact normal leans {math.degrees(lean):.1f} "
+            f"degrees from the vertical (tan {math.tan(lean):.2f})"
+            if d < FINGER_R
+            else f"is {d:.3f} m to the side of the triangle's peak, more than a finger's radius"
+        )
         words.append(
-            f"A finger stopped above the palm ({r.end[finger]:.3f} of 2) rests on the triangle's peak vertex, "
-            f"{d:.3f} m to its side: the contact normal leans {math.degrees(lean):.1f} degrees from the vertical "
-            f"(tan {math.tan(lean):.2f}), inside the friction cone at mu = {FAN_MU:g}, so the finger's push cannot "
-            "move the triangle (it moves only in x) and the quasistatic finger stops there: a jam of our disc fingers "
-            "on the vertex."
+            f"A finger stopped above the palm ({r.end[finger]:.3f} of 2) {where}"
+            + (
+                f", inside the friction cone at mu = {FAN_MU:g}, so the finger's push cannot move the triangle (it moves "
+                "only in x) and the quasistatic finger stops there: a jam of our disc fingers on the vertex."
+                if jammed
+                else f", not inside the friction cone at mu = {FAN_MU:g}: not a jam on the vertex."
+            )
         )
     if low:
         words.append(
-            f"The paper's failed runs halt at (2, 2, 1.5) or (2, 2, -1.5), both fingers on the palm; ours at mu = {LOW_MU:g}, "
-            f"below that lean, end at {_ends(low)}."
+            "The paper's failed runs halt at (2, 2, 1.5) or (2, 2, -1.5), both fingers on the palm; ours at "
+            + f"mu = {LOW_MU:g}{', below that lean,' if jammed else ''} end at {_ends(low)}."
         )
     return words
 
@@ -590,10 +600,9 @@ def _wide_statement(bands, mu_edges: dict, points=()) -> str:
         else ""
     )
     unphysical = [f"{m}: {k} of its {n} grasps" for m, (k, n) in flagged.items() if k]
-    sound = [m for m, (k, n) in flagged.items() if n and not k]
+    sound = [m for m, (k, n) in flagged.items() if n and not k and full[m]]  # the whole quadrant, every grasp physical
     verdict = (
-        " Each run's own check (`warnings` in the sweep's JSON) calls some of these grasps not physical, the fingers "
-        "having passed into the triangle past half a finger's thickness: "
+        " Each run's own check (its `warnings` in the sweep's JSON) calls some of these grasps not physical: "
         + "; ".join(unphysical)
         + ". Those grasps are held by fingers inside the triangle, not by friction, so for those models the whole "
         "quadrant at mu = 1.2 is not a result"
@@ -655,13 +664,13 @@ def _fingers_statement(bands, gains: dict) -> str:
     """Statement 5: finger dynamics give broader bands than quasistatic; with our open-loop
     policy and with the paper's attractive-well controller."""
 
-    def compared(model: str) -> tuple[list[str], int, list[float]]:
-        parts, broader, same = [], 0, []
+    def compared(model: str) -> tuple[list[str], list[float], list[float]]:
+        parts, broader, same = [], [], []
         for m in MUS:
             q, f = _single(_band(bands, "quasistatic", m)), _single(_band(bands, model, m))
             if q and f:
                 how = _compare(f, q)
-                broader += how == "around"
+                broader += [m] if how == "around" else []
                 same += [m] if how == "the same" else []
                 words = {"around": "broader", "the same": "the same"}.get(how, "NOT broader")
                 parts.append(f"mu = {m:g}: {f[0]:.4f} .. {f[1]:.4f} vs {q[0]:.4f} .. {q[1]:.4f} ({words})")
@@ -680,7 +689,7 @@ def _fingers_statement(bands, gains: dict) -> str:
         "`potential` policy: each finger under the force kd (v_des - v), v_des = (kp / kd) (target - y) limited to "
         "its speed, of a quadratic well centred on the point of the triangle's face below it): "
         + "; ".join(well)
-        + f". Broader than quasistatic at {broader} of {len(MUS)} friction values"
+        + f". Broader than quasistatic at {len(broader)} of {len(MUS)} friction values"
         + (f" (the same at mu = {', '.join(f'{m:g}' for m in same)}: the paper's sets match at larger friction)" if same else "")
         + (
             ", as the paper says for mu < 1. The mechanism we expect, not separated here: the finger that lands first presses "
@@ -689,7 +698,7 @@ def _fingers_statement(bands, gains: dict) -> str:
             "none); at mu = 0.5 other gains give "
             + "; ".join(f"kp = {kp:g}, kd = {kd:g}: {_fmt(edges)}" for (kp, kd), edges in gains.items())
             + "."
-            if broader == sum(1 for m in MUS if m < 1)
+            if all(m in broader for m in MUS if m < 1)  # what the paper says: broader for mu < 1
             else "."
         )
     )

@@ -42,15 +42,18 @@ def test_the_wide_friction_statement_gives_each_compliant_models_deepest_grasp_a
 
 
 def test_the_wide_friction_statement_counts_the_grasps_their_own_runs_call_not_physical():
-    """A grasp at mu = 1.2 held by fingers pushed inside the triangle carries the penetration
-    warning of its run: the statement counts those per model and says the whole quadrant is no
-    result for those models, and stands for the models whose grasps are all physical."""
+    """A grasp at mu = 1.2 held by fingers pushed inside the triangle carries its run's warning:
+    the statement counts those per model and says the whole quadrant is no result for those
+    models, and stands only for models that grasp over the whole grid with every grasp physical."""
     flagged = sw.Point("plastic", {"v1": 2.0, "mu": 1.2}, "goal", 1.0, "ok", {}, 100, 0.0, 0.26, warnings=["not physical"])
-    points = [*POINTS, flagged, point("fingers", 1.2, 1.0, "goal", 0.03)]
-    text = paper._wide_statement({m: {} for m in paper.TITLES}, {}, points)
-    assert "calls some of these grasps not physical" in text and "plastic: 1 of its 3 grasps." in text
+    points = [*POINTS, flagged, point("fingers", 1.2, 1.0, "goal", 0.03), point("elastic", 1.2, 1.0, "goal", 0.001)]
+    bands = {m: {"mu=1.2": band(0.25, 4.0, True, True)} for m in paper.TITLES}
+    bands["elastic"]["mu=1.2"] = band(0.5, 2.0)  # every grasp physical, but not the whole grid
+    text = paper._wide_statement(bands, {}, points)
+    assert "calls some of these grasps not physical: plastic: 1 of its 3 grasps." in text
+    assert "elastic: 0.5000 .. 2.0000" in text
     assert "for those models the whole quadrant at mu = 1.2 is not a result; it stands for quasistatic and fingers," in text
-    clean = paper._wide_statement({m: {} for m in paper.TITLES}, {}, POINTS)
+    clean = paper._wide_statement(bands, {}, POINTS)
     assert "No grasp at mu = 1.2 is flagged as not physical" in clean and "not a result" not in clean
 
 
@@ -84,6 +87,10 @@ def test_equal_bands_are_the_same_not_broader_or_inside():
     assert "mu = 0.8: 0.5000 .. 1.9000 vs 0.5000 .. 2.0000 (NOT broader)" in fingers
     assert "Broader than quasistatic at 2 of 4 friction values (the same at mu = 1.2: the paper's sets match" in fingers
     assert "as the paper says" not in fingers  # broader at 2 of the 3 values below mu = 1
+    # broader at mu = 0.3, 0.5 and 1.2 but not at 0.8: three of four, and still not what the paper says (mu < 1)
+    quasistatic_high = dict(bands, quasistatic={**bands["quasistatic"], "mu=1.2": band(0.5, 2.0)})
+    odd = paper._fingers_statement(quasistatic_high, {})
+    assert "Broader than quasistatic at 3 of 4 friction values" in odd and "as the paper says" not in odd
     bands["well"]["mu=0.8"] = band(0.3, 4.0, high_end=True)
     assert "at 3 of 4 friction values (the same at mu = 1.2" in paper._fingers_statement(bands, {})
     assert "as the paper says for mu < 1" in paper._fingers_statement(bands, {})
@@ -125,3 +132,8 @@ def test_the_fig4_caption_explains_a_finger_jammed_on_the_peak_vertex():
     assert "leans 24.8 degrees from the vertical (tan 0.46), inside the friction cone at mu = 0.5" in words
     assert "ours at mu = 0.3, below that lean, end at (2.00, 2.00, -1.52) and (2.00, 2.00, 1.52)." in words
     assert "peak vertex" not in " ".join(paper._jam_words({"quasistatic": fan["quasistatic"][1:2]}))
+    # a finger stopped 0.030 m beside the peak: the normal leans 36.9 degrees (tan 0.75), outside the cone at mu = 0.5
+    wide = {**fan, "quasistatic": [run(0.4, "unsafe", (1.0041, 2.0, -0.53))]}
+    words = " ".join(paper._jam_words(wide))
+    assert "leans 36.9 degrees from the vertical (tan 0.75), not inside the friction cone at mu = 0.5: not a jam" in words
+    assert "below that lean" not in words and "ours at mu = 0.3 end at (2.00, 2.00, -1.52)" in words

@@ -696,4 +696,61 @@ def test_a_plan_longer_than_the_horizon_does_not_hold(tmp_path):
     assert not result.top_holds and result.to_json()["top_holds"] is False
     # at the file's own horizon the same ladder holds
     held = run_ladder(load_scenario(TRIANGLE, {"v1": 0.8}), rungs=["geometric", "kinematic"], seed=1, iterations=400, time_limit=600.0)
-    assert held.top_holds and all(sum(r.durations) <= 4.0 for r in held.rungs)
+    assert held.top_holds and sum(held.rungs[0].durations) <= 4.0  # a geometric path ends at the goal
+    top = held.rungs[-1]  # (a search's last control may run on past the goal: its rollout stops there)
+    kinematic = rung_for(scenario, "kinematic")
+    run = kinematic.rollout(
+        scenario, kinematic.initial_state(scenario), np.array(top.controls), np.array(top.durations), scenario.rung_settings("kinematic").h
+    )
+    assert run.outcome == "goal" and run.t <= 4.0
+
+
+def test_a_control_that_moves_nothing_does_not_make_its_state_later():
+    """A control that presses the fingers into their upper limits (the start) makes a state with
+    the start's exact values; the propagator keys times by those values, so that state kept the
+    later time and held the start, still in the tree, to it (a 9-period control moved the start
+    from 0 to 0.45 s, and every expansion from it was judged later). The earliest time is kept."""
+    from ompl import base as ob
+
+    from planner.ompl_adapter import _control_state_space, _ControlLayout, _Limits, _Propagator, flatten
+
+    scenario = load_scenario(TRIANGLE, {"v1": 0.8})
+    rung = rung_for(scenario, "kinematic")
+    settings = scenario.rung_settings("kinematic")
+    start = rung.initial_state(scenario)
+    layout = _ControlLayout(scenario, start)
+    limits = _Limits(scenario, start, settings.control_period)
+    space, _projection = _control_state_space(ob, layout, scenario, start)
+    propagate = _Propagator(scenario, rung, layout, limits, settings.h, horizon=1.0)
+    root, result = space.allocState(), space.allocState()
+    layout.write(root, flatten(start))
+    x0 = layout.read(root)
+    propagate.at(x0, 0.0)
+    for _ in range(9):  # up, into the limits: nothing moves
+        propagate(root, [0.4, 0.4], settings.control_period, result)
+        assert layout.read(result).tobytes() == x0.tobytes()
+    assert propagate.times[x0.tobytes()] == 0.0
+    propagate(root, [-1.0, -1.0], settings.control_period, result)  # down: a new state, one period on
+    y = layout.read(result)
+    assert y.tobytes() != x0.tobytes() and propagate.times[y.tobytes()] == settings.control_period and y[-1] == 0.0
+    assert propagate.past_horizon == 0 and propagate.untimed == 0
+
+
+def test_a_plans_goal_time_is_infinite_where_its_rollout_does_not_reach_the_goal():
+    """`_goal_time` replays a plan whose durations pass the horizon to find when it reaches the
+    goal; a rollout that ends elsewhere (unsafe, a solver failure, or nowhere) is no time within it."""
+    from planner.ladder import _Budget, _goal_time, _in_time, _Step
+
+    scenario = load_scenario(TRIANGLE, {"v1": 0.8})
+    rung = rung_for(scenario, "kinematic")
+    step = _Step(scenario, "kinematic", rung, scenario.rung_settings("kinematic"), 1, 0, 0, _Budget(), None, 0.0)
+
+    class Plan:
+        controls, durations = [[0.0, 0.0]] * 100, [0.05] * 100  # 5 s of nothing: past the 4 s horizon, never the goal
+
+    assert _goal_time(step, Plan) == float("inf") and not _in_time(step, Plan)
+
+    class Short:
+        controls, durations = [[0.0, 0.0]] * 10, [0.05] * 10
+
+    assert _goal_time(step, Short) == 0.5 and _in_time(step, Short)  # within the horizon: its durations' sum, no replay
