@@ -449,7 +449,7 @@ class Policy(Strict):
 
 
 class TaskSpec(Strict):
-    horizon: Time = Field(description="longest plan duration, s")
+    horizon: Time = Field(description="the latest a plan may reach the goal, s")
     start: dict[str, Length] = Field(default_factory=dict, description="overrides of initial coordinates (default: body poses)")
     velocity: dict[str, Num] = Field(
         default_factory=dict,

@@ -1583,7 +1583,7 @@ def print_summary(summary: dict[str, Any]) -> None:
     task = summary["task"]
     policies = [f"policy {_policy_words(task['policy'])}"] if task["policy"] else ["no policy"]
     policies += [f"policy {name!r} {_policy_words(p)}" for name, p in task["policies"].items()]
-    console.print(f"task: plans of at most {task['horizon']:g} s; " + "; ".join(policies))
+    console.print(f"task: plans reach the goal within {task['horizon']:g} s (horizon); " + "; ".join(policies))
     expect = summary["expect"]
     if expect:
         if expect["policy"] or expect["plan"] is not None:

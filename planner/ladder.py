@@ -648,6 +648,13 @@ def _search(step: _Step, previous, replay, tracked, planner, seeded: bool, guide
             reason = _tracking_reason(ended, tracked) + f"; then a search from tracked state {j} of {len(seeds)} to the goal"
         elif tracked is not None:
             reason = _tracking_reason(ended, tracked) + "; then a search from the start"
+        if replay is not None and _reaches(replay):  # the previous plan did reach the goal: refused by `_in_time`
+            how = f"; {_tracking_words(tracked)}" if tracked is not None else ""
+            start_words = f"tracked state {j} of {len(seeds)}" if j > 0 else "the start"
+            reason = (
+                f"the previous plan reaches the goal later than the task's horizon allows ({scenario.spec.task.horizon:g} s{how}); "
+                f"a search from {start_words} found a plan into the goal set within it"
+            )
     elif not plan.exact:
         ended = plan.status
         reason = ended.message + (f" ({plan.iterations} of {budget} iterations)" if ended is PlanStatus.TIMEOUT else "")

@@ -54,11 +54,12 @@ def test_check_json_on_the_paper_scene():
 
 def test_check_says_the_task_and_the_expectations():
     said = " ".join(ladder("check", str(SCENARIOS / "two_finger_triangle.toml")).stdout.split())
-    assert "task: plans of at most 4 s; policy (constant_speed: finger1.y at -1 m/s, finger2.y at -1 m/s) for 3 s;" in said
+    assert "task: plans reach the goal within 4 s (horizon); policy (constant_speed: finger1.y at -1 m/s, finger2.y at -1 m/s)" in said
+    assert "finger2.y at -1 m/s) for 3 s;" in said
     assert "policy 'potential' (feedback: finger1.y by its law, finger2.y by its law) for 3 s" in said
     assert "the policy under kinematic ends in goal;" in said and "a plan holds at the top rung" in said
     said = " ".join(ladder("check", str(SCENARIOS / "box_rotate_3d.toml")).stdout.split())
-    assert "task: plans of at most 12 s; no policy" in said and "expect" not in said
+    assert "task: plans reach the goal within 12 s (horizon); no policy" in said and "expect" not in said
     said = " ".join(ladder("check", str(SCENARIOS / "incline_block.toml")).stdout.split())
     assert "expect, case sticks (mu = 0.7): the policy under dynamic-rigid ends in none;" in said
 

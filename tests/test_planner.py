@@ -754,3 +754,20 @@ def test_a_plans_goal_time_is_infinite_where_its_rollout_does_not_reach_the_goal
         controls, durations = [[0.0, 0.0]] * 10, [0.05] * 10
 
     assert _goal_time(step, Short) == 0.5 and _in_time(step, Short)  # within the horizon: its durations' sum, no replay
+
+
+def test_a_previous_plan_refused_for_reaching_the_goal_late_says_so(tmp_path):
+    """At a horizon of 0.9 s (seed 2) the rungs below plan a grasp at 0.9 s that the dynamic rung,
+    tracking it, reaches at 0.909 s: refused, and a search from the tracked states plans within
+    it. The reason had said tracking was lost (it tracked 100%), and nothing of the horizon."""
+    path = tmp_path / "short.toml"
+    path.write_text(TRIANGLE.read_text().replace("horizon = 4.0", "horizon = 0.9"))
+    scenario = load_scenario(path, {"v1": 0.8})
+    result = run_ladder(scenario, seed=2, time_limit=600.0)
+    top = result.rungs[-1]
+    assert result.top_holds and top.ended is PlanStatus.REPAIRED, (top.ended, top.reason)
+    assert top.reason.startswith("the previous plan reaches the goal later than the task's horizon allows (0.9 s; tracked 100%")
+    assert "a search from tracked state" in top.reason and "lost" not in top.reason
+    rung = rung_for(scenario, top.rung)
+    run = rung.rollout(scenario, rung.initial_state(scenario), np.array(top.controls), np.array(top.durations), top.h)
+    assert run.outcome == "goal" and run.t <= 0.9 + 1e-9
