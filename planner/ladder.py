@@ -635,7 +635,8 @@ def _search(step: _Step, previous, replay, tracked, planner, seeded: bool, guide
     tail = _replay_controls(scenario, step.rung, head.state, plan.controls[j:], plan.durations[j:], step.h, head)
     fields = tail.fields(scenario)
     reaches = _reaches(tail)
-    accepted = plan.exact and reaches and _in_time(step, plan)
+    goal_t = _goal_time(step, plan) if plan.exact and reaches else math.inf  # (one replay at most: `_goal_time`)
+    accepted = goal_t <= scenario.spec.task.horizon + HORIZON_SLACK
     if accepted:
         ended, reason = (PlanStatus.EXACT if previous is None else PlanStatus.REPLANNED), ""
         if ended is PlanStatus.REPLANNED and guide is None:  # the status's words say "guided by it"
@@ -664,7 +665,7 @@ def _search(step: _Step, previous, replay, tracked, planner, seeded: bool, guide
             reason += f"; {counted(plan.past_horizon, 'control')} would have ended past the task's horizon ({_horizon_words(scenario)})"
     elif reaches:  # the prefix of the previous plan to the root it starts at ran past the horizon
         ended = PlanStatus.PAST_HORIZON
-        reason = _past_horizon_reason(scenario, _goal_time(step, plan))
+        reason = _past_horizon_reason(scenario, goal_t)
     else:
         ended = PlanStatus.FAILED
         reason = f"{ended.message} ({fields['outcome']}, {fields['status']})"
