@@ -860,8 +860,9 @@ def rung_for(scenario: Scenario, name: str) -> Rung:
 #: The share of a body's weight a quasistatic run may leave unbalanced before `unbalanced_motion`
 #: looks at it (a compliant contact's settling step leaves about 1e-6 of it).
 UNBALANCED_SHARE = 1e-4
-#: How much faster than every actuated coordinate a body must move for `unbalanced_motion` to say
-#: nothing pushed it there (a wedge or a lever drives a body a few times faster than its pusher).
+#: How much faster than every actuated coordinate a body must move for `unbalanced_motion` and
+#: `thrown_motion` to say nothing pushed it there (a wedge or a lever drives a body a few times
+#: faster than its pusher).
 DRIVEN_RATIO = 100.0
 
 
@@ -899,6 +900,25 @@ def _peak_speed(scenario: Scenario, result: RolloutResult, velocities: list[int]
     return float(peak)
 
 
+def _driven_speed(scenario: Scenario, result: RolloutResult) -> float:
+    """The fastest anything drove a run: an actuated coordinate (`_peak_speed`) or an obstacle
+    on its script (m/s, rad/s)."""
+    scripted = [abs(float(v)) for body in scenario.spec.bodies if body.role == "obstacle" for v in body.velocity.values()]
+    return max([_peak_speed(scenario, result, [scenario.velocities.index(n) for n in scenario.actuated]), *scripted])
+
+
+def _passive_speeds(scenario: Scenario, result: RolloutResult):
+    """(body, its peak speed in the run: `_peak_speed`) for each body with passive DOFs and a mass."""
+    for body in scenario.spec.bodies:
+        prefix = body.name + "."
+        passive = [i for i, n in enumerate(scenario.velocities) if n.startswith(prefix) and n not in scenario.actuated]
+        if not passive or not body.mass:
+            continue
+        turns = any(scenario.velocities[i].rpartition(".")[2] not in TRANSLATIONAL_DOFS for i in passive)
+        gyration = min(body.inertia) / body.mass if turns and body.inertia else 0.0
+        yield body, _peak_speed(scenario, result, passive, gyration)
+
+
 def unbalanced_motion(scenario: Scenario, rung: Rung, h: float, result: RolloutResult) -> Unbalanced | None:
     """The passive body a quasistatic run moved most out of equilibrium, where nothing drove it:
     it left more than UNBALANCED_SHARE of its weight unbalanced and moved DRIVEN_RATIO times faster
@@ -919,20 +939,62 @@ def unbalanced_motion(scenario: Scenario, rung: Rung, h: float, result: RolloutR
     eps, g, steps = model.quasistatic_inertia, float(np.linalg.norm(scenario.spec.scene.gravity)), result.steps
     if g == 0.0 or steps == 0 or eps * steps >= 1.0 or len(result.times) == 0:
         return None
-    driven = _peak_speed(scenario, result, [scenario.velocities.index(n) for n in scenario.actuated])
+    driven = _driven_speed(scenario, result)
     worst = None
-    for body in scenario.spec.bodies:
-        prefix = body.name + "."
-        passive = [i for i, n in enumerate(scenario.velocities) if n.startswith(prefix) and n not in scenario.actuated]
-        if not passive or not body.mass:
-            continue
-        turns = any(scenario.velocities[i].rpartition(".")[2] not in TRANSLATIONAL_DOFS for i in passive)
-        gyration = min(body.inertia) / body.mass if turns and body.inertia else 0.0
-        speed = _peak_speed(scenario, result, passive, gyration)
+    for body, speed in _passive_speeds(scenario, result):
         share = eps * speed / (h * g)
         if share > UNBALANCED_SHARE and speed > DRIVEN_RATIO * driven and (worst is None or share > worst.share):
             worst = Unbalanced(body.name, share, speed, driven)
     return worst
+
+
+@dataclass(frozen=True)
+class Thrown:
+    """A body a kinematic run moved far faster than anything drove it (`thrown_motion`)."""
+
+    body: str
+    speed: float  # its peak speed, m/s (a rotation counted at the radius of gyration)
+    driven: float  # the fastest actuated coordinate's (or scripted obstacle's) speed in the run, m/s (rad/s)
+
+
+def thrown_motion(scenario: Scenario, rung: Rung, h: float, result: RolloutResult) -> Thrown | None:
+    """The passive body a kinematic run moved fastest, where it moved DRIVEN_RATIO times faster
+    than anything drove it (None otherwise, and for the other rungs).
+
+    The kinematic step (eq. 8) has no forces, friction or inertia: a body moves only as much as
+    keeps the contacts apart, at the least kinetic energy. Pushed along a contact normal almost
+    across the push (a finger pressing a block into the table at a corner, a wedge at a grazing
+    angle), that least motion is the push's speed over the tangent of the angle, without bound: a
+    jam that friction and the drives' force limits would hold becomes a body shot out at tens of
+    m/s. A lever or a wedge drives a body a few times faster than its pusher; DRIVEN_RATIO times is
+    a contact within about half a degree of the push's normal plane. Speeds are measured as
+    `_peak_speed` measures them; nothing driving (the passive bodies only pushed out of an initial
+    penetration) says nothing."""
+    model = rung.model
+    if model is None or not model.kinematic or result.steps == 0 or len(result.times) == 0:
+        return None
+    driven = _driven_speed(scenario, result)
+    if driven == 0.0:
+        return None
+    worst = None
+    for body, speed in _passive_speeds(scenario, result):
+        if speed > DRIVEN_RATIO * driven and (worst is None or speed > worst.speed):
+            worst = Thrown(body.name, speed, driven)
+    return worst
+
+
+def thrown_warning(scenario: Scenario, rung: Rung, h: float, result: RolloutResult) -> str:
+    """What `thrown_motion` says, in words ("" where it finds nothing)."""
+    found = thrown_motion(scenario, rung, h, result)
+    if found is None:
+        return ""
+    return (
+        f"{found.body} was thrown: kinematic steps moved it at up to {found.speed:.3g} m/s, "
+        f"{found.speed / found.driven:,.0f} times the fastest driven coordinate's {found.driven:.3g}; the kinematic model has "
+        f"no forces or friction, and frees a body pushed along a contact normal almost across the push (a pinch or a "
+        f"grazing wedge, which friction would jam) at whatever speed keeps the contacts apart: {found.body}'s motion is "
+        f"not physical (a quasistatic or dynamic rung models the jam)"
+    )
 
 
 def unbalanced_warning(scenario: Scenario, rung: Rung, h: float, result: RolloutResult) -> str:
@@ -970,8 +1032,9 @@ def run_warnings(scenario: Scenario, rung: Rung, h: float, result: RolloutResult
     """What a rollout's result says beside its status (a solver can solve every step of a run
     that is not physical): the bodies passed through each other (`models.scenario.penetration_warning`,
     of the pair that penetrated where the records show it: `penetrating_pair`), a quasistatic run
-    moved a body nothing held or drove (`unbalanced_warning`)."""
+    moved a body nothing held or drove (`unbalanced_warning`), a kinematic run threw a body far
+    faster than anything drove it (`thrown_warning`)."""
     deep = penetration_warning(scenario, result.max_penetration)
     if deep:  # (the pair, only where the thinnest of all is passed)
         deep = penetration_warning(scenario, result.max_penetration, penetrating_pair(scenario, result))
-    return [w for w in (deep, unbalanced_warning(scenario, rung, h, result)) if w]
+    return [w for w in (deep, unbalanced_warning(scenario, rung, h, result), thrown_warning(scenario, rung, h, result)) if w]
