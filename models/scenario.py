@@ -242,6 +242,7 @@ class Scenario:
                 "horizon": spec.task.horizon,
                 "policy": None if spec.task.policy is None else _policy_summary(spec.task.policy),
                 "policies": {name: _policy_summary(p) for name, p in spec.task.policies.items()},
+                "unplannable": [f"{p.key}: {p.reason}" for p in plan_problems(spec)],  # why `ladder plan` refuses it
             },
             "expect": None if spec.expect is None else spec.expect.model_dump(mode="json"),
         }
@@ -928,12 +929,13 @@ def _exact_cone_problems(spec: ScenarioSpec, rung, key: str) -> list[Problem]:
 def plan_problems(spec: ScenarioSpec) -> list[Problem]:
     """Why the scene cannot be planned (`planner.ladder.check_start`, and a file's `[expect]
     plan`): nothing is actuated, or an obstacle moves on a script (plan states carry no time, so
-    its pose at a state is unknown; simulate and sweep run such scenes from t = 0)."""
+    its pose at a state is unknown; simulate and sweep run such scenes from t = 0), or the
+    horizon is shorter than every rung's control period (each plan's controls last at least one)."""
     if not any(b.actuators for b in spec.bodies):
         return [
             Problem("bodies", "nothing to plan: no body has an actuated DOF (a robot's actuators); `ladder simulate` runs such a scene")
         ]
-    return [
+    out = [
         Problem(
             f"bodies[{i}].velocity",
             "planning with a scripted (moving) obstacle is not supported: plan states carry no "
@@ -942,6 +944,17 @@ def plan_problems(spec: ScenarioSpec) -> list[Problem]:
         for i, body in enumerate(spec.bodies)
         if body.velocity
     ]
+    period = min([spec.ladder.control_period, *(r.control_period for r in spec.ladder.rungs if r.control_period)])
+    if spec.task.horizon < period:
+        out.append(
+            Problem(
+                "task.horizon",
+                f"the task's horizon, {spec.task.horizon:g} s, is shorter than one control period ({period:g} s, "
+                "the shortest of the ladder's): every plan's controls last at least one period, "
+                "so no plan can reach the goal by the horizon",
+            )
+        )
+    return out
 
 
 #: Item names of a scenario file's own (the pytest plugin's FILE::plan, FILE::load), which a case's name would shadow.

@@ -1540,6 +1540,7 @@ def _console(stderr: bool = False, width: int | None = None):
 
 
 def print_summary(summary: dict[str, Any]) -> None:
+    from rich.markup import escape
     from rich.table import Table
 
     console = _console()
@@ -1584,6 +1585,8 @@ def print_summary(summary: dict[str, Any]) -> None:
     policies = [f"policy {_policy_words(task['policy'])}"] if task["policy"] else ["no policy"]
     policies += [f"policy {name!r} {_policy_words(p)}" for name, p in task["policies"].items()]
     console.print(f"task: plans reach the goal within {task['horizon']:g} s (horizon); " + "; ".join(policies))
+    for reason in task["unplannable"]:
+        console.print(f"[yellow]`ladder plan` refuses this scene: {escape(reason)}[/yellow]")
     expect = summary["expect"]
     if expect:
         if expect["policy"] or expect["plan"] is not None:

@@ -59,7 +59,7 @@ from models.rungs import State, rung_for
 from models.scenario import Problem, Scenario, ScenarioError, plan_problems
 from models.task import Outcome, classify, goal_distance
 from planner.clock import compiler_seconds, planning_clock
-from planner.ompl_adapter import HORIZON_SLACK, plan_control, plan_geometric, steered_coordinates
+from planner.ompl_adapter import HORIZON_SLACK, plan_control, plan_geometric, segment_periods, steered_coordinates
 from planner.plan_status import PlanStatus
 from planner.pushing import free_turn, push_reference
 from planner.tracking import TRACK_TOLERANCE, PoseError, Reference, Tracked, track
@@ -266,7 +266,7 @@ def run_ladder(
         report = climbed[-1]
         if report.ended.holds and not step.rung.propagates and math.fsum(report.durations) > scenario.spec.task.horizon + HORIZON_SLACK:
             # a geometric path reaches the goal at its end (a propagating rung's plans are held to it as they are accepted: `_in_time`)
-            reason = _past_horizon_reason(scenario, math.fsum(report.durations))
+            reason = _past_horizon_reason(scenario, math.fsum(report.durations)) + (f"; {report.reason}" if report.reason else "")
             climbed[-1] = report = replace(report, ended=PlanStatus.PAST_HORIZON, reason=reason)
         if not report.ended.holds and step.rung.propagates and name != names[-1]:
             climbed[-1] = report = _goes_on(report)
@@ -826,7 +826,7 @@ def _geometric(scenario: Scenario, seed: int, iterations: int, time_limit: float
     controls, durations, states = [], [], [path.states[0]]
     for a, b in zip(path.states[:-1], path.states[1:]):
         delta = b[index] - a[index]
-        periods = max(1, int(np.ceil(np.max(np.abs(delta) / max_speed / period, initial=0.0) - 1e-9)))
+        periods = segment_periods(delta, max_speed, period)
         # one control per period, so that a replay that stops agreeing part-way along a long
         # segment still leaves the states before that point as seeds
         for k in range(1, periods + 1):
@@ -836,7 +836,12 @@ def _geometric(scenario: Scenario, seed: int, iterations: int, time_limit: float
     ended = PlanStatus.EXACT if path.exact else PlanStatus.APPROXIMATE
     reason = "" if path.exact else ended.message
     if not path.goal_samples:
-        reason += ("; " if reason else "") + "no goal state could be made by projection, so RRT searched for the goal region"
+        late = (
+            f" ({path.late_goals} made were out of reach: the actuators at their max speeds do not get there by {_horizon_words(scenario)})"
+            if path.late_goals
+            else ""
+        )
+        reason += ("; " if reason else "") + f"no goal state could be made by projection{late}, so RRT searched for the goal region"
     return RungReport(
         "geometric",
         ended,

@@ -39,6 +39,15 @@ AUXILIARY_WEIGHT = 1e-6
 PASSIVE_RANGE = 2.0
 #: A plan may last this much (s) past the horizon: a sum of control durations' rounding.
 HORIZON_SLACK = 1e-9
+
+
+def segment_periods(delta: np.ndarray, max_speeds: np.ndarray, period: float) -> int:
+    """The control periods (at least one) that cover a straight move of the actuated
+    coordinates by `delta` without exceeding any drive's max speed: how the geometric rung
+    times its path (`planner.ladder._geometric`)."""
+    return max(1, int(np.ceil(np.max(np.abs(delta) / max_speeds / period, initial=0.0) - 1e-9)))
+
+
 #: Each control is held for 1 to this many control periods.
 MAX_CONTROL_PERIODS = 10
 #: Fraction of RRT's samples drawn near the previous rung's plan when one guides it.
@@ -666,6 +675,7 @@ class GeometricPlan:
     iterations: int
     checks: int
     goal_samples: int = 0  # goal states made by projection (0: the planner searched for the goal region)
+    late_goals: int = 0  # goal states made by projection and dropped: the actuators reach none by the horizon
 
     @property
     def exact(self) -> bool:
@@ -728,7 +738,7 @@ def plan_geometric(
     ss.solve(ob.PlannerTerminationCondition(stop_now))
     status = _search_status(bool(ss.haveExactSolutionPath()), done)
     states = _geometric_path(ss, si, scenario, steered, status)
-    result = GeometricPlan(states, status, done["iterations"], counter["checks"], len(pool))
+    result = GeometricPlan(states, status, done["iterations"], counter["checks"], len(pool), sampler.late)
     del ss, si, space
     return result
 
@@ -865,10 +875,14 @@ class GoalSampler:
     clipping, `touch` pairs by Gauss-Newton steps on their signed distances toward half the
     touch tolerance, with finite-difference gradients over the positional and planar-angle
     coordinates; one branch of each `any`, chosen at random), kept when the goal predicate
-    holds and `valid` accepts it. `draw()` tries up to GOAL_ATTEMPTS samples, else None."""
+    holds, `valid` accepts it and it is in reach (`in_reach`). `draw()` tries up to
+    GOAL_ATTEMPTS samples, else None; `late` counts the goal states it dropped as out of reach."""
 
     def __init__(self, scenario: Scenario, rng: np.random.Generator, low: np.ndarray, high: np.ndarray, valid) -> None:
         self.scenario, self.rng, self.low, self.high, self.valid = scenario, rng, low, high, valid
+        self.actuated = np.array([scenario.coordinates.index(n) for n in scenario.actuated], np.int64)
+        self.period = scenario.rung_settings("geometric").control_period
+        self.late = 0
         steered = set(steered_coordinates(scenario))
         self.movable = np.array(
             [i for i, n in enumerate(scenario.coordinates) if i in steered and n.rsplit(".", 1)[1] in ("x", "y", "z", "theta", "yaw")],
@@ -939,5 +953,16 @@ class GoalSampler:
                 q[movable] -= J.T @ np.linalg.solve(J @ J.T + 1e-12 * np.eye(len(touches)), r)
                 q = np.clip(q, low, high)
             if goal_distance(scenario, q) == 0.0 and self.valid(q):
-                return q
+                if self.in_reach(q):
+                    return q
+                self.late += 1
         return None
+
+    def in_reach(self, q: np.ndarray) -> bool:
+        """Whether the actuators reach q from the start by the task's horizon, moving straight at
+        their max speeds, as the geometric rung times a path (`segment_periods`): no path to a goal
+        state beyond that is in time, however the search finds it."""
+        start = np.asarray(self.scenario.start, float)
+        delta = q[self.actuated] - start[self.actuated]
+        periods = segment_periods(delta, self.scenario.max_speeds, self.period)
+        return periods * self.period <= self.scenario.spec.task.horizon + HORIZON_SLACK

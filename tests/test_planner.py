@@ -680,20 +680,21 @@ def test_a_plan_longer_than_the_horizon_does_not_hold(tmp_path):
     """A plan that reaches the goal but lasts longer than `[task] horizon` is not accepted: the
     rung ends PAST_HORIZON (a geometric path, a replayed or tracked plan) or its search finds none
     within it, the reason says so, and the top rung does not hold. It had been ignored: plans
-    of 16.6 s were accepted for a horizon of 10 s."""
-    text = TRIANGLE.read_text()
-    assert "horizon = 4.0" in text
+    of 16.6 s were accepted for a horizon of 10 s. free_transfer's seed 1 path detours round the
+    obstacle: 2.6 s, where its goal state is 2.2 s away (in reach: `GoalSampler.in_reach`)."""
+    text = (SCENARIOS / "free_transfer.toml").read_text()
+    assert "horizon = 10.0" in text
     path = tmp_path / "short.toml"
-    path.write_text(text.replace("horizon = 4.0", "horizon = 0.5"))
-    scenario = load_scenario(path, {"v1": 0.8})
-    result = run_ladder(scenario, rungs=["geometric", "kinematic"], seed=1, iterations=400, time_limit=600.0)
+    path.write_text(text.replace("horizon = 10.0", "horizon = 2.2"))
+    result = run_ladder(load_scenario(path), seed=1, iterations=400, time_limit=600.0)
     geometric, kinematic = result.rungs
     assert geometric.ended is PlanStatus.PAST_HORIZON and geometric.ended.label == "failed" and geometric.outcome == "goal"
-    assert geometric.reason == (
-        f"{PlanStatus.PAST_HORIZON.message}: it reaches the goal at t = {sum(geometric.durations):.4g} s (the task's horizon, 0.5 s)"
+    assert sum(geometric.durations) == pytest.approx(2.6) and geometric.reason == (
+        f"{PlanStatus.PAST_HORIZON.message}: it reaches the goal at t = 2.6 s (the task's horizon, 2.2 s)"
     )
-    assert not kinematic.ended.holds and "would have ended past the task's horizon (the task's horizon, 0.5 s)" in kinematic.reason
+    assert not kinematic.ended.holds and "would have ended past the task's horizon (the task's horizon, 2.2 s)" in kinematic.reason
     assert not result.top_holds and result.to_json()["top_holds"] is False
+    scenario = load_scenario(TRIANGLE, {"v1": 0.8})
     # at the file's own horizon the same ladder holds
     held = run_ladder(load_scenario(TRIANGLE, {"v1": 0.8}), rungs=["geometric", "kinematic"], seed=1, iterations=400, time_limit=600.0)
     assert held.top_holds and sum(held.rungs[0].durations) <= 4.0  # a geometric path ends at the goal
@@ -703,6 +704,93 @@ def test_a_plan_longer_than_the_horizon_does_not_hold(tmp_path):
         scenario, kinematic.initial_state(scenario), np.array(top.controls), np.array(top.durations), scenario.rung_settings("kinematic").h
     )
     assert run.outcome == "goal" and run.t <= 4.0
+
+
+def triangle_with_horizon(tmp_path, horizon: float):
+    text = TRIANGLE.read_text()
+    assert "horizon = 4.0" in text
+    path = tmp_path / f"horizon_{horizon}.toml"
+    path.write_text(text.replace("horizon = 4.0", f"horizon = {horizon}"))
+    return load_scenario(path)
+
+
+def geometric_time(scenario, states) -> float:
+    """How long the geometric rung's controls take along a path (`planner.ladder._geometric`)."""
+    from planner.ompl_adapter import segment_periods
+
+    index = [scenario.coordinates.index(n) for n in scenario.actuated]
+    period = scenario.rung_settings("geometric").control_period
+    return period * sum(segment_periods(b[index] - a[index], scenario.max_speeds, period) for a, b in zip(states[:-1], states[1:]))
+
+
+def test_the_geometric_rung_roots_its_goal_tree_only_at_goal_states_in_reach_by_the_horizon(tmp_path):
+    """The fingers close on the triangle in 0.74 s at full speed (2 m/s). At a horizon of 0.8 s
+    the geometric rung's goal states had been drawn anywhere in the goal set: seed 1's path went
+    straight to a grasp low on the triangle's side, 0.95 s away, and the scene failed at every
+    seed. A goal state the actuators cannot reach by the horizon, straight at their max speeds as
+    the rung times a path, is dropped (`GoalSampler.in_reach`). Where the horizon binds nothing
+    the geometric plans are the ones it made without the check (the same random stream)."""
+    from planner.ompl_adapter import plan_geometric
+
+    own, loose, tight = load_scenario(TRIANGLE), triangle_with_horizon(tmp_path, 1e6), triangle_with_horizon(tmp_path, 0.8)
+    assert geometric_time(own, plan_geometric(own, seed=1, iterations=2000).states) == pytest.approx(0.95)
+    late = 0
+    for seed in (1, 2, 3, 4):
+        path, unbound = plan_geometric(own, seed=seed, iterations=2000), plan_geometric(loose, seed=seed, iterations=2000)
+        assert path.exact and path.late_goals == 0 and np.array_equal(path.states, unbound.states)
+        short = plan_geometric(tight, seed=seed, iterations=2000)
+        assert short.exact and geometric_time(tight, short.states) <= 0.8 + 1e-9, seed
+        late += short.late_goals
+    assert late > 0  # (goal states were drawn out of reach, and dropped)
+    result = run_ladder(tight, seed=1)
+    assert result.top_holds and result.rungs[0].ended is PlanStatus.EXACT
+
+
+def test_a_geometric_rung_whose_every_goal_state_is_out_of_reach_says_so(tmp_path):
+    """At 0.5 s no grasp is in reach (the fingers need 0.74 s): the rung searches for the goal
+    region instead, and its reason says why it had no goal state."""
+    from planner.ladder import _geometric
+
+    scenario = triangle_with_horizon(tmp_path, 0.5)
+    report = _geometric(scenario, 1, 2000)
+    assert report.ended is PlanStatus.APPROXIMATE and report.outcome == "none"  # (the region search does not land in the thin goal set)
+    assert report.reason == (
+        f"{PlanStatus.APPROXIMATE.message}; no goal state could be made by projection (48 made were out of reach: the actuators "
+        "at their max speeds do not get there by the task's horizon, 0.5 s), so RRT searched for the goal region"
+    )
+    assert not run_ladder(scenario, rungs=["geometric", "kinematic"], seed=1, iterations=400).top_holds
+
+
+def test_a_horizon_shorter_than_a_control_period_cannot_be_planned(tmp_path, capsys):
+    """Every control lasts at least one control period (0.05 s here), so a plan reaches the goal
+    no sooner: `ladder plan` refuses a shorter horizon as bad input, and `ladder check` says so.
+    It had passed `check`, and every rung spent its budget."""
+    from planner.cli import main
+
+    text = TRIANGLE.read_text()
+    start = text.index("[expect]")
+    path = tmp_path / "short.toml"
+    path.write_text(text[:start].replace("horizon = 4.0", "horizon = 0.03"))
+    reason = (
+        "task.horizon: the task's horizon, 0.03 s, is shorter than one control period (0.05 s, the shortest of the ladder's): "
+        "every plan's controls last at least one period, so no plan can reach the goal by the horizon"
+    )
+    assert main(["check", str(path), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["task"]["unplannable"] == [reason]
+    assert main(["check", str(path)]) == 0
+    assert f"`ladder plan` refuses this scene: {reason}" in " ".join(capsys.readouterr().out.split())
+    assert main(["plan", str(path), "--out", str(tmp_path / "p")]) == 2
+    assert capsys.readouterr().err == f"error: {path}: {reason}\n" and not (tmp_path / "p").exists()
+    path.write_text(text[:start].replace("horizon = 4.0", "horizon = 0.05"))  # one period: a plan may reach the goal by it
+    assert main(["check", str(path), "--json"]) == 0 and json.loads(capsys.readouterr().out)["task"]["unplannable"] == []
+    with pytest.raises(ScenarioError, match="expect.plan: the task's horizon, 0.03 s, is shorter than one control period"):
+        _load_text(tmp_path, text.replace("horizon = 4.0", "horizon = 0.03"))  # ([expect] plan = true: the file's own problem)
+
+
+def _load_text(tmp_path, text):
+    path = tmp_path / "with_expect.toml"
+    path.write_text(text)
+    return load_scenario(path)
 
 
 def test_a_control_that_moves_nothing_does_not_make_its_state_later():
