@@ -860,8 +860,8 @@ def rung_for(scenario: Scenario, name: str) -> Rung:
 #: The share of a body's weight a quasistatic run may leave unbalanced before `unbalanced_motion`
 #: looks at it (a compliant contact's settling step leaves about 1e-6 of it).
 UNBALANCED_SHARE = 1e-4
-#: How much faster than every actuated coordinate a body must move for `unbalanced_motion` and
-#: `thrown_motion` to say nothing pushed it there (a wedge or a lever drives a body a few times
+#: How much faster than anything driving the run (`_driven_speed`) a body must move for
+#: `unbalanced_motion` and `thrown_motion` to say nothing pushed it there (a wedge or a lever drives a body a few times
 #: faster than its pusher).
 DRIVEN_RATIO = 100.0
 
@@ -873,7 +873,7 @@ class Unbalanced:
     body: str
     share: float  # the largest unbalanced force met, as a share of the body's weight (a lower bound)
     speed: float  # the speed that moved it at, m/s (a rotation counted at the radius of gyration)
-    driven: float  # the fastest actuated coordinate's speed in the run, m/s (rad/s)
+    driven: float  # the fastest driven speed in the run (`_driven_speed`), m/s (rad/s)
 
 
 def _peak_speed(scenario: Scenario, result: RolloutResult, velocities: list[int], gyration: float | None = None) -> float:
@@ -922,7 +922,8 @@ def _passive_speeds(scenario: Scenario, result: RolloutResult):
 def unbalanced_motion(scenario: Scenario, rung: Rung, h: float, result: RolloutResult) -> Unbalanced | None:
     """The passive body a quasistatic run moved most out of equilibrium, where nothing drove it:
     it left more than UNBALANCED_SHARE of its weight unbalanced and moved DRIVEN_RATIO times faster
-    than every actuated coordinate (None otherwise, and for the other rungs).
+    than anything drove the run, an actuated coordinate or a scripted obstacle (`_driven_speed`;
+    None otherwise, and for the other rungs).
 
     The quasistatic step is memoryless: eps M nu = h (forces), with eps the rung's inertia scale.
     A body the contacts hold in equilibrium moves as the bodies pushing it do; a body nothing
@@ -954,7 +955,7 @@ class Thrown:
 
     body: str
     speed: float  # its peak speed, m/s (a rotation counted at the radius of gyration)
-    driven: float  # the fastest actuated coordinate's (or scripted obstacle's) speed in the run, m/s (rad/s)
+    driven: float  # the fastest driven speed in the run (`_driven_speed`), m/s (rad/s)
 
 
 def thrown_motion(scenario: Scenario, rung: Rung, h: float, result: RolloutResult) -> Thrown | None:
@@ -991,9 +992,9 @@ def thrown_warning(scenario: Scenario, rung: Rung, h: float, result: RolloutResu
     return (
         f"{found.body} was thrown: kinematic steps moved it at up to {found.speed:.3g} m/s, "
         f"{found.speed / found.driven:,.0f} times the fastest driven coordinate's {found.driven:.3g}; the kinematic model has "
-        f"no forces or friction, and frees a body pushed along a contact normal almost across the push (a pinch or a "
-        f"grazing wedge, which friction would jam) at whatever speed keeps the contacts apart: {found.body}'s motion is "
-        f"not physical (a quasistatic or dynamic rung models the jam)"
+        f"no forces or friction, and moves a body at whatever speed keeps the contacts apart, without bound where the push "
+        f"runs along a contact normal almost across it (a pinch or a grazing wedge, which friction would jam): "
+        f"{found.body}'s motion is not physical (a quasistatic or dynamic rung models the forces)"
     )
 
 
@@ -1003,9 +1004,9 @@ def unbalanced_warning(scenario: Scenario, rung: Rung, h: float, result: Rollout
     if found is None:
         return ""
     driven = (
-        f"{found.speed / found.driven:,.0f} times the fastest actuated coordinate's {found.driven:.3g}"
+        f"{found.speed / found.driven:,.0f} times the fastest driven coordinate's {found.driven:.3g}"
         if found.driven > 0.0
-        else "with nothing actuated moving"
+        else "with nothing actuated or scripted moving"
     )
     return (
         f"{found.body} was not held in equilibrium: quasistatic steps moved it at up to {found.speed:.3g} m/s ({driven}), "

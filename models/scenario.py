@@ -78,6 +78,11 @@ class ScenarioError(ValueError):
         # picklable, so that a worker process's bad input reaches the parent as itself
         return ScenarioError, (self.file, self.problems)
 
+    def to_json(self) -> dict:
+        """The error as the service answers it (422) and a command's --json prints it: the
+        lines (`detail`), the file and its problems, each a key and a reason."""
+        return {"detail": str(self), "file": self.file, "problems": [{"key": p.key, "reason": p.reason} for p in self.problems]}
+
 
 @dataclass(frozen=True)
 class ContactPair:
@@ -930,7 +935,8 @@ def plan_problems(spec: ScenarioSpec) -> list[Problem]:
     """Why the scene cannot be planned (`planner.ladder.check_start`, and a file's `[expect]
     plan`): nothing is actuated, or an obstacle moves on a script (plan states carry no time, so
     its pose at a state is unknown; simulate and sweep run such scenes from t = 0), or the
-    horizon is shorter than every rung's control period (each plan's controls last at least one)."""
+    horizon is shorter than every rung's control period (a search's controls last whole periods,
+    and a geometric path's)."""
     if not any(b.actuators for b in spec.bodies):
         return [
             Problem("bodies", "nothing to plan: no body has an actuated DOF (a robot's actuators); `ladder simulate` runs such a scene")
@@ -944,14 +950,15 @@ def plan_problems(spec: ScenarioSpec) -> list[Problem]:
         for i, body in enumerate(spec.bodies)
         if body.velocity
     ]
-    period = min([spec.ladder.control_period, *(r.control_period for r in spec.ladder.rungs if r.control_period)])
+    # (the ladder's own period too: `plan --rungs` may pick a rung the file does not list)
+    period = min([spec.ladder.control_period, *(resolve_rung_settings(spec.ladder, r.model).control_period for r in spec.ladder.rungs)])
     if spec.task.horizon < period:
         out.append(
             Problem(
                 "task.horizon",
                 f"the task's horizon, {spec.task.horizon:g} s, is shorter than one control period ({period:g} s, "
-                "the shortest of the ladder's): every plan's controls last at least one period, "
-                "so no plan can reach the goal by the horizon",
+                "the shortest of the ladder's): the planners' controls last whole periods, so their plans cannot meet it; "
+                "lengthen the horizon or shorten ladder.control_period",
             )
         )
     return out

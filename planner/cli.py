@@ -319,6 +319,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return args.handler(args)
     except ScenarioError as exc:
+        if getattr(args, "json", False):  # (a script reading --json's stdout gets the problems too)
+            print(json.dumps(exc.to_json(), indent=2))
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:

@@ -179,8 +179,9 @@ def scene_mismatch(record, scenario: Scenario) -> list[str]:
 
 def check_start(scenario: Scenario) -> None:
     """A start inside the unsafe set is bad input (penetration is caught by the loader), and so
-    is a scripted obstacle: plan states carry no time, so a moving obstacle's pose at a state is
-    unknown (simulate and sweep run such scenes from t = 0)."""
+    is what `plan_problems` finds: nothing actuated, a scripted obstacle (plan states carry no
+    time, so a moving obstacle's pose at a state is unknown; simulate and sweep run such scenes
+    from t = 0), a horizon shorter than a control period."""
     problems = plan_problems(scenario.spec)
     if problems:
         raise ScenarioError(scenario.path, problems)
@@ -837,7 +838,8 @@ def _geometric(scenario: Scenario, seed: int, iterations: int, time_limit: float
     reason = "" if path.exact else ended.message
     if not path.goal_samples:
         late = (
-            f" ({path.late_goals} made were out of reach: the actuators at their max speeds do not get there by {_horizon_words(scenario)})"
+            f" ({path.late_goals} made were out of reach: the actuators at their max speeds, in whole control periods, "
+            f"do not get there by {_horizon_words(scenario)})"
             if path.late_goals
             else ""
         )

@@ -675,7 +675,7 @@ class GeometricPlan:
     iterations: int
     checks: int
     goal_samples: int = 0  # goal states made by projection (0: the planner searched for the goal region)
-    late_goals: int = 0  # goal states made by projection and dropped: the actuators reach none by the horizon
+    late_goals: int = 0  # goal states made by projection and dropped as out of reach by the horizon (`GoalSampler.in_reach`)
 
     @property
     def exact(self) -> bool:

@@ -31,7 +31,7 @@ class PlanStatus(Enum):
     TIMEOUT = "no exact plan before the time limit ran out"
     BUDGET_EXHAUSTED = "no exact plan within the iteration budget"
     FAILED = "the plan found does not hold when replayed"
-    PAST_HORIZON = "the plan reaches the goal but lasts longer than the task allows"
+    PAST_HORIZON = "the plan reaches the goal later than the task's horizon allows"
     STOPPED = "the search was stopped before it ended (interrupted)"
     ABORTED = "the planner ended the search by itself, with no plan (OMPL refused the start or the goal)"
 

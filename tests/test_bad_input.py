@@ -8,7 +8,7 @@ import pytest
 
 from models.scenario import ScenarioError, load_scenario
 from planner.pytest_plugin import _is_scenario_file
-from tests.conftest import DATA
+from tests.conftest import DATA, SCENARIOS
 from tests.test_cli import ladder
 from tests.test_scenarios import expectation
 
@@ -210,3 +210,26 @@ def test_plan_on_a_scene_with_nothing_to_actuate_is_bad_input(tmp_path):
     assert "Traceback" not in done.stderr
     assert "bodies: nothing to plan: no body has an actuated DOF" in done.stderr
     assert not (tmp_path / "p").exists()
+
+
+def test_bad_input_with_json_is_also_one_object_on_stdout(capsys):
+    """A script that reads a command's --json output meets bad input as JSON too, the service's
+    422 body (`ScenarioError.to_json`); the error lines still go to stderr. It had been text only."""
+    import json
+
+    from planner.cli import main
+
+    path = str(BAD / "negative_mu.toml")
+    for argv in (["check", path, "--json"], ["simulate", path, "--model", "kinematic", "--json"]):
+        assert main(argv) == 2
+        out, err = capsys.readouterr()
+        data = json.loads(out)
+        assert data["file"] == path and data["detail"] == err.removeprefix("error: ").rstrip("\n")
+        assert [p["key"] for p in data["problems"]] == ["contact.mu"] and "greater than or equal to 0" in data["problems"][0]["reason"]
+    assert main(["check", path]) == 2  # without --json: stderr only
+    out, err = capsys.readouterr()
+    assert out == "" and err.startswith(f"error: {path}: contact.mu: ")
+    good = str(SCENARIOS / "two_finger_triangle.toml")
+    assert main(["simulate", good, "--model", "kinematic", "--param", "v1=x", "--json"]) == 2  # a flag's problem, the same way
+    data = json.loads(capsys.readouterr().out)
+    assert [p["key"] for p in data["problems"]] == ["--param v1=x"]

@@ -93,7 +93,8 @@ def test_bad_file_exit_2_no_traceback_nothing_written(tmp_path, name):
     out = tmp_path / "summary.json"
     result = ladder("check", str(path), "--json", "--out", str(out))
     assert result.returncode == 2
-    assert result.stdout == ""
+    error = json.loads(result.stdout)  # (--json: the error as one object, not a summary)
+    assert error["file"] == str(path) and error["problems"] and "coordinates" not in error
     assert "Traceback" not in result.stderr
     assert str(path) in result.stderr
     assert not out.exists() and list(tmp_path.iterdir()) == []

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 
@@ -694,9 +695,9 @@ def test_a_plan_longer_than_the_horizon_does_not_hold(tmp_path):
     )
     assert not kinematic.ended.holds and "would have ended past the task's horizon (the task's horizon, 2.2 s)" in kinematic.reason
     assert not result.top_holds and result.to_json()["top_holds"] is False
+    # the paper's scene at its own horizon: the ladder holds, and its plan reaches the goal within it
     scenario = load_scenario(TRIANGLE, {"v1": 0.8})
-    # at the file's own horizon the same ladder holds
-    held = run_ladder(load_scenario(TRIANGLE, {"v1": 0.8}), rungs=["geometric", "kinematic"], seed=1, iterations=400, time_limit=600.0)
+    held = run_ladder(scenario, rungs=["geometric", "kinematic"], seed=1, iterations=400, time_limit=600.0)
     assert held.top_holds and sum(held.rungs[0].durations) <= 4.0  # a geometric path ends at the goal
     top = held.rungs[-1]  # (a search's last control may run on past the goal: its rollout stops there)
     kinematic = rung_for(scenario, "kinematic")
@@ -754,16 +755,21 @@ def test_a_geometric_rung_whose_every_goal_state_is_out_of_reach_says_so(tmp_pat
     scenario = triangle_with_horizon(tmp_path, 0.5)
     report = _geometric(scenario, 1, 2000)
     assert report.ended is PlanStatus.APPROXIMATE and report.outcome == "none"  # (the region search does not land in the thin goal set)
-    assert report.reason == (
-        f"{PlanStatus.APPROXIMATE.message}; no goal state could be made by projection (48 made were out of reach: the actuators "
-        "at their max speeds do not get there by the task's horizon, 0.5 s), so RRT searched for the goal region"
+    assert re.fullmatch(
+        re.escape(f"{PlanStatus.APPROXIMATE.message}; no goal state could be made by projection (")
+        + "[1-9][0-9]*"
+        + re.escape(
+            " made were out of reach: the actuators at their max speeds, in whole control periods, do not get there by "
+            "the task's horizon, 0.5 s), so RRT searched for the goal region"
+        ),
+        report.reason,
     )
     assert not run_ladder(scenario, rungs=["geometric", "kinematic"], seed=1, iterations=400).top_holds
 
 
 def test_a_horizon_shorter_than_a_control_period_cannot_be_planned(tmp_path, capsys):
-    """Every control lasts at least one control period (0.05 s here), so a plan reaches the goal
-    no sooner: `ladder plan` refuses a shorter horizon as bad input, and `ladder check` says so.
+    """The planners' controls last whole control periods (0.05 s here), a geometric path's too:
+    `ladder plan` refuses a shorter horizon as bad input, and `ladder check` says so.
     It had passed `check`, and every rung spent its budget."""
     from planner.cli import main
 
@@ -773,7 +779,7 @@ def test_a_horizon_shorter_than_a_control_period_cannot_be_planned(tmp_path, cap
     path.write_text(text[:start].replace("horizon = 4.0", "horizon = 0.03"))
     reason = (
         "task.horizon: the task's horizon, 0.03 s, is shorter than one control period (0.05 s, the shortest of the ladder's): "
-        "every plan's controls last at least one period, so no plan can reach the goal by the horizon"
+        "the planners' controls last whole periods, so their plans cannot meet it; lengthen the horizon or shorten ladder.control_period"
     )
     assert main(["check", str(path), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["task"]["unplannable"] == [reason]

@@ -23,11 +23,18 @@ LENGTH = 1.0
 GAP = 1e-4  # the finger starts this far above the face
 
 
-def wedge_scene(tmp_path, degrees: float):
+def wedge_scene(tmp_path, degrees: float, scripted: bool = False):
     """A right-triangle wedge whose face rises at `degrees` to the right, free along x, under a
-    disc finger that descends at SPEED over the face's middle."""
+    disc finger that descends at SPEED over the face's middle (scripted: an obstacle on a script,
+    the scene's only driver)."""
     rise = LENGTH * math.tan(math.radians(degrees))
-    path = tmp_path / f"wedge_{degrees}.toml"
+    path = tmp_path / f"wedge_{degrees}{'_scripted' if scripted else ''}.toml"
+    finger = (
+        f'role = "obstacle"\nvelocity = {{ y = {-SPEED} }}'
+        if scripted
+        else 'role = "robot"\nmass = 0.1\ndofs = ["y"]\nactuators.y = { kp = 1e4, kd = 2e2, max_speed = 1.0, lower = -1.0, upper = 1.0 }'
+    )
+    policy = "" if scripted else f'[task.policy]\ntype = "constant_speed"\nspeeds = {{ "finger.y" = {-SPEED} }}\nduration = 0.05\n'
     path.write_text(
         f"""version = 1
 [scenario]
@@ -48,20 +55,13 @@ shape = {{ type = "polygon", vertices = [[0.0, 0.0], [{LENGTH}, 0.0], [{LENGTH},
 dofs = ["x"]
 [[bodies]]
 name = "finger"
-role = "robot"
-mass = 0.1
+{finger}
 shape = {{ type = "disc", radius = {RADIUS} }}
 pose = {{ x = {LENGTH / 2}, y = {rise / 2 + RADIUS / math.cos(math.radians(degrees)) + GAP!r} }}
-dofs = ["y"]
-actuators.y = {{ kp = 1e4, kd = 2e2, max_speed = 1.0, lower = -1.0, upper = 1.0 }}
 [task]
 horizon = 1.0
 goal = {{ box = {{ "wedge.x" = [5.0, 6.0] }} }}
-[task.policy]
-type = "constant_speed"
-speeds = {{ "finger.y" = {-SPEED} }}
-duration = 0.05
-[ladder]
+{policy}[ladder]
 control_period = 0.05
 time_limit = 5.0
 [[ladder.rungs]]
@@ -103,9 +103,25 @@ def test_a_wedge_driven_a_few_times_faster_than_its_pusher_is_not_thrown(tmp_pat
     assert run_warnings(scenario, rung, 1e-3, out) == []
 
 
+def test_a_scripted_obstacle_drives_like_an_actuator(tmp_path):
+    """The finger on a script at the same speed (the scene's only driver) throws the wedge as
+    fast, and its speed is the one the ratio counts (`_driven_speed`); at 30 degrees it does not."""
+    for degrees, thrown in ((0.3, True), (30.0, False)):
+        scenario = load_scenario(wedge_scene(tmp_path, degrees, scripted=True))
+        assert not scenario.actuated
+        rung = rung_for(scenario, "kinematic")
+        out = rung.rollout(scenario, rung.initial_state(scenario), np.zeros((1, 0)), [0.05], 1e-3, stop_at_outcome=False)
+        speed = SPEED / math.tan(math.radians(degrees))
+        assert out.status == "ok" and out.velocities[-1][0] == pytest.approx(speed, rel=1e-9)
+        found = thrown_motion(scenario, rung, 1e-3, out)
+        assert (found is not None) is thrown
+        if thrown:
+            assert found.speed == pytest.approx(speed, rel=1e-9) and found.driven == SPEED
+
+
 def test_the_other_rungs_and_a_still_finger_say_nothing(tmp_path):
     """The rule is the kinematic model's: a dynamic rung's wedge is pushed by forces (and here
-    friction holds it); with the finger still nothing drives the scene."""
+    friction holds it); with the finger still nothing moves."""
     path = wedge_scene(tmp_path, 0.3)
     for name in ("quasistatic-rigid", "dynamic-rigid"):
         scenario, rung, out = run(path, name)

@@ -134,8 +134,7 @@ class EventStream(StreamingResponse):
 
 
 def _unprocessable(exc: ScenarioError) -> JSONResponse:
-    problems = [{"key": p.key, "reason": p.reason} for p in exc.problems]
-    return JSONResponse({"detail": str(exc), "file": exc.file, "problems": problems}, status_code=422)
+    return JSONResponse(exc.to_json(), status_code=422)
 
 
 class _Guard:
