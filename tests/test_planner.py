@@ -556,7 +556,7 @@ def test_a_rung_whose_coarse_stage_spent_its_iterations_says_so():
     """A coarse stage that finds no plan may spend all of its rung's iterations; the rung's own
     search then runs none, and its reason says why (it read as an ordinary search that failed)."""
     scenario = load_scenario(SCENARIOS / "four_finger_grasp.toml")
-    result = run_ladder(scenario, seed=7, iterations=30, planner="KPIECE1")
+    result = run_ladder(scenario, seed=31, iterations=30, planner="KPIECE1")  # (seed 7 holds: a closer replay goes up)
     stage, top = result.rungs[-2], result.rungs[-1]
     assert stage.stage == "coarse" and not stage.ended.holds
     assert top.rung == stage.rung and top.iterations == 0 and not top.ended.holds
@@ -745,6 +745,31 @@ def test_the_geometric_rung_roots_its_goal_tree_only_at_goal_states_in_reach_by_
     assert late > 0  # (goal states were drawn out of reach, and dropped)
     result = run_ladder(tight, seed=1)
     assert result.top_holds and result.rungs[0].ended is PlanStatus.EXACT
+
+
+def test_a_failed_search_passes_up_the_previous_plans_replay_where_it_ends_closer_to_the_goal(tmp_path):
+    """At a horizon of 0.76 s (full speed grasps at 0.74 s) seed 1's kinematic search finds no
+    plan in time; the geometric plan's replay under the rung ends on the goal set's edge
+    (3e-11 m out), where the search's closest path ends 0.85 m away. The replay had been dropped
+    for it, and every rung above failed; passed up, it holds above, within the horizon."""
+    from planner.ladder import _closer_partial, _Replay
+
+    scenario = triangle_with_horizon(tmp_path, 0.76)
+    result = run_ladder(scenario, seed=1)
+    kinematic, top = result.rungs[1], result.rungs[-1]
+    assert kinematic.rung == "kinematic" and not kinematic.ended.holds and kinematic.goal_distance < 1e-9
+    assert (
+        "the previous plan's replay, " in kinematic.reason
+        and "is the partial plan passed up (the search's closest path ends 0.8" in kinematic.reason
+    )
+    assert result.top_holds and top.ended.holds
+    rung = rung_for(scenario, top.rung)
+    run = rung.rollout(scenario, rung.initial_state(scenario), np.array(top.controls), np.array(top.durations), top.h)
+    assert run.outcome == "goal" and run.t <= 0.76 + 1e-9
+    # a replay that reached the goal (late), ended unsafe or failed is not passed up
+    for outcome, status in (("goal", "ok"), ("unsafe", "ok"), ("none", "lcp_failed")):
+        replay = _Replay(None, controls=[[0.0, 0.0]], durations=[0.05], outcome=outcome, status=status)
+        assert _closer_partial(None, replay, {"goal_distance": 1.0}) is None
 
 
 def test_a_geometric_rung_whose_every_goal_state_is_out_of_reach_says_so(tmp_path):
