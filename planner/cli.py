@@ -321,7 +321,7 @@ def main(argv: list[str] | None = None) -> int:
     except ScenarioError as exc:
         if getattr(args, "json", False):  # (a script reading --json's stdout gets the problems too)
             print(json.dumps(exc.to_json(), indent=2))
-        print(f"error: {exc}", file=sys.stderr)
+        print("\n".join(f"error: {line}" for line in str(exc).splitlines()), file=sys.stderr)  # (a grep for ^error: finds each)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)

@@ -76,6 +76,7 @@ def test_check_reports_the_key_and_reason(name):
     prefix = f"error: {path}: {key}: " if key else f"error: {path}: "
     assert lines[0].startswith(prefix), result.stderr
     assert reason in lines[0]
+    assert all(line.startswith(f"error: {path}: ") for line in lines), result.stderr  # (each problem's line)
 
 
 @pytest.mark.parametrize("command", [["simulate", "--model", "kinematic"], ["plan"]])
@@ -224,7 +225,7 @@ def test_bad_input_with_json_is_also_one_object_on_stdout(capsys):
         assert main(argv) == 2
         out, err = capsys.readouterr()
         data = json.loads(out)
-        assert data["file"] == path and data["detail"] == err.removeprefix("error: ").rstrip("\n")
+        assert data["file"] == path and data["detail"] == "\n".join(line.removeprefix("error: ") for line in err.splitlines())
         assert [p["key"] for p in data["problems"]] == ["contact.mu"] and "greater than or equal to 0" in data["problems"][0]["reason"]
     assert main(["check", path]) == 2  # without --json: stderr only
     out, err = capsys.readouterr()
@@ -233,3 +234,17 @@ def test_bad_input_with_json_is_also_one_object_on_stdout(capsys):
     assert main(["simulate", good, "--model", "kinematic", "--param", "v1=x", "--json"]) == 2  # a flag's problem, the same way
     data = json.loads(capsys.readouterr().out)
     assert [p["key"] for p in data["problems"]] == ["--param v1=x"]
+
+
+def test_each_problem_is_its_own_error_line(tmp_path, capsys):
+    """A file with two problems gives two `error:` lines (the second had no prefix: a grep for
+    ^error: found one of them)."""
+    from planner.cli import main
+
+    text = (BAD / "negative_mu.toml").read_text()
+    assert "mu = -0.1" in text and "K = 1e6" in text
+    path = tmp_path / "two.toml"
+    path.write_text(text.replace("K = 1e6", "K = -1e6", 1))
+    assert main(["check", str(path)]) == 2
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 2 and all(line.startswith(f"error: {path}: contact.") for line in lines), lines
