@@ -129,9 +129,11 @@ class LadderResult:
 def rung_json(report: RungReport, timings: bool = True) -> dict:
     """A rung's report as plan.json and the service's rung_ended events write it: its fields,
     `label` after `rung` (a coarse stage's "dynamic-rigid@0.002", which tells it from the rung
-    itself), how it ended by its label; without timings, no wall_s or compile_s."""
+    itself), how it ended by its label and, after it, by its status (`cause`: a `failed` rung's
+    budget_exhausted, timeout, failed, past_horizon or aborted); without timings, no wall_s or
+    compile_s."""
     data = asdict(report)
-    data = {"rung": data.pop("rung"), "label": report.label, **data, "ended": report.ended.label}
+    data = {"rung": data.pop("rung"), "label": report.label, **data, "ended": report.ended.label, "cause": report.ended.name.lower()}
     if not timings:
         del data["wall_s"], data["compile_s"]
     return data

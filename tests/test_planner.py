@@ -695,6 +695,8 @@ def test_a_plan_longer_than_the_horizon_does_not_hold(tmp_path):
     )
     assert not kinematic.ended.holds and "would have ended past the task's horizon (the task's horizon, 2.2 s)" in kinematic.reason
     assert not result.top_holds and result.to_json()["top_holds"] is False
+    # both read `failed`; plan.json's `cause` tells them apart without the reason's words
+    assert [(r["ended"], r["cause"]) for r in result.to_json()["rungs"]] == [("failed", "past_horizon"), ("failed", "budget_exhausted")]
     # the paper's scene at its own horizon: the ladder holds, and its plan reaches the goal within it
     scenario = load_scenario(TRIANGLE, {"v1": 0.8})
     held = run_ladder(scenario, rungs=["geometric", "kinematic"], seed=1, iterations=400, time_limit=600.0)
