@@ -321,7 +321,7 @@ def main(argv: list[str] | None = None) -> int:
     except ScenarioError as exc:
         if getattr(args, "json", False):  # (a script reading --json's stdout gets the problems too)
             print(json.dumps(exc.to_json(), indent=2))
-        print("\n".join(f"error: {line}" for line in str(exc).splitlines()), file=sys.stderr)  # (a grep for ^error: finds each)
+        _print_error(exc)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
@@ -336,6 +336,11 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:  # the reader went away (e.g. `| head`): nothing more to say
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return EXIT_OK
+
+
+def _print_error(exc: Exception) -> None:
+    """Bad input on stderr: `error:` before each of its lines (a problem each; a grep for ^error: finds every one)."""
+    print("\n".join(f"error: {line}" for line in str(exc).splitlines()), file=sys.stderr)
 
 
 def _write_perf_map() -> None:
@@ -399,7 +404,8 @@ def _many_steps(count: float) -> str:
 
 
 def read_plan(path: Path, scenario: Scenario) -> tuple[np.ndarray, np.ndarray]:
-    """The top rung's controls and durations of a plan.json, which must be of this scene
+    """The last rung's controls and durations of a plan.json that has any (the top rung's, unless
+    it failed with none or the plan was interrupted), which must be of this scene
     (same scenario name, contents after parameters, driven coordinates); else bad input."""
     from planner.ladder import scene_mismatch
 
@@ -1371,7 +1377,7 @@ def cmd_submit(args: argparse.Namespace) -> int:
             job = client.wait(job["id"], on_event=_job_progress(live=sys.stderr.isatty()))
             plan = json.loads(client.result(job["id"])) if job["result_available"] else None
     except ServiceError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        _print_error(exc)
         return EXIT_BAD_INPUT
     if args.json:
         print(json.dumps(job, indent=2))

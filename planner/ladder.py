@@ -129,11 +129,15 @@ class LadderResult:
 def rung_json(report: RungReport, timings: bool = True) -> dict:
     """A rung's report as plan.json and the service's rung_ended events write it: its fields,
     `label` after `rung` (a coarse stage's "dynamic-rigid@0.002", which tells it from the rung
-    itself), how it ended by its label and, after it, by its status (`cause`: a `failed` rung's
-    budget_exhausted, timeout, failed, past_horizon or aborted); without timings, no wall_s or
-    compile_s."""
-    data = asdict(report)
-    data = {"rung": data.pop("rung"), "label": report.label, **data, "ended": report.ended.label, "cause": report.ended.name.lower()}
+    itself), how it ended by its label and, right after it, by its status's name (`cause`: a
+    `failed` rung's budget_exhausted, timeout, failed, past_horizon or aborted; `exact` for
+    `planned`); without timings, no wall_s or compile_s."""
+    fields = asdict(report)
+    data = {"rung": fields.pop("rung"), "label": report.label}
+    for key, value in fields.items():
+        data[key] = value
+        if key == "ended":
+            data["ended"], data["cause"] = report.ended.label, report.ended.name.lower()
     if not timings:
         del data["wall_s"], data["compile_s"]
     return data
@@ -640,6 +644,7 @@ def _search(step: _Step, previous, replay, tracked, planner, seeded: bool, guide
     reaches = _reaches(tail)
     goal_t = _goal_time(step, plan) if plan.exact and reaches else math.inf  # (one replay at most: `_goal_time`)
     accepted = goal_t <= scenario.spec.task.horizon + HORIZON_SLACK
+    passed_up = False  # (a failed search's partial plan is the previous plan's run: `_closer_partial`)
     if accepted:
         ended, reason = (PlanStatus.EXACT if previous is None else PlanStatus.REPLANNED), ""
         if ended is PlanStatus.REPLANNED and guide is None:  # the status's words say "guided by it"
@@ -666,10 +671,11 @@ def _search(step: _Step, previous, replay, tracked, planner, seeded: bool, guide
             from planner.cli import counted
 
             reason += f"; {counted(plan.past_horizon, 'control')} would have ended past the task's horizon ({_horizon_words(scenario)})"
-        closer = _closer_partial(step, replay, fields)
-        if closer is not None:  # the partial plan passed up is the previous plan's replay
+        closer = _closer_partial(step, replay, fields, tracked=tracked is not None)
+        if closer is not None:  # the partial plan passed up is the previous plan's run under the rung
             reason += closer[0]
-            plan, tail, fields = replace(plan, controls=closer[1], durations=closer[2]), replay, replay.fields(scenario)
+            plan, tail = replace(plan, controls=closer[1], durations=closer[2]), closer[3]
+            fields, passed_up = tail.fields(scenario), True
     elif reaches:  # the prefix of the previous plan to the root it starts at ran past the horizon
         ended = PlanStatus.PAST_HORIZON
         reason = _past_horizon_reason(scenario, goal_t)
@@ -679,7 +685,8 @@ def _search(step: _Step, previous, replay, tracked, planner, seeded: bool, guide
     if pushed is not None:
         reason = f"{reason or ended.message}; before the search, {_tracking_words(pushed, True)}"
     # an accepted plan's states are its replay's under this rung, from the start (the tree's
-    # path begins at its root, which may be a seed part-way along the prefix)
+    # path begins at its root, which may be a seed part-way along the prefix: so are a spliced
+    # plan's that is not accepted, whose controls begin with the prefix)
     return RungReport(
         step.name,
         ended,
@@ -690,7 +697,7 @@ def _search(step: _Step, previous, replay, tracked, planner, seeded: bool, guide
         solver_failures=plan.failures,
         controls=plan.controls.tolist(),
         durations=plan.durations.tolist(),
-        states=tail.configurations(start) if accepted or tail is replay else plan.states.tolist(),
+        states=tail.configurations(start) if accepted or passed_up or j > 0 else plan.states.tolist(),
         tracked=None if spent is None else spent.fraction,
         diverged_at=None if spent is None else spent.diverged_at,
         repairs=0 if spent is None else spent.repairs,
@@ -699,23 +706,31 @@ def _search(step: _Step, previous, replay, tracked, planner, seeded: bool, guide
     )
 
 
-def _closer_partial(step: _Step, replay: _Replay | None, fields: dict):
-    """Where a search found no plan, the previous plan's replay under the rung as the partial plan
-    to pass up, if it ends closer to the goal than the search's closest path: (the reason's
-    words, its controls, its durations), else None. A grasp the geometric path missed by 1.4 mm
-    had been dropped for a search's path 0.85 m away (the paper's scene at a 0.76 s horizon). A
-    replay that reached the goal (late: the plan the rung refused), or ended unsafe or in a solver
-    failure, is not one."""
+def _closer_partial(step: _Step, replay: _Replay | None, fields: dict, tracked: bool = False):
+    """Where a search found no plan, the previous plan's replay (or tracked run) under the rung as
+    the partial plan to pass up, if it ends closer to the goal than the search's closest path:
+    (the reason's words, its controls, its durations, the run), else None. Only its controls that
+    end within the task's horizon count, as a search's do. A grasp the geometric path missed by
+    1.4 mm had been dropped for a search's path 0.85 m away (the paper's scene at a 0.76 s
+    horizon). A run that reached the goal (late: the plan the rung refused), or ended unsafe or in
+    a solver failure, is not one."""
     if replay is None or not replay.controls or replay.outcome != NONE or replay.status != OK:
         return None
-    own = replay.fields(step.scenario)["goal_distance"]
+    ends = np.cumsum(replay.durations)
+    m = int(np.searchsorted(ends, step.scenario.spec.task.horizon + HORIZON_SLACK, side="right"))
+    if m == 0:
+        return None
+    run = replay if m == len(replay.controls) else replay.head(m)
+    own = run.fields(step.scenario)["goal_distance"]
     if not own < fields["goal_distance"]:
         return None
+    what = "tracked run" if tracked else "replay"
+    within = "" if run is replay else f" (its first {m} controls, those within {_horizon_words(step.scenario)})"
     words = (
-        f"; the previous plan's replay, {own:.3g} m from the goal, is the partial plan passed up "
+        f"; the previous plan's {what}{within}, {own:.3g} m from the goal, is the partial plan passed up "
         f"(the search's closest path ends {fields['goal_distance']:.3g} m from it)"
     )
-    return words, np.array(replay.controls, float), np.array(replay.durations, float)
+    return words, np.array(run.controls, float), np.array(run.durations, float), run
 
 
 def _horizon_words(scenario: Scenario) -> str:

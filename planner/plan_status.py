@@ -10,8 +10,9 @@ from enum import Enum
 class PlanStatus(Enum):
     """How a search ended (after OMPL's ``ompl::base::PlannerStatus``) and how a rung of the
     ladder ended. Each member's value is its message; `label` is the word plan.json and
-    report.json write in a rung's ``ended`` (the three ways a control rung fails all write
-    ``failed``; the rung's ``reason`` starts with the member's message).
+    report.json write in a rung's ``ended`` (the five ways a rung fails, TIMEOUT,
+    BUDGET_EXHAUSTED, FAILED, PAST_HORIZON and ABORTED, all write ``failed``; ``cause`` beside it
+    gives the member's name, and the rung's ``reason`` starts with the member's message).
 
     The adapter (`planner.ompl_adapter`) returns EXACT, TIMEOUT, BUDGET_EXHAUSTED, STOPPED or
     ABORTED for a search, from what ended it; the ladder adds the rest.

@@ -768,10 +768,31 @@ def test_a_failed_search_passes_up_the_previous_plans_replay_where_it_ends_close
     rung = rung_for(scenario, top.rung)
     run = rung.rollout(scenario, rung.initial_state(scenario), np.array(top.controls), np.array(top.durations), top.h)
     assert run.outcome == "goal" and run.t <= 0.76 + 1e-9
+    # at 0.5 s (no grasp in reach) only the replay's controls within the horizon go up: the
+    # geometric path's 25 controls (1.25 s) had; a tracked run is named as one
+    short = run_ladder(triangle_with_horizon(tmp_path, 0.5), seed=1)
+    for report in short.rungs[1:]:
+        assert not report.ended.holds and len(report.controls) == 10 and sum(report.durations) == pytest.approx(0.5), report.label
+        assert "(its first 10 controls, those within the task's horizon, 0.5 s)" in report.reason
+    assert "the previous plan's tracked run (its first 10" in short.rungs[-1].reason
     # a replay that reached the goal (late), ended unsafe or failed is not passed up
     for outcome, status in (("goal", "ok"), ("unsafe", "ok"), ("none", "lcp_failed")):
         replay = _Replay(None, controls=[[0.0, 0.0]], durations=[0.05], outcome=outcome, status=status)
         assert _closer_partial(None, replay, {"goal_distance": 1.0}) is None
+
+
+def test_a_failed_search_from_a_root_along_the_previous_plan_reports_the_states_of_its_controls(tmp_path):
+    """At 0.8 s seed 2's top rung finds no plan in time; its closest path starts at a root part
+    way along the previous plan, and the report's controls begin with that plan's prefix. Its
+    states had been the tree's path from the root (2 states for 10 controls), which the plot and
+    a rung above read against the controls; they are the controls' replay from the start."""
+    scenario = triangle_with_horizon(tmp_path, 0.8)
+    top = run_ladder(scenario, seed=2).rungs[-1]
+    assert not top.ended.holds and len(top.controls) == 10
+    assert len(top.states) == len(top.controls) + 2 and top.states[0] == list(scenario.start)  # start, after each control, end
+    rung = rung_for(scenario, top.rung)
+    run = rung.rollout(scenario, rung.initial_state(scenario), np.array(top.controls), np.array(top.durations), top.h)
+    assert np.allclose(run.state.q, top.states[-1], atol=1e-12)
 
 
 def test_a_geometric_rung_whose_every_goal_state_is_out_of_reach_says_so(tmp_path):

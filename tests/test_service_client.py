@@ -176,7 +176,7 @@ def test_submit_refused_by_the_service_is_exit_2_with_its_reasons(idle, capsys, 
     assert code == 2 and out == "" and "Traceback" not in err
     lines = err.splitlines()
     assert lines[0].startswith("error: scenarios/free_transfer.toml: parameters.nope: the file has no parameter 'nope'")
-    assert lines[1] == "scenarios/free_transfer.toml: options.seed: must be between 0 and 1000000000, got -1"
+    assert lines[1] == "error: scenarios/free_transfer.toml: options.seed: must be between 0 and 1000000000, got -1"
     # an address past the service's root (its /jobs route) is a 405: said as a wrong address
     code, out, err = submit_cli(capsys, monkeypatch, "scenarios/free_transfer.toml", "--server", idle + "/jobs")
     assert code == 2 and out == "" and len(err.strip().splitlines()) == 1
