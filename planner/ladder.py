@@ -59,7 +59,7 @@ from models.rungs import State, rung_for
 from models.scenario import Problem, Scenario, ScenarioError, plan_problems
 from models.task import Outcome, classify, goal_distance
 from planner.clock import compiler_seconds, planning_clock
-from planner.ompl_adapter import HORIZON_SLACK, plan_control, plan_geometric, segment_periods, steered_coordinates
+from planner.ompl_adapter import latest_goal_time, plan_control, plan_geometric, segment_periods, steered_coordinates
 from planner.plan_status import PlanStatus
 from planner.pushing import free_turn, push_reference
 from planner.tracking import TRACK_TOLERANCE, PoseError, Reference, Tracked, track
@@ -271,7 +271,7 @@ def run_ladder(
         own_h = step.h if step.rung.propagates else None
         climbed = [r if r.stage else replace(r, h=own_h) for r in climbed]
         report = climbed[-1]
-        if report.ended.holds and not step.rung.propagates and math.fsum(report.durations) > scenario.spec.task.horizon + HORIZON_SLACK:
+        if report.ended.holds and not step.rung.propagates and math.fsum(report.durations) > latest_goal_time(scenario):
             # a geometric path reaches the goal at its end (a propagating rung's plans are held to it as they are accepted: `_in_time`)
             reason = _past_horizon_reason(scenario, math.fsum(report.durations)) + (f"; {report.reason}" if report.reason else "")
             climbed[-1] = report = replace(report, ended=PlanStatus.PAST_HORIZON, reason=reason)
@@ -643,7 +643,7 @@ def _search(step: _Step, previous, replay, tracked, planner, seeded: bool, guide
     fields = tail.fields(scenario)
     reaches = _reaches(tail)
     goal_t = _goal_time(step, plan) if plan.exact and reaches else math.inf  # (one replay at most: `_goal_time`)
-    accepted = goal_t <= scenario.spec.task.horizon + HORIZON_SLACK
+    accepted = goal_t <= latest_goal_time(scenario)
     passed_up = False  # (a failed search's partial plan is the previous plan's run: `_closer_partial`)
     if accepted:
         ended, reason = (PlanStatus.EXACT if previous is None else PlanStatus.REPLANNED), ""
@@ -673,8 +673,9 @@ def _search(step: _Step, previous, replay, tracked, planner, seeded: bool, guide
             reason += f"; {counted(plan.past_horizon, 'control')} would have ended past the task's horizon ({_horizon_words(scenario)})"
         closer = _closer_partial(step, replay, fields, tracked=tracked is not None)
         if closer is not None:  # the partial plan passed up is the previous plan's run under the rung
-            reason += closer[0]
-            plan, tail = replace(plan, controls=closer[1], durations=closer[2]), closer[3]
+            words, tail = closer
+            reason += words
+            plan = replace(plan, controls=np.array(tail.controls, float), durations=np.array(tail.durations, float))
             fields, passed_up = tail.fields(scenario), True
     elif reaches:  # the prefix of the previous plan to the root it starts at ran past the horizon
         ended = PlanStatus.PAST_HORIZON
@@ -709,7 +710,7 @@ def _search(step: _Step, previous, replay, tracked, planner, seeded: bool, guide
 def _closer_partial(step: _Step, replay: _Replay | None, fields: dict, tracked: bool = False):
     """Where a search found no plan, the previous plan's replay (or tracked run) under the rung as
     the partial plan to pass up, if it ends closer to the goal than the search's closest path:
-    (the reason's words, its controls, its durations, the run), else None. Only its controls that
+    (the reason's words, the run), else None. Only its controls that
     end within the task's horizon count, as a search's do. A grasp the geometric path missed by
     1.4 mm had been dropped for a search's path 0.85 m away (the paper's scene at a 0.76 s
     horizon). A run that reached the goal (late: the plan the rung refused), or ended unsafe or in
@@ -717,7 +718,7 @@ def _closer_partial(step: _Step, replay: _Replay | None, fields: dict, tracked: 
     if replay is None or not replay.controls or replay.outcome != NONE or replay.status != OK:
         return None
     ends = np.cumsum(replay.durations)
-    m = int(np.searchsorted(ends, step.scenario.spec.task.horizon + HORIZON_SLACK, side="right"))
+    m = int(np.searchsorted(ends, latest_goal_time(step.scenario), side="right"))
     if m == 0:
         return None
     run = replay if m == len(replay.controls) else replay.head(m)
@@ -730,7 +731,7 @@ def _closer_partial(step: _Step, replay: _Replay | None, fields: dict, tracked: 
         f"; the previous plan's {what}{within}, {own:.3g} m from the goal, is the partial plan passed up "
         f"(the search's closest path ends {fields['goal_distance']:.3g} m from it)"
     )
-    return words, np.array(run.controls, float), np.array(run.durations, float), run
+    return words, run
 
 
 def _horizon_words(scenario: Scenario) -> str:
@@ -746,7 +747,7 @@ def _goal_time(step: _Step, plan) -> float:
     reaches it: at most its durations' sum (the planners' last control runs on past the goal, 1 to
     10 periods, where a rollout stops), else its rollout from the start, which stops there."""
     total = math.fsum(plan.durations)
-    if total <= step.scenario.spec.task.horizon + HORIZON_SLACK:
+    if total <= latest_goal_time(step.scenario):
         return total
     out = step.rung.rollout(step.scenario, step.start(), np.array(plan.controls, float), np.array(plan.durations, float), step.h)
     return out.t if out.outcome == GOAL and out.status == OK else math.inf  # (never seen: the replay that reached it agrees)
@@ -757,7 +758,7 @@ def _in_time(step: _Step, plan) -> bool:
     keeps its own states within it (`planner.ompl_adapter._Propagator`), but the previous rung's
     plan, replayed with the drives held still at its end or tracked with repairs, or a search's
     path from a root part-way along it, can come out later."""
-    return _goal_time(step, plan) <= step.scenario.spec.task.horizon + HORIZON_SLACK
+    return _goal_time(step, plan) <= latest_goal_time(step.scenario)
 
 
 def _reaches(replay: _Replay) -> bool:

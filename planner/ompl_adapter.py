@@ -41,6 +41,11 @@ PASSIVE_RANGE = 2.0
 HORIZON_SLACK = 1e-9
 
 
+def latest_goal_time(scenario: Scenario) -> float:
+    """The latest a plan may reach the goal: the task's horizon, with HORIZON_SLACK."""
+    return scenario.spec.task.horizon + HORIZON_SLACK
+
+
 def segment_periods(delta: np.ndarray, max_speeds: np.ndarray, period: float) -> int:
     """The control periods (at least one) that cover a straight move of the actuated
     coordinates by `delta` without exceeding any drive's max speed: how the geometric rung
@@ -881,6 +886,8 @@ class GoalSampler:
     def __init__(self, scenario: Scenario, rng: np.random.Generator, low: np.ndarray, high: np.ndarray, valid) -> None:
         self.scenario, self.rng, self.low, self.high, self.valid = scenario, rng, low, high, valid
         self.actuated = np.array([scenario.coordinates.index(n) for n in scenario.actuated], np.int64)
+        self.start_actuated = np.asarray(scenario.start, float)[self.actuated]
+        self.max_speeds = scenario.max_speeds
         self.period = scenario.rung_settings("geometric").control_period
         self.late = 0
         steered = set(steered_coordinates(scenario))
@@ -962,7 +969,5 @@ class GoalSampler:
         """Whether the actuators reach q from the start by the task's horizon, moving straight at
         their max speeds, as the geometric rung times a path (`segment_periods`): no path to a goal
         state beyond that is in time, however the search finds it."""
-        start = np.asarray(self.scenario.start, float)
-        delta = q[self.actuated] - start[self.actuated]
-        periods = segment_periods(delta, self.scenario.max_speeds, self.period)
-        return periods * self.period <= self.scenario.spec.task.horizon + HORIZON_SLACK
+        periods = segment_periods(q[self.actuated] - self.start_actuated, self.max_speeds, self.period)
+        return periods * self.period <= latest_goal_time(self.scenario)
