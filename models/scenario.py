@@ -27,7 +27,7 @@ from pydantic import ValidationError
 
 from models import geometry as geo
 from models import messages
-from models.expressions import ExpressionError, evaluate
+from models.expressions import ExpressionError, evaluate, names_in
 from models.family import RUNG_NAMES, control_steps, definition
 from models.schema import (
     CONTROL_PLANNERS,
@@ -312,11 +312,16 @@ def penetration_warning(scenario: Scenario, depth: float, pair: int | None = Non
 
 
 def load_scenario(
-    path: str | Path, overrides: Mapping[str, float] | None = None, *, override_key: str = "overrides[{!r}]", check_expect: bool = True
+    path: str | Path,
+    overrides: Mapping[str, float] | None = None,
+    *,
+    override_key: str | Callable[[str], str] = "overrides[{!r}]",
+    check_expect: bool = True,
 ) -> Scenario:
     """Read, validate and derive a scenario, with overrides of its parameters (name -> value);
     raise ScenarioError listing every problem. override_key: how a problem names an override,
-    a format of its name (the library's dict by default; the CLI's "--param {}"). check_expect
+    a format of its name (the library's dict by default; the CLI's "--param {}") or a function
+    of it (a sweep's "--grid mu" or "--model plastic"). check_expect
     False: the [expect] table's runs are not checked on this variant (the pytest plugin loads an
     [[expect.cases]] entry's variant so, and checks the case's runs on it: `expected_run_problems`)."""
     path = Path(path)
@@ -343,11 +348,13 @@ def load_scenario(
     # structure still be too deep for the checks below), the file is what is wrong with it.
     try:
         with np.errstate(over="raise", invalid="raise", divide="raise"):
-            parameters = _parameters(raw, overrides or {}, path, override_key)
+            named = override_key.format if isinstance(override_key, str) else override_key
+            parameters = _parameters(raw, overrides or {}, path, named)
             try:
                 spec = ScenarioSpec.model_validate(raw, context={"parameters": parameters})
             except ValidationError as exc:
-                raise ScenarioError(path, _pydantic_problems(exc, parameters)) from None
+                overridden = {name: named(name) for name in overrides or {}}
+                raise ScenarioError(path, _pydantic_problems(exc, parameters, overridden)) from None
             return _derive(spec, MappingProxyType(parameters), path, text if check_expect else None)
     except (OverflowError, FloatingPointError, ZeroDivisionError) as exc:
         raise ScenarioError(path, [Problem("", f"a number is too large (or small) to compute with: {exc}")]) from None
@@ -406,7 +413,7 @@ def _check_predicate_depth(raw: dict) -> list[Problem]:
     return out
 
 
-def _parameters(raw: dict, overrides: Mapping[str, float], path: Path, override_key: str) -> dict[str, float]:
+def _parameters(raw: dict, overrides: Mapping[str, float], path: Path, named: Callable[[str], str]) -> dict[str, float]:
     table = raw.get("parameters", {})
     if not isinstance(table, dict):
         raise ScenarioError(path, [Problem("parameters", "must be a table of name = number")])
@@ -424,11 +431,11 @@ def _parameters(raw: dict, overrides: Mapping[str, float], path: Path, override_
         known = ", ".join(sorted(table)) or "none defined"
         raise ScenarioError(
             path,
-            [Problem(override_key.format(name), f"the file has no parameter {name!r} (parameters: {known})") for name in unknown],
+            [Problem(named(name), f"the file has no parameter {name!r} (parameters: {known})") for name in unknown],
         )
     bad = [(k, v) for k, v in overrides.items() if isinstance(v, bool) or not isinstance(v, numbers.Real) or not math.isfinite(v)]
     if bad:  # (float() would take "0.3" and True; a nan would be blamed on the key that uses it)
-        raise ScenarioError(path, [Problem(override_key.format(k), f"must be a finite number, got {v!r}") for k, v in bad])
+        raise ScenarioError(path, [Problem(named(k), f"must be a finite number, got {v!r}") for k, v in bad])
     params.update({k: float(v) for k, v in overrides.items()})
     return params
 
@@ -449,18 +456,22 @@ def key_path(loc: tuple) -> str:
     return out
 
 
-def _shown(value: Any, parameters: Mapping[str, float]) -> str:
-    """How a rejected input is quoted: parameter expressions also show their value."""
+def _shown(value: Any, parameters: Mapping[str, float], overridden: Mapping[str, str]) -> str:
+    """How a rejected input is quoted: parameter expressions also show their value, and name the
+    overrides (overridden: parameter -> how its override is named, "--param mu") that set it."""
     if isinstance(value, str):
         try:
-            return f"{evaluate(value, parameters):g} from {value!r}"
+            shown = f"{evaluate(value, parameters):g} from {value!r}"
         except ExpressionError:
             pass
+        else:
+            setters = [overridden[name] for name in sorted(names_in(value)) if name in overridden]
+            return f"{shown} ({', '.join(setters)})" if setters else shown
     return messages.got(value)
 
 
-def _pydantic_problems(exc: ValidationError, parameters: Mapping[str, float]) -> list[Problem]:
-    """One problem per key, in plain words (see `models.messages`)."""
+def _pydantic_problems(exc: ValidationError, parameters: Mapping[str, float], overridden: Mapping[str, str]) -> list[Problem]:
+    """One problem per key, in plain words (see `models.messages`); overridden as `_shown` takes it."""
     errors = exc.errors()
     locs = [err["loc"] for err in errors]
     problems: list[Problem] = []
@@ -471,7 +482,7 @@ def _pydantic_problems(exc: ValidationError, parameters: Mapping[str, float]) ->
             continue  # entries that failed are reported themselves; the count pydantic then gives is not the user's
         clean, annotation = messages.walk(ScenarioSpec, loc)
         known = messages.keys_at(ScenarioSpec, loc[:-1]) if err["type"] == "extra_forbidden" else ()
-        suffix, reason = messages.reason(err, annotation, lambda value: _shown(value, parameters), known)
+        suffix, reason = messages.reason(err, annotation, lambda value: _shown(value, parameters, overridden), known)
         key = key_path(clean) + suffix
         if key in seen:
             continue  # a union reports each member's complaint; one per key is clearer

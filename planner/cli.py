@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import atexit
+import functools
 import importlib.util
 import json
 import math
@@ -970,6 +971,13 @@ def print_simulation(summary: dict[str, Any]) -> None:
 MAX_BAD_POINTS = 1000
 
 
+def _sweep_setter(name: str, *, model, point: dict) -> str:
+    """Which option set a sweep run's parameter, as its problems name it (`load_scenario`'s override_key)."""
+    if name in dict(model.overrides):
+        return f"--model {model.label}"
+    return f"--grid {name}" if name in point else f"--param {name}"
+
+
 def sweep_point_problems(scenario: Scenario, texts: list[str], axes, models, fixed: dict, step, duration) -> list[Problem]:
     """Every run of a sweep checked before any starts: the scenario with the point's and the
     model's parameters applied must load (the file's validation), and the run must not take
@@ -990,7 +998,8 @@ def sweep_point_problems(scenario: Scenario, texts: list[str], axes, models, fix
             seen.add(signature)
             where = ", ".join(f"{k}={v:g}" for k, v in point.items())
             try:
-                variant = load_scenario(scenario.path, params).with_policy(model.policy)
+                setter = functools.partial(_sweep_setter, model=model, point=point)
+                variant = load_scenario(scenario.path, params, override_key=setter).with_policy(model.policy)
             except ScenarioError as exc:
                 reasons = "; ".join(f"{p.key}: {p.reason}" if p.key else p.reason for p in exc.problems)
                 blamed = [t for t, a in zip(texts, axes) if f"from '{a.name}'" in reasons and a.name not in dict(model.overrides)]

@@ -248,3 +248,26 @@ def test_each_problem_is_its_own_error_line(tmp_path, capsys):
     assert main(["check", str(path)]) == 2
     lines = capsys.readouterr().err.splitlines()
     assert len(lines) == 2 and all(line.startswith(f"error: {path}: contact.") for line in lines), lines
+
+
+def test_a_value_out_of_range_names_the_override_that_set_it(capsys):
+    """An override that puts a key out of range is named with the key: the option on the command
+    line, the dict entry in the library, the option of a sweep run (it said only "from 'mu'")."""
+    from planner.cli import main
+
+    triangle = str(SCENARIOS / "two_finger_triangle.toml")
+    assert main(["check", triangle, "--param", "mu=-1", "--param", "v1=2"]) == 2
+    assert capsys.readouterr().err.splitlines() == [
+        f"error: {triangle}: contact.pairs[{i}].mu: must be greater than or equal to 0, got -1 from 'mu' (--param mu)" for i in (0, 1)
+    ]
+    with pytest.raises(ScenarioError) as caught:
+        load_scenario(triangle, {"finger_mass": -0.1})
+    assert [(p.key, p.reason) for p in caught.value.problems] == [
+        (f"bodies[{i}].mass", "must be greater than 0, got -0.1 from 'finger_mass' (overrides['finger_mass'])") for i in (2, 3)
+    ]
+    with pytest.raises(ScenarioError) as caught:  # a function of the name, as a sweep names its grid and models
+        load_scenario(triangle, {"K": 0.0, "C": 5.0}, override_key=lambda name: f"--grid {name}")
+    assert [(p.key, p.reason) for p in caught.value.problems] == [("contact.K", "must be greater than 0, got 0 from 'K' (--grid K)")]
+    with pytest.raises(ScenarioError) as caught:  # a value written in the file is no override's, though another was given
+        load_scenario(BAD / "negative_mu.toml", {"v1": 2.0})
+    assert [(p.key, p.reason) for p in caught.value.problems] == [("contact.mu", "must be greater than or equal to 0, got -0.1")]

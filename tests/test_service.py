@@ -114,6 +114,11 @@ def test_bad_options_and_parameters_are_422_named_as_in_the_request(idle):
     assert r.status_code == 422 and r.json()["problems"][0]["key"] == "options.seed"
     r = submit(idle, {"kind": "plan", "scenario": FREE, "parameters": {"nope": 1.0}})
     assert r.status_code == 422 and "nope" in r.json()["detail"]
+    r = submit(idle, {"kind": "plan", "scenario": TRIANGLE, "parameters": {"mu": -1.0}})  # in range as a number, not as a friction
+    assert r.status_code == 422 and [(p["key"], p["reason"]) for p in r.json()["problems"]][0] == (
+        "contact.pairs[0].mu",
+        "must be greater than or equal to 0, got -1 from 'mu' (parameters.mu)",
+    )
     r = submit(idle, {"kind": "simulate", "scenario": FREE, "options": {}})
     assert r.status_code == 422 and r.json()["problems"][0]["key"] == "options.model"
     r = submit(idle, {"kind": "simulate", "scenario": FREE, "options": {"model": "dynamic-rigid", "step": 20.0}})
@@ -413,6 +418,11 @@ def test_bad_sweep_jobs_are_422_named_as_in_the_request(idle):
     assert problems({"grid": ["v1=1:2:3"], "model": "kinematic", "step": 10.0}) == [
         "options.step: kinematic at v1=1 and 2 more grid points: a run of 3 s at h = 10 is no step (a run takes round(duration / h) steps)"
     ]
+    # a value out of range names the option that set it, in the request's words
+    assert problems({"grid": ["mu=-1,0.5"], "model": "kinematic"})[0] == (
+        "options.grid mu=-1,0.5: kinematic at mu=-1: the scenario is invalid: contact.pairs[0].mu: must be greater than or equal to 0, "
+        "got -1 from 'mu' (options.grid mu); contact.pairs[1].mu: must be greater than or equal to 0, got -1 from 'mu' (options.grid mu)"
+    )
     no_policy = TRIANGLE[: TRIANGLE.index("[task.policy]")] + TRIANGLE[TRIANGLE.index("[ladder]") : TRIANGLE.index("[expect]")]
     assert problems({"grid": ["v1=1:2:3"], "model": "kinematic"}, no_policy) == [
         "task.policy: a sweep runs the scenario's policy, and this file has none"

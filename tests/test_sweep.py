@@ -285,7 +285,7 @@ def test_sweep_names_the_defaults_of_a_rung_the_ladder_does_not_list(tmp_path):
         (
             ["--grid", "mu=-1:1:3", "--model", "kinematic", "--workers", "2"],
             "--grid mu=-1:1:3: kinematic at mu=-1: the scenario is invalid: "
-            "contact.pairs[0].mu: must be greater than or equal to 0, got -1 from 'mu'",
+            "contact.pairs[0].mu: must be greater than or equal to 0, got -1 from 'mu' (--grid mu)",
         ),
         (
             ["--grid", "v1=0.5,1", "--model", "kinematic[mu=-2]", "--workers", "2"],

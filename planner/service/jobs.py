@@ -199,12 +199,14 @@ def _cli_key(key: str) -> str:
 
 def _cli_reason(kind: str, reason: str) -> str:
     """A CLI problem's advice in the request's words: "use a smaller --step" -> "use a smaller
-    options.step", for the options this kind of job takes (other text is left as it is)."""
+    options.step", for the options this kind of job takes, and "--param mu" -> "parameters.mu"
+    (other text is left as it is)."""
 
     def key(match: re.Match) -> str:
         name = _cli_key(match[0])
         return name if name.removeprefix("options.") in OPTIONS[kind] else match[0]
 
+    reason = re.sub(r"(?<![\w-])--param (\w+)", lambda m: _cli_key(m[0]), reason)  # a value set by the request
     return re.sub(r"(?<![\w-])--[a-z][a-z-]*", key, reason)
 
 
