@@ -944,8 +944,13 @@ class _Replay:
         )
 
     def configurations(self, start: State) -> list:
-        """q at the start, after each control that ran on, and where the replay ended."""
-        return [start.q.tolist()] + [s.q.tolist() for s in self.states] + [self.state.q.tolist()]
+        """q at the start, after each control that ran on, and where the replay ended when a
+        control ended it (in the goal, the unsafe set or a failure): one per control boundary.
+        A replay whose every control ran on ends at its last state, not listed twice (it had
+        been: len(controls) + 2 states, which the service's viewer timed against the controls)."""
+        ran_on = self.states[-1] if self.states else None
+        ended_in = self.state is not ran_on and (self.states or self.outcome != NONE or self.status != OK)
+        return [start.q.tolist()] + [s.q.tolist() for s in self.states] + ([self.state.q.tolist()] if ended_in else [])
 
     def fields(self, scenario: Scenario) -> dict:
         distance = 0.0 if self.outcome == GOAL else goal_distance(scenario, self.state.q)

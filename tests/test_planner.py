@@ -789,10 +789,28 @@ def test_a_failed_search_from_a_root_along_the_previous_plan_reports_the_states_
     scenario = triangle_with_horizon(tmp_path, 0.8)
     top = run_ladder(scenario, seed=2).rungs[-1]
     assert not top.ended.holds and len(top.controls) == 10
-    assert len(top.states) == len(top.controls) + 2 and top.states[0] == list(scenario.start)  # start, after each control, end
+    assert len(top.states) == len(top.controls) + 1 and top.states[0] == list(scenario.start)  # the start, after each control
     rung = rung_for(scenario, top.rung)
     run = rung.rollout(scenario, rung.initial_state(scenario), np.array(top.controls), np.array(top.durations), top.h)
     assert np.allclose(run.state.q, top.states[-1], atol=1e-12)
+
+
+def test_a_replays_configurations_are_one_per_control_boundary():
+    """The start, after each control that ran on, and the end when a control ended the replay;
+    a replay whose every control ran on had listed its last state twice."""
+    from types import SimpleNamespace
+
+    from planner.ladder import _Replay
+
+    start, a, b, end = (SimpleNamespace(q=np.array([float(i)])) for i in range(4))
+    ran_on = _Replay(b, states=[a, b], controls=[[1.0], [1.0]], durations=[0.1, 0.1], steps_min_psi=[(1.0, 0), (1.0, 0)])
+    assert ran_on.configurations(start) == [[0.0], [1.0], [2.0]]
+    assert ran_on.head(1).configurations(start) == [[0.0], [1.0]]
+    for outcome, status in (("goal", "ok"), ("unsafe", "ok"), ("none", "lcp_failed")):  # the third control ended it
+        stopped = _Replay(end, states=[a, b], controls=[[1.0], [1.0]], durations=[0.1, 0.1], outcome=outcome, status=status)
+        assert stopped.configurations(start) == [[0.0], [1.0], [2.0], [3.0]]
+    assert _Replay.empty(start).configurations(start) == [[0.0]]
+    assert _Replay(end, outcome="goal").configurations(start) == [[0.0], [3.0]]  # the first control reached the goal
 
 
 def test_a_geometric_rung_whose_every_goal_state_is_out_of_reach_says_so(tmp_path):
