@@ -37,9 +37,21 @@ MAX_RUNS = 1_000_000
 RESERVED: dict[str, str] = {}
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse's parser, whose usage errors are bad input as every other: its usage, then
+    `error: command line: --flag: reason` (and with --json the problem as JSON on stdout, `main`),
+    not `ladder plan: error: argument --flag: ...` that a grep for ^error: misses."""
+
+    def error(self, message: str):
+        self.print_usage(sys.stderr)
+        flag, colon, reason = message.removeprefix("argument ").partition(": ")
+        problem = Problem(flag, reason) if message.startswith("argument ") and colon else Problem("", message)
+        raise ScenarioError("command line", [problem])
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The `ladder` argument parser, one subparser per command."""
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="ladder",
         description="Hierarchical manipulation planning: plan with the cheapest contact model, "
         "then upgrade the model and replan until the plan holds under the highest-fidelity one.",
@@ -311,7 +323,13 @@ def _add_param_option(parser: argparse.ArgumentParser) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except ScenarioError as exc:  # (`_Parser.error`)
+        if "--json" in (sys.argv[1:] if argv is None else argv):
+            print(json.dumps(exc.to_json(), indent=2))
+        _print_error(exc)
+        return EXIT_BAD_INPUT
     from planner import interrupt
 
     interrupt.install()

@@ -271,3 +271,30 @@ def test_a_value_out_of_range_names_the_override_that_set_it(capsys):
     with pytest.raises(ScenarioError) as caught:  # a value written in the file is no override's, though another was given
         load_scenario(BAD / "negative_mu.toml", {"v1": 2.0})
     assert [(p.key, p.reason) for p in caught.value.problems] == [("contact.mu", "must be greater than or equal to 0, got -0.1")]
+
+
+def test_a_flag_argparse_refuses_is_bad_input_as_any_other(capsys):
+    """argparse's own refusals (an unknown choice, a missing option, a value of the wrong type)
+    end as every other bad input: `error: command line: FLAG: reason` after the usage, and with
+    --json the problem on stdout (they had been argparse's `ladder plan: error: argument ...`)."""
+    import json
+
+    from planner.cli import main
+
+    free = str(SCENARIOS / "free_transfer.toml")
+    assert main(["plan", free, "--planner", "PRM", "--json"]) == 2
+    out, err = capsys.readouterr()
+    assert json.loads(out)["problems"] == [{"key": "--planner", "reason": "invalid choice: 'PRM' (choose from 'RRT', 'KPIECE1', 'EST')"}]
+    assert err.startswith("usage: ladder plan ") and err.splitlines()[-1] == (
+        "error: command line: --planner: invalid choice: 'PRM' (choose from 'RRT', 'KPIECE1', 'EST')"
+    )
+    assert main(["plan", free, "--seed", "x"]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.splitlines()[-1] == "error: command line: --seed: invalid int value: 'x'"
+    assert main(["sweep", free, "--grid", "gap=1"]) == 2
+    assert capsys.readouterr().err.splitlines()[-1] == "error: command line: the following arguments are required: --model"
+    assert main([]) == 2
+    assert capsys.readouterr().err.splitlines() == [
+        "usage: ladder [-h] COMMAND ...",
+        "error: command line: the following arguments are required: COMMAND",
+    ]
