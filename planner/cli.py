@@ -387,6 +387,10 @@ def cmd_check(args: argparse.Namespace) -> int:
     if problems:
         raise ScenarioError(scenario.path, problems)
     summary = scenario.summary()
+    if scenario.actuated and not summary["task"]["unplannable"]:  # (else there is no plan to reach it)
+        from planner.ompl_adapter import goal_reach
+
+        summary["task"]["goal_reach"] = goal_reach(scenario)
     if args.out:
         write_atomic(args.out, json.dumps(summary, indent=2) + "\n")
     if args.json:
@@ -1622,6 +1626,14 @@ def print_summary(summary: dict[str, Any]) -> None:
     console.print(f"task: plans reach the goal within {task['horizon']:g} s (horizon); " + "; ".join(policies))
     for reason in task["unplannable"]:
         console.print(f"[yellow]`ladder plan` refuses this scene: {escape(reason)}[/yellow]")
+    reach = task.get("goal_reach")
+    if reach and not reach["in_reach"] and reach["late"]:
+        console.print(
+            f"[yellow]task.horizon: {task['horizon']:g} s looks too short for the goal: the {reach['late']} goal states the geometric "
+            f"rung made by projection are all out of reach, the soonest {reach['earliest']:g} s away (the actuators straight at "
+            "their max speeds, in whole control periods); `ladder plan` would search for the goal region instead, "
+            "and a plan is unlikely to reach it in time[/yellow]"
+        )
     expect = summary["expect"]
     if expect:
         if expect["policy"] or expect["plan"] is not None:

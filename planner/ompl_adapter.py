@@ -881,7 +881,8 @@ class GoalSampler:
     touch tolerance, with finite-difference gradients over the positional and planar-angle
     coordinates; one branch of each `any`, chosen at random), kept when the goal predicate
     holds, `valid` accepts it and it is in reach (`in_reach`). `draw()` tries up to
-    GOAL_ATTEMPTS samples, else None; `late` counts the goal states it dropped as out of reach."""
+    GOAL_ATTEMPTS samples, else None; `late` counts the goal states it dropped as out of reach,
+    `earliest` the soonest any of them is reached (`reach_time`)."""
 
     def __init__(self, scenario: Scenario, rng: np.random.Generator, low: np.ndarray, high: np.ndarray, valid) -> None:
         self.scenario, self.rng, self.low, self.high, self.valid = scenario, rng, low, high, valid
@@ -889,7 +890,7 @@ class GoalSampler:
         self.start_actuated = np.asarray(scenario.start, float)[self.actuated]
         self.max_speeds = scenario.max_speeds
         self.period = scenario.rung_settings("geometric").control_period
-        self.late = 0
+        self.late, self.earliest = 0, np.inf
         steered = set(steered_coordinates(scenario))
         self.movable = np.array(
             [i for i, n in enumerate(scenario.coordinates) if i in steered and n.rsplit(".", 1)[1] in ("x", "y", "z", "theta", "yaw")],
@@ -963,11 +964,29 @@ class GoalSampler:
                 if self.in_reach(q):
                     return q
                 self.late += 1
+                self.earliest = min(self.earliest, self.reach_time(q))
         return None
 
+    def reach_time(self, q: np.ndarray) -> float:
+        """The soonest the actuators reach q from the start, moving straight at their max speeds,
+        as the geometric rung times a path (`segment_periods`), in whole control periods."""
+        return segment_periods(q[self.actuated] - self.start_actuated, self.max_speeds, self.period) * self.period
+
     def in_reach(self, q: np.ndarray) -> bool:
-        """Whether the actuators reach q from the start by the task's horizon, moving straight at
-        their max speeds, as the geometric rung times a path (`segment_periods`): no path to a goal
+        """Whether the actuators reach q by the task's horizon (`reach_time`): no path to a goal
         state beyond that is in time, however the search finds it."""
-        periods = segment_periods(q[self.actuated] - self.start_actuated, self.max_speeds, self.period)
-        return periods * self.period <= latest_goal_time(self.scenario)
+        return self.reach_time(q) <= latest_goal_time(self.scenario)
+
+
+def goal_reach(scenario: Scenario, seed: int = 0) -> dict:
+    """What `ladder check` says of the goal set and the horizon: the geometric rung's first goal
+    draw (`GoalSampler.draw`, GOAL_ATTEMPTS tries) from the start. {"in_reach": whether it made
+    a goal state in reach of the horizon, "late": the goal states it made out of reach,
+    "earliest": the soonest any of those is reached, s (None: none)}. No goal state in reach
+    and some late: the horizon is shorter than the actuators need to get to the goal set."""
+    from models.rungs import GeometricChecker
+
+    low, high = sampling_limits(scenario, scenario.start)
+    sampler = GoalSampler(scenario, np.random.default_rng(int(seed)), low, high, GeometricChecker(scenario, low, high))
+    made = sampler.draw()
+    return {"in_reach": made is not None, "late": sampler.late, "earliest": float(sampler.earliest) if sampler.late else None}

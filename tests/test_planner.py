@@ -833,6 +833,28 @@ def test_a_geometric_rung_whose_every_goal_state_is_out_of_reach_says_so(tmp_pat
     assert not run_ladder(scenario, rungs=["geometric", "kinematic"], seed=1, iterations=400).top_holds
 
 
+def test_check_says_when_no_goal_state_is_in_reach_of_the_horizon(tmp_path, capsys):
+    """`ladder check` draws goal states as the geometric rung does: at 0.5 s every one is out of
+    reach (the fingers need 0.74 s, 0.75 s in whole 0.05 s periods) and it says so; at 0.8 s and
+    at the file's 4 s it does not (it had been silent at 0.5 s)."""
+    from planner.cli import main
+
+    short = triangle_with_horizon(tmp_path, 0.5).path
+    assert main(["check", str(short), "--json"]) == 0
+    reach = json.loads(capsys.readouterr().out)["task"]["goal_reach"]
+    assert reach["in_reach"] is False and reach["late"] > 0 and reach["earliest"] == pytest.approx(0.75)
+    assert main(["check", str(short)]) == 0
+    said = " ".join(capsys.readouterr().out.split())
+    assert f"task.horizon: 0.5 s looks too short for the goal: the {reach['late']} goal states the geometric rung made" in said
+    assert "the soonest 0.75 s away (the actuators straight at their max speeds, in whole control periods)" in said
+    for path in (triangle_with_horizon(tmp_path, 0.8).path, TRIANGLE):
+        assert main(["check", str(path), "--json"]) == 0
+        assert json.loads(capsys.readouterr().out)["task"]["goal_reach"] == {"in_reach": True, "late": 0, "earliest": None}
+        assert main(["check", str(path)]) == 0 and "looks too short" not in capsys.readouterr().out
+    assert main(["check", str(SCENARIOS / "bouncing_disc.toml"), "--json"]) == 0  # nothing to actuate: no plan, no draw
+    assert "goal_reach" not in json.loads(capsys.readouterr().out)["task"]
+
+
 def test_a_horizon_shorter_than_a_control_period_cannot_be_planned(tmp_path, capsys):
     """The planners' controls last whole control periods (0.05 s here), a geometric path's too:
     `ladder plan` refuses a shorter horizon as bad input, and `ladder check` says so.
