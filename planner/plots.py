@@ -285,6 +285,9 @@ def body_figure(scenario, runs, title: str):
                     target.axhspan(*interval, color=colour, alpha=0.13)
                     lines.append(_band_handle(colour, f"goal: {name} in [{interval[0]:g}, {interval[1]:g}]"))
                 style += 1
+        for kind, target in (("position", ax), ("angle", twin)):
+            if target is not None:
+                _view_without_far_edges(target, [goal[name] for name, _ in groups[kind] if name in goal])
         ax.set_ylabel(f"{body}: position (m)")
         _least_span(ax, MIN_POSITION_SPAN)
         if twin is not None:
@@ -297,6 +300,29 @@ def body_figure(scenario, runs, title: str):
     fig.suptitle(_wrap(title, 90))
     fig.tight_layout()
     return fig
+
+
+#: A goal interval's edge this many times further from 0 than the curves and the interval's other
+#: edges (at least 1) stands for "no bound" (a one-sided goal, [0.5, 1e6]): not drawn to scale.
+FAR_EDGE = 1e3
+
+
+def _view_without_far_edges(ax, intervals: list[tuple[float, float]]) -> None:
+    """The y axis over the curves and the goal intervals' edges, but for far ones (FAR_EDGE):
+    a one-sided goal's sentinel had set the axis, the curves drawn flat along its bottom."""
+    data = [np.asarray(line.get_ydata(), float) for line in ax.get_lines()]
+    data = np.concatenate(data)[np.isfinite(np.concatenate(data))] if data else np.zeros(0)
+    edges = [e for interval in intervals for e in interval]
+    scale = max([1.0, *np.abs(data).tolist()])
+    near = [e for e in edges if abs(e) < FAR_EDGE * scale]
+    scale = max([scale, *np.abs(near).tolist()])
+    near = [e for e in edges if abs(e) < FAR_EDGE * scale]
+    if len(near) == len(edges) or not (len(data) or near):
+        return  # (every edge to scale: matplotlib's own limits)
+    values = np.concatenate([data, near])
+    lo, hi = float(values.min()), float(values.max())
+    pad = 0.05 * (hi - lo) or 0.05 * max(abs(lo), 1.0)  # (matplotlib's default margin)
+    ax.set_ylim(lo - pad, hi + pad)
 
 
 def _least_span(ax, span: float) -> None:

@@ -177,3 +177,30 @@ def test_paper_figures_write(tmp_path):
     bounds = [{"v1": 0.5 * v2, "v2": v2, "mu": mu, "side": "low"} for v2 in (0.5, 1) for mu in (0.3, 0.5)]
     out = plots.plot_feasible_sets_3d(tmp_path / "fig5.png", [("(a)", points, bounds)], "t")
     assert out.exists()
+
+
+def test_a_one_sided_goal_does_not_set_the_axis(tmp_path):
+    """A goal interval with an edge standing for "no bound" ([0.55, 1e6]: scenario values are
+    within +-1e6) had set the panel's y axis to 1e6, the curves flat along its bottom; the axis
+    now spans the curves and the goal's near edge, and a goal to scale still sets it."""
+    import shutil
+
+    import matplotlib.pyplot as plt
+
+    shutil.copytree(SCENARIOS / "meshes", tmp_path / "meshes")
+    text = (SCENARIOS / "box_push_3d.toml").read_text()
+    old = 'goal = { box = { "box.x" = [0.55, 0.75], "box.y" = [-0.1, 0.1] } }'
+    assert old in text
+    for interval, top in (("[0.55, 1e6]", (0.55, 0.7)), ("[0.55, 0.75]", (0.75, 0.9)), ("[-1e6, 1e6]", (0.1, 0.2))):
+        path = tmp_path / "one_sided.toml"
+        path.write_text(text.replace(old, f'goal = {{ box = {{ "box.x" = {interval}, "box.y" = [-0.1, 0.1] }} }}'))
+        scenario = load_scenario(path)
+        fig = plots.rollout_figure(scenario, _still_runs(scenario), "t")
+        try:
+            box = next(ax for ax in fig.axes if ax.get_label() == "body:box")
+            data = np.concatenate([line.get_ydata() for line in box.get_lines()])
+            lo, hi = box.get_ylim()
+            assert lo <= data.min() and hi >= data.max(), interval
+            assert top[0] <= hi <= top[1], (interval, hi)
+        finally:
+            plt.close(fig)
