@@ -16,6 +16,7 @@ import os
 import stat
 import sys
 import tempfile
+from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -464,22 +465,35 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     result = _run_simulation(args, scenario, plan_controls, h, duration, total)
     if result is None:
         return EXIT_INTERRUPTED
-    summary = _simulation_summary(args, scenario, result, h, duration)
-    if args.plot:
-        from planner.plots import plot_rollouts
+    with _writing_results():
+        summary = _simulation_summary(args, scenario, result, h, duration)
+        if args.plot:
+            from planner.plots import plot_rollouts
 
-        plot_rollouts(
-            args.plot,
-            scenario,
-            [(args.model, result.times, result.trajectory)],
-            f"{scenario.spec.scenario.name}: {args.model}, h = {h:g}, outcome {result.outcome}",
-        )
-        summary["plot"] = str(args.plot)
-    if args.json:
-        print(json.dumps(summary, indent=2))
-    else:
-        print_simulation(summary)
+            plot_rollouts(
+                args.plot,
+                scenario,
+                [(args.model, result.times, result.trajectory)],
+                f"{scenario.spec.scenario.name}: {args.model}, h = {h:g}, outcome {result.outcome}",
+            )
+            summary["plot"] = str(args.plot)
+        if args.json:
+            print(json.dumps(summary, indent=2))
+        else:
+            print_simulation(summary)
     return EXIT_OK if result.ok else EXIT_FAILED
+
+
+@contextmanager
+def _writing_results():
+    """A command's results written whole: a Ctrl-C meanwhile is said after them (`interrupt.shielded`);
+    the command's exit code is its results' (they are complete)."""
+    from planner import interrupt
+
+    with interrupt.shielded():
+        yield
+    if interrupt.held():
+        print("interrupted after the results were complete: they are written whole", file=sys.stderr, flush=True)
 
 
 def _check_simulate_args(args: argparse.Namespace):
@@ -662,8 +676,9 @@ def cmd_plan(args: argparse.Namespace) -> int:
     """`ladder plan`: plan up the ladder, write plan.json, report.json and plots, and report."""
     scenario, names = _check_plan_args(args)
     result = _run_plan(args, scenario, names)
-    report, plots = _write_plan_outputs(args, scenario, result)
-    _print_plan(args, scenario, result, report, plots)
+    with _writing_results():
+        report, plots = _write_plan_outputs(args, scenario, result)
+        _print_plan(args, scenario, result, report, plots)
     if not result.complete:
         done = ", ".join(r.rung for r in result.rungs) or "none"
         print(f"interrupted: INCOMPLETE plan (rungs done: {done}) written to {args.out / 'plan.json'}", file=sys.stderr, flush=True)
@@ -1059,8 +1074,9 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     """`ladder sweep`: run the policy over a grid of design parameters per model, write and report the classes."""
     scenario, fixed, axes, models, runs = _check_sweep_args(args)
     result, interrupted = _run_sweep(args, scenario, fixed, axes, models, runs)
-    data, plot = _write_sweep_outputs(args, result, axes)
-    _print_sweep(args, result, data, plot, interrupted)
+    with _writing_results():
+        data, plot = _write_sweep_outputs(args, result, axes)
+        _print_sweep(args, result, data, plot, interrupted)
     return EXIT_INTERRUPTED if interrupted else EXIT_OK
 
 

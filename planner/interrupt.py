@@ -8,6 +8,11 @@ long loops (rollout chunks, OMPL's termination condition, the sweep's runs) read
 compiled calls (`asked`, `check`) and act on: they stop, keep what is done and the command
 exits 130. A second Ctrl-C inside such a block stops the process at once (exit 130, nothing
 more written). Outside a deferred block Ctrl-C raises KeyboardInterrupt as usual.
+
+A command's results, once computed, are written inside a `shielded()` block: a first Ctrl-C
+there is only remembered (`held`), so every output is written whole and the command reports
+it; a second (or the first there after one that stopped the work) stops the process at once. A Ctrl-C had left a simulate's plot and
+half its table, or a plan's plan.json (complete) with some of its plots, and exit 130.
 """
 
 from __future__ import annotations
@@ -17,7 +22,7 @@ import signal
 import sys
 from contextlib import contextmanager
 
-_state = {"asked": False, "deferring": 0}
+_state = {"asked": False, "deferring": 0, "shielding": 0, "held": False}
 
 
 def asked() -> bool:
@@ -31,7 +36,18 @@ def check() -> None:
         raise KeyboardInterrupt
 
 
+def held() -> bool:
+    """Whether Ctrl-C was pressed inside a `shielded()` block (the outputs were still written)."""
+    return _state["held"]
+
+
 def handler(signum, frame) -> None:
+    if _state["shielding"]:
+        if _state["held"] or _state["asked"]:  # the second Ctrl-C (the first may have stopped the work): stop now
+            print("interrupted", file=sys.stderr, flush=True)
+            os._exit(130)
+        _state["held"] = True
+        return
     if _state["deferring"]:
         if _state["asked"]:  # the second Ctrl-C: the user does not want to wait for a clean stop
             print("interrupted", file=sys.stderr, flush=True)
@@ -61,6 +77,16 @@ def deferred():
         _state["deferring"] -= 1
 
 
+@contextmanager
+def shielded():
+    """A block that writes a command's results: Ctrl-C only sets `held` (see the module)."""
+    _state["shielding"] += 1
+    try:
+        yield
+    finally:
+        _state["shielding"] -= 1
+
+
 def ask() -> None:
     """Ask the loops under way to stop, as a first Ctrl-C inside a deferred block does (the
     service's cancel and wall-time limit of a simulate job, from a thread of the worker)."""
@@ -68,4 +94,4 @@ def ask() -> None:
 
 
 def reset() -> None:
-    _state["asked"] = False
+    _state["asked"] = _state["held"] = False

@@ -739,6 +739,67 @@ def test_ctrl_c_while_the_command_still_imports_is_interrupted_not_a_traceback()
     assert (done.returncode, done.stderr, done.stdout) == (130, "interrupted\n", "")
 
 
+def _ctrl_c_before(monkeypatch, cli, name: str) -> None:
+    """Send this process a SIGINT as `cli.<name>` starts (the Ctrl-C lands while results are written)."""
+    original = getattr(cli, name)
+
+    def interrupted(*args, **kwargs):
+        os.kill(os.getpid(), signal.SIGINT)
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(cli, name, interrupted)
+
+
+@pytest.mark.parametrize("command", ["simulate", "plan"])
+def test_ctrl_c_while_the_results_are_written_lets_them_be_written_whole(command, tmp_path, capsys, monkeypatch):
+    """A Ctrl-C after the work is done, while its results are written, is said after them, and
+    the exit code is theirs: it had left a simulate's plot with half its table, or a plan's
+    plan.json (complete) with some of its plots, and exit 130."""
+    from planner import cli, interrupt
+
+    previous = signal.getsignal(signal.SIGINT)
+    try:
+        if command == "simulate":
+            plot = tmp_path / "run.png"
+            _ctrl_c_before(monkeypatch, cli, "_simulation_summary")
+            code = cli.main(["simulate", str(SCENARIOS / "free_transfer.toml"), "--model", "kinematic", "--plot", str(plot)])
+            written = [plot]
+        else:
+            out = tmp_path / "plan"
+            _ctrl_c_before(monkeypatch, cli, "_write_plan_outputs")
+            code = cli.main(["plan", str(SCENARIOS / "free_transfer.toml"), "--seed", "3", "--out", str(out)])
+            written = [out / "plan.json", out / "report.json", out / "plan.geometric.png", out / "plan.kinematic.png"]
+        stdout, stderr = capsys.readouterr()
+        assert interrupt.held() and not interrupt.asked()
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert stderr.splitlines()[-1] == "interrupted after the results were complete: they are written whole"
+    assert all(path.exists() for path in written) and stdout.strip()
+    if command == "simulate":  # the same run's results as without the Ctrl-C
+        monkeypatch.undo()
+        assert cli.main(["simulate", str(SCENARIOS / "free_transfer.toml"), "--model", "kinematic"]) == code
+        untimed = lambda text: re.sub(r"[0-9.]+ s \([0-9,]+ steps/s\)", "", text)  # noqa: E731
+        assert untimed(capsys.readouterr().out) == untimed(stdout.replace(f"plot written to {plot}\n", ""))
+    else:
+        assert code == 0 and json.loads((out / "plan.json").read_text())["complete"] is True
+
+
+def test_a_ctrl_c_as_the_process_ends_leaves_the_commands_exit_code():
+    """Once the command is done the `ladder` process ignores Ctrl-C while it shuts down (0.3-0.5 s
+    after its last output); one there had made exit 130, once with a traceback."""
+    program = (
+        "import signal, sys, planner\n"
+        "sys.argv = ['ladder', 'schema', '--out', '/dev/null']\n"
+        "code = planner.main()\n"
+        "print(code, signal.getsignal(signal.SIGINT) is signal.SIG_IGN)\n"
+        "print(planner.main(['schema', '--out', '/dev/null']), signal.getsignal(signal.SIGINT) is signal.SIG_IGN)\n"
+    )
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    done = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, cwd=ROOT, env=env, timeout=120)
+    said = [line for line in done.stdout.splitlines() if not line.startswith("schema written")]
+    assert said == ["0 True", "0 False"], done.stderr  # (a call with arguments is a library's: no)
+
+
 def test_outputs_get_the_usual_file_mode(tmp_path):
     out = tmp_path / "summary.json"
     env = dict(os.environ, PYTHONPATH=str(ROOT))
