@@ -50,6 +50,17 @@ class _Parser(argparse.ArgumentParser):
         raise ScenarioError("command line", [problem])
 
 
+class _Once(argparse.Action):
+    """An option given at most once: a second is refused, not silently the one that counts
+    (`simulate --model A --model B` had run B alone)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        before = getattr(namespace, self.dest, None)
+        if before is not None:
+            parser.error(f"argument {option_string}: given twice ({before} and {values}); it takes one")
+        setattr(namespace, self.dest, values)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The `ladder` argument parser, one subparser per command."""
     parser = _Parser(
@@ -107,7 +118,8 @@ def _add_simulate_parser(sub: argparse._SubParsersAction) -> None:
         "solver counters. Exit 0 when the run completed, 1 when a numerical failure stopped it.",
     )
     simulate.add_argument("file", type=Path, help="scenario file (TOML)")
-    simulate.add_argument("--model", required=True, metavar="RUNG", help="rung: " + ", ".join(PROPAGATING_RUNGS))
+    rungs = ", ".join(PROPAGATING_RUNGS)
+    simulate.add_argument("--model", required=True, metavar="RUNG", action=_Once, help=f"rung: {rungs} (one; `sweep` runs several)")
     _add_param_option(simulate)
     simulate.add_argument("--duration", type=float, help="seconds to run (default: the policy's duration)")
     _add_policy_option(simulate)
@@ -193,8 +205,9 @@ def _add_sweep_parser(sub: argparse._SubParsersAction) -> None:
     sweep.add_argument(
         "--model",
         required=True,
+        action="append",
         metavar="[LABEL=]RUNG[NAME=VALUE,...][,...]",
-        help="models to run (see below), e.g. quasistatic-rigid,elastic=dynamic-compliant[C=0]",
+        help="models to run (see below; repeatable), e.g. quasistatic-rigid,elastic=dynamic-compliant[C=0]",
     )
     where = sweep.add_mutually_exclusive_group()
     where.add_argument("--workers", type=int, help="local worker processes (default: all cores)")
@@ -1098,7 +1111,8 @@ def _check_sweep_args(args: argparse.Namespace):
         except ScenarioError as exc:
             problems += exc.problems
     try:  # --policy: the policy of the models that name none of their own
-        models = [m if m.policy else replace(m, policy=getattr(args, "policy", None)) for m in sw.parse_models(args.model)]
+        given = ",".join(args.model) if isinstance(args.model, list) else args.model  # (repeated --model: every one; a job's: one text)
+        models = [m if m.policy else replace(m, policy=getattr(args, "policy", None)) for m in sw.parse_models(given)]
     except ScenarioError as exc:
         problems += exc.problems
         models = []

@@ -298,3 +298,17 @@ def test_a_flag_argparse_refuses_is_bad_input_as_any_other(capsys):
         "usage: ladder [-h] COMMAND ...",
         "error: command line: the following arguments are required: COMMAND",
     ]
+
+
+def test_a_repeated_model_is_every_model_in_a_sweep_and_refused_by_simulate(capsys):
+    """`sweep --model A --model B` had kept B alone, and `simulate --model A --model B` run B
+    alone, both silently: a sweep runs every one, simulate refuses the second."""
+    from planner import cli
+
+    free = str(SCENARIOS / "free_transfer.toml")
+    args = cli.build_parser().parse_args(["sweep", free, "--grid", "gap=0.3,0.4", "--model", "kinematic", "--model", "dyn=dynamic-rigid"])
+    models = cli._check_sweep_args(args)[3]
+    assert [(m.label, m.rung) for m in models] == [("kinematic", "kinematic"), ("dyn", "dynamic-rigid")]
+    assert cli.main(["simulate", free, "--model", "kinematic", "--model", "dynamic-rigid"]) == 2
+    said = capsys.readouterr().err.splitlines()[-1]
+    assert said == "error: command line: --model: given twice (kinematic and dynamic-rigid); it takes one"
