@@ -991,7 +991,8 @@ def thrown_warning(scenario: Scenario, rung: Rung, h: float, result: RolloutResu
         return ""
     return (
         f"{found.body} was thrown: kinematic steps moved it at up to {found.speed:.3g} m/s, "
-        f"{found.speed / found.driven:,.0f} times the fastest driven coordinate's {found.driven:.3g}; the kinematic model has "
+        f"{found.speed / found.driven:,.0f} times the fastest any driven coordinate moved in the run, {found.driven:.3g} m/s; "
+        "the kinematic model has "
         f"no forces or friction, and moves a body at whatever speed keeps the contacts apart, without bound where the push "
         f"runs along a contact normal almost across it (a pinch or a grazing wedge, which friction would jam): "
         f"{found.body}'s motion is not physical (a quasistatic or dynamic rung models the forces)"
@@ -1004,7 +1005,7 @@ def unbalanced_warning(scenario: Scenario, rung: Rung, h: float, result: Rollout
     if found is None:
         return ""
     driven = (
-        f"{found.speed / found.driven:,.0f} times the fastest driven coordinate's {found.driven:.3g}"
+        f"{found.speed / found.driven:,.0f} times the fastest any driven coordinate moved in the run, {found.driven:.3g} m/s"
         if found.driven > 0.0
         else "with nothing actuated or scripted moving"
     )

@@ -354,7 +354,7 @@ def load_scenario(
                 spec = ScenarioSpec.model_validate(raw, context={"parameters": parameters})
             except ValidationError as exc:
                 overridden = {name: named(name) for name in overrides or {}}
-                raise ScenarioError(path, _pydantic_problems(exc, parameters, overridden)) from None
+                raise ScenarioError(path, _pydantic_problems(exc, parameters, overridden, raw)) from None
             return _derive(spec, MappingProxyType(parameters), path, text if check_expect else None)
     except (OverflowError, FloatingPointError, ZeroDivisionError) as exc:
         raise ScenarioError(path, [Problem("", f"a number is too large (or small) to compute with: {exc}")]) from None
@@ -470,8 +470,25 @@ def _shown(value: Any, parameters: Mapping[str, float], overridden: Mapping[str,
     return messages.got(value)
 
 
-def _pydantic_problems(exc: ValidationError, parameters: Mapping[str, float], overridden: Mapping[str, str]) -> list[Problem]:
-    """One problem per key, in plain words (see `models.messages`); overridden as `_shown` takes it."""
+def _written_as_scalar(raw: Any, loc: tuple) -> bool:
+    """Whether `loc` ends in an index into a value the file wrote as one number (a planar
+    inertia, which the schema stores as a tuple of one: its key has no [0] in the file)."""
+    if not loc or not isinstance(loc[-1], int):
+        return False
+    node = raw
+    for part in loc[:-1]:
+        try:
+            node = node[part]
+        except (KeyError, IndexError, TypeError):
+            return False
+    return not isinstance(node, (list, tuple, dict))
+
+
+def _pydantic_problems(
+    exc: ValidationError, parameters: Mapping[str, float], overridden: Mapping[str, str], raw: Any = None
+) -> list[Problem]:
+    """One problem per key, in plain words (see `models.messages`); overridden as `_shown` takes
+    it; raw, the file's table: a key the file wrote as one number is named without an index."""
     errors = exc.errors()
     locs = [err["loc"] for err in errors]
     problems: list[Problem] = []
@@ -481,6 +498,8 @@ def _pydantic_problems(exc: ValidationError, parameters: Mapping[str, float], ov
         if err["type"] in ("too_short", "too_long") and any(len(o) > len(loc) and o[: len(loc)] == loc for o in locs):
             continue  # entries that failed are reported themselves; the count pydantic then gives is not the user's
         clean, annotation = messages.walk(ScenarioSpec, loc)
+        if _written_as_scalar(raw, clean):
+            clean = clean[:-1]
         known = messages.keys_at(ScenarioSpec, loc[:-1]) if err["type"] == "extra_forbidden" else ()
         suffix, reason = messages.reason(err, annotation, lambda value: _shown(value, parameters, overridden), known)
         key = key_path(clean) + suffix

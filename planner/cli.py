@@ -1252,7 +1252,8 @@ def _print_sweep(args: argparse.Namespace, result, data: dict, plot, interrupted
                 for model, rows in per_model.items():
                     for rest, edges in rows.items():
                         text = "; ".join(f"{e['from']:.4g} .. {e['to']:.4g}" for e in edges) or "none"
-                        print(f"goal band in {axis_name}, {model}, {rest}: {text}")
+                        at = "" if rest == "-" else f", {rest}"  # ("-": no other axis)
+                        print(f"goal band in {axis_name}, {model}{at}: {text}")
         failed = sum(p is not None and p.status != "ok" for p in result.points)
         if failed:
             print(f"{failed} runs stopped on a solver failure (outcome none; their status is in the results)")

@@ -685,6 +685,9 @@ def _search(step: _Step, previous, replay, tracked, planner, seeded: bool, guide
         reason = f"{ended.message} ({fields['outcome']}, {fields['status']})"
     if pushed is not None:
         reason = f"{reason or ended.message}; before the search, {_tracking_words(pushed, True)}"
+    elif tracked is not None and not accepted:  # (the table's `tracked` column is this tracking's: say so)
+        partial = previous is not None and not previous.ended.holds
+        reason = f"{reason or ended.message}; before the search, {_tracking_words(tracked, partial=partial)}"
     # an accepted plan's states are its replay's under this rung, from the start (the tree's
     # path begins at its root, which may be a seed part-way along the prefix: so are a spliced
     # plan's that is not accepted, whose controls begin with the prefix)
@@ -1081,9 +1084,10 @@ def _tracking_reason(ended: PlanStatus, tracked: Tracked, pushed: bool = False) 
     return f"{ended.message}: " + _tracking_words(tracked, pushed)
 
 
-def _tracking_words(tracked: Tracked, pushed: bool = False) -> str:
+def _tracking_words(tracked: Tracked, pushed: bool = False, partial: bool = False) -> str:
+    """What tracking did, in words; `partial`: the previous plan was a failed rung's partial plan."""
     what = "a push along the geometric plan's object path" if pushed else "the previous plan"
-    words = [f"tracked {tracked.fraction:.0%} of {what}'s duration"]
+    words = [f"tracked {tracked.fraction:.0%} of {what}'s duration" + (" (a partial plan, short of the goal)" if partial else "")]
     if tracked.corrected:
         words.append(f"{tracked.corrected} of {len(tracked.controls)} controls corrected")
     if tracked.repairs:

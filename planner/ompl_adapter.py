@@ -983,7 +983,9 @@ def goal_reach(scenario: Scenario, seed: int = 0) -> dict:
     draw (`GoalSampler.draw`, GOAL_ATTEMPTS tries) from the start. {"in_reach": whether it made
     a goal state in reach of the horizon, "late": the goal states it made out of reach,
     "earliest": the soonest any of those is reached, s (None: none)}. No goal state in reach
-    and some late: the horizon is shorter than the actuators need to get to the goal set."""
+    and some late: the horizon is shorter than the actuators need to get to the goal set. In
+    reach is no promise: it times the actuators' own travel, and a body they must push into the
+    goal (which the geometric rung moves on its own) can need longer."""
     from models.rungs import GeometricChecker
 
     low, high = sampling_limits(scenario, scenario.start)

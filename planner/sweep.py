@@ -128,6 +128,9 @@ def parse_axis(text: str, key: str = "--grid") -> Axis:
             if log and (start <= 0 or stop <= 0):
                 raise ValueError("a log axis needs START and STOP > 0")
             values = np.geomspace(start, stop, count) if log else np.linspace(start, stop, count)
+            # the decimals meant, not the sum's round-off (0.2:0.4:3's middle was 0.30000000000000004
+            # in sweep.csv, sweep.json and a job's result): 15 significant digits, 1e-15 apart at most
+            values = np.array([float(f"{v:.15g}") for v in values])
         else:
             values = np.array([_number(v, "a value") for v in spec.split(",") if v.strip()])
             log = False

@@ -4,6 +4,8 @@ acceptance -- and the loader's limits sit where the format says they do."""
 
 from __future__ import annotations
 
+import re
+
 import pytest
 
 from models.scenario import ScenarioError, load_scenario
@@ -312,3 +314,19 @@ def test_a_repeated_model_is_every_model_in_a_sweep_and_refused_by_simulate(caps
     assert cli.main(["simulate", free, "--model", "kinematic", "--model", "dynamic-rigid"]) == 2
     said = capsys.readouterr().err.splitlines()[-1]
     assert said == "error: command line: --model: given twice (kinematic and dynamic-rigid); it takes one"
+
+
+def test_a_planar_inertia_is_named_as_the_file_writes_it(tmp_path):
+    """A planar inertia is one number in the file (the schema keeps it as a tuple of one): its
+    problems name `bodies[1].inertia`, not `bodies[1].inertia[0]`; a spatial one's keep their index."""
+    text = (SCENARIOS / "two_finger_triangle.toml").read_text()
+    written = re.search(r"^inertia = .*$", text, re.M)[0]
+    for value, shown in (("-1.0", "-1"), ('"-mu"', "-0.5 from '-mu'")):
+        path = tmp_path / "negative_inertia.toml"
+        path.write_text(text.replace(written, f"inertia = {value}", 1))
+        with pytest.raises(ScenarioError) as caught:
+            load_scenario(path)
+        assert [(p.key, p.reason) for p in caught.value.problems] == [("bodies[1].inertia", f"must be greater than 0, got {shown}")]
+    with pytest.raises(ScenarioError) as caught:
+        load_scenario(SCENARIOS / "box_push_3d.toml", {"box_mass": -1.0})
+    assert [p.key for p in caught.value.problems if ".inertia" in p.key] == [f"bodies[1].inertia[{i}]" for i in range(3)]

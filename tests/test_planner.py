@@ -775,6 +775,10 @@ def test_a_failed_search_passes_up_the_previous_plans_replay_where_it_ends_close
         assert not report.ended.holds and len(report.controls) == 10 and sum(report.durations) == pytest.approx(0.5), report.label
         assert "(its first 10 controls, those within the task's horizon, 0.5 s)" in report.reason
     assert "the previous plan's tracked run (its first 10" in short.rungs[-1].reason
+    # the table's `tracked` column of a failed rung is the tracking before its search: its reason says so
+    top = short.rungs[-1]
+    assert top.tracked is not None
+    assert f"before the search, tracked {top.tracked:.0%} of the previous plan's duration (a partial plan" in top.reason
     # a replay that reached the goal (late), ended unsafe or failed is not passed up
     for outcome, status in (("goal", "ok"), ("unsafe", "ok"), ("none", "lcp_failed")):
         replay = _Replay(None, controls=[[0.0, 0.0]], durations=[0.05], outcome=outcome, status=status)

@@ -243,6 +243,10 @@ def test_parse_axis_values():
     axis = sw.parse_axis("v1=0.25:4:5:log")
     assert axis.log and axis.values == pytest.approx((0.25, 0.5, 1.0, 2.0, 4.0))
     assert sw.parse_axis("mu=0.3,0.5").values == (0.3, 0.5)
+    # the decimals meant: the middle of 0.2:0.4:3 had been 0.30000000000000004, 0.1:1:10's 0.30000000000000004 too
+    assert sw.parse_axis("mu=0.2:0.4:3").values == (0.2, 0.3, 0.4)
+    assert sw.parse_axis("mu=0.1:1:10").values == (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0)
+    assert sw.parse_axis("v1=0.25:4:5:log").values == (0.25, 0.5, 1.0, 2.0, 4.0)
     with pytest.raises(ScenarioError):
         sw.parse_axis("mu=")
 
@@ -423,8 +427,11 @@ def test_refinement_keeps_its_runs_and_names_a_boundary_a_solver_failure_bounds(
     data = result.to_json()
     assert len(data["refine_points"]) == len(result.refine_points) == 9  # 0.5 / 2**9 < 1e-3 <= 0.5 / 2**8
     assert sum(p["status"] == "lcp_failed" for p in data["refine_points"]) >= 1
+    data["bands"] = {"x": sw.bands(result, "x")}  # (as the command adds them with --refine)
     cli._print_sweep(SimpleNamespace(json=False, out=Path("out")), result, data, None, False)
     said = capsys.readouterr().out
+    (band,) = [line for line in said.splitlines() if line.startswith("goal band in ")]
+    assert band == f"goal band in x, kinematic: 0 .. {boundary['boundary']:.4g}"  # (no other axis: it had said "kinematic, -:")
     failed = sum(p.status != "ok" for p in result.refine_points)
     assert f"{failed} of the 9 refinement runs stopped on a solver failure" in said
     assert "1 refined boundary lies against a run a solver failure stopped" in said
