@@ -991,7 +991,8 @@ def thrown_warning(scenario: Scenario, rung: Rung, h: float, result: RolloutResu
         return ""
     return (
         f"{found.body} was thrown: kinematic steps moved it at up to {found.speed:.3g} m/s, "
-        f"{found.speed / found.driven:,.0f} times the fastest any driven coordinate moved in the run, {found.driven:.3g} m/s; "
+        f"{found.speed / found.driven:,.0f} times the fastest anything drove it, {found.driven:.3g} m/s or rad/s "
+        "(an actuated coordinate's speed in the run, or a scripted obstacle's); "
         "the kinematic model has "
         f"no forces or friction, and moves a body at whatever speed keeps the contacts apart, without bound where the push "
         f"runs along a contact normal almost across it (a pinch or a grazing wedge, which friction would jam): "
@@ -1005,7 +1006,7 @@ def unbalanced_warning(scenario: Scenario, rung: Rung, h: float, result: Rollout
     if found is None:
         return ""
     driven = (
-        f"{found.speed / found.driven:,.0f} times the fastest any driven coordinate moved in the run, {found.driven:.3g} m/s"
+        f"{found.speed / found.driven:,.0f} times the fastest anything drove it, {found.driven:.3g} m/s or rad/s"
         if found.driven > 0.0
         else "with nothing actuated or scripted moving"
     )

@@ -340,7 +340,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         args = parser.parse_args(argv)
     except ScenarioError as exc:  # (`_Parser.error`)
-        if "--json" in (sys.argv[1:] if argv is None else argv):
+        if any(a.startswith("--j") and "--json".startswith(a) for a in (sys.argv[1:] if argv is None else argv)):  # (or its abbreviation)
             print(json.dumps(exc.to_json(), indent=2))
         _print_error(exc)
         return EXIT_BAD_INPUT
@@ -1111,8 +1111,7 @@ def _check_sweep_args(args: argparse.Namespace):
         except ScenarioError as exc:
             problems += exc.problems
     try:  # --policy: the policy of the models that name none of their own
-        given = ",".join(args.model) if isinstance(args.model, list) else args.model  # (repeated --model: every one; a job's: one text)
-        models = [m if m.policy else replace(m, policy=getattr(args, "policy", None)) for m in sw.parse_models(given)]
+        models = [m if m.policy else replace(m, policy=getattr(args, "policy", None)) for m in sw.parse_models(args.model)]
     except ScenarioError as exc:
         problems += exc.problems
         models = []

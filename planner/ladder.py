@@ -686,7 +686,7 @@ def _search(step: _Step, previous, replay, tracked, planner, seeded: bool, guide
     if pushed is not None:
         reason = f"{reason or ended.message}; before the search, {_tracking_words(pushed, True)}"
     elif tracked is not None and not accepted:  # (the table's `tracked` column is this tracking's: say so)
-        partial = previous is not None and not previous.ended.holds
+        partial = previous is not None and previous.outcome != GOAL  # (a plan refused as late does reach it)
         reason = f"{reason or ended.message}; before the search, {_tracking_words(tracked, partial=partial)}"
     # an accepted plan's states are its replay's under this rung, from the start (the tree's
     # path begins at its root, which may be a seed part-way along the prefix: so are a spliced

@@ -981,7 +981,7 @@ class GoalSampler:
 def goal_reach(scenario: Scenario, seed: int = 0) -> dict:
     """What `ladder check` says of the goal set and the horizon: the geometric rung's first goal
     draw (`GoalSampler.draw`, GOAL_ATTEMPTS tries) from the start. {"in_reach": whether it made
-    a goal state in reach of the horizon, "late": the goal states it made out of reach,
+    a goal state in reach of the horizon (None: it made none at all), "late": the goal states it made out of reach,
     "earliest": the soonest any of those is reached, s (None: none)}. No goal state in reach
     and some late: the horizon is shorter than the actuators need to get to the goal set. In
     reach is no promise: it times the actuators' own travel, and a body they must push into the
@@ -991,4 +991,5 @@ def goal_reach(scenario: Scenario, seed: int = 0) -> dict:
     low, high = sampling_limits(scenario, scenario.start)
     sampler = GoalSampler(scenario, np.random.default_rng(int(seed)), low, high, GeometricChecker(scenario, low, high))
     made = sampler.draw()
-    return {"in_reach": made is not None, "late": sampler.late, "earliest": float(sampler.earliest) if sampler.late else None}
+    in_reach = True if made is not None else False if sampler.late else None  # (None: no goal state made, nothing to time)
+    return {"in_reach": in_reach, "late": sampler.late, "earliest": float(sampler.earliest) if sampler.late else None}

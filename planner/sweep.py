@@ -130,7 +130,8 @@ def parse_axis(text: str, key: str = "--grid") -> Axis:
             values = np.geomspace(start, stop, count) if log else np.linspace(start, stop, count)
             # the decimals meant, not the sum's round-off (0.2:0.4:3's middle was 0.30000000000000004
             # in sweep.csv, sweep.json and a job's result): 15 significant digits, 1e-15 apart at most
-            values = np.array([float(f"{v:.15g}") for v in values])
+            # (and 0 where the axis crosses it: -0.7:0.3:11's middle was 1.1e-16)
+            values = np.array([0.0 if abs(v) < 1e-13 * max(abs(start), abs(stop)) else float(f"{v:.15g}") for v in values])
         else:
             values = np.array([_number(v, "a value") for v in spec.split(",") if v.strip()])
             log = False
@@ -146,10 +147,8 @@ def parse_axis(text: str, key: str = "--grid") -> Axis:
 _MODEL = re.compile(r"^\s*(?:([A-Za-z0-9_.-]+)\s*=\s*)?([a-z-]+)\s*(?:\[(.*)\])?\s*$")
 
 
-def parse_models(text: str) -> list[ModelSpec]:
-    """``quasistatic-rigid,elastic=dynamic-compliant[C=0;finger_mass=1e3]``: rungs, each with
-    optional overrides (separated by ';' or ',' inside the brackets; ``policy=NAME`` runs one of
-    the scenario's [task.policies]) and an optional label."""
+def _model_specs(text: str) -> list[ModelSpec]:
+    """One --model text's models (`parse_models`), its labels not yet checked against each other."""
     from models.family import PROPAGATING_RUNGS
 
     syntax = "[LABEL=]RUNG[NAME=VALUE,...], e.g. elastic=dynamic-compliant[C=0,finger_mass=1e3]"
@@ -199,6 +198,16 @@ def parse_models(text: str) -> list[ModelSpec]:
         if twice:
             raise ScenarioError(Path("--model"), [Problem(f"--model {item}", f"{', '.join(twice)} overridden twice")])
         specs.append(ModelSpec(m.group(2), tuple(overrides), m.group(1) or "", policy))
+    return specs
+
+
+def parse_models(text: str | list[str]) -> list[ModelSpec]:
+    """``quasistatic-rigid,elastic=dynamic-compliant[C=0;finger_mass=1e3]``: rungs, each with
+    optional overrides (separated by ';' or ',' inside the brackets; ``policy=NAME`` runs one of
+    the scenario's [task.policies]) and an optional label; a list: the texts of repeated --model
+    options, each parsed on its own, their labels distinct across them."""
+    texts = [text] if isinstance(text, str) else list(text)
+    specs = [spec for one in texts for spec in _model_specs(one)]
     labels = [spec.label for spec in specs]
     twice = sorted({label for label in labels if labels.count(label) > 1})
     if twice:
@@ -206,7 +215,7 @@ def parse_models(text: str) -> list[ModelSpec]:
             Path("--model"),
             [
                 Problem(
-                    f"--model {text}",
+                    " ".join(f"--model {one}" for one in texts),
                     f"the label {label!r} names two models (or one model is given twice); give each model its own label, LABEL=RUNG[...]",
                 )
                 for label in twice

@@ -290,6 +290,8 @@ def test_a_flag_argparse_refuses_is_bad_input_as_any_other(capsys):
     assert err.startswith("usage: ladder plan ") and err.splitlines()[-1] == (
         "error: command line: --planner: invalid choice: 'PRM' (choose from 'RRT', 'KPIECE1', 'EST')"
     )
+    assert main(["plan", free, "--planner", "PRM", "--js"]) == 2  # (argparse takes an abbreviation: so does the JSON)
+    assert json.loads(capsys.readouterr().out)["problems"][0]["key"] == "--planner"
     assert main(["plan", free, "--seed", "x"]) == 2
     out, err = capsys.readouterr()
     assert out == "" and err.splitlines()[-1] == "error: command line: --seed: invalid int value: 'x'"
@@ -314,6 +316,16 @@ def test_a_repeated_model_is_every_model_in_a_sweep_and_refused_by_simulate(caps
     assert cli.main(["simulate", free, "--model", "kinematic", "--model", "dynamic-rigid"]) == 2
     said = capsys.readouterr().err.splitlines()[-1]
     assert said == "error: command line: --model: given twice (kinematic and dynamic-rigid); it takes one"
+    from planner import sweep as sw
+
+    with pytest.raises(ScenarioError) as caught:  # each --model parsed on its own: an open '[' does not take the next
+        sw.parse_models(["kinematic[C=0", "dynamic-rigid"])
+    assert [p.key for p in caught.value.problems] == ["--model kinematic[C=0"]
+    with pytest.raises(ScenarioError, match="no model given"):
+        sw.parse_models(["", "kinematic"])
+    with pytest.raises(ScenarioError) as caught:  # labels distinct across them
+        sw.parse_models(["kinematic", "kinematic"])
+    assert [p.key for p in caught.value.problems] == ["--model kinematic --model kinematic"]
 
 
 def test_a_planar_inertia_is_named_as_the_file_writes_it(tmp_path):

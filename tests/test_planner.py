@@ -855,6 +855,11 @@ def test_check_says_when_no_goal_state_is_in_reach_of_the_horizon(tmp_path, caps
         assert main(["check", str(path), "--json"]) == 0
         assert json.loads(capsys.readouterr().out)["task"]["goal_reach"] == {"in_reach": True, "late": 0, "earliest": None}
         assert main(["check", str(path)]) == 0 and "looks too short" not in capsys.readouterr().out
+    from planner import ompl_adapter
+
+    with pytest.MonkeyPatch.context() as patch:  # no goal state made at all: nothing to time, not "out of reach"
+        patch.setattr(ompl_adapter.GoalSampler, "draw", lambda self: None)
+        assert ompl_adapter.goal_reach(load_scenario(TRIANGLE)) == {"in_reach": None, "late": 0, "earliest": None}
     assert main(["check", str(SCENARIOS / "bouncing_disc.toml"), "--json"]) == 0  # nothing to actuate: no plan, no draw
     assert "goal_reach" not in json.loads(capsys.readouterr().out)["task"]
 

@@ -247,6 +247,7 @@ def test_parse_axis_values():
     assert sw.parse_axis("mu=0.2:0.4:3").values == (0.2, 0.3, 0.4)
     assert sw.parse_axis("mu=0.1:1:10").values == (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0)
     assert sw.parse_axis("v1=0.25:4:5:log").values == (0.25, 0.5, 1.0, 2.0, 4.0)
+    assert sw.parse_axis("x=-0.7:0.3:11").values[7] == 0.0  # (crossing 0: it had been 1.1e-16)
     with pytest.raises(ScenarioError):
         sw.parse_axis("mu=")
 
