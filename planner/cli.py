@@ -43,11 +43,21 @@ class _Parser(argparse.ArgumentParser):
     `error: command line: --flag: reason` (and with --json the problem as JSON on stdout, `main`),
     not `ladder plan: error: argument --flag: ...` that a grep for ^error: misses."""
 
+    def parse_known_args(self, args=None, namespace=None):
+        self._given = list(sys.argv[1:] if args is None else args)  # (what `error` looks through)
+        return super().parse_known_args(args, namespace)
+
     def error(self, message: str):
         self.print_usage(sys.stderr)
         flag, colon, reason = message.removeprefix("argument ").partition(": ")
-        problem = Problem(flag, reason) if message.startswith("argument ") and colon else Problem("", message)
-        raise ScenarioError("command line", [problem])
+        problems = [Problem(flag, reason) if message.startswith("argument ") and colon else Problem("", message)]
+        if message.startswith("the following arguments are required"):  # argparse stops there: an unknown flag too
+            known = list(self._option_string_actions)
+            for given in getattr(self, "_given", []):
+                name = given.partition("=")[0]
+                if name.startswith("--") and len(name) > 2 and not any(option.startswith(name) for option in known):
+                    problems.insert(0, Problem(name, "no such option"))
+        raise ScenarioError("command line", problems)
 
 
 class _Once(argparse.Action):

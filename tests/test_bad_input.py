@@ -297,6 +297,11 @@ def test_a_flag_argparse_refuses_is_bad_input_as_any_other(capsys):
     assert out == "" and err.splitlines()[-1] == "error: command line: --seed: invalid int value: 'x'"
     assert main(["sweep", free, "--grid", "gap=1"]) == 2
     assert capsys.readouterr().err.splitlines()[-1] == "error: command line: the following arguments are required: --model"
+    assert main(["simulate", free, "--polcy", "x"]) == 2  # a misspelt flag is named too, not only the missing option
+    assert capsys.readouterr().err.splitlines()[-2:] == [
+        "error: command line: --polcy: no such option",
+        "error: command line: the following arguments are required: --model",
+    ]
     assert main([]) == 2
     assert capsys.readouterr().err.splitlines() == [
         "usage: ladder [-h] COMMAND ...",
