@@ -226,6 +226,23 @@ def test_the_token_may_come_as_a_query_parameter_on_the_events_route_only(tmp_pa
         assert page.status_code == 200 and page.headers["content-type"].startswith("text/html") and "EventSource" in page.text
 
 
+def test_a_rung_without_states_has_no_times_in_the_scene():
+    """One time per state: an omitted rung (no states) had times [0.0] and no placement, which
+    stopped the viewer's animation; a failed rung's states are one per control boundary."""
+    from planner.service.view import scene_view
+
+    plan = {
+        "rungs": [
+            {"rung": "kinematic", "ended": "omitted", "outcome": "none", "controls": [], "durations": [], "states": []},
+            {"rung": "dynamic-rigid", "ended": "failed", "outcome": "none", "durations": [0.5, 0.25], "states": [[0, 0], [1, 0], [2, 0]]},
+        ]
+    }
+    view = scene_view({"filename": "free.toml", "scenario": FREE}, json.dumps(plan))
+    omitted, failed = view["rungs"]
+    assert omitted["times"] == [] and omitted["placements"] == []
+    assert failed["times"] == [0.0, 0.5, 0.75] and len(failed["placements"]) == 3
+
+
 def test_the_scene_of_a_spatial_job_has_its_shapes_and_mesh_vertices(idle):
     from models.geometry import read_obj
 

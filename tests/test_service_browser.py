@@ -146,6 +146,17 @@ def test_the_viewer_draws_a_spatial_scene_from_above_and_a_sweeps_outcomes(brows
         assert pixels["objects"] > 1000 and pixels["robots"] > 50  # the 0.2 m box, the 0.03 m sphere
         assert table["robots"] > 0.5 * pixels["total"] and table["objects"] > 1000  # the table under all, the wall and the wedge
         page.screenshot(path=str(tmp_path / "viewer-3d.png"), full_page=True)
+        # a rung with no states (omitted, skipped) shows the bodies at their start and the animation goes on:
+        # its times had one entry and its placements none, and the page stopped drawing at the first frame
+        empty = {"rung": "kinematic", "label": "kinematic", "ended": "omitted", "outcome": "none", "times": [], "placements": []}
+        page.evaluate(
+            f"async (empty) => {{ const scene = await (await api('/jobs/{job['id']}/scene')).json(); "
+            "scene.rungs = [empty]; startAnimation(scene); }",
+            empty,
+        )
+        before = page.evaluate("Number(document.getElementById('view').dataset.drawn)")
+        page.wait_for_function(f"Number(document.getElementById('view').dataset.drawn) > {before + 5}", timeout=10_000)
+        assert page.evaluate(COUNT_PIXELS, [ROBOT, OBJECT])["objects"] > 1000 and errors == []
 
         sweep = {
             "axes": [{"name": "v1", "values": [0.25, 1.0, 4.0], "log": True}],

@@ -485,7 +485,7 @@ def create_app(
         last_event_id: str | None = Header(None),
         token: str | None = Query(None, description="the bearer token, for clients that cannot send headers (EventSource)"),
     ):
-        """Server-sent events: state, rung_started, progress, rung_ended, job_ended (the last)."""
+        """Server-sent events: state, rung_started, progress, rung_ended, cancel_requested, job_ended (the last)."""
         get_row(job_id)
         try:
             after = int(last_event_id) if last_event_id else 0

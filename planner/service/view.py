@@ -55,7 +55,7 @@ def scene_view(inputs: dict, result: str | None = None) -> dict:
 
 def _rung_view(scenario, rung: dict) -> dict:
     moving = [b.name for b in scenario.spec.bodies if b.dofs]
-    times = [0.0]
+    times = [0.0] if rung.get("states") else []  # (one per state: an omitted or skipped rung has none)
     for duration in rung.get("durations", [])[: max(0, len(rung.get("states", [])) - 1)]:
         times.append(times[-1] + float(duration))
     placements = []
