@@ -655,7 +655,7 @@ def _simulation_summary(args: argparse.Namespace, scenario: Scenario, result, h:
     """The simulate report: the run's outcome, final state, solver counters, the largest
     penetration met at a step's start (m: a compliant contact's deformation, or a rigid contact's
     first-order error at a large step), what the result says beside its status
-    (`models.rungs.run_warnings`) and parameters."""
+    (`models.rungs.run_warnings`), the family defaults a rung not in the ladder runs at, and parameters."""
     from models.rungs import run_warnings, rung_for
 
     return {
@@ -678,6 +678,7 @@ def _simulation_summary(args: argparse.Namespace, scenario: Scenario, result, h:
         "max_residual": result.max_residual,
         "max_lcp_size": result.max_lcp_size,
         "max_penetration": result.max_penetration,
+        "not_in_ladder": unlisted_rung_note(scenario, args.model),  # (the note stderr has without --json; None: in the ladder)
         "warnings": run_warnings(scenario, rung_for(scenario, args.model), h, result),
         "parameters": dict(scenario.parameters),
     }

@@ -1071,3 +1071,18 @@ def test_simulate_of_a_plan_sums_its_durations_correctly_rounded(tmp_path, capsy
     assert main(["simulate", TRIANGLE, "--plan", str(tmp_path / "plan.json"), "--model", "kinematic", "--json"]) == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["duration"] == 4.5 and summary["steps"] == 450
+
+
+def test_simulate_json_says_when_the_rung_is_not_in_the_ladder(capsys):
+    """The note stderr has without --json (the family defaults an unlisted rung runs at) is the
+    object's `not_in_ladder` with it; --json had dropped it."""
+    from planner.cli import main
+
+    free = str(SCENARIOS / "free_transfer.toml")  # its ladder: geometric, kinematic
+    assert main(["simulate", free, "--model", "dynamic-rigid", "--duration", "0.01", "--json"]) == 0
+    out, err = capsys.readouterr()
+    note = json.loads(out)["not_in_ladder"]
+    assert note.startswith("dynamic-rigid is not in the scenario's ladder, so it runs at its family's defaults: h = 0.0001")
+    assert "not in the scenario's ladder" not in err
+    assert main(["simulate", free, "--model", "kinematic", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["not_in_ladder"] is None
