@@ -596,3 +596,33 @@ def test_a_signal_to_the_servers_process_group_while_a_job_runs_and_restart(tmp_
         proc.send_signal(signal.SIGINT)
         proc.wait(timeout=30)
         client.close()
+
+
+def test_a_jobs_last_progress_is_not_held_back(monkeypatch):
+    """Progress events are throttled; the last one held back is written when the job ends (a
+    cancelled sweep's progress had said 10 runs done where its result kept 11)."""
+    from planner.service import jobs, worker
+
+    class Sink:
+        def __init__(self):
+            self.progressed, self.events = [], []
+
+        def cancel_requested(self):
+            return False
+
+        def progress(self, data, event=None):
+            self.progressed.append(data)
+
+        def event(self, type_, data):
+            self.events.append(type_)
+
+    def run(kind, inputs, options, *, sweep_progress, **kwargs):
+        for done in range(1, 12):  # 11 runs of 50 in well under PROGRESS_EVERY
+            sweep_progress({"runs_done": done, "runs": 50})
+        return "{}", False
+
+    monkeypatch.setattr(jobs, "run", run)
+    sink = Sink()
+    assert worker.execute("sweep", {}, {}, sink)[0] == "cancelled"
+    assert sink.progressed[0] == {"runs_done": 1, "runs": 50} and sink.progressed[-1] == {"runs_done": 11, "runs": 50}
+    assert len(sink.progressed) == 2  # the first, and the last held back

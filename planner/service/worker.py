@@ -53,7 +53,7 @@ def execute(
     """Run a job: (its final state, the result file's text or None, its error or None).
     `check()` runs at every stop check (a local worker exits there when the server died)."""
     deadline = None if max_seconds is None else time.monotonic() + max_seconds
-    state = {"cancel": False, "timeout": False, "checked": 0.0, "written": 0.0}
+    state = {"cancel": False, "timeout": False, "checked": 0.0, "written": 0.0, "pending": None}
 
     def stop() -> bool:
         if check is not None:
@@ -71,19 +71,24 @@ def execute(
         data = {"rung": rung, "iterations": iterations, "propagations": propagations}
         if iterations == 0 and propagations == 0:
             sink.progress(data, ("rung_started", {"rung": rung}))
-            state["written"] = now
+            state["written"], state["pending"] = now, None
         elif now - state["written"] >= PROGRESS_EVERY:
             sink.progress(data, ("progress", data))
-            state["written"] = now
+            state["written"], state["pending"] = now, None
+        else:
+            state["pending"] = data
 
     def rung_done(report) -> None:
+        state["pending"] = None  # (its progress held back is superseded by its end)
         sink.event("rung_ended", jobs.rung_view(report))
 
     def sweep_progress(data: dict) -> None:
         now = time.monotonic()
         if now - state["written"] >= PROGRESS_EVERY or data.get("runs_done") == data.get("runs"):
             sink.progress(data, ("progress", data))
-            state["written"] = now
+            state["written"], state["pending"] = now, None
+        else:
+            state["pending"] = data
 
     try:
         text, complete = jobs.run(kind, inputs, options, progress=progress, rung_done=rung_done, sweep_progress=sweep_progress, stop=stop)
@@ -91,6 +96,9 @@ def execute(
         return "failed", None, str(exc)
     except Exception as exc:  # a bug, reported on the job rather than lost
         return "failed", None, f"internal error: {type(exc).__name__}: {exc}"
+    finally:  # the last progress the throttle held back: a cancelled sweep's had said 10 runs where its result kept 11
+        if state["pending"] is not None:
+            sink.progress(state["pending"], ("progress", state["pending"]))
     if complete:
         return "succeeded", text, None
     if state["timeout"] and not state["cancel"]:
