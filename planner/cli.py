@@ -604,7 +604,8 @@ def _run_simulation(args: argparse.Namespace, scenario: Scenario, plan_controls,
     with interrupt.deferred():
         announce_compile()
         rung.rollout(scenario, state, controls[:1], [h], h)  # load the compiled kernels before timing
-        if not args.json or total > PROGRESS_STEPS:
+        quiet = getattr(args, "quiet", False)  # (a service job: its events say it, not the server's log)
+        if not quiet and (not args.json or total > PROGRESS_STEPS):
             # each control runs whole steps (`control_steps`): say so where that is not the duration asked for
             whole = abs(total * h - duration) <= 1e-9 * duration
             span = f"{duration:g} s" if whole else f"{duration:g} s run as {total * h:g} s of whole steps"
@@ -614,7 +615,8 @@ def _run_simulation(args: argparse.Namespace, scenario: Scenario, plan_controls,
             return run_with_progress(rung, scenario, state, controls, durations, h, live=live, laws=laws)
         except KeyboardInterrupt as stop:
             done = getattr(stop, "steps_done", 0)
-            print(f"interrupted after {done:,} of {total:,} steps; nothing written", file=sys.stderr, flush=True)
+            if not quiet:
+                print(f"interrupted after {done:,} of {total:,} steps; nothing written", file=sys.stderr, flush=True)
             return None
 
 

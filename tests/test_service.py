@@ -626,3 +626,14 @@ def test_a_jobs_last_progress_is_not_held_back(monkeypatch):
     assert worker.execute("sweep", {}, {}, sink)[0] == "cancelled"
     assert sink.progressed[0] == {"runs_done": 1, "runs": 50} and sink.progressed[-1] == {"runs_done": 11, "runs": 50}
     assert len(sink.progressed) == 2  # the first, and the last held back
+
+
+def test_a_simulate_job_leaves_the_servers_log_alone(capsys):
+    """A job's progress is its events: the CLI's "simulating N steps (...; Ctrl-C stops)" line,
+    which a long run printed even under --json, had gone to the server's stderr."""
+    from planner.service import jobs
+
+    options = {"model": "kinematic", "duration": 2500.0}  # 250,000 steps, over the progress bar's threshold
+    text, complete = jobs.run("simulate", {"filename": "free.toml", "scenario": FREE}, options)
+    assert complete and json.loads(text)["duration"] == 2500.0  # (its policy ends unsafe at 1.6 s: the line counts the steps asked for)
+    assert "simulating" not in capsys.readouterr().err

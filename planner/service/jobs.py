@@ -256,6 +256,7 @@ def cli_args(kind: str, path: Path, parameters: dict, options: dict, out: Path) 
         plot=None,
         plan=None,
         json=True,
+        quiet=True,  # no "simulating N steps (Ctrl-C stops)" in the server's log
     )
 
 
