@@ -68,23 +68,23 @@ def install() -> None:
 
 
 @contextmanager
+def _inside(counter: str):
+    """A block counted in _state[counter] (blocks nest)."""
+    _state[counter] += 1
+    try:
+        yield
+    finally:
+        _state[counter] -= 1
+
+
 def deferred():
     """A block whose loops check `asked()` between compiled calls: Ctrl-C only sets the flag."""
-    _state["deferring"] += 1
-    try:
-        yield
-    finally:
-        _state["deferring"] -= 1
+    return _inside("deferring")
 
 
-@contextmanager
 def shielded():
     """A block that writes a command's results: Ctrl-C only sets `held` (see the module)."""
-    _state["shielding"] += 1
-    try:
-        yield
-    finally:
-        _state["shielding"] -= 1
+    return _inside("shielding")
 
 
 def ask() -> None:
