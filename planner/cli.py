@@ -52,11 +52,11 @@ class _Parser(argparse.ArgumentParser):
         flag, colon, reason = message.removeprefix("argument ").partition(": ")
         problems = [Problem(flag, reason) if message.startswith("argument ") and colon else Problem("", message)]
         if message.startswith("the following arguments are required"):  # argparse stops there: an unknown flag too
-            known = list(self._option_string_actions)
-            for given in getattr(self, "_given", []):
-                name = given.partition("=")[0]
-                if name.startswith("--") and len(name) > 2 and not any(option.startswith(name) for option in known):
-                    problems.insert(0, Problem(name, "no such option"))
+            known, given = list(self._option_string_actions), getattr(self, "_given", [])
+            given = given[: given.index("--")] if "--" in given else given  # (after it: positionals)
+            names = [text.partition("=")[0] for text in given]
+            unknown = [n for n in names if n.startswith("--") and len(n) > 2 and not any(option.startswith(n) for option in known)]
+            problems[:0] = [Problem(name, "no such option") for name in unknown]
         raise ScenarioError("command line", problems)
 
 

@@ -302,6 +302,13 @@ def test_a_flag_argparse_refuses_is_bad_input_as_any_other(capsys):
         "error: command line: --polcy: no such option",
         "error: command line: the following arguments are required: --model",
     ]
+    assert main(["simulate", free, "--polcy", "x", "--plott", "p.png"]) == 2  # in the order given
+    assert [line for line in capsys.readouterr().err.splitlines() if "no such option" in line] == [
+        "error: command line: --polcy: no such option",
+        "error: command line: --plott: no such option",
+    ]
+    assert main(["simulate", "--", "--polcy"]) == 2  # after "--" a positional, not a flag
+    assert "no such option" not in capsys.readouterr().err
     assert main([]) == 2
     assert capsys.readouterr().err.splitlines() == [
         "usage: ladder [-h] COMMAND ...",

@@ -627,6 +627,27 @@ def test_a_jobs_last_progress_is_not_held_back(monkeypatch):
     assert sink.progressed[0] == {"runs_done": 1, "runs": 50} and sink.progressed[-1] == {"runs_done": 11, "runs": 50}
     assert len(sink.progressed) == 2  # the first, and the last held back
 
+    class Locked(Sink):  # a store that fails at the flush: the job fails, not the worker (it had raised, the job left running)
+        def progress(self, data, event=None):
+            if self.progressed:
+                raise RuntimeError("database is locked")
+            self.progressed.append(data)
+
+    assert worker.execute("sweep", {}, {}, Locked()) == ("failed", None, "internal error: RuntimeError: database is locked")
+
+
+def test_a_dask_tasks_last_progress_arrives_with_its_end():
+    """Progress goes to the server as topic messages, which may arrive after the task's end
+    (and are then dropped): the task's last message comes with its result when it is not kept."""
+    from planner.service.remote import must_arrive
+
+    claim, ended = {"n": 1, "type": "claim"}, {"n": 7, "type": "event"}
+    late = {"n": 9, "type": "progress"}
+    assert must_arrive([claim, ended], late) == [claim, ended, late]
+    assert must_arrive([claim, ended], ended) == [claim, ended]  # the last was kept
+    assert must_arrive([claim, ended], {"n": 5, "type": "progress"}) == [claim, ended]  # superseded by a later kept one
+    assert must_arrive([], None) == []
+
 
 def test_a_simulate_job_leaves_the_servers_log_alone(capsys):
     """A job's progress is its events: the CLI's "simulating N steps (...; Ctrl-C stops)" line,

@@ -42,6 +42,7 @@ class TopicSink:
         self.worker = get_worker()
         self.job_id, self.run, self.n = job_id, uuid.uuid4().hex, 0
         self.kept: list[dict] = []
+        self.last: dict | None = None  # the last message sent
         self.cancel = _cancel_event(job_id)
 
     def send(self, type_: str, data: dict, *, keep: bool) -> None:
@@ -49,6 +50,7 @@ class TopicSink:
         message = {"job": self.job_id, "run": self.run, "n": self.n, "type": type_, "data": data}
         if keep:
             self.kept.append(message)
+        self.last = message
         self.worker.log_event(TOPIC, message)
 
     def cancel_requested(self) -> bool:
@@ -69,7 +71,16 @@ def run_remote(job_id: str, kind: str, inputs: dict, options: dict, max_seconds:
             return {"state": "cancelled", "result": None, "error": None, "messages": []}
         sink.send("claim", {}, keep=True)
         final, text, error = execute(kind, inputs, options, sink, max_seconds)
-        return {"state": final, "result": text, "error": error, "messages": sink.kept}
+        return {"state": final, "result": text, "error": error, "messages": must_arrive(sink.kept, sink.last)}
+
+
+def must_arrive(kept: list[dict], last: dict | None) -> list[dict]:
+    """A task's messages that must reach the store before its end: the kept ones, and the last
+    message sent when it is not one of them (the job's last progress, which a topic message
+    could bring after the job's end, where it is dropped)."""
+    if last is None or (kept and last["n"] <= kept[-1]["n"]):
+        return kept
+    return [*kept, last]
 
 
 class DaskRunner:

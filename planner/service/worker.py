@@ -92,13 +92,13 @@ def execute(
 
     try:
         text, complete = jobs.run(kind, inputs, options, progress=progress, rung_done=rung_done, sweep_progress=sweep_progress, stop=stop)
+        # the last progress the throttle held back (a cancelled sweep's had said 10 runs where its result kept 11)
+        if state["pending"] is not None:
+            sink.progress(state["pending"], ("progress", state["pending"]))
     except ScenarioError as exc:
         return "failed", None, str(exc)
     except Exception as exc:  # a bug, reported on the job rather than lost
         return "failed", None, f"internal error: {type(exc).__name__}: {exc}"
-    finally:  # the last progress the throttle held back: a cancelled sweep's had said 10 runs where its result kept 11
-        if state["pending"] is not None:
-            sink.progress(state["pending"], ("progress", state["pending"]))
     if complete:
         return "succeeded", text, None
     if state["timeout"] and not state["cancel"]:
