@@ -349,11 +349,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
-    except ScenarioError as exc:  # (`_Parser.error`)
-        if any(a.startswith("--j") and "--json".startswith(a) for a in (sys.argv[1:] if argv is None else argv)):  # (or its abbreviation)
-            print(json.dumps(exc.to_json(), indent=2))
-        _print_error(exc)
-        return EXIT_BAD_INPUT
+    except ScenarioError as exc:  # (`_Parser.error`: no namespace to read --json from, or its abbreviation)
+        return _bad_input(exc, any(a.startswith("--j") and "--json".startswith(a) for a in (sys.argv[1:] if argv is None else argv)))
     from planner import interrupt
 
     interrupt.install()
@@ -362,10 +359,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return args.handler(args)
     except ScenarioError as exc:
-        if getattr(args, "json", False):  # (a script reading --json's stdout gets the problems too)
-            print(json.dumps(exc.to_json(), indent=2))
-        _print_error(exc)
-        return EXIT_BAD_INPUT
+        return _bad_input(exc, getattr(args, "json", False))
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
@@ -379,6 +373,15 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:  # the reader went away (e.g. `| head`): nothing more to say
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return EXIT_OK
+
+
+def _bad_input(exc: ScenarioError, as_json: bool) -> int:
+    """Report bad input: with --json also as one object on stdout (a script reading it gets the
+    problems too), always as `error:` lines on stderr; EXIT_BAD_INPUT."""
+    if as_json:
+        print(json.dumps(exc.to_json(), indent=2))
+    _print_error(exc)
+    return EXIT_BAD_INPUT
 
 
 def _print_error(exc: Exception) -> None:

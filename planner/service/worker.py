@@ -66,29 +66,26 @@ def execute(
             state["cancel"] = sink.cancel_requested()
         return state["cancel"] or state["timeout"]
 
-    def progress(rung: str, iterations: int, propagations: int) -> None:
+    def report(data: dict, event: tuple[str, dict], now_too: bool) -> None:
+        """Progress written at most every PROGRESS_EVERY s (at once when `now_too`); the latest held back is kept."""
         now = time.monotonic()
-        data = {"rung": rung, "iterations": iterations, "propagations": propagations}
-        if iterations == 0 and propagations == 0:
-            sink.progress(data, ("rung_started", {"rung": rung}))
-            state["written"], state["pending"] = now, None
-        elif now - state["written"] >= PROGRESS_EVERY:
-            sink.progress(data, ("progress", data))
+        if now_too or now - state["written"] >= PROGRESS_EVERY:
+            sink.progress(data, event)
             state["written"], state["pending"] = now, None
         else:
             state["pending"] = data
+
+    def progress(rung: str, iterations: int, propagations: int) -> None:
+        data = {"rung": rung, "iterations": iterations, "propagations": propagations}
+        started = iterations == 0 and propagations == 0
+        report(data, ("rung_started", {"rung": rung}) if started else ("progress", data), started)
 
     def rung_done(report) -> None:
         state["pending"] = None  # (its progress held back is superseded by its end)
         sink.event("rung_ended", jobs.rung_view(report))
 
     def sweep_progress(data: dict) -> None:
-        now = time.monotonic()
-        if now - state["written"] >= PROGRESS_EVERY or data.get("runs_done") == data.get("runs"):
-            sink.progress(data, ("progress", data))
-            state["written"], state["pending"] = now, None
-        else:
-            state["pending"] = data
+        report(data, ("progress", data), data.get("runs_done") == data.get("runs"))
 
     try:
         text, complete = jobs.run(kind, inputs, options, progress=progress, rung_done=rung_done, sweep_progress=sweep_progress, stop=stop)
