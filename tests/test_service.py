@@ -658,3 +658,14 @@ def test_a_simulate_job_leaves_the_servers_log_alone(capsys):
     text, complete = jobs.run("simulate", {"filename": "free.toml", "scenario": FREE}, options)
     assert complete and json.loads(text)["duration"] == 2500.0  # (its policy ends unsafe at 1.6 s: the line counts the steps asked for)
     assert "simulating" not in capsys.readouterr().err
+
+
+def test_a_simulate_jobs_note_on_a_rung_not_in_the_ladder_speaks_the_requests_words():
+    """The note names options.step, the request's key, where `ladder simulate` names --step."""
+    from planner.service import jobs
+
+    options = {"model": "dynamic-rigid", "duration": 0.05}  # free_transfer's ladder: geometric, kinematic
+    text, complete = jobs.run("simulate", {"filename": "free.toml", "scenario": FREE}, options)
+    note = json.loads(text)["not_in_ladder"]
+    assert complete and note.startswith("dynamic-rigid is not in the scenario's ladder")
+    assert "(unless options.step)" in note and "--step" not in note

@@ -389,4 +389,7 @@ def run(
             result = cli._run_simulation(args, scenario, plan_controls, h, duration, total)
         if result is None:
             return None, False
-        return json.dumps(cli._simulation_summary(args, scenario, result, h, duration), indent=2) + "\n", True
+        summary = cli._simulation_summary(args, scenario, result, h, duration)
+        if summary["not_in_ladder"]:  # ("unless --step": the request's options.step)
+            summary["not_in_ladder"] = _cli_reason(kind, summary["not_in_ladder"])
+        return json.dumps(summary, indent=2) + "\n", True
