@@ -511,6 +511,10 @@ def _track_rounds(step: _Step, stage: RungReport, h: float) -> Tracked:
         if part.outcome == GOAL or step.stopped() or left <= 0 or k + 1 == COARSE_ROUNDS:
             break
         t = part.diverged_at if part.diverged_at is not None else len(part.controls) * period
+        cut = _time_left_for_search(scenario, run, len(run.controls) - len(part.controls))
+        if cut < len(run.controls):  # the search starts where it has time to reach the goal
+            t = min(t, (cut - (len(run.controls) - len(part.controls))) * period)
+            run.truncate(cut)
         guide = np.array([reference.configuration(x) for x in np.arange(t, reference.duration + 1e-9, period)])
         plan = plan_control(
             scenario,
@@ -539,6 +543,20 @@ def _track_rounds(step: _Step, stage: RungReport, h: float) -> Tracked:
 
 #: Seed offset between a rung's coarse re-plans.
 COARSE_STRIDE = 15485863
+#: A coarse re-plan starts from a tracked state at least this long before the task's horizon.
+#: Tracking that follows a plan reaching the goal near the horizon goes on to it (the
+#: reference's last periods and TRACK_SETTLE more) and may end there, within TRACK_TOLERANCE
+#: of the goal set but outside it (the post scene in tests/data: 2.6 mm out at 12 s); a search
+#: from that state has no time left and had spent the rung's whole budget in vain.
+SEARCH_TIME = 2.0
+
+
+def _time_left_for_search(scenario: Scenario, run: Tracked, floor: int) -> int:
+    """How many of `run`'s controls (at least `floor`: those of the rounds before) to keep so
+    that a search from the state after them has SEARCH_TIME before the task's horizon."""
+    ends = np.cumsum(run.durations)
+    keep = int(np.searchsorted(ends, latest_goal_time(scenario) - SEARCH_TIME, side="right"))
+    return max(floor, min(keep, len(run.controls)))
 
 
 def _skipped(step: _Step, previous: RungReport, reason: str) -> RungReport:
@@ -671,7 +689,7 @@ def _search(step: _Step, previous, replay, tracked, planner, seeded: bool, guide
             from planner.cli import counted
 
             reason += f"; {counted(plan.past_horizon, 'control')} would have ended past the task's horizon ({_horizon_words(scenario)})"
-        closer = _closer_partial(step, replay, fields, tracked=tracked is not None)
+        closer = _closer_partial(step, replay, fields, tracked=tracked is not None, searched=plan.iterations > 0)
         if closer is not None:  # the partial plan passed up is the previous plan's run under the rung
             words, tail = closer
             reason += words
@@ -710,10 +728,11 @@ def _search(step: _Step, previous, replay, tracked, planner, seeded: bool, guide
     )
 
 
-def _closer_partial(step: _Step, replay: _Replay | None, fields: dict, tracked: bool = False):
+def _closer_partial(step: _Step, replay: _Replay | None, fields: dict, tracked: bool = False, searched: bool = True):
     """Where a search found no plan, the previous plan's replay (or tracked run) under the rung as
-    the partial plan to pass up, if it ends closer to the goal than the search's closest path:
-    (the reason's words, the run), else None. Only its controls that
+    the partial plan to pass up, if it ends closer to the goal than the search's closest path
+    (the start where the search ran no iteration: `searched` False): (the reason's words, the
+    run), else None. Only its controls that
     end within the task's horizon count, as a search's do. A grasp the geometric path missed by
     1.4 mm had been dropped for a search's path 0.85 m away (the paper's scene at a 0.76 s
     horizon). A run that reached the goal (late: the plan the rung refused), or ended unsafe or in
@@ -730,10 +749,12 @@ def _closer_partial(step: _Step, replay: _Replay | None, fields: dict, tracked: 
         return None
     what = "tracked run" if tracked else "replay"
     within = "" if run is replay else f" (its first {m} controls, those within {_horizon_words(step.scenario)})"
-    words = (
-        f"; the previous plan's {what}{within}, {own:.3g} m from the goal, is the partial plan passed up "
-        f"(the search's closest path ends {fields['goal_distance']:.3g} m from it)"
+    closest = (
+        f"the search's closest path ends {fields['goal_distance']:.3g} m from it"
+        if searched
+        else f"the search had no iteration left to run; the start is {fields['goal_distance']:.3g} m from it"
     )
+    words = f"; the previous plan's {what}{within}, {own:.3g} m from the goal, is the partial plan passed up ({closest})"
     return words, run
 
 

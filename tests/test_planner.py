@@ -962,3 +962,60 @@ def test_a_previous_plan_refused_for_reaching_the_goal_late_says_so(tmp_path):
     rung = rung_for(scenario, top.rung)
     run = rung.rollout(scenario, rung.initial_state(scenario), np.array(top.controls), np.array(top.durations), top.h)
     assert run.outcome == "goal" and run.t <= 0.9 + 1e-9
+
+
+def test_a_coarse_replan_starts_where_the_horizon_leaves_it_time():
+    """tests/data/push_past_post.toml, seed 7: the coarse stage's plan reaches the goal at 11.0 s
+    (horizon 12 s). Tracked at the rung's own step it ran on to 12.0 s and ended 2.6 mm outside
+    the goal set; the coarse re-plan from there had no time left, spent the rung's 7,994
+    iterations in vain, and the search at the rung's own step had none left: the top rung
+    failed. The re-plan now starts SEARCH_TIME before the horizon, and the top rung holds."""
+    from pathlib import Path
+
+    from planner.ladder import SEARCH_TIME
+
+    scenario = load_scenario(Path(__file__).parent / "data" / "push_past_post.toml")
+    result = run_ladder(scenario, seed=7)
+    stage, top = result.rungs[-2], result.rungs[-1]
+    assert stage.stage == "coarse" and stage.ended is PlanStatus.TRACKED and sum(stage.durations) > 12.0 - SEARCH_TIME
+    assert result.top_holds and top.ended is PlanStatus.REPAIRED, top.reason
+    assert top.iterations < 2000 and sum(top.durations) <= 12.0 + 1e-9
+    rung = rung_for(scenario, top.rung)
+    run = rung.rollout(scenario, rung.initial_state(scenario), np.array(top.controls), np.array(top.durations), top.h)
+    assert run.outcome == "goal" and run.status == "ok"
+
+
+def test_time_left_for_search_keeps_the_controls_that_end_before_the_horizon_less_search_time(tmp_path):
+    from types import SimpleNamespace
+
+    from planner.ladder import SEARCH_TIME, _time_left_for_search
+    from planner.ompl_adapter import latest_goal_time
+    from planner.tracking import Tracked
+
+    scenario = triangle_with_horizon(tmp_path, 3.0)
+    run = Tracked(SimpleNamespace(), durations=[0.1] * 25)
+    run.controls = [[0.0]] * 25
+    keep = _time_left_for_search(scenario, run, 0)
+    assert 0.1 * keep <= latest_goal_time(scenario) - SEARCH_TIME < 0.1 * (keep + 1) and keep == 10
+    assert _time_left_for_search(scenario, run, 12) == 12  # not into the rounds before
+    assert _time_left_for_search(triangle_with_horizon(tmp_path, 30.0), run, 0) == 25  # time left: all kept
+
+
+def test_a_search_with_no_iteration_left_names_the_start_beside_the_partial_plan(tmp_path):
+    """A search that ran no iteration (its budget spent before it) has no closest path of its own:
+    the partial plan's words had called the start "the search's closest path"."""
+    from types import SimpleNamespace
+
+    from planner.ladder import _closer_partial, _Replay, _replay_controls
+
+    scenario = triangle_with_horizon(tmp_path, 3.0)
+    rung = rung_for(scenario, "kinematic")
+    start = rung.initial_state(scenario)
+    controls = np.zeros((2, len(scenario.actuated)))
+    replay = _replay_controls(scenario, rung, start, controls, [0.1, 0.1], 1e-3, _Replay.empty(start))
+    step = SimpleNamespace(scenario=scenario)
+    far = {"goal_distance": 10.0}
+    words, _ = _closer_partial(step, replay, far, searched=False)
+    assert "(the search had no iteration left to run; the start is 10 m from it)" in words
+    words, _ = _closer_partial(step, replay, far)
+    assert "(the search's closest path ends 10 m from it)" in words
