@@ -543,19 +543,21 @@ def _track_rounds(step: _Step, stage: RungReport, h: float) -> Tracked:
 
 #: Seed offset between a rung's coarse re-plans.
 COARSE_STRIDE = 15485863
-#: A coarse re-plan starts from a tracked state at least this long before the task's horizon.
-#: Tracking that follows a plan reaching the goal near the horizon goes on to it (the
-#: reference's last periods and TRACK_SETTLE more) and may end there, within TRACK_TOLERANCE
-#: of the goal set but outside it (the post scene in tests/data: 2.6 mm out at 12 s); a search
-#: from that state has no time left and had spent the rung's whole budget in vain.
+#: A coarse re-plan starts from a tracked state at least this long before the task's horizon
+#: (s; at most SEARCH_SHARE of the horizon). Tracking that follows a plan reaching the goal
+#: near the horizon goes on to it (the reference's last periods and TRACK_SETTLE more) and may
+#: end there, within TRACK_TOLERANCE of the goal set but outside it (the post scene in
+#: tests/data: 2.6 mm out at 12 s); a search from that state has no time left and had spent
+#: the rung's whole budget in vain.
 SEARCH_TIME = 2.0
+SEARCH_SHARE = 0.25
 
 
 def _time_left_for_search(scenario: Scenario, run: Tracked, floor: int) -> int:
     """How many of `run`'s controls (at least `floor`: those of the rounds before) to keep so
-    that a search from the state after them has SEARCH_TIME before the task's horizon."""
-    ends = np.cumsum(run.durations)
-    keep = int(np.searchsorted(ends, latest_goal_time(scenario) - SEARCH_TIME, side="right"))
+    that a search from the state after them has time before the task's horizon (SEARCH_TIME)."""
+    left = min(SEARCH_TIME, SEARCH_SHARE * scenario.spec.task.horizon)
+    keep = int(np.searchsorted(np.cumsum(run.durations), latest_goal_time(scenario) - left, side="right"))
     return max(floor, min(keep, len(run.controls)))
 
 

@@ -988,17 +988,17 @@ def test_a_coarse_replan_starts_where_the_horizon_leaves_it_time():
 def test_time_left_for_search_keeps_the_controls_that_end_before_the_horizon_less_search_time(tmp_path):
     from types import SimpleNamespace
 
-    from planner.ladder import SEARCH_TIME, _time_left_for_search
-    from planner.ompl_adapter import latest_goal_time
+    from planner.ladder import SEARCH_SHARE, SEARCH_TIME, _time_left_for_search
     from planner.tracking import Tracked
 
-    scenario = triangle_with_horizon(tmp_path, 3.0)
-    run = Tracked(SimpleNamespace(), durations=[0.1] * 25)
-    run.controls = [[0.0]] * 25
-    keep = _time_left_for_search(scenario, run, 0)
-    assert 0.1 * keep <= latest_goal_time(scenario) - SEARCH_TIME < 0.1 * (keep + 1) and keep == 10
-    assert _time_left_for_search(scenario, run, 12) == 12  # not into the rounds before
+    run = Tracked(SimpleNamespace(), durations=[0.5] * 25, controls=[[0.0]] * 25)  # 12.5 s
+    scenario = triangle_with_horizon(tmp_path, 12.0)
+    assert SEARCH_TIME == 2.0 and _time_left_for_search(scenario, run, 0) == 20  # ends at 10 s, 2 s before
+    assert _time_left_for_search(scenario, run, 22) == 22  # not into the rounds before
     assert _time_left_for_search(triangle_with_horizon(tmp_path, 30.0), run, 0) == 25  # time left: all kept
+    # a short horizon: a share of it (the paper's scene at 0.8 s: 0.2 s before)
+    short = Tracked(SimpleNamespace(), durations=[0.1] * 8, controls=[[0.0]] * 8)
+    assert SEARCH_SHARE == 0.25 and _time_left_for_search(triangle_with_horizon(tmp_path, 0.8), short, 0) == 6
 
 
 def test_a_search_with_no_iteration_left_names_the_start_beside_the_partial_plan(tmp_path):
