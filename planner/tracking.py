@@ -13,6 +13,7 @@ same states) under the rung.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -331,6 +332,8 @@ def _repair(scenario, rung, follower: _Follower, run: Tracked, start: State, see
         time_limit=time_limit,
         stop=stop,
         reached=lambda q: follower.error(q, target) <= REPAIR_REACH * TRACK_TOLERANCE,
+        horizon=scenario.spec.task.horizon,  # (a repair that ends past it only makes a plan refused as late)
+        start_times=[math.fsum(run.durations[: first_root + j]) for j in range(len(roots))],
     )
     run.repairs += 1
     run.repair_propagations += plan.propagations

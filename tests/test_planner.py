@@ -1019,3 +1019,31 @@ def test_a_search_with_no_iteration_left_names_the_start_beside_the_partial_plan
     assert "(the search had no iteration left to run; the start is 10 m from it)" in words
     words, _ = _closer_partial(step, replay, far)
     assert "(the search's closest path ends 10 m from it)" in words
+
+
+def test_a_local_repair_searches_within_the_tasks_horizon(tmp_path, monkeypatch):
+    """Tracking's local repair searched with no horizon: a repair ending past it only made a
+    plan the rung then refused as late. Its search now has the task's horizon and its roots' times."""
+    from types import SimpleNamespace
+
+    import planner.tracking as tracking
+
+    scenario = triangle_with_horizon(tmp_path, 3.0)
+    rung = rung_for(scenario, "kinematic")
+    start = rung.initial_state(scenario)
+    seen = {}
+
+    def plan_control(*args, **kwargs):
+        seen.update(kwargs, root=args[2])
+        return SimpleNamespace(exact=False, propagations=0, iterations=0)
+
+    monkeypatch.setattr(tracking, "plan_control", plan_control)
+    na = len(scenario.actuated)
+    reference = tracking.Reference(np.array([0.0, 1.0]), np.array([start.q, start.q]), np.zeros((1, na)))
+    follower = SimpleNamespace(reference=reference, period=0.1, h=1e-3, error=lambda q, target: 0.0)
+    run = tracking.Tracked(start, states=[start] * 4, controls=[[0.0] * na] * 4, durations=[0.1, 0.2, 0.3, 0.4])
+    run.diverged_at = 0.5
+    assert tracking._repair(scenario, rung, follower, run, start, 1, 1.0, 300, None, None) is None
+    assert seen["horizon"] == 3.0
+    assert seen["start_times"] == pytest.approx([0.3, 0.6, 1.0])  # the last 3 tracked states: after 2, 3 and 4 controls
+    assert len(seen["extra_starts"]) == 2
