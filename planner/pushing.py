@@ -30,9 +30,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from models.rungs import compiled
+from models.rungs import GeometricChecker, compiled
 from models.scenario import Scenario
-from planner.ompl_adapter import goal_coordinates
+from planner.ompl_adapter import goal_coordinates, sampling_limits
 from planner.tracking import Reference
 
 #: The object's speed along its path, as a fraction of the pusher's smaller speed limit: slow
@@ -51,6 +51,22 @@ AROUND = 0.5
 REPOSITION = 2.0
 #: The largest push offset, as a fraction of the object's half-width across the push.
 OFFSET_REACH = 0.8
+#: A stretch of the object's path is pushed as it is while its heading is within this share of
+#: the pusher's friction cone (atan mu of the pair) of a face's normal; further from every one,
+#: a pusher behind it would press a face outside its cone, slide along it, and the object would
+#: go along the face's normal instead of the path. Such a stretch becomes legs along the face
+#: normals (`pushable_path`). Measured: docs/measurements.md, "Pushing a box past a post".
+CONE_SHARE = 0.8
+#: The legs keep the object this far (m) from what it may not touch or pass through: each leg is
+#: checked also moved this far to either side (tracking lets the object drift TRACK_TOLERANCE).
+LEG_CLEARANCE = 0.03
+#: Where the legs are checked along them, m.
+LEG_STEP = 0.01
+#: A stretch that neither two legs nor three (the middle one at a level scanned in LEG_STEP
+#: steps) replace is halved, at most this many times; else it stays as it is.
+LEG_SPLITS = 3
+#: The robot's offset (m, along x and y) while the legs are checked: out of every body's reach.
+FAR = 1e3
 
 
 class _Footprint:
@@ -139,6 +155,10 @@ def push_reference(scenario: Scenario, path, q0: np.ndarray, period: float) -> R
     xy = path[:, [ox, oy]]
     # a turn the goal does not ask for is one the geometric path takes at random: pushed straight
     free = turn is None or names[turn] in free_turn(scenario)
+    if free:  # (the object keeps its start's turn: its faces' normals are fixed)
+        legs = pushable_path(scenario, xy, q0)
+        if legs is not None:
+            xy, path = legs, np.repeat(path[-1:], len(legs), axis=0)
     yaw = np.full(len(path), _yaw(scenario, q0, obj) or 0.0) if free else path[:, turn]
     # arc length: the object's travel, or its turn times c where it turns more than it moves
     arc = np.concatenate([[0.0], np.cumsum(np.maximum(np.hypot(*np.diff(xy, axis=0).T), c * np.abs(np.diff(yaw))))])
@@ -242,3 +262,126 @@ class _Builder:
 
     def done(self) -> Reference:
         return Reference(np.arange(len(self.q)) * self.period, np.array(self.q), np.array(self.controls))
+
+
+def _rectangle_frame(shape: _Footprint) -> float | None:
+    """The angle (body frame) of one of the footprint's face normals when every face normal is
+    one of the four axes of that frame (a rectangle: its legs run along them), else None."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    try:
+        hull = ConvexHull(shape.points)
+    except (QhullError, ValueError):  # a point or a segment: no faces
+        return None
+    angles = np.arctan2(hull.equations[:, 1], hull.equations[:, 0])
+    quarter = np.mod(angles - angles[0] + np.pi / 4, np.pi / 2) - np.pi / 4
+    return float(angles[0]) if np.all(np.abs(quarter) < 1e-6) else None
+
+
+def pushable_path(scenario: Scenario, xy: np.ndarray, q0: np.ndarray) -> np.ndarray | None:
+    """The pushed object's path (its positions `xy` along the geometric path, from q0) as
+    pushes along its faces' normals: each straight stretch whose heading is further than
+    CONE_SHARE of the friction cone from every face normal becomes two legs (an L), else three
+    (a Z, the middle leg at the nearest level that is clear), else is halved (LEG_SPLITS), each
+    leg clear of what the object may not touch by LEG_CLEARANCE; corners are skipped where one
+    stretch, an L or a Z reaches further along the path. For a rectangular footprint whose turn
+    the goal leaves free (it keeps its start's turn); None where the path stays as it is (no
+    such footprint, no pusher-object pair, or the object cannot be checked alone)."""
+    pair = pushing_pair(scenario)
+    if pair is None:
+        return None
+    obj, robot = pair
+    frame = _rectangle_frame(_Footprint(scenario, obj))
+    mu = next((p.mu for p in scenario.pairs if {p.body_a, p.body_b} == {obj, robot}), None)
+    if frame is None or mu is None:
+        return None
+    names = scenario.coordinates
+    ox, oy = names.index(f"{obj}.x"), names.index(f"{obj}.y")
+    rx, ry = names.index(f"{robot}.x"), names.index(f"{robot}.y")
+    # the object alone: the geometric rung's validity, with the robot out of reach
+    low, high = sampling_limits(scenario, q0)
+    far = np.array(q0, float)
+    far[[rx, ry]] += FAR
+    low[[rx, ry]], high[[rx, ry]] = -np.inf, np.inf
+    check = GeometricChecker(scenario, low, high)
+    if not check(far):
+        return None
+    yaw = (_yaw(scenario, q0, obj) or 0.0) + frame
+    axes = np.array([[np.cos(yaw), -np.sin(yaw)], [np.sin(yaw), np.cos(yaw)]])  # columns: the legs' two directions
+    cone = CONE_SHARE * float(np.arctan(mu))
+
+    def clear(a, b) -> bool:
+        d = b - a
+        length = float(np.hypot(*d))
+        side = np.array([-d[1], d[0]]) / length if length > 1e-12 else np.zeros(2)
+        q = far.copy()
+        for s in np.linspace(0.0, 1.0, max(2, int(np.ceil(length / LEG_STEP)) + 1)):
+            for off in (0.0, LEG_CLEARANCE, -LEG_CLEARANCE):
+                q[[ox, oy]] = a + s * d + off * side
+                if not check(q):
+                    return False
+        return True
+
+    def pushable(a, b) -> bool:
+        d = axes.T @ (b - a)
+        angle = float(np.arctan2(abs(d[1]), abs(d[0])))
+        return min(angle, np.pi / 2 - angle) <= cone
+
+    def straight(a, b):
+        return [b] if pushable(a, b) and clear(a, b) else None
+
+    def two(a, b):
+        d = axes.T @ (b - a)
+        for first in (0, 1):
+            corner = a + axes[:, first] * d[first]
+            if clear(a, corner) and clear(corner, b):
+                return [corner, b]
+        return None
+
+    local = xy @ axes  # the path in the legs' frame
+    reach = float(np.max(np.hypot(*_Footprint(scenario, obj).points.T), initial=0.0))
+    lo, hi = local.min(axis=0) - reach, local.max(axis=0) + reach
+
+    def three(a, b):
+        A, B = axes.T @ a, axes.T @ b
+        best = None
+        for k in (1, 0):  # the middle leg along axis 1 - k, at a level on axis k
+            levels = np.arange(lo[k], hi[k] + LEG_STEP / 2, LEG_STEP)
+            for level in sorted(levels, key=lambda v: abs(v - A[k]) + abs(v - B[k])):
+                length = abs(level - A[k]) + abs(level - B[k]) + abs(B[1 - k] - A[1 - k])
+                if best is not None and length >= best[0]:
+                    break
+                c1, c2 = A.copy(), B.copy()
+                c1[k] = c2[k] = level
+                p1, p2 = axes @ c1, axes @ c2
+                if clear(a, p1) and clear(p1, p2) and clear(p2, b):
+                    best = (length, [p1, p2, b])
+                    break
+        return None if best is None else best[1]
+
+    def split(a, b, depth: int):
+        if pushable(a, b):
+            return [b]
+        found = two(a, b) or three(a, b)
+        if found is not None or depth == 0:
+            return found or [b]
+        m = (a + b) / 2.0
+        return split(a, m, depth - 1) + split(m, b, depth - 1)
+
+    # the path's corners (the geometric rung's path is subdivided per control period)
+    keep = [0]
+    for k in range(1, len(xy) - 1):
+        u, v = xy[k] - xy[keep[-1]], xy[k + 1] - xy[k]
+        if abs(u[0] * v[1] - u[1] * v[0]) > 1e-9 * max(float(np.hypot(*u) * np.hypot(*v)), 1e-12) or u @ v < 0.0:
+            keep.append(k)
+    points = [xy[k] for k in keep] + [xy[-1]]
+    out, i = [points[0]], 0
+    while i < len(points) - 1:
+        for j in range(len(points) - 1, i, -1):
+            a, b = points[i], points[j]
+            legs = (straight(a, b) or two(a, b) or three(a, b)) if j > i + 1 else split(a, b, LEG_SPLITS)
+            if legs is not None:
+                out += legs
+                i = j
+                break
+    return np.array(out)
