@@ -21,6 +21,12 @@ loop along the reference; tracked, the smaller c reaches the goal far more often
 geometric path turns faster than a push can, and the larger offsets of the smaller c catch
 up). Measured: docs/measurements.md, "Object paths".
 
+A pusher behind a face pushes the object along the face's normal unless its push lies within
+the friction cone of the pair: a box pushed at 35 degrees to its faces with mu = 0.2 (a cone of
+11 degrees) goes along the face's normal, off the path. Where the goal leaves the object's turn
+free, so that its faces keep their directions, a stretch of the path outside the cone becomes
+legs along the face normals first (`pushable_path`).
+
 A scene is a pushing scene when it has one object whose x and y are coordinates and one robot
 whose x and y are both actuated; elsewhere `push_reference` returns None and the ladder plans
 as before.
