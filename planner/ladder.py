@@ -511,9 +511,10 @@ def _track_rounds(step: _Step, stage: RungReport, h: float) -> Tracked:
         if part.outcome == GOAL or step.stopped() or left <= 0 or k + 1 == COARSE_ROUNDS:
             break
         t = part.diverged_at if part.diverged_at is not None else len(part.controls) * period
-        cut = _time_left_for_search(scenario, run, len(run.controls) - len(part.controls))
+        before = len(run.controls) - len(part.controls)  # the rounds before this one's
+        cut = _time_left_for_search(scenario, run, before)
         if cut < len(run.controls):  # the search starts where it has time to reach the goal
-            t = min(t, (cut - (len(run.controls) - len(part.controls))) * period)
+            t = min(t, (cut - before) * period)
             run.truncate(cut)
         guide = np.array([reference.configuration(x) for x in np.arange(t, reference.duration + 1e-9, period)])
         plan = plan_control(

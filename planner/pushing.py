@@ -85,18 +85,22 @@ class _Footprint:
         start, count = int(scene.vstart[i]), int(scene.vcount[i])
         self.points = np.asarray(scene.verts[start : start + count], float).reshape(count, -1)[:, :2]
         self.radius = float(scene.radius[i])
-        self.limit_radius = 2.0 / 3.0 * np.sqrt(self._area() / np.pi)
+        self.limit_radius = 2.0 / 3.0 * np.sqrt(self._hull() / np.pi)
 
-    def _area(self) -> float:
-        """Footprint area: the convex hull of the vertices in the plane, swept by the radius."""
+    def _hull(self) -> float:
+        """Footprint area (the convex hull of the vertices in the plane, swept by the radius);
+        keeps the hull's outward face normals as angles in the body frame (`normals`, none for
+        a point or a segment)."""
         from scipy.spatial import ConvexHull, QhullError
 
         p, r = self.points, self.radius
         try:
             hull = ConvexHull(p)
             area, perimeter = float(hull.volume), float(hull.area)  # in the plane: area, perimeter
+            self.normals = np.arctan2(hull.equations[:, 1], hull.equations[:, 0])
         except (QhullError, ValueError):  # a point or a segment (fewer than 3 points, or collinear)
             area, perimeter = 0.0, 2.0 * float(np.ptp(p, axis=0).max(initial=0.0)) if len(p) else 0.0
+            self.normals = np.zeros(0)
         return area + perimeter * r + np.pi * r * r
 
     def support(self, direction: np.ndarray) -> float:
@@ -273,13 +277,9 @@ class _Builder:
 def _rectangle_frame(shape: _Footprint) -> float | None:
     """The angle (body frame) of one of the footprint's face normals when every face normal is
     one of the four axes of that frame (a rectangle: its legs run along them), else None."""
-    from scipy.spatial import ConvexHull, QhullError
-
-    try:
-        hull = ConvexHull(shape.points)
-    except (QhullError, ValueError):  # a point or a segment: no faces
+    angles = shape.normals
+    if not len(angles):  # a point or a segment: no faces
         return None
-    angles = np.arctan2(hull.equations[:, 1], hull.equations[:, 0])
     quarter = np.mod(angles - angles[0] + np.pi / 4, np.pi / 2) - np.pi / 4
     return float(angles[0]) if np.all(np.abs(quarter) < 1e-6) else None
 
@@ -297,7 +297,8 @@ def pushable_path(scenario: Scenario, xy: np.ndarray, q0: np.ndarray) -> np.ndar
     if pair is None:
         return None
     obj, robot = pair
-    frame = _rectangle_frame(_Footprint(scenario, obj))
+    shape = _Footprint(scenario, obj)
+    frame = _rectangle_frame(shape)
     mu = next((p.mu for p in scenario.pairs if {p.body_a, p.body_b} == {obj, robot}), None)
     if frame is None or mu is None:
         return None
@@ -345,7 +346,7 @@ def pushable_path(scenario: Scenario, xy: np.ndarray, q0: np.ndarray) -> np.ndar
         return None
 
     local = xy @ axes  # the path in the legs' frame
-    reach = float(np.max(np.hypot(*_Footprint(scenario, obj).points.T), initial=0.0))
+    reach = float(np.max(np.hypot(*shape.points.T), initial=0.0))
     lo, hi = local.min(axis=0) - reach, local.max(axis=0) + reach
 
     def three(a, b):
