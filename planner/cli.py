@@ -41,10 +41,17 @@ RESERVED: dict[str, str] = {}
 class _Parser(argparse.ArgumentParser):
     """argparse's parser, whose usage errors are bad input as every other: its usage, then
     `error: command line: --flag: reason` (and with --json the problem as JSON on stdout, `main`),
-    not `ladder plan: error: argument --flag: ...` that a grep for ^error: misses."""
+    not `ladder plan: error: argument --flag: ...` that a grep for ^error: misses. An option
+    that takes one value takes it once (`_Once`)."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.register("action", None, _Once)  # (argument groups share the parser's registry)
+        self.register("action", "store", _Once)
 
     def parse_known_args(self, args=None, namespace=None):
         self._given = list(sys.argv[1:] if args is None else args)  # (what `error` looks through)
+        self._once = {}  # (what `_Once` saw in this parse)
         return super().parse_known_args(args, namespace)
 
     def error(self, message: str):
@@ -61,13 +68,15 @@ class _Parser(argparse.ArgumentParser):
 
 
 class _Once(argparse.Action):
-    """An option given at most once: a second is refused, not silently the one that counts
-    (`simulate --model A --model B` had run B alone)."""
+    """A value given at most once, every `_Parser` option's that takes one value (argparse's
+    `store`): a second is refused, not silently the one that counts (`simulate --model A
+    --model B` had run B alone, `plan --seed 1 --seed 2` planned seed 2)."""
 
     def __call__(self, parser, namespace, values, option_string=None):
-        before = getattr(namespace, self.dest, None)
-        if before is not None:
-            parser.error(f"argument {option_string}: given twice ({before} and {values}); it takes one")
+        seen = parser.__dict__.setdefault("_once", {})
+        if self.dest in seen and option_string is not None:
+            parser.error(f"argument {option_string}: given twice ({seen[self.dest]} and {values}); it takes one")
+        seen[self.dest] = values
         setattr(namespace, self.dest, values)
 
 
@@ -129,7 +138,7 @@ def _add_simulate_parser(sub: argparse._SubParsersAction) -> None:
     )
     simulate.add_argument("file", type=Path, help="scenario file (TOML)")
     rungs = ", ".join(PROPAGATING_RUNGS)
-    simulate.add_argument("--model", required=True, metavar="RUNG", action=_Once, help=f"rung: {rungs} (one; `sweep` runs several)")
+    simulate.add_argument("--model", required=True, metavar="RUNG", help=f"rung: {rungs} (one; `sweep` runs several)")
     _add_param_option(simulate)
     simulate.add_argument("--duration", type=float, help="seconds to run (default: the policy's duration)")
     _add_policy_option(simulate)

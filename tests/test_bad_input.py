@@ -316,6 +316,37 @@ def test_a_flag_argparse_refuses_is_bad_input_as_any_other(capsys):
     ]
 
 
+def test_an_option_that_takes_one_value_is_refused_given_twice(capsys):
+    """`plan --seed 1 --seed 2` had planned seed 2, silently (argparse keeps the last): every
+    command's single-valued options now refuse a second value, in argument groups too, while
+    options that take several (`--param`, `--grid`, a sweep's `--model`) and flags still repeat."""
+    from planner import cli
+
+    free, box = str(SCENARIOS / "free_transfer.toml"), str(SCENARIOS / "box_push_3d.toml")
+    refused = [
+        (["plan", box, "--seed", "1", "--seed", "2"], "--seed: given twice (1 and 2); it takes one"),
+        (["plan", box, "--out", "a", "--out", "b"], "--out: given twice (a and b); it takes one"),  # (a default of its own)
+        (["sweep", free, "--model", "kinematic", "--workers", "1", "--workers", "2"], "--workers: given twice (1 and 2); it takes one"),
+        (["serve", "--port", "8001", "--port", "8002"], "--port: given twice (8001 and 8002); it takes one"),
+        # an abbreviation is named as its option
+        (
+            ["simulate", free, "--model", "kinematic", "--duration", "1", "--dur", "2"],
+            "--duration: given twice (1.0 and 2.0); it takes one",
+        ),
+    ]
+    for argv, said in refused:
+        assert cli.main(argv) == 2, argv
+        assert capsys.readouterr().err.splitlines()[-1] == f"error: command line: {said}"
+    parser = cli.build_parser()
+    args = parser.parse_args(["plan", box, "--seed", "3", "--json", "--json"])
+    assert args.seed == 3 and args.json and str(args.out) == "out/plan"  # once, and the defaults as they were
+    args = parser.parse_args(["plan", box, "--seed", "4"])  # a second parse by the same parser starts afresh
+    assert args.seed == 4
+    twice = ["--grid", "gap=0.3,0.4", "--grid", "mu=0.1,0.2", "--param", "a=1", "--param", "b=2"]
+    args = parser.parse_args(["sweep", free, *twice, "--model", "kinematic"])
+    assert args.grid == ["gap=0.3,0.4", "mu=0.1,0.2"] and args.param == ["a=1", "b=2"]
+
+
 def test_a_repeated_model_is_every_model_in_a_sweep_and_refused_by_simulate(capsys):
     """`sweep --model A --model B` had kept B alone, and `simulate --model A --model B` run B
     alone, both silently: a sweep runs every one, simulate refuses the second."""
