@@ -66,14 +66,16 @@ def evaluate(text: str, parameters: Mapping[str, float]) -> float:
     return value
 
 
-def names_in(text: str) -> set[str]:
-    """Parameter names an expression refers to (empty if it does not parse)."""
+def names_in(text: str, parameters: Mapping[str, float] | None = None) -> set[str]:
+    """Parameter names an expression refers to (empty if it does not parse). A name in
+    `parameters` is the parameter's even where a constant has it (``pi``), as `evaluate` reads it."""
     try:
         tree = _parse(text)
     except SyntaxError:
         return set()
     called = {n.func.id for n in ast.walk(tree) if isinstance(n, ast.Call) and isinstance(n.func, ast.Name)}
-    return {n.id for n in ast.walk(tree) if isinstance(n, ast.Name)} - called - set(CONSTANTS)
+    constants = set(CONSTANTS) - set(parameters or ())
+    return {n.id for n in ast.walk(tree) if isinstance(n, ast.Name)} - called - constants
 
 
 def _eval(node: ast.AST, text: str, parameters: Mapping[str, float]) -> float:

@@ -465,7 +465,7 @@ def _shown(value: Any, parameters: Mapping[str, float], overridden: Mapping[str,
         except ExpressionError:
             pass
         else:
-            setters = [overridden[name] for name in sorted(names_in(value)) if name in overridden]
+            setters = [overridden[name] for name in sorted(names_in(value, parameters)) if name in overridden]
             return f"{shown} ({', '.join(setters)})" if setters else shown
     return messages.got(value)
 

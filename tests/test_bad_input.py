@@ -252,7 +252,7 @@ def test_each_problem_is_its_own_error_line(tmp_path, capsys):
     assert len(lines) == 2 and all(line.startswith(f"error: {path}: contact.") for line in lines), lines
 
 
-def test_a_value_out_of_range_names_the_override_that_set_it(capsys):
+def test_a_value_out_of_range_names_the_override_that_set_it(capsys, tmp_path):
     """An override that puts a key out of range is named with the key: the option on the command
     line, the dict entry in the library, the option of a sweep run (it said only "from 'mu'")."""
     from planner.cli import main
@@ -270,6 +270,17 @@ def test_a_value_out_of_range_names_the_override_that_set_it(capsys):
     with pytest.raises(ScenarioError) as caught:  # a function of the name, as a sweep names its grid and models
         load_scenario(triangle, {"K": 0.0, "C": 5.0}, override_key=lambda name: f"--grid {name}")
     assert [(p.key, p.reason) for p in caught.value.problems] == [("contact.K", "must be greater than 0, got 0 from 'K' (--grid K)")]
+    shadowing = tmp_path / "pi.toml"  # a parameter named like the constant pi is the one overridden
+    text = (SCENARIOS / "box_push_3d.toml").read_text().replace("push_speed = 0.2", "pi = 3.0\npush_speed = 0.2", 1)
+    shadowing.write_text(text.replace("radius = 0.03 }", 'radius = "0.01 * pi" }', 1))
+    (tmp_path / "meshes").mkdir()
+    (tmp_path / "meshes" / "wedge.obj").write_bytes((SCENARIOS / "meshes" / "wedge.obj").read_bytes())
+    assert load_scenario(shadowing).spec.bodies[2].shape.radius == pytest.approx(0.03)
+    with pytest.raises(ScenarioError) as caught:
+        load_scenario(shadowing, {"pi": -1.0})
+    assert [(p.key, p.reason) for p in caught.value.problems] == [
+        ("bodies[2].shape.radius", "must be greater than 0, got -0.01 from '0.01 * pi' (overrides['pi'])")
+    ]
     with pytest.raises(ScenarioError) as caught:  # a value written in the file is no override's, though another was given
         load_scenario(BAD / "negative_mu.toml", {"v1": 2.0})
     assert [(p.key, p.reason) for p in caught.value.problems] == [("contact.mu", "must be greater than or equal to 0, got -0.1")]

@@ -43,3 +43,12 @@ def test_rejects(text, fragment):
 
 def test_names_in():
     assert names_in("2 * sin(alpha) + beta - pi") == {"alpha", "beta"}
+
+
+def test_a_parameter_named_like_a_constant_is_the_parameter_in_names_in_as_in_evaluate():
+    """A parameter `pi` shadows the constant where an expression is evaluated; `names_in` had
+    still dropped it, so an override of it that put a key out of range went unnamed."""
+    parameters = {"pi": 3.0, "r": 0.5}
+    assert evaluate("2 * pi * r", parameters) == 3.0
+    assert names_in("2 * pi * r", parameters) == {"pi", "r"}
+    assert names_in("2 * pi * r", {"r": 0.5}) == names_in("2 * pi * r") == {"r"}
