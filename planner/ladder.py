@@ -692,7 +692,7 @@ def _search(step: _Step, previous, replay, tracked, planner, seeded: bool, guide
             from planner.cli import counted
 
             reason += f"; {counted(plan.past_horizon, 'control')} would have ended past the task's horizon ({_horizon_words(scenario)})"
-        closer = _closer_partial(step, replay, fields, tracked=tracked is not None, searched=plan.iterations > 0)
+        closer = _closer_partial(step, replay, fields, tracked=tracked is not None, searched=plan.iterations > 0, pushed=pushed)
         if closer is not None:  # the partial plan passed up is the previous plan's run under the rung
             words, tail = closer
             reason += words
@@ -731,34 +731,43 @@ def _search(step: _Step, previous, replay, tracked, planner, seeded: bool, guide
     )
 
 
-def _closer_partial(step: _Step, replay: _Replay | None, fields: dict, tracked: bool = False, searched: bool = True):
-    """Where a search found no plan, the previous plan's replay (or tracked run) under the rung as
-    the partial plan to pass up, if it ends closer to the goal than the search's closest path
-    (the start where the search ran no iteration: `searched` False): (the reason's words, the
-    run), else None. Only its controls that
-    end within the task's horizon count, as a search's do. A grasp the geometric path missed by
-    1.4 mm had been dropped for a search's path 0.85 m away (the paper's scene at a 0.76 s
-    horizon). A run that reached the goal (late: the plan the rung refused), or ended unsafe or in
-    a solver failure, is not one."""
-    if replay is None or not replay.controls or replay.outcome != NONE or replay.status != OK:
+def _closer_partial(step: _Step, replay: _Replay | None, fields: dict, tracked: bool = False, searched: bool = True, pushed=None):
+    """Where a search found no plan, the previous plan's replay (or tracked run) under the rung, or
+    the run of a push along the geometric plan's object path (`pushed`, tracked before the search
+    and lost), as the partial plan to pass up: the one that ends closest to the goal, if closer
+    than the search's closest path (the start where the search ran no iteration: `searched`
+    False): (the reason's words, the run), else None. Only a run's controls that end within the
+    task's horizon count, as a search's do. A grasp the geometric path missed by 1.4 mm had been
+    dropped for a search's path 0.85 m away (the paper's scene at a 0.76 s horizon); a push lost
+    part way (tests/data/push_past_post.toml, seed 9: the box 0.245 m from the goal) for the
+    geometric plan's replay, whose robot pushes nothing along (0.48 m). A run that reached the
+    goal (late: the plan the rung refused), or ended unsafe or in a solver failure, is not one."""
+    candidates = [(replay, "the previous plan's " + ("tracked run" if tracked else "replay"))]
+    if pushed is not None:
+        candidates.append((_Replay.of(pushed), "the push along the geometric plan's object path, its tracked run"))
+    best = None
+    for run, what in candidates:
+        if run is None or not run.controls or run.outcome != NONE or run.status != OK:
+            continue
+        ends = np.cumsum(run.durations)
+        m = int(np.searchsorted(ends, latest_goal_time(step.scenario), side="right"))
+        if m == 0:
+            continue
+        whole = m == len(run.controls)
+        run = run if whole else run.head(m)
+        own = run.fields(step.scenario)["goal_distance"]
+        if own < fields["goal_distance"] and (best is None or own < best[0]):
+            within = "" if whole else f" (its first {m} controls, those within {_horizon_words(step.scenario)})"
+            best = (own, what + within, run)
+    if best is None:
         return None
-    ends = np.cumsum(replay.durations)
-    m = int(np.searchsorted(ends, latest_goal_time(step.scenario), side="right"))
-    if m == 0:
-        return None
-    run = replay if m == len(replay.controls) else replay.head(m)
-    own = run.fields(step.scenario)["goal_distance"]
-    if not own < fields["goal_distance"]:
-        return None
-    what = "tracked run" if tracked else "replay"
-    within = "" if run is replay else f" (its first {m} controls, those within {_horizon_words(step.scenario)})"
+    own, what, run = best
     closest = (
         f"the search's closest path ends {fields['goal_distance']:.3g} m from it"
         if searched
         else f"the search had no iteration left to run; the start is {fields['goal_distance']:.3g} m from it"
     )
-    words = f"; the previous plan's {what}{within}, {own:.3g} m from the goal, is the partial plan passed up ({closest})"
-    return words, run
+    return f"; {what}, {own:.3g} m from the goal, is the partial plan passed up ({closest})", run
 
 
 def _horizon_words(scenario: Scenario) -> str:

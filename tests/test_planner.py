@@ -789,6 +789,63 @@ def test_a_failed_search_passes_up_the_previous_plans_replay_where_it_ends_close
         assert _closer_partial(None, replay, {"goal_distance": 1.0}) is None
 
 
+def test_a_lost_push_passes_up_its_tracked_run_where_it_ends_closer_to_the_goal():
+    """tests/data/push_past_post.toml, seed 9: the quasistatic rung loses the push along the
+    geometric plan's object path at 6.9 s and its search finds no plan. The partial plan passed
+    up had been the geometric plan's replay under the rung, whose robot pushes nothing along
+    (0.48 m from the goal); it is now the push's tracked run, which took the box further."""
+    from pathlib import Path
+
+    from models.task import goal_distance
+
+    scenario = load_scenario(Path(__file__).parent / "data" / "push_past_post.toml")
+    result = run_ladder(scenario, seed=9, rungs=["geometric", "quasistatic-rigid"])
+    geometric, quasi = result.rungs[0], result.rungs[-1]
+    assert not quasi.ended.holds and quasi.tracked == pytest.approx(0.64, abs=0.01)
+    said = f"the push along the geometric plan's object path, its tracked run, {quasi.goal_distance:.3g} m from the goal"
+    assert f"{said}, is the partial plan passed up" in quasi.reason and "lost at 6.9 s" in quasi.reason, quasi.reason
+    rung = rung_for(scenario, quasi.rung)
+    start = rung.initial_state(scenario)
+    run = rung.rollout(scenario, start, np.array(quasi.controls), np.array(quasi.durations), quasi.h)  # the controls passed up
+    assert run.outcome == "none" and run.status == "ok"
+    assert goal_distance(scenario, run.state.q) == pytest.approx(quasi.goal_distance, abs=1e-9)
+    assert quasi.states[-1] == pytest.approx(run.state.q.tolist(), abs=1e-12) and sum(quasi.durations) <= 12.0
+    replay = rung.rollout(scenario, start, np.array(geometric.controls), np.array(geometric.durations), quasi.h)
+    assert goal_distance(scenario, replay.state.q) > quasi.goal_distance + 0.1  # what had been passed up
+
+
+def test_the_partial_plan_passed_up_is_the_run_that_ends_closest_to_the_goal(tmp_path):
+    """`_closer_partial` with a lost push beside the previous plan's replay: the closer of the two,
+    if closer than the search's; a push's run is named as one."""
+    from types import SimpleNamespace
+
+    from models.task import goal_distance
+    from planner.ladder import _closer_partial, _Replay, _replay_controls
+    from planner.tracking import Tracked
+
+    scenario = triangle_with_horizon(tmp_path, 3.0)
+    rung = rung_for(scenario, "kinematic")
+    start = rung.initial_state(scenario)
+    step = SimpleNamespace(scenario=scenario)
+
+    def run_of(speed: float, n: int) -> _Replay:  # the fingers moving at `speed` for n periods of 0.1 s (down: < 0)
+        controls = np.full((n, len(scenario.actuated)), speed)
+        return _replay_controls(scenario, rung, start, controls, [0.1] * n, 1e-3, _Replay.empty(start))
+
+    def tracked(r: _Replay) -> Tracked:
+        return Tracked(start, r.state, list(r.states), list(r.controls), list(r.durations), steps_min_psi=list(r.steps_min_psi))
+
+    short, longer = run_of(-1.0, 2), run_of(-1.0, 4)
+    near, far = (goal_distance(scenario, r.state.q) for r in (longer, short))
+    assert longer.outcome == short.outcome == "none" and near < far
+    words, run = _closer_partial(step, short, {"goal_distance": 10.0}, pushed=tracked(longer))
+    assert words.startswith(f"; the push along the geometric plan's object path, its tracked run, {near:.3g} m from the goal")
+    assert run.controls == longer.controls
+    words, run = _closer_partial(step, longer, {"goal_distance": 10.0}, pushed=tracked(short))
+    assert words.startswith(f"; the previous plan's replay, {near:.3g} m from the goal") and run.controls == longer.controls
+    assert _closer_partial(step, short, {"goal_distance": near / 2}, pushed=tracked(longer)) is None  # the search's ends closer
+
+
 def test_a_failed_search_from_a_root_along_the_previous_plan_reports_the_states_of_its_controls(tmp_path):
     """At 0.8 s seed 2's top rung finds no plan in time; its closest path starts at a root part
     way along the previous plan, and the report's controls begin with that plan's prefix. Its
