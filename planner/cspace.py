@@ -142,7 +142,17 @@ def two_finger_cspace(scenario) -> TwoFingerCSpace:
     missing = [c for c in needed if c not in names]
     if missing:
         raise ValueError(f"not a two-finger scene: no coordinate {', '.join(missing)}")
+    others = [c for c in scenario.coordinates if c not in needed]  # (the C-space has these three axes only)
+    if others:
+        raise ValueError(f"not a two-finger scene: other coordinates {', '.join(others)}")
     place = scenario.placements(scenario.start)
+    # a body besides the fingers, the object and a floor under them (the palm) bounds C_free too,
+    # which this C-space does not know: a wall had been left out of the plot's facets
+    extra = [
+        b.name for b in scenario.spec.bodies if b.name not in (*FINGERS, OBJECT) and not _floor(scenario.geometries[b.name], place[b.name])
+    ]
+    if extra:
+        raise ValueError(f"not a two-finger scene: other bodies {', '.join(extra)}")
     obj = scenario.geometries[OBJECT]
     if obj.kind != "rounded" or len(obj.core) < 3:
         raise ValueError(f"{OBJECT} is not a polygon")
@@ -173,6 +183,14 @@ def two_finger_cspace(scenario) -> TwoFingerCSpace:
                 strata.append(s)
     space = TwoFingerCSpace(tuple(finger_x), tuple(finger_y0), tuple(limits), core, float(radius), tuple(strata), None)
     return TwoFingerCSpace(**{**space.__dict__, "goal_edge": _goal_edge(space, x30)})
+
+
+def _floor(geometry, placement) -> bool:
+    """A half-plane whose normal points up: the palm under the fingers and the object."""
+    if geometry.kind != "halfspace":
+        return False
+    normal = placement.rotation @ np.asarray(geometry.normal, float)
+    return bool(np.allclose(normal, [0.0, 1.0], atol=1e-9))
 
 
 def _goal_edge(space: TwoFingerCSpace, x30: float) -> np.ndarray | None:

@@ -2,8 +2,10 @@
 
 The paper's Fig. 4 coordinates for the two-finger scene: finger depths x1 = y0 - finger1.y,
 x2 = y0 - finger2.y (0 = fully raised) and the triangle's offset x3 = triangle.x; its C-space
-(C_free's boundary and the goal edge) comes from `planner.cspace`. Any other scene is drawn
-one panel per body, its coordinates against time with the task's goal intervals shaded.
+(C_free's boundary and the goal edge) comes from `planner.cspace`, for a scene of those three
+coordinates whose only other body is a floor (the palm); the goal drawn is the file's (its
+interval of triangle.x; the goal edge cut to it). Any other scene is drawn one panel per body,
+its coordinates against time with the task's goal intervals shaded.
 """
 
 from __future__ import annotations
@@ -194,14 +196,17 @@ def _paper_rollout_figure(scenario, space, runs, title: str):
     fig = plt.figure(figsize=(12, 5.2))
     ax3 = fig.add_subplot(1, 2, 1, projection="3d")
     ax2 = fig.add_subplot(1, 2, 2)
-    handles = draw_cspace(ax3, space)
+    interval = goal_intervals(scenario.spec.task.goal).get(PAPER_COORDINATES[2])  # the file's, not the paper's [-0.5, 0.5]
+    handles = draw_cspace(ax3, _goal_edge_within(space, interval))
     for k, (label, _, X) in enumerate(runs):
         P = paper_coordinates(scenario.coordinates, scenario.start, X)
         colour = f"C{k}"
         _draw_paper_run(ax3, P, space, colour, LINE_STYLES[k % len(LINE_STYLES)], label)
         ax2.plot(P[:, 0] - P[:, 1], P[:, 2], color=colour, ls=LINE_STYLES[k % len(LINE_STYLES)], label=label)
     ax3.scatter([0], [0], [0], color="k", marker="*", s=80, depthshade=False)
-    ax2.axhspan(-0.5, 0.5, color="tab:green", alpha=0.08, label="triangle.x in the goal box")
+    if interval is not None:
+        ax2.axhspan(*interval, color="tab:green", alpha=0.08, label=f"goal: {PAPER_COORDINATES[2]} in [{interval[0]:g}, {interval[1]:g}]")
+        _view_without_far_edges(ax2, [interval])
     ax2.set_xlabel("x1 - x2")
     ax2.set_ylabel("x3 (triangle offset)")
     ax2.legend(fontsize=7)
@@ -209,6 +214,24 @@ def _paper_rollout_figure(scenario, space, runs, title: str):
     fig.suptitle(_wrap(title, 110))
     fig.tight_layout(rect=(0, 0.14, 1, 1))
     return fig
+
+
+def _goal_edge_within(space, interval: tuple[float, float] | None):
+    """`space` with its goal edge (a segment in (x1, x2, x3)) cut to the goal's interval of x3
+    (none where they do not meet); as it is without an interval."""
+    from dataclasses import replace
+
+    edge = space.goal_edge
+    if edge is None or interval is None:
+        return space
+    (a, b), (lo, hi) = edge[:, 2], interval
+    if a == b:
+        return space if lo <= a <= hi else replace(space, goal_edge=None)
+    s0, s1 = sorted(((lo - a) / (b - a), (hi - a) / (b - a)))
+    s0, s1 = max(s0, 0.0), min(s1, 1.0)
+    if s1 < s0:
+        return replace(space, goal_edge=None)
+    return replace(space, goal_edge=np.array([edge[0] + s * (edge[1] - edge[0]) for s in (s0, s1)]))
 
 
 def body_coordinates(coordinates) -> dict[str, dict[str, list]]:

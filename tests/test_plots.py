@@ -204,3 +204,64 @@ def test_a_one_sided_goal_does_not_set_the_axis(tmp_path):
             assert top[0] <= hi <= top[1], (interval, hi)
         finally:
             plt.close(fig)
+
+
+def test_the_paper_figure_draws_the_files_goal_not_the_papers(tmp_path):
+    """The Fig. 4 plot of a two-finger scene had shaded triangle.x in [-0.5, 0.5], the paper's
+    goal box, whatever the file's goal said, and drawn the whole form-closure edge as the goal:
+    both are the file's goal now (its interval of triangle.x; the edge cut to it)."""
+    import matplotlib.pyplot as plt
+
+    text = TRIANGLE.read_text()
+    old = '{ box = { "triangle.x" = [-0.5, 0.5] } }'
+    assert old in text
+    shipped = load_scenario(TRIANGLE)
+    whole = two_finger_cspace(shipped).goal_edge
+    for interval, edge_x3 in (("[0.1, 0.4]", (0.1, 0.4)), ("[-0.5, 0.5]", tuple(whole[:, 2])), ("[0.6, 0.9]", None)):
+        path = tmp_path / "goal.toml"
+        path.write_text(text.replace(old, f'{{ box = {{ "triangle.x" = {interval} }} }}'))
+        scenario = load_scenario(path)
+        fig = plots.rollout_figure(scenario, _still_runs(scenario), "t")
+        try:
+            flat = next(ax for ax in fig.axes if ax.name != "3d")
+            lo, hi = (float(v) for v in interval.strip("[]").split(","))
+            spans = [p for p in flat.patches if p.get_label().startswith("goal: triangle.x in")]
+            assert [p.get_label() for p in spans] == [f"goal: triangle.x in [{lo:g}, {hi:g}]"]
+            extent = spans[0].get_transform().transform(spans[0].get_path().vertices)  # (display units)
+            back = flat.transData.inverted().transform(extent)[:, 1]
+            assert (back.min(), back.max()) == pytest.approx((lo, hi))
+            space = plots._goal_edge_within(two_finger_cspace(scenario), (lo, hi))
+            if edge_x3 is None:
+                assert space.goal_edge is None
+            else:
+                assert tuple(space.goal_edge[:, 2]) == pytest.approx(edge_x3)
+                # the cut edge lies on the whole edge: both fingers still on their faces
+                for point in space.goal_edge:
+                    q = _q(scenario, *point)
+                    assert _distance(scenario, q, "finger1") == pytest.approx(0.0, abs=1e-9)
+                    assert _distance(scenario, q, "finger2") == pytest.approx(0.0, abs=1e-9)
+        finally:
+            plt.close(fig)
+
+
+def test_a_two_finger_scene_with_other_bodies_or_coordinates_is_drawn_per_body(tmp_path):
+    """A wall beside the triangle, or the triangle free in y, bounds or changes C-space in ways
+    the paper's figure does not know: such a scene had been drawn with the paper's facets alone."""
+    import matplotlib.pyplot as plt
+
+    text = TRIANGLE.read_text()
+    wall = text + '\n[[bodies]]\nname = "wall"\nrole = "obstacle"\nshape = { type = "halfplane", normal = [1.0, 0.0], offset = -1.3 }\n'
+    assert 'dofs = ["x"]' in text
+    free_y = text.replace('dofs = ["x"]', 'dofs = ["x", "y"]', 1)
+    for name, variant, said in (("wall", wall, "other bodies wall"), ("free_y", free_y, "other coordinates triangle.y")):
+        path = tmp_path / f"{name}.toml"
+        path.write_text(variant)
+        scenario = load_scenario(path)
+        with pytest.raises(ValueError, match=f"not a two-finger scene: {said}"):
+            two_finger_cspace(scenario)
+        fig = plots.rollout_figure(scenario, _still_runs(scenario), "t")
+        try:
+            assert any(ax.get_label() == "body:triangle" for ax in fig.axes)
+        finally:
+            plt.close(fig)
+    assert two_finger_cspace(load_scenario(TRIANGLE)).goal_edge is not None  # the palm, a floor, is the scene's own
