@@ -426,7 +426,8 @@ def cmd_check(args: argparse.Namespace) -> int:
     if scenario.actuated and not summary["task"]["unplannable"]:  # (else there is no plan to reach it)
         from planner.ompl_adapter import goal_reach
 
-        summary["task"]["goal_reach"] = goal_reach(scenario)
+        with announcing_compile(CHECK_COMPILE_NOTE):  # (a first run: its geometry's kernels)
+            summary["task"]["goal_reach"] = goal_reach(scenario)
     if args.out:
         write_atomic(args.out, json.dumps(summary, indent=2) + "\n")
     if args.json:
@@ -964,6 +965,8 @@ COMPILE_NOTE = "compiling the physics kernels (first run only: about 10 minutes 
 PLAN_COMPILE_NOTE = "compiling the planners' kernels (first plan only: about a minute on two cores)"
 BENCH_COMPILE_NOTE = "compiling the benchmark's kernels (first bench only: about a minute on two cores)"
 SEARCH_COMPILE_NOTE = "compiling the control search's kernel (first search only: about half a minute on two cores)"
+#: `check`'s, as its goal states are drawn and checked (`goal_reach`): 1.6-1.8 min in a trial, silent.
+CHECK_COMPILE_NOTE = "compiling the geometry kernels (first run only: about 2 minutes on two cores)"
 
 
 def announce_compile(planning: bool = False, bench: bool = False) -> None:
@@ -983,28 +986,32 @@ def announce_compile(planning: bool = False, bench: bool = False) -> None:
 
 def announcing_search_compile():
     """A context in which SEARCH_COMPILE_NOTE is printed, once, as the control search's kernel,
-    `models.rollout.propagate_kernel`, starts compiling (numba's `numba:compile` event, which
-    fires where a kernel is compiled, not where it is loaded from the cache). Only a rung's own
-    search calls that kernel, so `announce_compile` cannot tell before a plan whether it will: a
-    first plan that searched sat silent while it compiled (23 s on free_transfer)."""
-    from numba.core import event
-
+    `models.rollout.propagate_kernel`, starts compiling. Only a rung's own search calls that
+    kernel, so `announce_compile` cannot tell before a plan whether it will: a first plan that
+    searched sat silent while it compiled (23 s on free_transfer)."""
     from models import rollout
 
-    kernel = rollout.propagate_kernel
+    return announcing_compile(SEARCH_COMPILE_NOTE, rollout.propagate_kernel)
 
-    class SearchCompileNotice(event.Listener):
+
+def announcing_compile(note: str, kernel=None):
+    """A context in which `note` is printed (stderr), once, as a kernel starts compiling (`kernel`
+    only, where given; numba's `numba:compile` event, which fires where a kernel is compiled, not
+    where it is loaded from the cache)."""
+    from numba.core import event
+
+    class CompileNotice(event.Listener):
         said = False
 
         def on_start(self, ev) -> None:
-            if not self.said and (ev.data or {}).get("dispatcher") is kernel:
+            if not self.said and (kernel is None or (ev.data or {}).get("dispatcher") is kernel):
                 self.said = True
-                print(SEARCH_COMPILE_NOTE, file=sys.stderr, flush=True)
+                print(note, file=sys.stderr, flush=True)
 
         def on_end(self, ev) -> None:
             pass
 
-    return event.install_listener("numba:compile", SearchCompileNotice())
+    return event.install_listener("numba:compile", CompileNotice())
 
 
 def print_simulation(summary: dict[str, Any]) -> None:

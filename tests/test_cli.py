@@ -896,6 +896,31 @@ def test_a_cold_kernel_cache_is_announced(monkeypatch, capsys):
     assert capsys.readouterr().err == cli.BENCH_COMPILE_NOTE + "\n"
 
 
+def test_check_says_so_as_it_compiles_the_geometry_kernels(monkeypatch, capsys):
+    """A first `ladder check` compiled its goal states' geometry kernels for 1.6-1.8 min without a
+    word (a trial took it for hung). The notice comes as a compile starts, once; a check that
+    compiles nothing says nothing. A fresh kernel stands in for the geometry's here."""
+    import numba
+
+    import planner.ompl_adapter
+    from planner import cli
+
+    @numba.njit(cache=False)
+    def stand_in(x):
+        return x + 1
+
+    def goal_reach(scenario):
+        stand_in(1.0)  # compiled on the first call only
+        return None
+
+    monkeypatch.setattr(planner.ompl_adapter, "goal_reach", goal_reach)
+    triangle = str(SCENARIOS / "two_finger_triangle.toml")
+    assert cli.main(["check", triangle]) == 0
+    assert capsys.readouterr().err == cli.CHECK_COMPILE_NOTE + "\n"
+    assert cli.main(["check", triangle, "--json"]) == 0  # compiled: no notice
+    assert capsys.readouterr().err == ""
+
+
 def test_a_compile_of_the_control_search_kernel_is_announced_as_it_starts(monkeypatch, capsys):
     """Only a rung's own search calls `propagate_kernel`, so a plan cannot tell before it runs
     whether it will compile it: the notice comes from numba's compile event, once, and only for
