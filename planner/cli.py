@@ -1267,6 +1267,32 @@ def _write_sweep_outputs(args: argparse.Namespace, result, axes) -> tuple[dict, 
     return data, plot
 
 
+def _edge(edge: dict, end: str) -> str:
+    """A band's edge (`sweep.bands`): its value, "(grid end)" where it is the grid's last point."""
+    return f"{edge[end]:.4g}" + (" (grid end)" if edge[f"{end}_is_grid_end"] else "")
+
+
+def _classes_between(result) -> list[str]:
+    """Lines naming the outcomes refining found between two neighbouring grid points that neither
+    of them has (more than one boundary between them): unsafe | none | goal between grid points
+    of unsafe and goal had been printed as a goal band alone, as if unsafe met goal."""
+    groups: dict = {}
+    swept = [a.name for a in result.axes if len(a.values) > 1]
+    for b in result.boundaries:
+        rest = tuple((n, b["at"][n]) for n in swept if n != b["axis"] and n in b["at"])
+        groups.setdefault((b["model"], b["axis"], rest, b["grid_low"], b["grid_high"]), []).append(b)
+    lines = []
+    for (model, axis, rest, lo, hi), found in groups.items():
+        if len(found) < 2:
+            continue
+        found.sort(key=lambda b: b["boundary"])
+        inner = list(dict.fromkeys(b["high_outcome"] for b in found[:-1]))
+        where = "".join(f", {n}={v:g}" for n, v in rest)
+        steps = ", ".join(f"{b['low_outcome']} | {b['high_outcome']} at {b['boundary']:.4g}" for b in found)
+        lines.append(f"{model}: refining found {' and '.join(inner)} between {axis} = {lo:g} and {hi:g}{where}: {steps}")
+    return lines
+
+
 def _print_sweep(args: argparse.Namespace, result, data: dict, plot, interrupted: bool) -> None:
     """Print the sweep: one JSON object, or the counts per model, the goal bands and where the results went."""
     if args.json:
@@ -1276,13 +1302,21 @@ def _print_sweep(args: argparse.Namespace, result, data: dict, plot, interrupted
         for p in result.points:
             if p is not None:
                 counts.setdefault(p.model, dict.fromkeys(OUTCOME_LABELS, 0))[p.outcome] += 1
+        refined = {}
+        for p in result.refine_points:
+            refined.setdefault(p.model, dict.fromkeys(OUTCOME_LABELS, 0))[p.outcome] += 1
         for model, c in counts.items():
-            print(f"{model}: {c['goal']} goal, {c['unsafe']} unsafe, {c['none']} none")
+            more = refined.get(model)
+            ran = ", ".join(f"{n} {o}" for o, n in (more or {}).items() if n)
+            also = f" on the grid; refining's {sum(more.values())} runs: {ran}" if more else ""
+            print(f"{model}: {c['goal']} goal, {c['unsafe']} unsafe, {c['none']} none{also}")
+        for line in _classes_between(result):
+            print(line)
         if data.get("bands"):  # along the first axis (all axes are in the JSON)
             for axis_name, per_model in list(data["bands"].items())[:1]:
                 for model, rows in per_model.items():
                     for rest, edges in rows.items():
-                        text = "; ".join(f"{e['from']:.4g} .. {e['to']:.4g}" for e in edges) or "none"
+                        text = "; ".join(f"{_edge(e, 'from')} .. {_edge(e, 'to')}" for e in edges) or "none"
                         at = "" if rest == "-" else f", {rest}"  # ("-": no other axis)
                         print(f"goal band in {axis_name}, {model}{at}: {text}")
         failed = sum(p is not None and p.status != "ok" for p in result.points)

@@ -381,9 +381,12 @@ def plot_feasible_sets(path: Path, result) -> Path:
     for panel, model in zip(panels[0], models):
         for outcome, colour in OUTCOME_COLOURS.items():
             pts = [p for p in result.points if p is not None and p.model == model and p.outcome == outcome]
-            xs = [p.parameters[x_axis.name] for p in pts]
-            ys = [p.parameters[y_axis.name] if y_axis else 0.0 for p in pts]
-            panel.scatter(xs, ys, s=14, color=colour, label=f"{outcome} ({len(pts)})", marker="s")
+            more = [p for p in result.refine_points if p.model == model and p.outcome == outcome]  # (an outcome only they found too)
+            label = f"{outcome} ({len(pts)}" + (f"; {len(more)} refining, small dots)" if more else ")")
+            for runs, size, marker in ((pts, 14, "s"), (more, 5, "o")):
+                xs = [p.parameters[x_axis.name] for p in runs]
+                ys = [p.parameters[y_axis.name] if y_axis else 0.0 for p in runs]
+                panel.scatter(xs, ys, s=size, color=colour, label=label if runs is pts else None, marker=marker)
         for b in result.boundaries:
             if b["model"] != model:
                 continue
@@ -401,6 +404,10 @@ def plot_feasible_sets(path: Path, result) -> Path:
         if x_axis.log:
             panel.set_xscale("log")
             log_ticks(panel.xaxis, min(x_axis.values), max(x_axis.values))
+        else:  # (at most 5 labelled ticks: 0.3200 0.3225 ... had run into each other)
+            from matplotlib.ticker import MaxNLocator
+
+            panel.xaxis.set_major_locator(MaxNLocator(nbins=5))
         panel.set_xlabel(x_axis.name)
         panel.set_title(_wrap(model + (f" ({fixed})" if fixed else ""), 38), fontsize=8)
         panel.legend(fontsize=7, loc="best")

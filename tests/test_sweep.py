@@ -432,7 +432,56 @@ def test_refinement_keeps_its_runs_and_names_a_boundary_a_solver_failure_bounds(
     cli._print_sweep(SimpleNamespace(json=False, out=Path("out")), result, data, None, False)
     said = capsys.readouterr().out
     (band,) = [line for line in said.splitlines() if line.startswith("goal band in ")]
-    assert band == f"goal band in x, kinematic: 0 .. {boundary['boundary']:.4g}"  # (no other axis: it had said "kinematic, -:")
+    assert band == f"goal band in x, kinematic: 0 (grid end) .. {boundary['boundary']:.4g}"  # (no other axis: it had said "kinematic, -:")
     failed = sum(p.status != "ok" for p in result.refine_points)
     assert f"{failed} of the 9 refinement runs stopped on a solver failure" in said
     assert "1 refined boundary lies against a run a solver failure stopped" in said
+
+
+class _ThreeClasses:
+    """Runs that end in goal below x = 0.3, none in [0.3, 0.35) and unsafe after: a class narrower
+    than the grid's spacing, between grid points of the other two."""
+
+    def map(self, tasks):
+        for i, task in enumerate(tasks):
+            x = dict(task.parameters)["x"]
+            outcome = "goal" if x < 0.3 else "none" if x < 0.35 else "unsafe"
+            yield i, sw.Point(task.model.label, dict(task.parameters), outcome, 1.0, "ok", {}, 10, 0.0)
+
+
+def test_an_outcome_only_refining_found_is_printed_and_drawn(capsys, tmp_path, monkeypatch):
+    """A trial's sweep printed "2 goal, 3 unsafe, 0 none" and a goal band, and its plot's legend
+    said "none (0)" between two boundary ticks, where refining had found none between an unsafe
+    and a goal grid point: a reader concluded unsafe met goal. A band's grid end was unmarked."""
+    from types import SimpleNamespace
+
+    import matplotlib.pyplot as plt
+
+    from planner import cli, plots
+
+    axes, models = [sw.parse_axis("x=0:1:3")], sw.parse_models("kinematic")
+    result = sw.sweep(TRIANGLE, axes, models, executor=_ThreeClasses())
+    sw.refine(result, tolerance=1e-3, executor=_ThreeClasses())
+    low, high = sorted(result.boundaries, key=lambda b: b["boundary"])
+    assert (low["low_outcome"], low["high_outcome"], high["high_outcome"]) == ("goal", "none", "unsafe")
+    data = result.to_json()
+    data["bands"] = {"x": sw.bands(result, "x")}
+    cli._print_sweep(SimpleNamespace(json=False, out=tmp_path), result, data, None, False)
+    said = capsys.readouterr().out.splitlines()
+    ran = {o: sum(p.outcome == o for p in result.refine_points) for o in ("none", "goal", "unsafe")}
+    assert ran["none"] > 0 and sum(ran.values()) == len(result.refine_points)
+    assert said[0].startswith(f"kinematic: 1 goal, 2 unsafe, 0 none on the grid; refining's {len(result.refine_points)} runs: ")
+    assert f"{ran['none']} none" in said[0]
+    assert said[1] == (
+        "kinematic: refining found none between x = 0 and 0.5: "
+        f"goal | none at {low['boundary']:.4g}, none | unsafe at {high['boundary']:.4g}"
+    )
+    assert said[2] == f"goal band in x, kinematic: 0 (grid end) .. {low['boundary']:.4g}"
+    drawn = []
+    monkeypatch.setattr(plots, "_save", lambda fig, path, svg=False: drawn.append(fig) or path)
+    plots.plot_feasible_sets(tmp_path / "sweep.png", result)
+    try:
+        labels = [t.get_text() for t in drawn[0].axes[0].get_legend().get_texts()]
+        assert f"none (0; {ran['none']} refining, small dots)" in labels
+    finally:
+        plt.close(drawn[0])
