@@ -811,6 +811,7 @@ def _write_plan_outputs(args: argparse.Namespace, scenario: Scenario, result) ->
     runs = []
     for entry, rung_report in zip(report["rungs"], result.rungs):  # (report.json only: plan.json is the plan)
         rung = rung_for(scenario, rung_report.rung)
+        entry["not_in_ladder"] = unlisted_rung_note(scenario, rung_report.rung, step_flag=False)  # (stderr's note; None: listed)
         if rung.propagates and rung_report.durations:
             h = rung_report.h
             replay = rung.rollout(
@@ -1120,7 +1121,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     scenario, fixed, axes, models, runs = _check_sweep_args(args)
     result, interrupted = _run_sweep(args, scenario, fixed, axes, models, runs)
     with _writing_results():
-        data, plot = _write_sweep_outputs(args, result, axes)
+        data, plot = _write_sweep_outputs(args, scenario, result, axes)
         _print_sweep(args, result, data, plot, interrupted)
     return EXIT_INTERRUPTED if interrupted else EXIT_OK
 
@@ -1252,11 +1253,15 @@ def _run_sweep(args: argparse.Namespace, scenario: Scenario, fixed: dict, axes, 
     return result, interrupted
 
 
-def _write_sweep_outputs(args: argparse.Namespace, result, axes) -> tuple[dict, Any]:
-    """Write sweep.json, sweep.csv and (with any points) sweep.png: (the JSON data, the plot's path or None)."""
+def _write_sweep_outputs(args: argparse.Namespace, scenario: Scenario, result, axes, reword=str) -> tuple[dict, Any]:
+    """Write sweep.json, sweep.csv and (with any points) sweep.png: (the JSON data, the plot's path or None).
+    reword: the notes' words for where the options came from (a service job's: options.step)."""
     from planner import sweep as sw
 
     data = result.to_json()
+    # the note stderr has without --json, per rung the ladder does not list
+    notes = {m.rung: unlisted_rung_note(scenario, m.rung) for m in result.models}
+    data["not_in_ladder"] = {rung: reword(note) for rung, note in notes.items() if note}
     if args.refine and result.boundaries:
         data["bands"] = {a.name: sw.bands(result, a.name) for a in axes}
     write_atomic(args.out / "sweep.json", json.dumps(data, indent=1) + "\n")

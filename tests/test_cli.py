@@ -1098,6 +1098,31 @@ def test_simulate_of_a_plan_sums_its_durations_correctly_rounded(tmp_path, capsy
     assert summary["duration"] == 4.5 and summary["steps"] == 450
 
 
+def test_plan_and_sweep_json_say_when_a_rung_is_not_in_the_ladder(capsys, tmp_path):
+    """A trial's `plan --json` and `sweep --json` printed nothing of the note stderr has without
+    --json (simulate's had become `not_in_ladder`): report.json gives it per rung (None for a rung
+    the ladder lists), sweep.json per unlisted rung."""
+    from planner.cli import main
+
+    free = str(SCENARIOS / "free_transfer.toml")  # its ladder: geometric, kinematic
+    argv = ["plan", free, "--rungs", "geometric,kinematic,quasistatic-rigid", "--iterations", "50", "--seed", "1", "--json"]
+    code = main([*argv, "--out", str(tmp_path / "plan")])
+    out, err = capsys.readouterr()
+    assert code in (0, 1) and "not in the scenario's ladder" not in err
+    notes = {r["rung"]: r["not_in_ladder"] for r in json.loads(out)["rungs"]}
+    assert notes["geometric"] is None and notes["kinematic"] is None
+    assert notes["quasistatic-rigid"].startswith("quasistatic-rigid is not in the scenario's ladder, so it runs at its family's defaults")
+    assert "--step" not in notes["quasistatic-rigid"]  # (plan takes none)
+    on_disk = json.loads((tmp_path / "plan" / "report.json").read_text())
+    assert [r["not_in_ladder"] for r in on_disk["rungs"]] == list(notes.values())
+    argv = ["sweep", free, "--grid", "gap=0.3", "--model", "kinematic,dynamic-rigid", "--workers", "1", "--duration", "0.01", "--json"]
+    assert main([*argv, "--out", str(tmp_path / "sweep")]) == 0
+    out, err = capsys.readouterr()
+    said = json.loads(out)["not_in_ladder"]
+    assert list(said) == ["dynamic-rigid"] and "(unless --step)" in said["dynamic-rigid"] and "not in the scenario" not in err
+    assert json.loads((tmp_path / "sweep" / "sweep.json").read_text())["not_in_ladder"] == said
+
+
 def test_simulate_json_says_when_the_rung_is_not_in_the_ladder(capsys):
     """The note stderr has without --json (the family defaults an unlisted rung runs at) is the
     object's `not_in_ladder` with it; --json had dropped it."""

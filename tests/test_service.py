@@ -660,7 +660,7 @@ def test_a_simulate_job_leaves_the_servers_log_alone(capsys):
     assert "simulating" not in capsys.readouterr().err
 
 
-def test_a_simulate_jobs_note_on_a_rung_not_in_the_ladder_speaks_the_requests_words():
+def test_a_simulate_or_sweep_jobs_note_on_a_rung_not_in_the_ladder_speaks_the_requests_words():
     """The note names options.step, the request's key, where `ladder simulate` names --step."""
     from planner.service import jobs
 
@@ -669,3 +669,7 @@ def test_a_simulate_jobs_note_on_a_rung_not_in_the_ladder_speaks_the_requests_wo
     note = json.loads(text)["not_in_ladder"]
     assert complete and note.startswith("dynamic-rigid is not in the scenario's ladder")
     assert "(unless options.step)" in note and "--step" not in note
+    options = {"grid": ["gap=0.3"], "model": "dynamic-rigid", "duration": 0.01}  # a sweep job's sweep.json too
+    text, complete = jobs.run("sweep", {"filename": "free.toml", "scenario": FREE}, options)
+    note = json.loads(text)["not_in_ladder"]["dynamic-rigid"]
+    assert complete and "(unless options.step)" in note and "--step" not in note

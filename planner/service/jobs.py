@@ -382,7 +382,7 @@ def run(
                     raise KeyboardInterrupt  # the sweep stops between runs, keeping them
 
             result, interrupted = cli._run_sweep(args, *checked, on_progress=on_progress)
-            cli._write_sweep_outputs(args, result, checked[2])
+            cli._write_sweep_outputs(args, checked[0], result, checked[2], reword=lambda text: _cli_reason(kind, text))
             return (args.out / "sweep.json").read_text(), not interrupted
         scenario, plan_controls, h, duration, total = checked
         with _interrupt_when(stop):
