@@ -232,7 +232,7 @@ def _add_sweep_parser(sub: argparse._SubParsersAction) -> None:
     where.add_argument("--workers", type=int, help="local worker processes (default: all cores)")
     where.add_argument("--executor", metavar="dask://HOST:PORT", help="run on a Dask distributed scheduler")
     sweep.add_argument("--refine", action="store_true", help="bisect class boundaries along grid lines")
-    sweep.add_argument("--tolerance", type=float, default=1e-3, help="refinement bracket (relative on log axes; default 1e-3)")
+    sweep.add_argument("--tolerance", type=float, help="refinement bracket, with --refine (relative on log axes; default 1e-3)")
     sweep.add_argument("--duration", type=float, help="seconds per run (default: the policy's duration)")
     _add_policy_option(sweep)
     sweep.add_argument("--step", type=float, help="time step h (default: each rung's h in the ladder, else the rung's default)")
@@ -1136,6 +1136,10 @@ def _check_sweep_args(args: argparse.Namespace):
     problems += executor_problems(args.executor)
     for key, value in (("--duration", args.duration), ("--step", args.step), ("--tolerance", args.tolerance)):
         problems += positive(key, value)
+    if args.tolerance is not None and not args.refine and not any(p.key == "--tolerance" for p in problems):  # (unused, silently)
+        problems.append(Problem("--tolerance", "is the refinement's bracket: give it with --refine, or leave it out"))
+    if args.tolerance is None:
+        args.tolerance = sw.TOLERANCE
     scenario = load_from_args(args, problems)
     fixed = parse_overrides(args.param)
     for text in args.grid:
@@ -1759,6 +1763,6 @@ def _expect_words(runs: dict) -> str:
 def _policy_words(policy: dict) -> str:
     """A policy of `Scenario.summary` in words: its type, what it drives and for how long."""
     unit = lambda name: "m/s" if name.rpartition(".")[2] in TRANSLATIONAL_DOFS else "rad/s"  # noqa: E731
-    drives = [f"{name} at {speed:g} {unit(name)}" for name, speed in policy["speeds"].items()]
+    drives = [f"{name} at {speed + 0.0:g} {unit(name)}" for name, speed in policy["speeds"].items()]  # (+ 0.0: -0 is 0)
     drives += [f"{name} by its law" for name in policy["laws"]]
     return f"({policy['type']}: {', '.join(drives) or 'nothing driven'}) for {policy['duration']:g} s"

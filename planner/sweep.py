@@ -449,7 +449,11 @@ def sweep(
     return result
 
 
-def refine(result: SweepResult, *, tolerance: float = 1e-3, executor: Executor | None = None, progress=None) -> SweepResult:
+#: `refine`'s bracket, where none is given (relative on log axes).
+TOLERANCE = 1e-3
+
+
+def refine(result: SweepResult, *, tolerance: float = TOLERANCE, executor: Executor | None = None, progress=None) -> SweepResult:
     """Bisect every pair of grid neighbours (along one axis) whose outcomes differ, until the
     bracket is below `tolerance` (relative on log axes, absolute otherwise). Each boundary
     records the axis, the other parameters, the two outcomes and the bracket, and the status

@@ -1098,6 +1098,27 @@ def test_simulate_of_a_plan_sums_its_durations_correctly_rounded(tmp_path, capsy
     assert summary["duration"] == 4.5 and summary["steps"] == 450
 
 
+def test_a_sweep_tolerance_without_refine_is_refused_and_a_speed_of_zero_has_no_sign(capsys, tmp_path):
+    """Found by a trial: `sweep --tolerance 0.01` without --refine ran and ignored it, silently;
+    `check` said "finger1.y at -0 m/s" of a policy speed "-v1" at v1 = 0."""
+    from planner.cli import main
+
+    free = str(SCENARIOS / "free_transfer.toml")
+    argv = ["sweep", free, "--grid", "gap=0.3", "--model", "kinematic", "--workers", "1", "--duration", "0.01"]
+    assert main([*argv, "--tolerance", "0.01", "--out", str(tmp_path / "a")]) == 2
+    said = capsys.readouterr().err.splitlines()[-1]
+    assert said == f"error: {free}: --tolerance: is the refinement's bracket: give it with --refine, or leave it out"
+    assert not (tmp_path / "a").exists()
+    assert main([*argv, "--tolerance", "0.01", "--refine", "--out", str(tmp_path / "b")]) == 0
+    assert json.loads((tmp_path / "b" / "sweep.json").read_text())["refine_tolerance"] == 0.01
+    assert main([*argv, "--refine", "--out", str(tmp_path / "c")]) == 0
+    assert json.loads((tmp_path / "c" / "sweep.json").read_text())["refine_tolerance"] == 1e-3  # the default, as before
+    capsys.readouterr()
+    assert main(["check", str(SCENARIOS / "two_finger_triangle.toml"), "--param", "v1=0"]) == 0
+    out = capsys.readouterr().out
+    assert "finger1.y at 0 m/s" in out and "-0 m/s" not in out
+
+
 def test_plan_and_sweep_json_say_when_a_rung_is_not_in_the_ladder(capsys, tmp_path):
     """A trial's `plan --json` and `sweep --json` printed nothing of the note stderr has without
     --json (simulate's had become `not_in_ladder`): report.json gives it per rung (None for a rung

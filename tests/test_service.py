@@ -137,6 +137,11 @@ def test_bad_options_and_parameters_are_422_named_as_in_the_request(idle):
         )
     ]
     assert submit(idle, {"kind": "sweep", "scenario": FREE}).status_code == 422
+    sweep = {"grid": ["gap=0.3"], "model": "kinematic", "tolerance": 0.01}  # a tolerance with no refinement to bracket
+    r = submit(idle, {"kind": "sweep", "scenario": FREE, "options": sweep})
+    assert r.status_code == 422 and [(p["key"], p["reason"]) for p in r.json()["problems"]] == [
+        ("options.tolerance", "is the refinement's bracket: give it with options.refine, or leave it out")
+    ]
     r = submit(idle, {"kind": "bogus", "scenario": FREE, "extra": 1})  # not what the API's description allows: the same shape
     assert r.status_code == 422 and [p["key"] for p in r.json()["problems"]] == ["body.kind", "body.extra"]
     assert r.json()["file"] == "request" and r.json()["detail"].startswith("request: body.kind: Input should be 'plan'")

@@ -239,7 +239,7 @@ def cli_args(kind: str, path: Path, parameters: dict, options: dict, out: Path) 
             workers=1,  # the job's own worker process runs the sweep's runs (the service's --workers is the parallelism)
             executor=None,
             refine=bool(options.get("refine", False)),
-            tolerance=options.get("tolerance", 1e-3),
+            tolerance=options.get("tolerance"),
             duration=options.get("duration"),
             step=options.get("step"),
             policy=options.get("policy"),
