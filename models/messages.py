@@ -217,7 +217,7 @@ def unknown_key(key: str, known: tuple[str, ...]) -> str:
         hint = f"this table takes: {', '.join(known)}"
     else:
         hint = "check the spelling"
-    return f"unknown key ({hint} See docs/scenario-format.md)"
+    return f"unknown key ({hint}{'' if hint.endswith('?') else '.'} See docs/scenario-format.md)"
 
 
 def reason(err: Mapping[str, Any], annotation: Any, shown: Callable[[Any], str] = got, known: tuple[str, ...] = ()) -> tuple[str, str]:
