@@ -73,7 +73,7 @@ class _Once(argparse.Action):
     --model B` had run B alone, `plan --seed 1 --seed 2` planned seed 2)."""
 
     def __call__(self, parser, namespace, values, option_string=None):
-        seen = parser.__dict__.setdefault("_once", {})
+        seen = parser._once  # (`_Parser.parse_known_args` starts it empty for each parse)
         if self.dest in seen and option_string is not None:
             parser.error(f"argument {option_string}: given twice ({seen[self.dest]} and {values}); it takes one")
         seen[self.dest] = values
@@ -1302,18 +1302,21 @@ def _classes_between(result) -> list[str]:
     return lines
 
 
+def _outcome_counts(points) -> dict[str, dict[str, int]]:
+    """Per model, how many of `points` (None: a run not done) ended in each outcome."""
+    counts: dict = {}
+    for p in points:
+        if p is not None:
+            counts.setdefault(p.model, dict.fromkeys(OUTCOME_LABELS, 0))[p.outcome] += 1
+    return counts
+
+
 def _print_sweep(args: argparse.Namespace, result, data: dict, plot, interrupted: bool) -> None:
     """Print the sweep: one JSON object, or the counts per model, the goal bands and where the results went."""
     if args.json:
         print(json.dumps(data, indent=2))
     else:
-        counts = {}
-        for p in result.points:
-            if p is not None:
-                counts.setdefault(p.model, dict.fromkeys(OUTCOME_LABELS, 0))[p.outcome] += 1
-        refined = {}
-        for p in result.refine_points:
-            refined.setdefault(p.model, dict.fromkeys(OUTCOME_LABELS, 0))[p.outcome] += 1
+        counts, refined = _outcome_counts(result.points), _outcome_counts(result.refine_points)
         for model, c in counts.items():
             more = refined.get(model)
             ran = ", ".join(f"{n} {o}" for o, n in (more or {}).items() if n)
