@@ -1043,7 +1043,11 @@ def expected_run_problems(spec: ScenarioSpec, runs, key: str, *, cases: int = 0)
         if getattr(runs, setting) is not None and runs.plan is None:
             out.append(Problem(f"{key}.{setting}", "is the plan check's, and there is none (plan = true or false)"))
     if runs.plan is not None:  # the plan item plans: what `ladder plan` would refuse, under this key
-        out += [Problem(f"{key}.plan", reason) for reason in dict.fromkeys(p.reason for p in plan_problems(spec))]
+        refused = dict.fromkeys(f"{p.key}: {p.reason}" for p in plan_problems(spec))
+        out += [
+            Problem(f"{key}.plan", f"`ladder plan` refuses this scene, so [expect] cannot test a plan of it; leave plan out ({why})")
+            for why in refused
+        ]
     policy = spec.task.policy
     if policy is None:
         if runs.policy:
@@ -1085,8 +1089,8 @@ def _check_ladder(spec: ScenarioSpec) -> list[Problem]:
         if rung.h is None:
             out.append(Problem(f"{key}.h", f"required: the {rung.model} rung needs a time step h > 0"))
         planner = rung.planner or ladder.planner
-        if planner not in CONTROL_PLANNERS:
-            which = f"{key}.planner" if rung.planner else "ladder.planner"
+        which = f"{key}.planner" if rung.planner else "ladder.planner"
+        if planner not in CONTROL_PLANNERS and all(p.key != which for p in out):  # (ladder.planner once, not once per rung)
             out.append(Problem(which, f"{planner!r} is not a control planner; use one of {', '.join(CONTROL_PLANNERS)}"))
         if rung.friction_cone == "exact":
             out += _exact_cone_problems(spec, rung, key)

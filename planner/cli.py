@@ -408,6 +408,8 @@ def _write_perf_map() -> None:
 def load_from_args(args: argparse.Namespace, problems: list[Problem] | None = None) -> Scenario:
     """The scenario of the command line; when it does not load, its problems and `problems`
     (the other arguments' checked so far) are reported together."""
+    if problems is not None:
+        problems += _repeated_params(args.param)
     try:  # --policy (simulate, sweep): run one of [task.policies] instead of [task.policy]
         scenario = load_scenario(args.file, parse_overrides(args.param), override_key="--param {}")
         return scenario.with_policy(getattr(args, "policy", None))
@@ -417,12 +419,26 @@ def load_from_args(args: argparse.Namespace, problems: list[Problem] | None = No
         raise ScenarioError(exc.file, exc.problems + problems) from None
 
 
+def _repeated_params(items: list[str] | None) -> list[Problem]:
+    """A --param name given twice (the last had been taken, silently)."""
+    seen: dict[str, str] = {}
+    problems = []
+    for item in items or []:
+        name, sep, value = item.partition("=")
+        name = name.strip()
+        if sep and name in seen:
+            problems.append(Problem(f"--param {name}", f"given twice ({seen[name]} and {value.strip()}); give it once"))
+        seen.setdefault(name, value.strip())
+    return problems
+
+
 def cmd_check(args: argparse.Namespace) -> int:
     problems = check_out_file("--out", args.out)
     scenario = load_from_args(args, problems)
     if problems:
         raise ScenarioError(scenario.path, problems)
     summary = scenario.summary()
+    summary["task"]["goal_reach"] = None  # (None: no plan to reach it, as --json's other keys are there)
     if scenario.actuated and not summary["task"]["unplannable"]:  # (else there is no plan to reach it)
         from planner.ompl_adapter import goal_reach
 
@@ -469,14 +485,24 @@ def read_plan(path: Path, scenario: Scenario) -> tuple[np.ndarray, np.ndarray]:
     (same scenario name, contents after parameters, driven coordinates); else bad input."""
     from planner.ladder import scene_mismatch
 
+    expected = "expected a plan.json that `ladder plan` wrote"
     try:
         data = json.loads(path.read_text())
+    except OSError as exc:
+        raise ScenarioError(path, [Problem("--plan", f"cannot read the plan file: {exc.strerror or exc}")]) from None
+    except ValueError as exc:
+        raise ScenarioError(path, [Problem("--plan", f"not JSON ({exc}); {expected}")]) from None
+    try:
         index = [i for i, r in enumerate(data["rungs"]) if r.get("durations")][-1]
+    except (KeyError, IndexError, TypeError, AttributeError):
+        raise ScenarioError(path, [Problem("rungs", f"no rung with controls; {expected}")]) from None
+    try:
         last = data["rungs"][index]
         controls = np.array(last["controls"], float).reshape(len(last["durations"]), -1)
         durations = np.array(last["durations"], float)
-    except (OSError, ValueError, KeyError, IndexError, TypeError, AttributeError) as exc:
-        raise ScenarioError(path, [Problem("rungs", f"not a usable plan file: {exc}")]) from None
+    except (ValueError, KeyError, TypeError) as exc:
+        problem = Problem(f"rungs[{index}]", f"its controls and durations do not make a plan ({exc}); {expected}")
+        raise ScenarioError(path, [problem]) from None
     bad = [k for k, d in enumerate(durations) if not (0.0 < d < float("inf"))]
     if bad:
         k = bad[0]
@@ -542,7 +568,9 @@ def _check_simulate_args(args: argparse.Namespace):
     elif args.model == "geometric":
         problems.append(Problem("--model", "the geometric rung is a validity check with no dynamics to simulate"))
     plan_controls = None
-    if args.plan is not None:
+    if args.plan is not None and args.policy is not None:  # (the policy is part of the scene a plan was made for)
+        problems.append(Problem("--policy", "a plan's controls replace the policy; --policy goes without --plan"))
+    elif args.plan is not None:
         plan_controls = read_plan(args.plan, scenario)
         if args.duration is not None:
             problems.append(Problem("--duration", "a plan's controls carry their own durations; --duration goes with the policy"))
@@ -609,7 +637,7 @@ def _run_simulation(args: argparse.Namespace, scenario: Scenario, plan_controls,
 
     rung = rung_for(scenario, args.model)
     if not args.json:
-        say_unlisted_rungs(scenario, [args.model])
+        say_unlisted_rungs(scenario, [args.model], step=args.step)
     state = rung.initial_state(scenario)
     laws = plan_controls is None  # the policy's feedback laws (a plan's controls are open loop)
     controls, durations = plan_controls if plan_controls is not None else policy_controls(scenario, duration)
@@ -638,17 +666,18 @@ def counted(n: int, noun: str) -> str:
     return f"{n:,} {noun}{'' if n == 1 else 's'}"
 
 
-def say_unlisted_rungs(scenario: Scenario, names, step_flag: bool = True) -> None:
+def say_unlisted_rungs(scenario: Scenario, names, step_flag: bool = True, step: float | None = None) -> None:
     """`unlisted_rung_note` of each rung named (once each), on stderr."""
     for name in dict.fromkeys(names):
-        note = unlisted_rung_note(scenario, name, step_flag)
+        note = unlisted_rung_note(scenario, name, step_flag, step)
         if note:
             print(note, file=sys.stderr, flush=True)
 
 
-def unlisted_rung_note(scenario: Scenario, name: str, step_flag: bool = True) -> str | None:
+def unlisted_rung_note(scenario: Scenario, name: str, step_flag: bool = True, step: float | None = None) -> str | None:
     """What a rung the scenario's ladder does not list runs at (its family's defaults, which
-    the file does not show); None for a listed rung. step_flag: the command takes --step."""
+    the file does not show); None for a listed rung. step_flag: the command takes --step;
+    step: the --step given (the run's h, no default then)."""
     from models.rungs import rung_for
 
     model = rung_for(scenario, name).model
@@ -656,10 +685,12 @@ def unlisted_rung_note(scenario: Scenario, name: str, step_flag: bool = True) ->
         return None
     settings = scenario.rung_settings(name)
     quasistatic = model.eps == 0.0 and not model.kinematic
+    if step is not None:
+        h = ""
+    else:
+        h = f"h = {settings.h:g}" + (" (unless --step)" if step_flag else "") + ", "
     return (
-        f"{name} is not in the scenario's ladder, so it runs at its family's defaults: h = {settings.h:g}"
-        + (" (unless --step)" if step_flag else "")
-        + f", {settings.contact_solver}"
+        f"{name} is not in the scenario's ladder, so it runs at its family's defaults: {h}{settings.contact_solver}"
         + (f", {settings.friction_directions} friction directions" if scenario.spec.scene.dimension == 3 else "")
         + (f", quasistatic inertia scale {model.quasistatic_inertia:g}" if quasistatic else "")
         + "; a [[ladder.rungs]] entry would set them (and add the rung to the ladder)"
@@ -693,7 +724,8 @@ def _simulation_summary(args: argparse.Namespace, scenario: Scenario, result, h:
         "max_residual": result.max_residual,
         "max_lcp_size": result.max_lcp_size,
         "max_penetration": result.max_penetration,
-        "not_in_ladder": unlisted_rung_note(scenario, args.model),  # (the note stderr has without --json; None: in the ladder)
+        # (the note stderr has without --json; None: in the ladder)
+        "not_in_ladder": unlisted_rung_note(scenario, args.model, step=args.step),
         "warnings": run_warnings(scenario, rung_for(scenario, args.model), h, result),
         "parameters": dict(scenario.parameters),
     }
@@ -1118,8 +1150,14 @@ def sweep_point_problems(scenario: Scenario, texts: list[str], axes, models, fix
 
 def cmd_sweep(args: argparse.Namespace) -> int:
     """`ladder sweep`: run the policy over a grid of design parameters per model, write and report the classes."""
+    existed = args.out.exists()
     scenario, fixed, axes, models, runs = _check_sweep_args(args)
-    result, interrupted = _run_sweep(args, scenario, fixed, axes, models, runs)
+    try:
+        result, interrupted = _run_sweep(args, scenario, fixed, axes, models, runs)
+    except ScenarioError:  # (a Dask scheduler out of reach, a file its workers cannot read): no empty folder left
+        if not existed and args.out.is_dir() and not any(args.out.iterdir()):
+            args.out.rmdir()
+        raise
     with _writing_results():
         data, plot = _write_sweep_outputs(args, scenario, result, axes)
         _print_sweep(args, result, data, plot, interrupted)
@@ -1160,8 +1198,13 @@ def _check_sweep_args(args: argparse.Namespace):
             problems.append(
                 Problem(f"--grid {axis.name}", f"not a design parameter of this file; parameters: {', '.join(scenario.parameters)}")
             )
-    if len({a.name for a in axes}) != len(axes):
-        problems.append(Problem("--grid", "an axis is given twice"))
+    names = [a.name for a in axes]
+    for name in dict.fromkeys(n for n in names if names.count(n) > 1):
+        problems.append(Problem(f"--grid {name}", "is given twice; give each axis once (one --grid NAME=VALUES)"))
+    for name in dict.fromkeys(n for n in names if n in fixed):
+        problems.append(
+            Problem(f"--grid {name}", f"is also fixed by --param {name}={fixed[name]:g}; an axis takes its values from --grid alone")
+        )
     for model in models:
         for name, _ in model.overrides:
             if name not in scenario.parameters:
@@ -1228,27 +1271,48 @@ def _run_sweep(args: argparse.Namespace, scenario: Scenario, fixed: dict, axes, 
             bar.update(task_id, completed=done, total=total)
         if on_progress is not None:
             on_progress({"runs_done": done, "runs": total})
-        interrupt.check()
 
     def refine_progress(step: int, active: int) -> None:
         if bar is not None:
             bar.update(task_id, description=f"refine step {step}: {active} brackets", completed=0, total=None)
         if on_progress is not None:
             on_progress({"refine_step": step, "brackets": active})
-        interrupt.check()
+
+    said = []
+
+    def stop() -> bool:
+        """Ctrl-C: the runs under way finish and are kept (a second Ctrl-C stops at once)."""
+        if interrupt.asked() and not said:
+            said.append(True)
+            notice("stopping: the runs under way finish and are kept (Ctrl-C again stops at once)")
+        return interrupt.asked()
+
+    def notice(text: str) -> None:
+        if bar is not None:
+            bar.console.print(text, highlight=False, markup=False)
+        else:
+            print(text, file=sys.stderr, flush=True)
 
     where = args.executor or counted(args.workers or os.cpu_count() or 1, "local worker")
     if not args.json:
         print(f"sweeping {runs} runs on {where} (Ctrl-C stops and keeps what is done)", file=sys.stderr, flush=True)
-        say_unlisted_rungs(scenario, [m.rung for m in models])
+        say_unlisted_rungs(scenario, [m.rung for m in models], step=args.step)
         announce_compile()
     try:
-        with interrupt.deferred(), sw.Executor(args.workers, args.executor) as executor:
+        with interrupt.deferred(), sw.Executor(args.workers, args.executor, notice) as executor:
             result = sw.sweep(
-                str(scenario.path), axes, models, fixed=fixed, h=args.step, duration=args.duration, executor=executor, progress=progress
+                str(scenario.path),
+                axes,
+                models,
+                fixed=fixed,
+                h=args.step,
+                duration=args.duration,
+                executor=executor,
+                progress=progress,
+                stop=stop,
             )
             if result.complete and args.refine:
-                result = sw.refine(result, tolerance=args.tolerance, executor=executor, progress=refine_progress)
+                result = sw.refine(result, tolerance=args.tolerance, executor=executor, progress=refine_progress, stop=stop)
     finally:
         if bar is not None:
             bar.stop()
@@ -1264,9 +1328,9 @@ def _write_sweep_outputs(args: argparse.Namespace, scenario: Scenario, result, a
 
     data = result.to_json()
     # the note stderr has without --json, per rung the ladder does not list
-    notes = {m.rung: unlisted_rung_note(scenario, m.rung) for m in result.models}
+    notes = {m.rung: unlisted_rung_note(scenario, m.rung, step=args.step) for m in result.models}
     data["not_in_ladder"] = {rung: reword(note) for rung, note in notes.items() if note}
-    if args.refine and result.boundaries:
+    if any(result.points):  # (at grid points; refined edges where --refine bracketed them)
         data["bands"] = {a.name: sw.bands(result, a.name) for a in axes}
     write_atomic(args.out / "sweep.json", json.dumps(data, indent=1) + "\n")
     write_atomic(args.out / "sweep.csv", result.to_csv())
@@ -1317,6 +1381,8 @@ def _print_sweep(args: argparse.Namespace, result, data: dict, plot, interrupted
         print(json.dumps(data, indent=2))
     else:
         counts, refined = _outcome_counts(result.points), _outcome_counts(result.refine_points)
+        for model in (m.label for m in result.models if m.label not in counts):  # (an interrupted sweep's)
+            print(f"{model}: no run done")
         for model, c in counts.items():
             more = refined.get(model)
             ran = ", ".join(f"{n} {o}" for o, n in (more or {}).items() if n)
@@ -1331,6 +1397,8 @@ def _print_sweep(args: argparse.Namespace, result, data: dict, plot, interrupted
                         text = "; ".join(f"{_edge(e, 'from')} .. {_edge(e, 'to')}" for e in edges) or "none"
                         at = "" if rest == "-" else f", {rest}"  # ("-": no other axis)
                         print(f"goal band in {axis_name}, {model}{at}: {text}")
+            if result.refine_tolerance is None:
+                print("(the bands' edges are grid points: --refine finds the edges between them)")
         failed = sum(p is not None and p.status != "ok" for p in result.points)
         if failed:
             print(f"{failed} runs stopped on a solver failure (outcome none; their status is in the results)")

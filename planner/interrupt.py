@@ -13,6 +13,9 @@ A command's results, once computed, are written inside a `shielded()` block: a f
 there is only remembered (`held`), so every output is written whole and the command reports
 it; a second (or the first there after one that stopped the work) stops the process at once. A Ctrl-C had left a simulate's plot and
 half its table, or a plan's plan.json (complete) with some of its plots, and exit 130.
+
+Stopping at once skips every `finally`: what the process started that would outlive it (a
+sweep's pool of worker processes) is registered with `stopped_at_once` and ended first.
 """
 
 from __future__ import annotations
@@ -23,6 +26,8 @@ import sys
 from contextlib import contextmanager
 
 _state = {"asked": False, "deferring": 0, "shielding": 0, "held": False}
+#: What a stop at once ends before the process exits (`stopped_at_once`).
+_at_stop: list = []
 
 
 def asked() -> bool:
@@ -41,17 +46,26 @@ def held() -> bool:
     return _state["held"]
 
 
+def _stop_now() -> None:
+    """End the process at once (exit 130), first ending what `stopped_at_once` registered."""
+    for end in reversed(_at_stop):
+        try:
+            end()
+        except Exception:  # (ending the rest matters more than what this one said)
+            pass
+    print("interrupted", file=sys.stderr, flush=True)
+    os._exit(130)
+
+
 def handler(signum, frame) -> None:
     if _state["shielding"]:
         if _state["held"] or _state["asked"]:  # the second Ctrl-C (the first may have stopped the work): stop now
-            print("interrupted", file=sys.stderr, flush=True)
-            os._exit(130)
+            _stop_now()
         _state["held"] = True
         return
     if _state["deferring"]:
         if _state["asked"]:  # the second Ctrl-C: the user does not want to wait for a clean stop
-            print("interrupted", file=sys.stderr, flush=True)
-            os._exit(130)
+            _stop_now()
         _state["asked"] = True
         return
     _state["asked"] = True
@@ -75,6 +89,17 @@ def _inside(counter: str):
         yield
     finally:
         _state[counter] -= 1
+
+
+@contextmanager
+def stopped_at_once(end):
+    """A block during which a stop at once (a second Ctrl-C) calls `end()` before the process
+    exits: a sweep's worker processes, which ignore Ctrl-C, had been left running as orphans."""
+    _at_stop.append(end)
+    try:
+        yield
+    finally:
+        _at_stop.remove(end)
 
 
 def deferred():

@@ -401,16 +401,24 @@ def plot_feasible_sets(path: Path, result) -> Path:
                     color="k",
                     lw=1.5,
                 )
+        low, high = min(x_axis.values), max(x_axis.values)
         if x_axis.log:
             panel.set_xscale("log")
-            log_ticks(panel.xaxis, min(x_axis.values), max(x_axis.values))
+            log_ticks(panel.xaxis, low, high)
+            # the grid's range, run or not: a model an interrupted sweep never reached has no point
+            # to scale a log axis by (matplotlib had raised)
+            panel.set_xlim(low * (high / low) ** -0.04, high * (high / low) ** 0.04)
         else:  # (at most 5 labelled ticks: 0.3200 0.3225 ... had run into each other)
             from matplotlib.ticker import MaxNLocator
 
             panel.xaxis.set_major_locator(MaxNLocator(nbins=5))
+            panel.set_xlim(low - 0.04 * _span(x_axis), high + 0.04 * _span(x_axis))
         panel.set_xlabel(x_axis.name)
         panel.set_title(_wrap(model + (f" ({fixed})" if fixed else ""), 38), fontsize=8)
-        panel.legend(fontsize=7, loc="best")
+        if any(p is not None and p.model == model for p in result.points):
+            panel.legend(fontsize=7, loc="best")
+        else:
+            panel.text(0.5, 0.5, "no run done", transform=panel.transAxes, ha="center", va="center", fontsize=9, color="0.4")
         if y_axis is None:  # a strip: its height means nothing
             panel.set_yticks([])
     panels[0][0].set_ylabel(y_axis.name if y_axis else "")

@@ -19,10 +19,12 @@ not depend on the executor or on the order runs finish in.
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import math
 import os
 import re
+import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -263,27 +265,46 @@ def run_task(task: Task) -> Point:
     )
 
 
-def _warm() -> None:
+def _warm(parent: int) -> None:
     """Load the compiled kernels in a fresh worker before its first timed run. Ctrl-C at a
-    terminal reaches the workers too: they leave it to the parent, which stops between runs."""
+    terminal reaches the workers too: they leave it to the parent, which stops between runs.
+    A worker whose parent is gone (killed, or stopped at once) exits once its run is done:
+    workers had been left running, then blocked on the pool's pipe for good."""
     import signal
+    import threading
+    import time
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+    def orphaned() -> None:
+        while os.getppid() == parent:
+            time.sleep(1.0)
+        os._exit(1)
+
+    threading.Thread(target=orphaned, daemon=True, name="ladder-parent-watch").start()
     import models.rollout  # noqa: F401
 
 
 #: Runs in flight per worker: the pool is fed from the (lazy) task stream this far ahead.
 WINDOW_PER_WORKER = 4
+#: Seconds between checks of `map`'s `stop` while it waits for a run (a Dask cluster that lost
+#: its workers finishes none; a check at each run's end alone had left Ctrl-C unheard).
+POLL_S = 0.5
+#: Seconds a Dask sweep waits with no worker in the cluster before it says so.
+NO_WORKERS_S = 10.0
 
 
 class Executor:
-    """Runs tasks, yielding (index, Point) as they finish. `local` (process pool) or Dask."""
+    """Runs tasks, yielding (index, Point) as they finish. `local` (process pool) or Dask.
+    `notice(text)`: what the executor has to say while it waits (a Dask cluster with no workers)."""
 
-    def __init__(self, workers: int | None = None, address: str | None = None) -> None:
+    def __init__(self, workers: int | None = None, address: str | None = None, notice=None) -> None:
         self.address = address
         self.workers = workers or os.cpu_count() or 1
+        self.notice = notice or (lambda text: None)
         self._pool = None
         self._client = None
+        self._stack = contextlib.ExitStack()
 
     def __enter__(self) -> Executor:
         if self.address:
@@ -291,69 +312,146 @@ class Executor:
                 from distributed import Client
             except ImportError:
                 raise ScenarioError(
-                    Path("--executor"),
-                    [Problem(f"--executor {self.address}", 'install the dask extra: pip install "contact-ladder[dask]"')],
+                    "command line", [Problem("--executor", f'{self.address}: install the dask extra: pip install "contact-ladder[dask]"')]
                 ) from None
             try:
                 self._client = Client(self.address.removeprefix("dask://"), set_as_default=False, timeout=10)
             except (OSError, TimeoutError, ValueError) as exc:
-                raise ScenarioError(
-                    Path("--executor"), [Problem(f"--executor {self.address}", f"cannot reach the Dask scheduler: {exc}")]
-                ) from None
+                problem = Problem("--executor", f"cannot reach the Dask scheduler at {self.address}: {exc}")
+                raise ScenarioError("command line", [problem]) from None
         elif self.workers > 1:
-            self._pool = ProcessPoolExecutor(self.workers, initializer=_warm)
+            from planner import interrupt
+
+            self._pool = ProcessPoolExecutor(self.workers, initializer=_warm, initargs=(os.getpid(),))
+            self._stack.enter_context(interrupt.stopped_at_once(self._kill_workers))
         return self
 
     def __exit__(self, *exc) -> None:
+        self._stack.close()
         if self._pool is not None:
             self._pool.shutdown(wait=exc[0] is None, cancel_futures=True)
         if self._client is not None:
+            # a result lost with its worker leaves Dask's gather waiting; closing ends it with
+            # AllExit, which asyncio would print as a traceback ("Task exception was never retrieved")
+            loop = self._client.loop.asyncio_loop
+            loop.set_exception_handler(_quiet_all_exit)
             self._client.close()
 
-    def map(self, tasks):
+    def _kill_workers(self) -> None:
+        """End the pool's worker processes now (a stop at once: they would outlive the process)."""
+        for process in list((self._pool._processes or {}).values()):
+            process.kill()
+
+    def map(self, tasks, stop=None):
         """(index, Point) for each task of the iterable `tasks` as it finishes; at most
-        WINDOW_PER_WORKER runs per worker are submitted ahead, so a long stream is never held."""
+        WINDOW_PER_WORKER runs per worker are submitted ahead, so a long stream is never held.
+        `stop()` is asked after each run and every POLL_S s while waiting: once it is true no
+        further run starts, the runs not yet begun are cancelled, and those under way are
+        waited for and yielded (they are computed: a Ctrl-C keeps them), then the stream ends."""
+        stop = stop or (lambda: False)
         stream = enumerate(tasks)
-        window = WINDOW_PER_WORKER * self.workers
         if self._client is not None:
-            from distributed import as_completed
-
-            window = WINDOW_PER_WORKER * max(1, sum(self._client.nthreads().values()))
-            inflight = {}  # key -> (future, index)
-
-            def submit(i, t):
-                future = self._client.submit(run_task, t, pure=False)
-                inflight[future.key] = (future, i)
-                return future
-
-            try:
-                pending = as_completed([submit(i, t) for i, t in itertools.islice(stream, window)], loop=self._client.loop)
-                for future in pending:
-                    _, i = inflight.pop(future.key)
-                    for j, t in itertools.islice(stream, 1):
-                        pending.add(submit(j, t))
-                    yield i, future.result()
-            finally:
-                if inflight:
-                    self._client.cancel([f for f, _ in inflight.values()])
+            yield from self._map_dask(stream, stop)
         elif self._pool is not None:
+            window = WINDOW_PER_WORKER * self.workers
             futures = {}
+            stopping = False
             try:
                 for i, t in itertools.islice(stream, window):
                     futures[self._pool.submit(run_task, t)] = i
                 while futures:
-                    done, _ = wait(futures, return_when=FIRST_COMPLETED)
+                    if not stopping and stop():
+                        stopping = True
+                        # (a run the pool has begun, or queued for a worker, cannot be cancelled)
+                        futures = {f: i for f, i in futures.items() if not f.cancel()}
+                        continue
+                    done, _ = wait(futures, timeout=POLL_S, return_when=FIRST_COMPLETED)
                     for f in done:
                         i = futures.pop(f)
-                        for j, t in itertools.islice(stream, 1):
-                            futures[self._pool.submit(run_task, t)] = j
+                        if not stopping:
+                            for j, t in itertools.islice(stream, 1):
+                                futures[self._pool.submit(run_task, t)] = j
                         yield i, f.result()
             finally:
                 for f in futures:
                     f.cancel()
         else:
             for i, t in stream:
+                if stop():
+                    return
                 yield i, run_task(t)
+
+    def _map_dask(self, stream, stop):
+        import queue
+
+        window = WINDOW_PER_WORKER * max(1, sum(self._client.nthreads().values()))
+        finished: queue.Queue = queue.Queue()  # futures as they finish (their callbacks run on the client's thread)
+        inflight = {}  # future -> index
+        lost = set()  # finished runs whose result went with their worker
+        stopping = False
+        idle_since, said = None, False
+
+        def submit(i, t):
+            future = self._client.submit(run_task, t, pure=False)
+            inflight[future] = i
+            future.add_done_callback(finished.put)
+
+        for i, t in itertools.islice(stream, window):
+            submit(i, t)
+        try:
+            while inflight:
+                if not stopping and stop():
+                    stopping = True
+                    # the runs a worker has begun go on (Dask cannot stop a task): keep them
+                    under_way = {key for keys in self._client.processing().values() for key in keys}
+                    self._client.cancel([f for f in inflight if f.key not in under_way])
+                    inflight = {f: i for f, i in inflight.items() if f.key in under_way}
+                    continue
+                try:
+                    f = finished.get(timeout=POLL_S)
+                except queue.Empty:
+                    for f in lost:  # (tried again: Dask runs a lost result again once it knows it lost)
+                        f.add_done_callback(finished.put)
+                    lost.clear()
+                    idle_since = None if self._client.scheduler_info().get("workers") else (idle_since or time.monotonic())
+                    if idle_since is not None and not said and time.monotonic() - idle_since >= NO_WORKERS_S:
+                        self.notice(
+                            f"the Dask cluster at {self.address} has no workers: "
+                            "the sweep waits for one (Ctrl-C stops it and keeps what is done)"
+                        )
+                        said = True
+                    continue
+                if f not in inflight:  # (cancelled as the sweep stopped)
+                    continue
+                try:
+                    point = _dask_result(f)
+                except TimeoutError:  # its result was lost with its worker: Dask runs it again
+                    lost.add(f)
+                    continue
+                i = inflight.pop(f)
+                if not stopping:
+                    for j, t in itertools.islice(stream, 1):
+                        submit(j, t)
+                yield i, point
+        finally:
+            if inflight:
+                self._client.cancel(list(inflight))
+
+
+def _quiet_all_exit(loop, context) -> None:
+    """The Dask client's loop: AllExit (a gather the client's close ended) is no error of ours."""
+    if type(context.get("exception")).__name__ != "AllExit":
+        loop.default_exception_handler(context)
+
+
+def _dask_result(future):
+    """A finished Dask run's Point (TimeoutError where its result went with its worker); a file a
+    worker could not read is named as the worker's problem."""
+    try:
+        return future.result(timeout=POLL_S)
+    except ScenarioError as exc:
+        where = "as a Dask worker reads it: the workers read the scenario, and the files it names, at the same absolute path"
+        raise ScenarioError(exc.file, [Problem(p.key, f"{p.reason} ({where})") for p in exc.problems]) from None
 
 
 @dataclass
@@ -421,14 +519,16 @@ def sweep(
     duration: float | None = None,
     executor: Executor | None = None,
     progress=None,
+    stop=None,
 ) -> SweepResult:
-    """Every grid point under every model. On KeyboardInterrupt the result so far comes back
-    with complete = False (the caller writes it)."""
+    """Every grid point under every model. When `stop()` turns true (`Executor.map`), or on a
+    KeyboardInterrupt, the result so far comes back with complete = False (the caller writes it)."""
     fixed = dict(fixed or {})
     runs = grid_size(axes) * len(models)
     if runs > MAX_RUNS:
         raise ScenarioError(Path(file), [Problem("--grid", f"{runs:,} runs are more than a sweep may run ({MAX_RUNS:,})")])
-    tasks = (Task(str(file), tuple({**fixed, **p}.items()), m, h, duration) for m in models for p in grid_points(axes))
+    path = os.path.abspath(file)  # (a Dask worker's working folder is its own)
+    tasks = (Task(path, tuple({**fixed, **p}.items()), m, h, duration) for m in models for p in grid_points(axes))
     result = SweepResult(str(file), axes, models, fixed, h, duration, [None] * runs)
     own = executor is None
     executor = executor or Executor(1)
@@ -436,11 +536,12 @@ def sweep(
         if own:
             executor.__enter__()
         done = 0
-        for i, point in executor.map(tasks):
+        for i, point in executor.map(tasks, stop):
             result.points[i] = point
             done += 1
             if progress:
                 progress(done, runs)
+        result.complete = done == runs
     except KeyboardInterrupt:
         result.complete = False
     finally:
@@ -453,13 +554,14 @@ def sweep(
 TOLERANCE = 1e-3
 
 
-def refine(result: SweepResult, *, tolerance: float = TOLERANCE, executor: Executor | None = None, progress=None) -> SweepResult:
+def refine(result: SweepResult, *, tolerance: float = TOLERANCE, executor: Executor | None = None, progress=None, stop=None) -> SweepResult:
     """Bisect every pair of grid neighbours (along one axis) whose outcomes differ, until the
     bracket is below `tolerance` (relative on log axes, absolute otherwise). Each boundary
     records the axis, the other parameters, the two outcomes and the bracket, and the status
     of the two runs that bound it (`low_status`, `high_status`: a side a solver failure ended is
     no physical outcome). Brackets of all boundaries advance together, one batch of runs per
-    bisection step; the runs are kept in `result.refine_points`."""
+    bisection step; the runs are kept in `result.refine_points`. A stop (`stop()`, or a
+    KeyboardInterrupt) keeps the runs done, each bracket narrowed by its own, complete = False."""
     by_key = {}
     for p in result.points:
         if p is not None:
@@ -499,6 +601,8 @@ def refine(result: SweepResult, *, tolerance: float = TOLERANCE, executor: Execu
     def width(b) -> float:
         return math.log(b["high"] / b["low"]) if b["log"] else b["high"] - b["low"]
 
+    path = os.path.abspath(result.file)
+
     own = executor is None
     executor = executor or Executor(1)
     try:
@@ -514,13 +618,15 @@ def refine(result: SweepResult, *, tolerance: float = TOLERANCE, executor: Execu
                 mid = math.sqrt(b["low"] * b["high"]) if b["log"] else 0.5 * (b["low"] + b["high"])
                 b["mid"] = mid
                 params = {**b["at"], b["axis"]: mid}
-                tasks.append(Task(result.file, tuple(params.items()), models[b["model"]], result.h, result.duration))
+                tasks.append(Task(path, tuple(params.items()), models[b["model"]], result.h, result.duration))
             outcomes = [None] * len(tasks)
-            for i, point in executor.map(tasks):
+            for i, point in executor.map(tasks, stop):
                 outcomes[i] = point
-            result.refine_points += outcomes
+            result.refine_points += [p for p in outcomes if p is not None]
             for b, point in zip(active, outcomes):
                 mid = b.pop("mid")
+                if point is None:  # (stopped before this run)
+                    continue
                 if point.outcome == b["low_outcome"]:
                     b["low"], b["low_status"] = mid, point.status
                 elif point.outcome == b["high_outcome"]:
@@ -528,6 +634,9 @@ def refine(result: SweepResult, *, tolerance: float = TOLERANCE, executor: Execu
                 else:  # a third outcome in between: a boundary on each side of it
                     brackets.append({**b, "low": mid, "low_outcome": point.outcome, "low_status": point.status})
                     b["high"], b["high_outcome"], b["high_status"] = mid, point.outcome, point.status
+            if None in outcomes:
+                result.complete = False
+                break
             step += 1
             if progress:
                 progress(step, len(active))

@@ -396,3 +396,71 @@ def test_a_planar_inertia_is_named_as_the_file_writes_it(tmp_path):
     with pytest.raises(ScenarioError) as caught:
         load_scenario(SCENARIOS / "box_push_3d.toml", {"box_mass": -1.0})
     assert [p.key for p in caught.value.problems if ".inertia" in p.key] == [f"bodies[1].inertia[{i}]" for i in range(3)]
+
+
+def test_a_parameter_set_twice_is_refused_and_named(capsys, tmp_path):
+    """`--param v1=1 --param v1=3` had taken 3, and `sweep --grid v1=1,2 --param v1=3` run the
+    grid while sweep.json's `fixed` said v1 = 3, both silently; `--grid v1=1,2 --grid v1=3`
+    said "an axis is given twice" without naming it. Found by a user's trial of the docs."""
+    from planner import cli
+
+    free = str(SCENARIOS / "free_transfer.toml")
+    refused = [
+        (["check", free, "--param", "gap=0.3", "--param", "gap=0.35"], "--param gap: given twice (0.3 and 0.35); give it once"),
+        (
+            ["sweep", free, "--grid", "gap=0.3,0.4", "--param", "gap=0.35", "--model", "kinematic", "--out", str(tmp_path / "a")],
+            "--grid gap: is also fixed by --param gap=0.35; an axis takes its values from --grid alone",
+        ),
+        (
+            ["sweep", free, "--grid", "gap=0.3,0.4", "--grid", "gap=0.5", "--model", "kinematic", "--out", str(tmp_path / "b")],
+            "--grid gap: is given twice; give each axis once (one --grid NAME=VALUES)",
+        ),
+    ]
+    for argv, said in refused:
+        assert cli.main(argv) == 2, argv
+        assert capsys.readouterr().err.splitlines()[-1] == f"error: {free}: {said}"
+    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
+
+
+def test_a_plan_file_that_cannot_be_replayed_says_why(capsys, tmp_path):
+    """`simulate --plan` of a missing file had said "rungs: not a usable plan file: [Errno 2] ...",
+    and with `--policy` "the scene's contents differ", of the same file and parameters."""
+    from planner import cli
+
+    triangle = str(SCENARIOS / "two_finger_triangle.toml")
+    missing, text, empty = tmp_path / "missing.json", tmp_path / "text.json", tmp_path / "empty.json"
+    text.write_text("a plan\n")
+    empty.write_text("{}")
+    expected = "expected a plan.json that `ladder plan` wrote"
+    cases = [
+        (missing, f"error: {missing}: --plan: cannot read the plan file: No such file or directory"),
+        (text, f"error: {text}: --plan: not JSON (Expecting value: line 1 column 1 (char 0)); {expected}"),
+        (empty, f"error: {empty}: rungs: no rung with controls; {expected}"),
+    ]
+    for path, said in cases:
+        assert cli.main(["simulate", triangle, "--model", "kinematic", "--plan", str(path)]) == 2
+        assert capsys.readouterr().err.splitlines()[-1] == said
+    argv = ["simulate", triangle, "--model", "kinematic", "--plan", str(empty), "--policy", "potential"]
+    assert cli.main(argv) == 2
+    assert capsys.readouterr().err.splitlines()[-1] == (
+        f"error: {triangle}: --policy: a plan's controls replace the policy; --policy goes without --plan"
+    )
+
+
+def test_a_ladders_planner_is_one_problem_and_an_expected_plan_of_an_unplannable_scene_says_why(tmp_path):
+    """`[ladder] planner = "RRTConnect"` had been one problem per control rung (the same line
+    twice here); `[expect] plan = true` of a scene with a scripted obstacle had said "`ladder
+    simulate` and `ladder sweep` run such scenes", which refuse the file as well."""
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(_scene(tmp_path, GOOD.replace("[ladder]\n", '[ladder]\nplanner = "RRTConnect"\n')))
+    assert [(p.key, p.reason) for p in info.value.problems] == [
+        ("ladder.planner", "'RRTConnect' is not a control planner; use one of RRT, KPIECE1, EST")
+    ]
+    scripted = GOOD.replace('role = "obstacle"\n', 'role = "obstacle"\nvelocity = { y = 0.01 }\n', 1)
+    load_scenario(_scene(tmp_path, scripted))  # (simulate and sweep run it)
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(_scene(tmp_path, scripted + "\n[expect]\nplan = true\n"))
+    (problem,) = info.value.problems
+    assert problem.key == "expect.plan"
+    said = "`ladder plan` refuses this scene, so [expect] cannot test a plan of it; leave plan out (bodies[0].velocity: "
+    assert problem.reason.startswith(said)

@@ -262,6 +262,14 @@ def test_simulate_runs_a_rung_the_ladder_does_not_list_at_the_rungs_default_step
         "dynamic-rigid is not in the scenario's ladder, so it runs at its family's defaults: h = 0.0001 (unless --step), lemke; "
         "a [[ladder.rungs]] entry would set them (and add the rung to the ladder)"
     )
+    # with --step the run's h is the user's: the note names no default h (it had said "h = 0.0001 (unless --step)")
+    triangle = str(SCENARIOS / "two_finger_triangle.toml")
+    stepped = ladder("simulate", triangle, "--model", "dynamic-rigid", "--duration", "0.01", "--step", "1e-5", "--json")
+    assert stepped.returncode == 0, stepped.stderr
+    assert json.loads(stepped.stdout)["not_in_ladder"] == (
+        "dynamic-rigid is not in the scenario's ladder, so it runs at its family's defaults: lemke; "
+        "a [[ladder.rungs]] entry would set them (and add the rung to the ladder)"
+    )
     listed = ladder("simulate", str(SCENARIOS / "two_finger_triangle.toml"), "--model", "dynamic-compliant", "--duration", "0.01")
     assert listed.returncode == 0 and "not in the scenario's ladder" not in listed.stderr
     # plan with --rungs naming it (plan takes no --step)

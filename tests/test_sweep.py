@@ -405,7 +405,7 @@ class _ScriptedRuns:
     """An executor whose runs end as a script of the parameter x says: goal below 0.3, a solver
     failure (outcome none) in [0.3, 0.35), none after: refine's bookkeeping without physics."""
 
-    def map(self, tasks):
+    def map(self, tasks, stop=None):
         for i, task in enumerate(tasks):
             x = dict(task.parameters)["x"]
             outcome, status = ("goal", "ok") if x < 0.3 else ("none", "lcp_failed" if x < 0.35 else "ok")
@@ -442,7 +442,7 @@ class _ThreeClasses:
     """Runs that end in goal below x = 0.3, none in [0.3, 0.35) and unsafe after: a class narrower
     than the grid's spacing, between grid points of the other two."""
 
-    def map(self, tasks):
+    def map(self, tasks, stop=None):
         for i, task in enumerate(tasks):
             x = dict(task.parameters)["x"]
             outcome = "goal" if x < 0.3 else "none" if x < 0.35 else "unsafe"

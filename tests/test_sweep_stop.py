@@ -1,0 +1,226 @@
+"""A sweep that is stopped (Ctrl-C, a lost Dask cluster) keeps the runs under way and leaves no
+process behind; a plot of it draws the models it never reached. Found by a user's trial: a
+second Ctrl-C left `--workers 2`'s pool running as orphans, the first threw away the runs that
+finished after it, a Dask cluster that lost its workers hung the sweep unheard, a Dask worker read
+a relative scenario path in its own folder, and the plot of a model with no run raised."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from planner import sweep as sw
+from tests.conftest import ROOT
+from tests.test_sweep import TRIANGLE
+
+
+def _tasks(count: int):
+    """Runs of the paper's scene under dynamic-compliant at h = 1e-5 (about 180,000 steps each
+    to the grasp: under way when the sweep stops)."""
+    values = [0.5 + 1.5 * k / (count - 1) for k in range(count)]
+    return [sw.Task(TRIANGLE, (("v1", v), ("v2", 1.0)), sw.ModelSpec("dynamic-compliant"), 1e-5, 8.0) for v in values]
+
+
+def test_a_stopped_pool_finishes_and_keeps_the_runs_under_way_and_starts_no_other():
+    tasks = _tasks(40)
+    got = []
+    with sw.Executor(2) as pool:
+        for i, point in pool.map(tasks, stop=lambda: bool(got)):
+            got.append((i, point))
+    # the first run, then those the two workers had begun or the pool had queued for them (its
+    # call queue holds workers + 1, and the first run's refill may be among them)
+    assert 2 <= len(got) <= 1 + 2 + 3 + 1 < len(tasks), [i for i, _ in got]
+    i, point = got[-1]
+    again = sw.run_task(tasks[i])  # a kept run is the whole run, as run alone
+    assert (point.outcome, point.t, point.steps, point.final) == (again.outcome, again.t, again.steps, again.final)
+
+
+def test_a_stopped_sweep_is_incomplete_with_every_run_it_kept(monkeypatch):
+    axes = [sw.parse_axis("v1=0.5:2:40")]
+    seen = []
+
+    def progress(done, total):
+        seen.append(done)
+
+    with sw.Executor(2) as pool:
+        result = sw.sweep(
+            TRIANGLE,
+            axes,
+            sw.parse_models("dynamic-compliant"),
+            fixed={"v2": 1.0},
+            h=1e-5,
+            duration=8.0,
+            executor=pool,
+            progress=progress,
+            stop=lambda: bool(seen),
+        )
+    kept = [p for p in result.points if p is not None]
+    assert not result.complete and 2 <= len(kept) <= 7 and seen[-1] == len(kept)
+    assert result.to_json()["missing"] == 40 - len(kept)
+
+
+def test_the_runs_read_the_scenario_at_its_absolute_path(monkeypatch):
+    """A Dask worker's working folder is its own: a relative path had been read there."""
+    monkeypatch.chdir(ROOT)
+    relative = os.path.relpath(TRIANGLE, ROOT)
+    files = []
+
+    class Recording:
+        def map(self, tasks, stop=None):
+            for i, task in enumerate(tasks):
+                files.append(task.file)
+                yield i, sw.Point(task.model.label, dict(task.parameters), "goal" if i == 0 else "none", 1.0, "ok", {}, 1, 0.0)
+
+    result = sw.sweep(relative, [sw.parse_axis("v1=1,2")], sw.parse_models("kinematic"), executor=Recording())
+    sw.refine(result, tolerance=0.3, executor=Recording())
+    assert result.file == relative  # (sweep.json names the file as given)
+    assert len(files) > 2 and set(files) == {TRIANGLE} and os.path.isabs(TRIANGLE)
+
+
+def test_a_dask_sweep_stops_and_keeps_the_run_under_way():
+    distributed = pytest.importorskip("distributed", reason="the test extra installs distributed")
+    tasks = _tasks(12)
+    got = []
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        with sw.Executor(address=f"dask://{cluster.scheduler_address}") as dask:
+            for i, point in dask.map(tasks, stop=lambda: bool(got)):
+                got.append((i, point))
+    assert 1 <= len(got) <= 3 < len(tasks), [i for i, _ in got]
+    i, point = got[-1]
+    assert point.steps == sw.run_task(tasks[i]).steps
+
+
+def test_a_dask_cluster_with_no_workers_is_said_and_ctrl_c_still_stops_the_sweep(monkeypatch):
+    distributed = pytest.importorskip("distributed", reason="the test extra installs distributed")
+    monkeypatch.setattr(sw, "NO_WORKERS_S", 0.3)
+    said = []
+    start = time.monotonic()
+    with distributed.LocalCluster(n_workers=0, processes=True, dashboard_address=None) as cluster:
+        address = f"dask://{cluster.scheduler_address}"
+        with sw.Executor(address=address, notice=said.append) as dask:
+            got = list(dask.map(_tasks(4), stop=lambda: time.monotonic() > start + 3.0))
+    assert got == []
+    assert said == [f"the Dask cluster at {address} has no workers: the sweep waits for one (Ctrl-C stops it and keeps what is done)"]
+
+
+def _children(pid: int) -> set[int]:
+    found = set()
+    for task in os.listdir(f"/proc/{pid}/task"):
+        with open(f"/proc/{pid}/task/{task}/children") as f:
+            found |= {int(c) for c in f.read().split()}
+    return found
+
+
+def _gone(pids, within: float) -> set[int]:
+    """Which of `pids` still run after `within` s."""
+    end = time.monotonic() + within
+    alive = set(pids)
+    while alive and time.monotonic() < end:
+        alive = {p for p in alive if os.path.exists(f"/proc/{p}") and "zombie" not in open(f"/proc/{p}/status").read()}
+        time.sleep(0.2)
+    return alive
+
+
+def _long_sweep(out) -> subprocess.Popen:
+    """`ladder sweep` with two workers, each run 800,000 steps (seconds)."""
+    command = [sys.executable, "-m", "planner", "sweep", TRIANGLE, "--grid", "v1=0.5:2:40", "--param", "v2=1"]
+    command += ["--model", "dynamic-compliant", "--step", "1e-5", "--duration", "8", "--workers", "2", "--out", str(out)]
+    proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=dict(os.environ, PYTHONPATH=str(ROOT)))
+    assert proc.stderr.readline().startswith("sweeping 40 runs"), "the sweep did not start"
+    deadline = time.monotonic() + 60
+    while len(_children(proc.pid)) < 2 and time.monotonic() < deadline:
+        time.sleep(0.2)
+    time.sleep(1.0)
+    return proc
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads a process's children in /proc (Linux)")
+def test_a_second_ctrl_c_ends_the_pools_workers_with_the_sweep(tmp_path):
+    proc = _long_sweep(tmp_path / "sweep")
+    workers = _children(proc.pid)
+    assert len(workers) >= 2
+    proc.send_signal(signal.SIGINT)
+    time.sleep(0.5)
+    proc.send_signal(signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 130, stderr
+    assert "stopping: the runs under way finish and are kept (Ctrl-C again stops at once)" in stderr
+    assert stderr.rstrip().endswith("interrupted") and "Traceback" not in stderr
+    assert _gone(workers, within=5.0) == set()  # they had run on as orphans, then blocked for good
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads a process's children in /proc (Linux)")
+def test_the_pools_workers_end_when_the_sweep_is_killed(tmp_path):
+    proc = _long_sweep(tmp_path / "sweep")
+    workers = _children(proc.pid)
+    proc.kill()
+    proc.communicate(timeout=60)
+    assert _gone(workers, within=60.0) == set()  # each ends once its run is done
+
+
+def test_a_first_ctrl_c_keeps_the_runs_that_finish_after_it(tmp_path):
+    proc = _long_sweep(tmp_path / "sweep")
+    proc.send_signal(signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 130, stderr
+    data = json.loads((tmp_path / "sweep" / "sweep.json").read_text())
+    # the two workers' runs under way were finishing: kept (a run ended by the interrupt would be short)
+    assert data["complete"] is False and len(data["points"]) >= 2
+    assert all(p["steps"] == 800_000 or p["outcome"] != "none" for p in data["points"])
+
+
+def test_the_plot_of_an_interrupted_sweep_draws_a_model_it_never_reached(tmp_path):
+    """A log axis and a second model with no run: matplotlib had raised 'Data cannot be
+    log-scaled', a traceback and exit 1 after Ctrl-C."""
+    from planner.plots import plot_feasible_sets
+
+    axes, models = [sw.parse_axis("x=0.25:4:5:log")], sw.parse_models("a=kinematic,b=dynamic-rigid")
+    result = sw.SweepResult("scene.toml", axes, models, {}, None, None, [None] * 10, complete=False)
+    for k, x in enumerate(axes[0].values[:3]):
+        result.points[k] = sw.Point("a", {"x": x}, "goal", 1.0, "ok", {}, 10, 0.0)
+    path = plot_feasible_sets(tmp_path / "sweep.png", result)
+    assert path.stat().st_size > 0 and (tmp_path / "sweep.svg").read_text().count("no run done") == 1
+
+
+def test_a_sweep_without_refine_prints_its_goal_bands_at_grid_points_and_names_a_model_with_no_run(capsys, tmp_path):
+    """The README promised the goal bands in the summary; they were printed (and in sweep.json)
+    only with --refine. An interrupted sweep's model with no run had no line at all."""
+    from types import SimpleNamespace
+
+    from models.scenario import load_scenario
+    from planner import cli
+    from tests.test_sweep import _ThreeClasses
+
+    axes, models = [sw.parse_axis("x=0:1:5")], sw.parse_models("kinematic,late=dynamic-rigid")
+    result = sw.sweep(TRIANGLE, axes, models[:1], executor=_ThreeClasses())
+    result.models, result.points, result.complete = models, result.points + [None] * 5, False
+    args = SimpleNamespace(json=False, out=tmp_path, step=None)
+    data, _ = cli._write_sweep_outputs(args, load_scenario(TRIANGLE), result, axes)
+    assert data["bands"]["x"]["kinematic"]["-"] == [{"from": 0.0, "to": 0.25, "from_is_grid_end": True, "to_is_grid_end": False}]
+    cli._print_sweep(args, result, data, None, True)
+    said = capsys.readouterr().out.splitlines()
+    assert said[:4] == [
+        "late: no run done",
+        "kinematic: 2 goal, 3 unsafe, 0 none",
+        "goal band in x, kinematic: 0 (grid end) .. 0.25",
+        "(the bands' edges are grid points: --refine finds the edges between them)",
+    ]
+    assert json.loads((tmp_path / "sweep.json").read_text())["bands"] == data["bands"]
+
+
+def test_a_scheduler_out_of_reach_is_named_and_leaves_no_output_folder(capsys, tmp_path):
+    pytest.importorskip("distributed", reason="the test extra installs distributed")
+    from planner import cli
+
+    out = tmp_path / "sweep"
+    argv = ["sweep", TRIANGLE, "--grid", "v1=1,2", "--model", "kinematic", "--executor", "dask://127.0.0.1:9", "--out", str(out)]
+    assert cli.main(argv) == 2
+    said = capsys.readouterr().err.splitlines()[-1]
+    assert said.startswith("error: command line: --executor: cannot reach the Dask scheduler at dask://127.0.0.1:9: "), said
+    assert not out.exists()  # (an empty folder had been left)
