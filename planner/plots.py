@@ -407,12 +407,14 @@ def plot_feasible_sets(path: Path, result) -> Path:
             log_ticks(panel.xaxis, low, high)
             # the grid's range, run or not: a model an interrupted sweep never reached has no point
             # to scale a log axis by (matplotlib had raised)
-            panel.set_xlim(low * (high / low) ** -0.04, high * (high / low) ** 0.04)
+            if high > low:
+                panel.set_xlim(low * (high / low) ** -0.04, high * (high / low) ** 0.04)
         else:  # (at most 5 labelled ticks: 0.3200 0.3225 ... had run into each other)
             from matplotlib.ticker import MaxNLocator
 
             panel.xaxis.set_major_locator(MaxNLocator(nbins=5))
-            panel.set_xlim(low - 0.04 * _span(x_axis), high + 0.04 * _span(x_axis))
+            if high > low:
+                panel.set_xlim(low - 0.04 * _span(x_axis), high + 0.04 * _span(x_axis))
         panel.set_xlabel(x_axis.name)
         panel.set_title(_wrap(model + (f" ({fixed})" if fixed else ""), 38), fontsize=8)
         if any(p is not None and p.model == model for p in result.points):

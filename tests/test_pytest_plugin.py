@@ -64,7 +64,10 @@ def test_a_scenario_file_that_does_not_load_is_a_failing_item_not_left_out(lab):
     assert "syntax.toml: not valid TOML" in text
     assert "expcet: unknown key (did you mean 'expect'?" in text
     assert "expect: names no expectation" in text
-    assert "expect.plan: nothing to plan: no body has an actuated DOF" in text
+    assert (
+        "expect.plan: `ladder plan` refuses this scene, so [expect] cannot test a plan of it; leave plan out (bodies: nothing to plan"
+        in text
+    )
     assert "dynamic-rigid: the policy ends in 'goal'" in text and "expected 'unsafe'" in text
 
 
