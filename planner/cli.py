@@ -420,16 +420,18 @@ def load_from_args(args: argparse.Namespace, problems: list[Problem] | None = No
 
 
 def _repeated_params(items: list[str] | None) -> list[Problem]:
-    """A --param name given twice (the last had been taken, silently)."""
-    seen: dict[str, str] = {}
-    problems = []
+    """A --param name given more than once (the last had been taken, silently)."""
+    values: dict[str, list[str]] = {}
     for item in items or []:
         name, sep, value = item.partition("=")
-        name = name.strip()
-        if sep and name in seen:
-            problems.append(Problem(f"--param {name}", f"given twice ({seen[name]} and {value.strip()}); give it once"))
-        seen.setdefault(name, value.strip())
-    return problems
+        if sep:
+            values.setdefault(name.strip(), []).append(value.strip())
+    counts = {2: "twice", 3: "three times"}
+    return [
+        Problem(f"--param {name}", f"given {counts.get(len(given), f'{len(given)} times')} ({' and '.join(given)}); give it once")
+        for name, given in values.items()
+        if len(given) > 1
+    ]
 
 
 def cmd_check(args: argparse.Namespace) -> int:
@@ -1330,7 +1332,9 @@ def _write_sweep_outputs(args: argparse.Namespace, scenario: Scenario, result, a
     # the note stderr has without --json, per rung the ladder does not list
     notes = {m.rung: unlisted_rung_note(scenario, m.rung, step=args.step) for m in result.models}
     data["not_in_ladder"] = {rung: reword(note) for rung, note in notes.items() if note}
-    if any(result.points):  # (at grid points; refined edges where --refine bracketed them)
+    # the whole grid's (an interrupted one's would end bands at runs not done); at grid points,
+    # refined where --refine bracketed them
+    if result.points and all(p is not None for p in result.points):
         data["bands"] = {a.name: sw.bands(result, a.name) for a in axes}
     write_atomic(args.out / "sweep.json", json.dumps(data, indent=1) + "\n")
     write_atomic(args.out / "sweep.csv", result.to_csv())
@@ -1381,10 +1385,11 @@ def _print_sweep(args: argparse.Namespace, result, data: dict, plot, interrupted
         print(json.dumps(data, indent=2))
     else:
         counts, refined = _outcome_counts(result.points), _outcome_counts(result.refine_points)
-        for model in (m.label for m in result.models if m.label not in counts):  # (an interrupted sweep's)
-            print(f"{model}: no run done")
-        for model, c in counts.items():
-            more = refined.get(model)
+        for model in (m.label for m in result.models):
+            if model not in counts:  # (an interrupted sweep's)
+                print(f"{model}: no run done")
+                continue
+            c, more = counts[model], refined.get(model)
             ran = ", ".join(f"{n} {o}" for o, n in (more or {}).items() if n)
             also = f" on the grid; refining's {sum(more.values())} runs: {ran}" if more else ""
             print(f"{model}: {c['goal']} goal, {c['unsafe']} unsafe, {c['none']} none{also}")
@@ -1562,6 +1567,9 @@ def cmd_serve(args: argparse.Namespace) -> int:
 
 def cmd_submit(args: argparse.Namespace) -> int:
     """`ladder submit`: a plan job sent to a planning service, printed (and followed with --wait)."""
+    repeated = _repeated_params(args.param)
+    if repeated:
+        raise ScenarioError("command line", repeated)
     if importlib.util.find_spec("httpx2") is None:
         raise ScenarioError(
             "ladder submit", [Problem("ladder submit", 'needs httpx2: install the serve extra: pip install "contact-ladder[serve]"')]

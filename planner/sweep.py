@@ -265,23 +265,17 @@ def run_task(task: Task) -> Point:
     )
 
 
-def _warm(parent: int) -> None:
+def _warm() -> None:
     """Load the compiled kernels in a fresh worker before its first timed run. Ctrl-C at a
     terminal reaches the workers too: they leave it to the parent, which stops between runs.
-    A worker whose parent is gone (killed, or stopped at once) exits once its run is done:
-    workers had been left running, then blocked on the pool's pipe for good."""
+    A worker ends with its parent (killed, or stopped at once): workers had been left running,
+    then blocked on the pool's pipe for good."""
     import signal
-    import threading
-    import time
+
+    from models.kernel_cache import _end_with_parent
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-
-    def orphaned() -> None:
-        while os.getppid() == parent:
-            time.sleep(1.0)
-        os._exit(1)
-
-    threading.Thread(target=orphaned, daemon=True, name="ladder-parent-watch").start()
+    _end_with_parent(os.getppid())  # (the process that started the pool, or its forkserver)
     import models.rollout  # noqa: F401
 
 
@@ -322,14 +316,14 @@ class Executor:
         elif self.workers > 1:
             from planner import interrupt
 
-            self._pool = ProcessPoolExecutor(self.workers, initializer=_warm, initargs=(os.getpid(),))
+            self._pool = ProcessPoolExecutor(self.workers, initializer=_warm)
             self._stack.enter_context(interrupt.stopped_at_once(self._kill_workers))
         return self
 
     def __exit__(self, *exc) -> None:
-        self._stack.close()
-        if self._pool is not None:
+        if self._pool is not None:  # (a stop at once while it waits still ends the workers)
             self._pool.shutdown(wait=exc[0] is None, cancel_futures=True)
+        self._stack.close()
         if self._client is not None:
             # a result lost with its worker leaves Dask's gather waiting; closing ends it with
             # AllExit, which asyncio would print as a traceback ("Task exception was never retrieved")
@@ -349,6 +343,8 @@ class Executor:
         further run starts, the runs not yet begun are cancelled, and those under way are
         waited for and yielded (they are computed: a Ctrl-C keeps them), then the stream ends."""
         stop = stop or (lambda: False)
+        if stop():  # (refine's next batch after a Ctrl-C starts no run)
+            return
         stream = enumerate(tasks)
         if self._client is not None:
             yield from self._map_dask(stream, stop)
@@ -385,7 +381,7 @@ class Executor:
         import queue
 
         window = WINDOW_PER_WORKER * max(1, sum(self._client.nthreads().values()))
-        finished: queue.Queue = queue.Queue()  # futures as they finish (their callbacks run on the client's thread)
+        finished: queue.Queue = queue.Queue()  # futures as they finish (put by Dask's callback thread)
         inflight = {}  # future -> index
         lost = set()  # finished runs whose result went with their worker
         stopping = False
@@ -402,10 +398,12 @@ class Executor:
             while inflight:
                 if not stopping and stop():
                     stopping = True
-                    # the runs a worker has begun go on (Dask cannot stop a task): keep them
+                    # the runs a worker has begun go on (Dask cannot stop a task), and those done
+                    # but not yet read are computed: keep both
                     under_way = {key for keys in self._client.processing().values() for key in keys}
-                    self._client.cancel([f for f in inflight if f.key not in under_way])
-                    inflight = {f: i for f, i in inflight.items() if f.key in under_way}
+                    kept = {f: i for f, i in inflight.items() if f.done() or f.key in under_way}
+                    self._client.cancel([f for f in inflight if f not in kept])
+                    inflight = kept
                     continue
                 try:
                     f = finished.get(timeout=POLL_S)
@@ -413,7 +411,7 @@ class Executor:
                     for f in lost:  # (tried again: Dask runs a lost result again once it knows it lost)
                         f.add_done_callback(finished.put)
                     lost.clear()
-                    idle_since = None if self._client.scheduler_info().get("workers") else (idle_since or time.monotonic())
+                    idle_since = None if self._client.scheduler_info(n_workers=1).get("workers") else (idle_since or time.monotonic())
                     if idle_since is not None and not said and time.monotonic() - idle_since >= NO_WORKERS_S:
                         self.notice(
                             f"the Dask cluster at {self.address} has no workers: "
@@ -425,8 +423,10 @@ class Executor:
                     continue
                 try:
                     point = _dask_result(f)
-                except TimeoutError:  # its result was lost with its worker: Dask runs it again
-                    lost.add(f)
+                except TimeoutError:
+                    if f.status == "error":  # (the run's own TimeoutError)
+                        raise
+                    lost.add(f)  # its result was lost with its worker: Dask runs it again
                     continue
                 i = inflight.pop(f)
                 if not stopping:
@@ -560,8 +560,9 @@ def refine(result: SweepResult, *, tolerance: float = TOLERANCE, executor: Execu
     records the axis, the other parameters, the two outcomes and the bracket, and the status
     of the two runs that bound it (`low_status`, `high_status`: a side a solver failure ended is
     no physical outcome). Brackets of all boundaries advance together, one batch of runs per
-    bisection step; the runs are kept in `result.refine_points`. A stop (`stop()`, or a
-    KeyboardInterrupt) keeps the runs done, each bracket narrowed by its own, complete = False."""
+    bisection step; the runs are kept in `result.refine_points`. A stop (`stop()`) keeps the
+    runs done, each bracket narrowed by its own; a KeyboardInterrupt keeps the bisection steps
+    done before it (its batch is lost); either way complete = False."""
     by_key = {}
     for p in result.points:
         if p is not None:

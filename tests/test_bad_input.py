@@ -420,6 +420,10 @@ def test_a_parameter_set_twice_is_refused_and_named(capsys, tmp_path):
         assert cli.main(argv) == 2, argv
         assert capsys.readouterr().err.splitlines()[-1] == f"error: {free}: {said}"
     assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
+    thrice = ["--param", "gap=0.3", "--param", "gap=0.35", "--param", "gap=0.4"]
+    assert cli.main(["submit", free, *thrice, "--server", "http://127.0.0.1:9"]) == 2  # (refused before any request)
+    said = "--param gap: given three times (0.3 and 0.35 and 0.4); give it once"
+    assert capsys.readouterr().err.splitlines()[-1] == f"error: command line: {said}"
 
 
 def test_a_plan_file_that_cannot_be_replayed_says_why(capsys, tmp_path):
