@@ -33,9 +33,9 @@ def test_a_stopped_pool_finishes_and_keeps_the_runs_under_way_and_starts_no_othe
     with sw.Executor(2) as pool:
         for i, point in pool.map(tasks, stop=lambda: bool(got)):
             got.append((i, point))
-    # the first run, then those the two workers had begun or the pool had queued for them (its
-    # call queue holds workers + 1, and the first run's refill may be among them)
-    assert 2 <= len(got) <= 1 + 2 + 3 + 1 < len(tasks), [i for i, _ in got]
+    # the first run, then those under way or done but not yet read: at most the window submitted
+    # ahead and the first run's refill (runs of 0.06 s finish while the first is read); none after
+    assert 2 <= len(got) <= sw.WINDOW_PER_WORKER * 2 + 1 < len(tasks), [i for i, _ in got]
     i, point = got[-1]
     again = sw.run_task(tasks[i])  # a kept run is the whole run, as run alone
     assert (point.outcome, point.t, point.steps, point.final) == (again.outcome, again.t, again.steps, again.final)
@@ -61,7 +61,7 @@ def test_a_stopped_sweep_is_incomplete_with_every_run_it_kept(monkeypatch):
             stop=lambda: bool(seen),
         )
     kept = [p for p in result.points if p is not None]
-    assert not result.complete and 2 <= len(kept) <= 7 and seen[-1] == len(kept)
+    assert not result.complete and 2 <= len(kept) <= sw.WINDOW_PER_WORKER * 2 + 1 and seen[-1] == len(kept)
     assert result.to_json()["missing"] == 40 - len(kept)
 
 
@@ -91,7 +91,9 @@ def test_a_dask_sweep_stops_and_keeps_the_run_under_way():
         with sw.Executor(address=f"dask://{cluster.scheduler_address}") as dask:
             for i, point in dask.map(tasks, stop=lambda: bool(got)):
                 got.append((i, point))
-    assert 2 <= len(got) <= 3 < len(tasks), [i for i, _ in got]  # (the first, and the one it had begun then)
+    # the first, the one the worker had begun then, and any done but not yet read: at most the
+    # window submitted ahead and the first run's refill (CI kept 4 of runs of 0.06 s); none after
+    assert 2 <= len(got) <= sw.WINDOW_PER_WORKER + 1 < len(tasks), [i for i, _ in got]
     i, point = got[-1]
     assert point.steps == sw.run_task(tasks[i]).steps
 
