@@ -1334,7 +1334,7 @@ def _write_sweep_outputs(args: argparse.Namespace, scenario: Scenario, result, a
     data["not_in_ladder"] = {rung: reword(note) for rung, note in notes.items() if note}
     # the whole grid's (an interrupted one's would end bands at runs not done); at grid points,
     # refined where --refine bracketed them
-    if result.points and all(p is not None for p in result.points):
+    if data["points"] and not data["missing"]:
         data["bands"] = {a.name: sw.bands(result, a.name) for a in axes}
     write_atomic(args.out / "sweep.json", json.dumps(data, indent=1) + "\n")
     write_atomic(args.out / "sweep.csv", result.to_csv())
