@@ -1163,6 +1163,11 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     with _writing_results():
         data, plot = _write_sweep_outputs(args, scenario, result, axes)
         _print_sweep(args, result, data, plot, interrupted)
+    if result.error:  # (the executor was lost: a failure, not a stop)
+        done = len(data["points"]) + len(data["refine_points"])
+        print(f"error: the sweep ended after {counted(done, 'run')}: {result.error}", file=sys.stderr)
+        print("error: the runs done are written (sweep.json: complete false, and this error); run the sweep again", file=sys.stderr)
+        return EXIT_FAILED
     return EXIT_INTERRUPTED if interrupted else EXIT_OK
 
 
@@ -1423,7 +1428,7 @@ def _print_sweep(args: argparse.Namespace, result, data: dict, plot, interrupted
                 f"{against} refined boundar{'y lies' if against == 1 else 'ies lie'} against a run a solver failure stopped, "
                 "not between two physical outcomes (low_status, high_status in sweep.json)"
             )
-        state = "INCOMPLETE (interrupted), " if interrupted else ""
+        state = "" if not interrupted else "INCOMPLETE (the executor was lost), " if result.error else "INCOMPLETE (interrupted), "
         print(f"{state}results written to {args.out / 'sweep.json'}, {args.out / 'sweep.csv'}" + (f", {plot}" if plot else ""))
 
 

@@ -25,7 +25,8 @@ import math
 import os
 import re
 import time
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, CancelledError, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -288,6 +289,12 @@ POLL_S = 0.5
 NO_WORKERS_S = 10.0
 
 
+class ExecutorLost(Exception):
+    """The executor can run no more of the sweep: a worker process of the local pool ended
+    abruptly (killed, out of memory), or the Dask scheduler went away. The runs done were
+    yielded before it; `sweep` and `refine` keep them (`SweepResult.error`)."""
+
+
 class Executor:
     """Runs tasks, yielding (index, Point) as they finish. `local` (process pool) or Dask.
     `notice(text)`: what the executor has to say while it waits (a Dask cluster with no workers)."""
@@ -298,6 +305,7 @@ class Executor:
         self.notice = notice or (lambda text: None)
         self._pool = None
         self._client = None
+        self._lost = False  # (the Dask scheduler went away)
         self._stack = contextlib.ExitStack()
 
     def __enter__(self) -> Executor:
@@ -329,7 +337,9 @@ class Executor:
             # AllExit, which asyncio would print as a traceback ("Task exception was never retrieved")
             loop = self._client.loop.asyncio_loop
             loop.set_exception_handler(_quiet_all_exit)
-            self._client.close()
+            # a client that lost its scheduler logs its reconnect's cancel at close as an error traceback
+            with _logs_off("distributed") if self._lost else contextlib.nullcontext():
+                self._client.close()
 
     def _kill_workers(self) -> None:
         """End the pool's worker processes now (a stop at once: they would outlive the process)."""
@@ -363,6 +373,8 @@ class Executor:
                         continue
                     done, _ = wait(futures, timeout=POLL_S, return_when=FIRST_COMPLETED)
                     for f in done:
+                        if isinstance(f.exception(), BrokenProcessPool):
+                            yield from self._pool_lost(futures)
                         i = futures.pop(f)
                         if not stopping:
                             for j, t in itertools.islice(stream, 1):
@@ -376,6 +388,14 @@ class Executor:
                 if stop():
                     return
                 yield i, run_task(t)
+
+    def _pool_lost(self, futures):
+        """A broken pool: the runs it finished first are yielded, then ExecutorLost."""
+        for f, i in list(futures.items()):
+            if f.done() and not f.cancelled() and f.exception() is None:
+                del futures[f]
+                yield i, f.result()
+        raise ExecutorLost("a worker process of the local pool ended abruptly (killed, or out of memory), and the pool can run no more")
 
     def _map_dask(self, stream, stop):
         import queue
@@ -392,9 +412,9 @@ class Executor:
             inflight[future] = i
             future.add_done_callback(finished.put)
 
-        for i, t in itertools.islice(stream, window):
-            submit(i, t)
         try:
+            for i, t in itertools.islice(stream, window):
+                submit(i, t)
             while inflight:
                 if not stopping and stop():
                     stopping = True
@@ -433,9 +453,30 @@ class Executor:
                     for j, t in itertools.islice(stream, 1):
                         submit(j, t)
                 yield i, point
+        except (OSError, CancelledError) as exc:  # (a run cancelled by anyone but this sweep: its scheduler is gone)
+            inflight.clear()
+            self._lost = True
+            raise ExecutorLost(f"lost the Dask scheduler at {self.address}: its connection closed ({type(exc).__name__})") from None
         finally:
             if inflight:
                 self._client.cancel(list(inflight))
+
+
+@contextlib.contextmanager
+def _logs_off(name: str):
+    """The logger `name` (and those under it) silent for the block."""
+    import logging
+
+    names = [n for n in list(logging.root.manager.loggerDict) if n == name or n.startswith(name + ".")]
+    loggers = [logging.getLogger(n) for n in names]
+    were = [logger.disabled for logger in loggers]
+    for logger in loggers:
+        logger.disabled = True
+    try:
+        yield
+    finally:
+        for logger, was in zip(loggers, were):
+            logger.disabled = was
 
 
 def _quiet_all_exit(loop, context) -> None:
@@ -452,6 +493,10 @@ def _dask_result(future):
     except ScenarioError as exc:
         where = "as a Dask worker reads it: the workers read the scenario, and the files it names, at the same absolute path"
         raise ScenarioError(exc.file, [Problem(p.key, f"{p.reason} ({where})") for p in exc.problems]) from None
+    except OSError as exc:
+        if future.status == "error":  # (the run's own, not the lost connection `_map_dask` takes an OSError for)
+            raise RuntimeError(f"a run raised {exc!r}") from exc
+        raise
 
 
 @dataclass
@@ -465,6 +510,7 @@ class SweepResult:
     points: list[Point | None]
     boundaries: list[dict] = field(default_factory=list)
     complete: bool = True
+    error: str | None = None  # what ended it before its end other than a stop (ExecutorLost)
     refine_tolerance: float | None = None
     refine_points: list[Point] = field(default_factory=list)  # the bisection's runs, in the order they ran
 
@@ -472,6 +518,7 @@ class SweepResult:
         return {
             "file": self.file,
             "complete": self.complete,
+            "error": self.error,
             "axes": [asdict(a) for a in self.axes],
             "models": [m.label for m in self.models],
             "fixed": self.fixed,
@@ -544,6 +591,8 @@ def sweep(
         result.complete = done == runs
     except KeyboardInterrupt:
         result.complete = False
+    except ExecutorLost as exc:
+        result.complete, result.error = False, str(exc)
     finally:
         if own:
             executor.__exit__(None, None, None)
@@ -621,8 +670,11 @@ def refine(result: SweepResult, *, tolerance: float = TOLERANCE, executor: Execu
                 params = {**b["at"], b["axis"]: mid}
                 tasks.append(Task(path, tuple(params.items()), models[b["model"]], result.h, result.duration))
             outcomes = [None] * len(tasks)
-            for i, point in executor.map(tasks, stop):
-                outcomes[i] = point
+            try:
+                for i, point in executor.map(tasks, stop):
+                    outcomes[i] = point
+            except ExecutorLost as exc:  # (the batch's runs done are kept, as at a stop)
+                result.error = str(exc)
             result.refine_points += [p for p in outcomes if p is not None]
             for b, point in zip(active, outcomes):
                 mid = b.pop("mid")
@@ -635,7 +687,7 @@ def refine(result: SweepResult, *, tolerance: float = TOLERANCE, executor: Execu
                 else:  # a third outcome in between: a boundary on each side of it
                     brackets.append({**b, "low": mid, "low_outcome": point.outcome, "low_status": point.status})
                     b["high"], b["high_outcome"], b["high_status"] = mid, point.outcome, point.status
-            if None in outcomes:
+            if None in outcomes or result.error:
                 result.complete = False
                 break
             step += 1

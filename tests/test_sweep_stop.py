@@ -6,6 +6,7 @@ a relative scenario path in its own folder, and the plot of a model with no run 
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import signal
@@ -15,6 +16,7 @@ import time
 
 import pytest
 
+from models.scenario import load_scenario
 from planner import sweep as sw
 from tests.conftest import ROOT
 from tests.test_sweep import TRIANGLE
@@ -234,3 +236,92 @@ def test_a_scheduler_out_of_reach_is_named_and_leaves_no_output_folder(capsys, t
     said = capsys.readouterr().err.splitlines()[-1]
     assert said.startswith("error: command line: --executor: cannot reach the Dask scheduler at dask://127.0.0.1:9: "), said
     assert not out.exists()  # (an empty folder had been left)
+
+
+_run_task = sw.run_task
+
+
+def _run_killing_its_worker_at_v1_1_5(task: sw.Task) -> sw.Point:
+    """A run that kills its own pool worker (as the kernel's OOM killer would) at v1 = 1.5."""
+    if dict(task.parameters)["v1"] == 1.5:
+        os.kill(os.getpid(), signal.SIGKILL)
+    return _run_task(task)
+
+
+def test_a_pool_worker_killed_ends_the_sweep_as_a_failure_that_keeps_the_runs_done(capsys, tmp_path, monkeypatch):
+    """A worker ended abruptly had raised BrokenProcessPool's traceback, and lost every run done."""
+    from planner import cli
+
+    monkeypatch.setattr(sw, "run_task", _run_killing_its_worker_at_v1_1_5)
+    out = tmp_path / "sweep"
+    argv = ["sweep", TRIANGLE, "--grid", "v1=1:2:5", "--param", "v2=1", "--model", "kinematic", "--workers", "2", "--out", str(out)]
+    assert cli.main(argv) == 1
+    said = capsys.readouterr()
+    assert "Traceback" not in said.err
+    assert "error: the sweep ended after " in said.err
+    assert ": a worker process of the local pool ended abruptly (killed, or out of memory), and the pool can run no more" in said.err
+    assert "INCOMPLETE (the executor was lost), results written to" in said.out
+    data = json.loads((out / "sweep.json").read_text())
+    assert data["complete"] is False and data["error"].startswith("a worker process of the local pool ended abruptly")
+    kept = [p["parameters"]["v1"] for p in data["points"]]
+    assert 1.5 not in kept and len(kept) + data["missing"] == 5
+    for p in data["points"]:  # each kept run is whole
+        again = _run_task(sw.Task(TRIANGLE, (("v1", p["parameters"]["v1"]), ("v2", 1.0)), sw.ModelSpec("kinematic"), None, None))
+        assert (p["outcome"], p["steps"]) == (again.outcome, again.steps)
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_a_dask_scheduler_that_dies_ends_the_sweep_as_a_failure_that_keeps_the_runs_done(tmp_path):
+    """A scheduler gone mid-sweep had raised a traceback (FutureCancelledError or OSError), losing the runs done."""
+    pytest.importorskip("distributed", reason="the test extra installs distributed")
+    from planner import cli
+
+    port = _free_port()
+    quiet = dict(stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    scheduler = subprocess.Popen([sys.executable, "-m", "dask", "scheduler", "--port", str(port), "--no-dashboard"], **quiet)
+    worker = None
+    try:
+        worker = subprocess.Popen(
+            [sys.executable, "-m", "dask", "worker", f"tcp://127.0.0.1:{port}", "--nthreads", "1", "--no-dashboard"],
+            env=dict(os.environ, PYTHONPATH=str(ROOT)),
+            **quiet,
+        )
+        got = []
+
+        def progress(done, total):
+            got.append(done)
+            if done == 1:
+                scheduler.kill()
+
+        out = tmp_path / "sweep"
+        out.mkdir()
+        with sw.Executor(address=f"dask://127.0.0.1:{port}") as dask:
+            result = sw.sweep(
+                TRIANGLE,
+                [sw.parse_axis("v1=0.5:2:12")],
+                sw.parse_models("dynamic-compliant"),
+                fixed={"v2": 1.0},
+                h=1e-5,
+                duration=8.0,
+                executor=dask,
+                progress=progress,
+            )
+    finally:
+        for proc in (worker, scheduler):
+            if proc is not None:
+                proc.kill()
+                proc.wait(timeout=30)
+    assert not result.complete
+    assert result.error.startswith(f"lost the Dask scheduler at dask://127.0.0.1:{port}: its connection closed ("), result.error
+    kept = [p for p in result.points if p is not None]
+    assert len(kept) == got[-1] >= 1  # the runs read before it went are kept
+    args = argparse.Namespace(json=False, out=out, step=1e-5)
+    data, _ = cli._write_sweep_outputs(args, load_scenario(TRIANGLE), result, result.axes)
+    assert data["error"] == result.error and data["complete"] is False and len(data["points"]) == len(kept)
