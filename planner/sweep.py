@@ -338,7 +338,7 @@ class Executor:
             loop = self._client.loop.asyncio_loop
             loop.set_exception_handler(_quiet_all_exit)
             # a client that lost its scheduler logs its reconnect's cancel at close as an error traceback
-            with _logs_off("distributed") if self._lost else contextlib.nullcontext():
+            with logs_off("distributed") if self._lost else contextlib.nullcontext():
                 self._client.close()
 
     def _kill_workers(self) -> None:
@@ -463,7 +463,7 @@ class Executor:
 
 
 @contextlib.contextmanager
-def _logs_off(name: str):
+def logs_off(name: str):
     """The logger `name` (and those under it) silent for the block."""
     import logging
 

@@ -67,3 +67,40 @@ def test_an_unreachable_scheduler_is_bad_input(tmp_path, monkeypatch):
     monkeypatch.setattr(remote, "CONNECT_TIMEOUT_S", 1)
     with pytest.raises(ScenarioError, match="cannot reach the Dask scheduler"):
         create_app(tmp_path / "jobs.sqlite", executor="dask://127.0.0.1:9")
+
+
+def test_a_scheduler_that_goes_away_queues_its_jobs_again_and_runs_them_when_it_is_back(tmp_path, monkeypatch):
+    """The scheduler's tasks go with it: the job under way had stayed `running` for good, and the
+    server's client closed itself, so no job ran again even once a scheduler was back."""
+    from planner.service import remote
+    from tests import dask_processes as dp
+
+    monkeypatch.setattr(remote, "WATCH_S", 0.3)
+    said = []
+    monkeypatch.setattr(remote.DaskRunner, "__init__", _with_say(remote.DaskRunner.__init__, said.append))
+    port = dp.free_port()
+    stuck = {**STUCK, "options": {"iterations": 10**7, "time_limit": 3}}  # (a plan job of 3 s a run)
+    with dp.ended([dp.scheduler(port)]) as processes:
+        processes.append(dp.worker(port))
+        with TestClient(create_app(tmp_path / "jobs.sqlite", executor=f"dask://127.0.0.1:{port}")) as client:
+            job = submit(client, stuck).json()
+            wait_for(client, job["id"], states=("running",))
+            processes[0].kill()
+            assert wait_for(client, job["id"], states=("queued",), timeout=30)["runs"] == 1
+            waiting = submit(client).json()  # accepted while no scheduler is there
+            assert client.get(f"/jobs/{waiting['id']}").json()["state"] == "queued"
+            processes += [dp.scheduler(port), dp.worker(port)]  # (a Dask worker ends with its scheduler)
+            ended = wait_for(client, job["id"])
+            assert ended["state"] == "succeeded" and ended["runs"] == 2, ended
+            assert wait_for(client, waiting["id"])["state"] == "succeeded"
+            states = [e["data"] for e in parse_sse(client.get(f"/jobs/{job['id']}/events").text) if e["event"] == "state"]
+            assert states == [{"state": "queued"}, {"state": "running"}, {"state": "queued", "requeued": True}, {"state": "running"}]
+    assert said[0].startswith(f"lost the Dask scheduler at dask://127.0.0.1:{port}: the jobs under way are queued again"), said
+    assert said[1] == f"connected again to the Dask scheduler at dask://127.0.0.1:{port}: 2 queued job(s) sent", said
+
+
+def _with_say(init, say):
+    def patched(self, *args, **kwargs):
+        init(self, *args, **{**kwargs, "say": say})
+
+    return patched

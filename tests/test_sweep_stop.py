@@ -270,38 +270,23 @@ def test_a_pool_worker_killed_ends_the_sweep_as_a_failure_that_keeps_the_runs_do
         assert (p["outcome"], p["steps"]) == (again.outcome, again.steps)
 
 
-def _free_port() -> int:
-    import socket
-
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def test_a_dask_scheduler_that_dies_ends_the_sweep_as_a_failure_that_keeps_the_runs_done(tmp_path):
     """A scheduler gone mid-sweep had raised a traceback (FutureCancelledError or OSError), losing the runs done."""
     pytest.importorskip("distributed", reason="the test extra installs distributed")
     from planner import cli
+    from tests import dask_processes as dp
 
-    port = _free_port()
-    quiet = dict(stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    scheduler = subprocess.Popen([sys.executable, "-m", "dask", "scheduler", "--port", str(port), "--no-dashboard"], **quiet)
-    worker = None
-    try:
-        worker = subprocess.Popen(
-            [sys.executable, "-m", "dask", "worker", f"tcp://127.0.0.1:{port}", "--nthreads", "1", "--no-dashboard"],
-            env=dict(os.environ, PYTHONPATH=str(ROOT)),
-            **quiet,
-        )
-        got = []
+    port = dp.free_port()
+    got = []
+    with dp.ended([dp.scheduler(port)]) as processes:
+        processes.append(dp.worker(port))
+        scheduler = processes[0]
 
         def progress(done, total):
             got.append(done)
             if done == 1:
                 scheduler.kill()
 
-        out = tmp_path / "sweep"
-        out.mkdir()
         with sw.Executor(address=f"dask://127.0.0.1:{port}") as dask:
             result = sw.sweep(
                 TRIANGLE,
@@ -313,15 +298,12 @@ def test_a_dask_scheduler_that_dies_ends_the_sweep_as_a_failure_that_keeps_the_r
                 executor=dask,
                 progress=progress,
             )
-    finally:
-        for proc in (worker, scheduler):
-            if proc is not None:
-                proc.kill()
-                proc.wait(timeout=30)
     assert not result.complete
     assert result.error.startswith(f"lost the Dask scheduler at dask://127.0.0.1:{port}: its connection closed ("), result.error
     kept = [p for p in result.points if p is not None]
     assert len(kept) == got[-1] >= 1  # the runs read before it went are kept
+    out = tmp_path / "sweep"
+    out.mkdir()
     args = argparse.Namespace(json=False, out=out, step=1e-5)
     data, _ = cli._write_sweep_outputs(args, load_scenario(TRIANGLE), result, result.axes)
     assert data["error"] == result.error and data["complete"] is False and len(data["points"]) == len(kept)

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import queue
+import sys
 import threading
 import uuid
 
@@ -23,6 +24,8 @@ from planner.service.worker import execute
 
 TOPIC = "ladder-jobs"
 CONNECT_TIMEOUT_S = 10
+#: Seconds between the server's checks of its connection to the scheduler (a lost one is made again).
+WATCH_S = 2.0
 #: One job at a time per worker process: a job changes the process's working directory.
 _ONE_JOB = threading.Lock()
 
@@ -85,32 +88,86 @@ def must_arrive(kept: list[dict], last: dict | None) -> list[dict]:
 
 class DaskRunner:
     """The server's side: sends jobs to the cluster at `address` (dask://HOST:PORT) and writes
-    what their tasks report into `store`. ScenarioError when the scheduler cannot be reached."""
+    what their tasks report into `store`. ScenarioError when the scheduler cannot be reached.
 
-    def __init__(self, address: str, store: Store, max_seconds: float | None):
+    A scheduler that goes away (restarted, its machine down) loses the tasks it held: their
+    jobs go back to queued, the server says so on stderr and connects again every WATCH_S s
+    (each try up to CONNECT_TIMEOUT_S), meanwhile accepting jobs; once connected it sends
+    every queued job again, and says so. `say(text)`: the server's line on stderr."""
+
+    def __init__(self, address: str, store: Store, max_seconds: float | None, say=None):
         try:
-            from distributed import Client
+            import distributed  # noqa: F401
         except ImportError:
             raise ScenarioError(
                 "ladder serve", [Problem(f"--executor {address}", 'install the dask extra: pip install "contact-ladder[dask]"')]
             ) from None
-        try:
-            self.client = Client(address.removeprefix("dask://"), set_as_default=False, timeout=CONNECT_TIMEOUT_S)
-        except (OSError, TimeoutError, ValueError) as exc:
-            raise ScenarioError("ladder serve", [Problem(f"--executor {address}", f"cannot reach the Dask scheduler: {exc}")]) from None
-        self.store, self.max_seconds = store, max_seconds
+        self.address, self.store, self.max_seconds = address, store, max_seconds
+        self.say = say or (lambda text: print(text, file=sys.stderr, flush=True))
         self.lock = threading.Lock()  # one job's messages and its end are written in order
+        self.connection = threading.RLock()  # the client and the futures sent through it
         self.applied: dict[tuple[str, str], int] = {}  # (job, run) -> the last message written
         self.futures: dict[str, object] = {}  # a future Dask forgets once nothing refers to it
         # the messages are written by a thread of their own: the handler runs on the Dask
         # client's event loop, which must neither block on SQLite nor call Dask synchronously
         self.inbox: queue.Queue = queue.Queue()
+        try:
+            self.client = self._connect()
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise ScenarioError("ladder serve", [Problem(f"--executor {address}", f"cannot reach the Dask scheduler: {exc}")]) from None
+        self.connected = True
+        self.closing = threading.Event()
         threading.Thread(target=self._write_messages, name="ladder-dask-messages", daemon=True).start()
-        self.client.subscribe_topic(TOPIC, lambda event: self.inbox.put(event[1]))
+        threading.Thread(target=self._watch, name="ladder-dask-watch", daemon=True).start()
+
+    def _connect(self):
+        from distributed import Client
+
+        client = Client(self.address.removeprefix("dask://"), set_as_default=False, timeout=CONNECT_TIMEOUT_S)
+        client.subscribe_topic(TOPIC, lambda event: self.inbox.put(event[1]))
+        return client
 
     def close(self) -> None:
+        self.closing.set()
         self.inbox.put(None)
-        self.client.close()
+        with self.connection:
+            self._close_client()
+
+    def _close_client(self) -> None:
+        from planner.sweep import logs_off
+
+        # (a client that lost its scheduler logs its reconnect's cancel at close as an error traceback)
+        with logs_off("distributed"):
+            self.client.close()
+
+    def _watch(self) -> None:
+        """A lost scheduler: its jobs queued again, and a connection made again, then every queued job sent."""
+        while not self.closing.wait(WATCH_S):
+            if self.connected:
+                if self.client.status == "running":
+                    continue
+                with self.connection:
+                    self.connected = False
+                    self._close_client()  # (its futures are cancelled: `_done` queues their jobs again)
+                    self.futures.clear()
+                self.say(
+                    f"lost the Dask scheduler at {self.address}: the jobs under way are queued again and run when it is back; "
+                    f"connecting again every {WATCH_S:g} s"
+                )
+                continue
+            try:
+                client = self._connect()
+            except (OSError, TimeoutError, ValueError):
+                continue
+            with self.connection:
+                if self.closing.is_set():
+                    client.close()
+                    return
+                self.client, self.connected = client, True
+                jobs = self.store.recover()
+                for job_id in jobs:
+                    self.submit(job_id)
+            self.say(f"connected again to the Dask scheduler at {self.address}: {len(jobs)} queued job(s) sent")
 
     def _write_messages(self) -> None:
         while (message := self.inbox.get()) is not None:
@@ -120,6 +177,12 @@ class DaskRunner:
                 return
 
     def submit(self, job_id: str) -> None:
+        """Send the job to the cluster (when it is connected: else it waits queued, sent on reconnecting)."""
+        with self.connection:
+            if self.connected and job_id not in self.futures:
+                self._submit(job_id)
+
+    def _submit(self, job_id: str) -> None:
         row = self.store.get(job_id)
         future = self.client.submit(
             run_remote,
@@ -136,10 +199,16 @@ class DaskRunner:
 
     def cancel(self, job_id: str) -> None:
         """Ask the job's task to stop (the store already says the job is cancelled or to be)."""
-        _cancel_event(job_id, self.client).set()
-        future = self.futures.get(job_id)
-        if future is not None and self.store.get(job_id)["state"] == "cancelled":
-            future.cancel()  # not started: it need not start
+        with self.connection:
+            if not self.connected:  # (queued again: the store's cancel is the whole of it)
+                return
+            try:
+                _cancel_event(job_id, self.client).set()
+            except (OSError, TimeoutError):  # (the scheduler went away just now: the job is queued again)
+                return
+            future = self.futures.get(job_id)
+            if future is not None and self.store.get(job_id)["state"] == "cancelled":
+                future.cancel()  # not started: it need not start
 
     def _apply(self, message: dict) -> None:
         job_id, data = message["job"], message["data"]
@@ -161,9 +230,19 @@ class DaskRunner:
                 self.store.add_event(job_id, data["type"], data["data"])
 
     def _done(self, job_id: str, future) -> None:
+        current = self.futures.get(job_id)
+        if current is not None and current is not future:
+            return  # a run sent before its scheduler went away: the job has been sent again
         self.futures.pop(job_id, None)
         if future.cancelled():
-            return  # cancelled before it started, or the service is stopping
+            # cancelled before it started, or the service is stopping (the job runs again on
+            # restart); else its scheduler went away: it runs again when one is back
+            if not self.closing.is_set():
+                try:
+                    self.store.requeue(job_id)
+                except Exception:  # the store is closed: the service is stopping
+                    pass
+            return
         try:
             try:
                 out = future.result()

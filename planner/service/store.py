@@ -217,14 +217,31 @@ class Store:
                 reports.append(data)
         return reports
 
+    @classmethod
+    def _requeue(cls, conn, job_id: str) -> None:
+        conn.execute("UPDATE jobs SET state = 'queued', progress = NULL, updated = ? WHERE id = ?", (time.time(), job_id))
+        cls._event(conn, job_id, "state", {"state": "queued", "requeued": True})
+
+    def requeue(self, job_id: str) -> bool:
+        """running -> queued, to run again from its inputs (its run was lost, not ended: a Dask
+        scheduler that went away); False when it is not running."""
+
+        def fn(conn):
+            row = conn.execute("SELECT state FROM jobs WHERE id = ?", (job_id,)).fetchone()
+            if row is None or row["state"] != "running":
+                return False
+            self._requeue(conn, job_id)
+            return True
+
+        return self._write(fn)
+
     def recover(self) -> list[str]:
         """At startup: jobs left running (the server died) go back to queued; the queued jobs'
         ids, oldest first, to run again from their inputs."""
 
         def fn(conn):
             for row in conn.execute("SELECT id FROM jobs WHERE state = 'running'").fetchall():
-                conn.execute("UPDATE jobs SET state = 'queued', progress = NULL, updated = ? WHERE id = ?", (time.time(), row["id"]))
-                self._event(conn, row["id"], "state", {"state": "queued", "requeued": True})
+                self._requeue(conn, row["id"])
             cancelled = conn.execute("SELECT id FROM jobs WHERE state = 'queued' AND cancel_requested = 1").fetchall()
             for row in cancelled:  # asked to stop before the server died: it is cancelled, not run again
                 conn.execute("UPDATE jobs SET state = 'cancelled', updated = ? WHERE id = ?", (time.time(), row["id"]))
