@@ -8,11 +8,13 @@ from __future__ import annotations
 
 import argparse
 import atexit
+import errno
 import functools
 import importlib.util
 import json
 import math
 import os
+import socket
 import stat
 import sys
 import tempfile
@@ -1547,9 +1549,10 @@ def cmd_serve(args: argparse.Namespace) -> int:
         )
     if problems:
         raise ScenarioError("ladder serve", problems)
-    import uvicorn
+    sock = _bound_socket(args.host, args.port)  # (before the database is made: a port in use leaves none)
 
     from planner.service import create_app
+    from planner.service.app import server_for
 
     app = create_app(
         args.db,
@@ -1560,14 +1563,33 @@ def cmd_serve(args: argparse.Namespace) -> int:
         executor=args.executor,
     )
     where = f"jobs on {args.executor}" if args.executor else f"{args.workers} worker process(es)"
-    print(f"serving on http://{args.host}:{args.port} (jobs in {args.db}, {where}; API at /docs, viewer at /)", file=sys.stderr, flush=True)
+    port = sock.getsockname()[1]  # (--port 0: the one the system chose)
+    print(f"serving on http://{args.host}:{port} (jobs in {args.db}, {where}; API at /docs, viewer at /)", file=sys.stderr, flush=True)
     from planner import interrupt
 
-    uvicorn.run(app, host=args.host, port=args.port, log_level="info")  # on Ctrl-C it shuts down and returns
+    server_for(app, host=args.host, port=args.port, log_level="info").run(sockets=[sock])  # on Ctrl-C it shuts down and returns
     if interrupt.asked():  # uvicorn hands the SIGINT back to `interrupt.handler` after its shutdown, and swallows the rest
         print("interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
     return EXIT_OK
+
+
+def _bound_socket(host: str, port: int) -> socket.socket:
+    """The server's listening socket, bound as uvicorn binds it; bad input when it cannot be (in
+    use, no such address): uvicorn had said so only after "serving on", exiting 3."""
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    sock = socket.socket(family, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        sock.bind((host, port))
+    except (OSError, OverflowError) as exc:
+        sock.close()
+        where = f"[{host}]:{port}" if family == socket.AF_INET6 else f"{host}:{port}"
+        reason = getattr(exc, "strerror", None) or exc
+        key = "--host" if isinstance(exc, socket.gaierror) or getattr(exc, "errno", None) == errno.EADDRNOTAVAIL else "--port"
+        raise ScenarioError("ladder serve", [Problem(key, f"cannot listen on {where}: {reason}")]) from None
+    sock.set_inheritable(True)
+    return sock
 
 
 def cmd_submit(args: argparse.Namespace) -> int:

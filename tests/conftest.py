@@ -19,6 +19,15 @@ DATA = Path(__file__).resolve().parent / "data"
 collect_ignore = ["data"]
 
 
+def free_port() -> int:
+    """A TCP port of the loopback no one listens on (now)."""
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
 def perf_map_entries(path: Path) -> list[tuple[int, int, str]]:
     """The rows (start, size, name) of a perf map file (`models.perfmap`: "start size name", hex)."""
     rows = []

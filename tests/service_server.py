@@ -20,16 +20,13 @@ JOB_TIMEOUT_S = 900.0
 @contextlib.contextmanager
 def running_service(db: Path, **kwargs) -> Iterator[str]:
     """Serve `create_app(db, **kwargs)` on 127.0.0.1 until the block ends; yields its URL."""
-    import uvicorn
-
     from planner.service import create_app
+    from planner.service.app import server_for
 
     sock = socket.socket()
     sock.bind(("127.0.0.1", 0))
     port = sock.getsockname()[1]
-    # a client still following a job's events holds the server up to the graceful timeout at the end
-    config = uvicorn.Config(create_app(db, **kwargs), log_level="warning", lifespan="on", timeout_graceful_shutdown=5)
-    server = uvicorn.Server(config)
+    server = server_for(create_app(db, **kwargs), log_level="warning", lifespan="on")
     thread = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, daemon=True)
     thread.start()
     try:

@@ -20,7 +20,7 @@ from models.scenario import ScenarioError, load_scenario  # noqa: E402
 from planner.cli import main as cli_main  # noqa: E402
 from planner.service import create_app  # noqa: E402
 from planner.service.store import Store  # noqa: E402
-from tests.conftest import ROOT, SCENARIOS  # noqa: E402
+from tests.conftest import ROOT, SCENARIOS, free_port  # noqa: E402
 from tests.service_server import JOB_TIMEOUT_S, cli_plan_json  # noqa: E402
 
 FREE = (SCENARIOS / "free_transfer.toml").read_text()
@@ -504,15 +504,12 @@ def start_server(db, log=None):
     """A real `ladder serve` on a free port, in a session of its own (so that a signal to its
     process group is what a terminal's Ctrl-C sends): (process, client)."""
     import os
-    import socket
     import subprocess
     import sys
 
     import httpx2
 
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
+    port = free_port()
     proc = subprocess.Popen(
         [sys.executable, "-m", "planner", "serve", "--port", str(port), "--db", str(db)],
         cwd=ROOT,
@@ -569,21 +566,39 @@ def test_a_signal_to_the_servers_process_group_while_a_job_runs_and_restart(tmp_
     workers, and the job under way stays running and runs again on restart, as after a kill.
     On Ctrl-C the server exits 130 with one line, no traceback; on SIGTERM it ends by the
     signal, as uvicorn does. Before, the worker took the signal itself: the job ended `failed`
-    ("the worker stopped: KeyboardInterrupt", or BrokenProcessPool) and Ctrl-C exited 0."""
+    ("the worker stopped: KeyboardInterrupt", or BrokenProcessPool) and Ctrl-C exited 0.
+    A client follows the job's events meanwhile: uvicorn had waited for its connection, so the
+    server ran on, its workers too, until the job ended (`succeeded`, never run again)."""
     import os
     import signal
+    import threading
+
+    import httpx2
 
     db, log = tmp_path / "jobs.sqlite", tmp_path / "serve.log"
+    followed = []
+
+    def follow(url: str) -> None:
+        with httpx2.stream("GET", url, timeout=None) as response:
+            for line in response.iter_lines():
+                followed.append(line)
+
     with log.open("w") as err:
         proc, client = start_server(db, err)
         try:
             job = client.post("/jobs", json=STUCK).json()
             wait_for(client, job["id"], ("running",))
-            time.sleep(1.0)  # the worker is planning
+            follower = threading.Thread(target=follow, args=(f"{str(client.base_url).rstrip('/')}/jobs/{job['id']}/events",), daemon=True)
+            follower.start()
+            while "event: rung_started" not in followed:  # the worker is planning, and the client follows it
+                assert follower.is_alive() and proc.poll() is None
+                time.sleep(0.1)
         finally:
             os.killpg(proc.pid, getattr(signal, signum))
             code = proc.wait(timeout=60)
             client.close()
+    follower.join(10)
+    assert not follower.is_alive() and "event: job_ended" not in followed  # its stream ended with the server
     text = log.read_text()
     assert "Traceback" not in text, text
     if signum == "SIGINT":
@@ -678,3 +693,30 @@ def test_a_simulate_or_sweep_jobs_note_on_a_rung_not_in_the_ladder_speaks_the_re
     text, complete = jobs.run("sweep", {"filename": "free.toml", "scenario": FREE}, options)
     note = json.loads(text)["not_in_ladder"]["dynamic-rigid"]
     assert complete and "(unless options.step)" in note and "--step" not in note
+
+
+def test_a_port_in_use_or_a_database_in_use_is_bad_input_and_makes_no_database(tmp_path, capsys):
+    """A port in use had been said by uvicorn after "serving on ...", exit 3, leaving an empty
+    database; a second server on a database in use had queued and run its jobs under way again,
+    beside the first."""
+    import socket
+
+    busy = socket.socket()
+    busy.bind(("127.0.0.1", 0))
+    busy.listen()
+    port = busy.getsockname()[1]
+    try:
+        assert cli_main(["serve", "--port", str(port), "--db", str(tmp_path / "a.sqlite")]) == 2
+    finally:
+        busy.close()
+    said = capsys.readouterr().err
+    assert said.startswith(f"error: ladder serve: --port: cannot listen on 127.0.0.1:{port}: "), said
+    assert "serving on" not in said and not list(tmp_path.iterdir())
+    db = tmp_path / "jobs.sqlite"
+    with TestClient(create_app(db, workers=0)) as first:
+        job = submit(first).json()
+        with pytest.raises(ScenarioError, match="another `ladder serve` runs this database's jobs"):
+            create_app(db, workers=0)
+        assert first.get(f"/jobs/{job['id']}").json()["state"] == "queued"
+    with TestClient(create_app(db, workers=0)) as again:  # (once the first has stopped)
+        assert again.get(f"/jobs/{job['id']}").json()["state"] == "queued"

@@ -51,6 +51,8 @@ DEFAULT_MAX_QUEUED = 100
 RETRY_AFTER_S = 5
 #: Seconds between the events stream's looks at the database, and between keep-alive comments.
 EVENTS_POLL_S = 0.1
+#: Seconds a stopping server gives the requests still open (its event streams end at once).
+SHUTDOWN_GRACE_S = 1
 KEEPALIVE_S = 15.0
 
 
@@ -210,11 +212,14 @@ class Service:
         self.max_queued = max_queued
         self.max_job_seconds = max_job_seconds
         self.executor = executor
+        self._owner = None
+        self._own()
         self.store = Store(self.db_path)
         self.closed = False
         self.pool: ProcessPoolExecutor | None = None
         self.lock = threading.Lock()
         self.runner = None
+        self.stopping = lambda: False  # the server is stopping: event streams end (`server_for`)
         if executor is not None:
             from planner.service.remote import DaskRunner
 
@@ -224,6 +229,7 @@ class Service:
         """Run the jobs a stopped service left (also when this service was stopped before: an
         app's lifespan may run more than once in tests)."""
         if self.closed:
+            self._own()
             self.store, self.closed = Store(self.db_path), False
         if self.executor is not None and self.runner is None:
             from planner.service.remote import DaskRunner
@@ -249,6 +255,28 @@ class Service:
             self.runner = None
         self.store.close()
         self.closed = True
+        self._owner.close()  # (the lock with it)
+        self._owner = None
+
+    def _own(self) -> None:
+        """Run the database's jobs alone, or ScenarioError: a second server on it ran them again
+        (its start queues the jobs under way and runs them), beside the first. The lock is an
+        exclusive flock on DB.lock, which the system releases when the process ends (kill -9 too);
+        not on the database, whose SQLite locks closing another descriptor of it would release."""
+        import fcntl
+
+        owner = open(f"{self.db_path}.lock", "a")  # noqa: SIM115 (held until `stop`)
+        try:
+            fcntl.flock(owner, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            owner.close()
+            problem = Problem(
+                "--db",
+                f"{self.db_path}: another `ladder serve` runs this database's jobs (two would run the same jobs at once); "
+                "stop it, or give another --db",
+            )
+            raise ScenarioError("ladder serve", [problem]) from None
+        self._owner = owner
 
     def _pool(self) -> ProcessPoolExecutor:
         with self.lock:
@@ -318,6 +346,18 @@ def _job_json(service: Service, row, *, rungs: bool = True) -> dict:
     if rungs:
         data["rungs"] = service.store.rung_reports(job_id)
     return data
+
+
+def server_for(app: FastAPI, **config):
+    """A uvicorn Server of the app (`config`: uvicorn.Config's) whose job event streams end as it
+    stops: a client following a job holds its connection open, and uvicorn waits for the open
+    connections (here at most SHUTDOWN_GRACE_S) before the app's shutdown stops the workers, so
+    the server had run on until the followed job ended."""
+    import uvicorn
+
+    server = uvicorn.Server(uvicorn.Config(app, timeout_graceful_shutdown=SHUTDOWN_GRACE_S, **config))
+    app.state.service.stopping = lambda: server.should_exit
+    return server
 
 
 def create_app(
@@ -494,7 +534,7 @@ def create_app(
 
         async def stream():
             seq, quiet = after, 0.0
-            while True:
+            while not service.stopping():  # (a client follows again, with Last-Event-ID, once it is back)
                 rows = service.store.events_after(job_id, seq)
                 for row in rows:
                     seq = row["seq"]
