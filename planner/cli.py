@@ -18,7 +18,7 @@ import socket
 import stat
 import sys
 import tempfile
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -1159,8 +1159,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     try:
         result, interrupted = _run_sweep(args, scenario, fixed, axes, models, runs)
     except ScenarioError:  # (a Dask scheduler out of reach, a file its workers cannot read): no empty folder left
-        if not existed and args.out.is_dir() and not any(args.out.iterdir()):
-            args.out.rmdir()
+        if not existed:
+            remove_if_empty(args.out)
         raise
     with _writing_results():
         data, plot = _write_sweep_outputs(args, scenario, result, axes)
@@ -1761,12 +1761,25 @@ def make_out_dir(key: str, path: Path) -> list[Problem]:
     """Create the output folder `path` (and missing parents): a problem when that fails although
     `check_out_dir` passed (e.g. root under /proc, whose folders are writable but take no
     new entries). Called once the other arguments are known good, before the work, so a bad
-    folder costs no run and a bad argument leaves no folder."""
+    folder costs no run and a bad argument leaves no folder; a stop at once (`interrupt`) before
+    anything is written in the folder it made leaves none either."""
+    from planner import interrupt
+
+    made = not path.exists()
     try:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         return [Problem(key, f"{path}: cannot create the folder: {exc.strerror or exc}")]
+    if made:
+        interrupt.at_stop(functools.partial(remove_if_empty, path))
     return []
+
+
+def remove_if_empty(path: Path) -> None:
+    """Remove the folder `path` if it is there and empty (one a command made and wrote nothing in)."""
+    with suppress(OSError):
+        if path.is_dir() and not any(path.iterdir()):
+            path.rmdir()
 
 
 def positive(key: str, value, *, integer: bool = False, allow_zero: bool = False) -> list[Problem]:

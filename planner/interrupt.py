@@ -7,7 +7,10 @@ installs `handler`: inside a `deferred()` block a first Ctrl-C only sets a flag,
 long loops (rollout chunks, OMPL's termination condition, the sweep's runs) read between
 compiled calls (`asked`, `check`) and act on: they stop, keep what is done and the command
 exits 130. A second Ctrl-C inside such a block stops the process at once (exit 130, nothing
-more written). Outside a deferred block Ctrl-C raises KeyboardInterrupt as usual.
+more written). So does a first Ctrl-C while a kernel compiles inside such a block, or one
+before a compile starts there: a compile has no check in it and takes minutes on a first run,
+which had held a first simulate's Ctrl-C for 10 minutes. Outside a deferred block Ctrl-C raises
+KeyboardInterrupt as usual.
 
 A command's results, once computed, are written inside a `shielded()` block: a first Ctrl-C
 there is only remembered (`held`), so every output is written whole and the command reports
@@ -25,7 +28,7 @@ import signal
 import sys
 from contextlib import contextmanager
 
-_state = {"asked": False, "deferring": 0, "shielding": 0, "held": False}
+_state = {"asked": False, "deferring": 0, "shielding": 0, "held": False, "signalled": False, "compiling": 0}
 #: What a stop at once ends before the process exits (`stopped_at_once`).
 _at_stop: list = []
 
@@ -64,9 +67,9 @@ def handler(signum, frame) -> None:
         _state["held"] = True
         return
     if _state["deferring"]:
-        if _state["asked"]:  # the second Ctrl-C: the user does not want to wait for a clean stop
+        if _state["asked"] or _state["compiling"]:  # the second Ctrl-C, or one that a compile would hold for minutes
             _stop_now()
-        _state["asked"] = True
+        _state["asked"] = _state["signalled"] = True
         return
     _state["asked"] = True
     raise KeyboardInterrupt
@@ -102,9 +105,45 @@ def stopped_at_once(end):
         _at_stop.remove(end)
 
 
+def at_stop(end) -> None:
+    """`end()` before the process exits at a stop at once, from now on (an output folder made
+    empty: `end` must do no harm once the work is done)."""
+    _at_stop.append(end)
+
+
 def deferred():
-    """A block whose loops check `asked()` between compiled calls: Ctrl-C only sets the flag."""
+    """A block whose loops check `asked()` between compiled calls: Ctrl-C only sets the flag
+    (but stops at once while a kernel compiles there)."""
+    _watch_compiles()
     return _inside("deferring")
+
+
+_watching: list = []
+
+
+def _watch_compiles() -> None:
+    """Count the kernels compiling (numba's `numba:compile` event, which a load from the cache
+    does not fire), once per process; a compile that starts after a Ctrl-C in a deferred block
+    (not one the service's `ask` made, nor while results are written) stops the process."""
+    if _watching:
+        return
+    try:
+        from numba.core import event
+    except ImportError:  # (no kernels to compile)
+        return
+
+    class Compiles(event.Listener):
+        def on_start(self, ev) -> None:
+            _state["compiling"] += 1
+            if _state["signalled"] and _state["deferring"] and not _state["shielding"]:
+                _stop_now()
+
+        def on_end(self, ev) -> None:
+            _state["compiling"] -= 1
+
+    listener = Compiles()
+    event.register("numba:compile", listener)
+    _watching.append(listener)
 
 
 def shielded():
@@ -119,4 +158,4 @@ def ask() -> None:
 
 
 def reset() -> None:
-    _state["asked"] = _state["held"] = False
+    _state["asked"] = _state["held"] = _state["signalled"] = False

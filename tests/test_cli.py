@@ -747,6 +747,33 @@ def test_ctrl_c_while_the_command_still_imports_is_interrupted_not_a_traceback()
     assert (done.returncode, done.stderr, done.stdout) == (130, "interrupted\n", "")
 
 
+@pytest.mark.parametrize("command", ["simulate", "plan"])
+def test_ctrl_c_as_a_kernel_compiles_stops_at_once_and_leaves_no_folder(command, tmp_path):
+    """A first run compiles its kernels for minutes with no check in between: a first simulate
+    had held its Ctrl-C for 10 minutes, then said "interrupted after 0 of 1,500 steps". Here the
+    Ctrl-C comes as the command announces its compile, and a (small, uncached) kernel compiles
+    after it; a plan's output folder, made before, is left empty, so it is removed."""
+    out = tmp_path / "plan"
+    argv = ["simulate", str(SCENARIOS / "free_transfer.toml"), "--model", "kinematic"]
+    if command == "plan":
+        argv = ["plan", str(SCENARIOS / "free_transfer.toml"), "--out", str(out)]
+    program = (
+        "import os, signal, sys, numba, planner\n"
+        "from planner import cli\n"
+        "def announce(*args, **kwargs):\n"
+        "    os.kill(os.getpid(), signal.SIGINT)\n"
+        "    numba.njit(lambda x: x + 1)(1)\n"
+        "    print('compiled past the Ctrl-C', file=sys.stderr)\n"
+        "cli.announce_compile = announce\n"
+        f"raise SystemExit(planner.main({argv!r}))\n"
+    )
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    done = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, cwd=ROOT, env=env, timeout=300)
+    assert (done.returncode, done.stderr.splitlines()[-1:], done.stdout) == (130, ["interrupted"], ""), done.stderr
+    assert "compiled past the Ctrl-C" not in done.stderr
+    assert not out.exists()
+
+
 def _ctrl_c_before(monkeypatch, cli, name: str) -> None:
     """Send this process a SIGINT as `cli.<name>` starts (the Ctrl-C lands while results are written)."""
     original = getattr(cli, name)
