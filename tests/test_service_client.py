@@ -52,6 +52,17 @@ def test_job_request_carries_the_meshes_the_scenario_names(monkeypatch):
     assert outside["filename"] == "free_transfer.toml" and outside["files"] == {}
 
 
+def test_a_mesh_missing_here_is_named_as_ladder_check_names_it(tmp_path, capsys, monkeypatch):
+    """`ladder submit` of a scene whose mesh is missing: it had been sent as none, and the
+    service's answer, "not among the files the request carried (none); send its contents in
+    'files'", read as advice on the HTTP request."""
+    scene = tmp_path / "box_push_3d.toml"
+    scene.write_text((SCENARIOS / "box_push_3d.toml").read_text())
+    code, out, err = submit_cli(capsys, monkeypatch, str(scene), "--server", "http://127.0.0.1:9")
+    assert code == 2 and out == ""
+    assert err == f"error: {scene}: bodies[4].shape.file: cannot read 'meshes/wedge.obj': No such file or directory\n", err
+
+
 def test_submit_then_wait_prints_the_job_and_the_result_is_the_clis(live, capsys, monkeypatch):
     code, out, err = submit_cli(capsys, monkeypatch, "scenarios/free_transfer.toml", "--server", live, "--seed", "3", "--json")
     assert code == 0, err

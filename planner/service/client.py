@@ -67,8 +67,9 @@ def job_request(path: str | Path, kind: str = "plan", *, parameters: dict | None
     """The POST /jobs body for the scenario file at `path`: its TOML text, every file it names
     (meshes, relative to it) as contents, and `filename` the path as given when it is relative
     and stays below the working folder (so plan.json names the scenario as `ladder plan PATH`
-    would), else the file's name. A file the scenario names that is not beside it is left out:
-    the service says what is wrong with it. ScenarioError when the file cannot be read."""
+    would), else the file's name. ScenarioError when the file, or one it names, cannot be read
+    here (a missing mesh had been sent as none, and the service's problem, "not among the files
+    the request carried", read as advice on the request)."""
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
@@ -88,8 +89,6 @@ def job_request(path: str | Path, kind: str = "plan", *, parameters: dict | None
             continue
         try:
             files[name] = (path.parent / name).read_text(encoding="utf-8")
-        except FileNotFoundError:
-            continue
         except (OSError, UnicodeDecodeError) as exc:
             raise ScenarioError(path, [Problem(key, f"cannot read {name!r}: {getattr(exc, 'strerror', None) or exc}")]) from None
     return {
