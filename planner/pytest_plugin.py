@@ -127,7 +127,15 @@ class LoadFailure(pytest.Item):
         return str(excinfo.value)
 
     def reportinfo(self):
-        return self.path, None, self.name
+        return _reportinfo(self)
+
+
+def _reportinfo(item):
+    """(path, line, the failure's heading): "[CASE::]NAME in FILE" (a heading of the name alone
+    had been "plan" or "load" for every file's). Not the id's tail "FILE::NAME": pytest -v
+    prints an id that ends with the heading with its dots as "::" ("x::toml::plan")."""
+    within = item.nodeid.split("::", 1)[-1]
+    return item.path, None, f"{within} in {item.path.name}"
 
 
 class ScenarioExpectationFailed(AssertionError):
@@ -172,15 +180,17 @@ class PolicyItem(pytest.Item):
         if not result.ok:
             raise ScenarioExpectationFailed(f"{self.rung}: the run failed: {result.message}")
         if result.outcome != self.outcome:
+            final = ", ".join(f"{name} = {value:.6g}" for name, value in result.state.named(self.scenario).items())
             raise ScenarioExpectationFailed(
-                f"{self.rung}: the policy ends in {result.outcome!r} at t = {result.t:.4f} s, expected {self.outcome!r}"
+                f"{self.rung}: the policy ends in {result.outcome!r} at t = {result.t:.4f} s, expected {self.outcome!r} "
+                f"(expect.policy.{self.rung}); the final state: {final}"
             )
 
     def repr_failure(self, excinfo):
         return _failure(self, excinfo)
 
     def reportinfo(self):
-        return self.path, None, self.name  # (a domain with the file's name printed "x::toml::plan" under -v)
+        return _reportinfo(self)
 
 
 class PlanItem(pytest.Item):
@@ -193,11 +203,14 @@ class PlanItem(pytest.Item):
 
         result = run_ladder(self.scenario, iterations=self.iterations, seed=self.seed)
         if result.top_holds != self.holds:
-            ended = "; ".join(f"{r.label}: {r.ended.label}" + (f" ({r.reason})" if r.reason else "") for r in result.rungs)
-            raise ScenarioExpectationFailed(f"top rung holds: {result.top_holds}, expected {self.holds} ({ended})")
+            budget = f"{self.iterations:,} iterations a rung" if self.iterations is not None else "each rung's own iterations"
+            ended = "".join(f"\n  {r.label}: {r.ended.label}" + (f" ({r.reason})" if r.reason else "") for r in result.rungs)
+            raise ScenarioExpectationFailed(
+                f"top rung holds: {result.top_holds}, expected {self.holds} (expect.plan; seed {result.seed}, {budget}):{ended}"
+            )
 
     def repr_failure(self, excinfo):
         return _failure(self, excinfo)
 
     def reportinfo(self):
-        return self.path, None, self.name  # (a domain with the file's name printed "x::toml::plan" under -v)
+        return _reportinfo(self)

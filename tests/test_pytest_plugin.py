@@ -68,7 +68,17 @@ def test_a_scenario_file_that_does_not_load_is_a_failing_item_not_left_out(lab):
         "expect.plan: `ladder plan` refuses this scene, so [expect] cannot test a plan of it; leave plan out (bodies: nothing to plan"
         in text
     )
-    assert "dynamic-rigid: the policy ends in 'goal'" in text and "expected 'unsafe'" in text
+    assert "dynamic-rigid: the policy ends in 'goal'" in text
+    assert "expected 'unsafe' (expect.policy.dynamic-rigid); the final state: " in text
+    # each failure's heading names its file (they had all been "load", or "plan")
+    headings = sorted(line.strip("_ ") for line in text.splitlines() if line.startswith("___"))
+    assert headings == [
+        "load in empty.toml",
+        "load in misspelt.toml",
+        "load in nothing_to_plan.toml",
+        "load in syntax.toml",
+        "policy[dynamic-rigid] in wrong.toml",
+    ], text
 
 
 def test_last_failed_reruns_a_failed_policy_item_and_verbose_ids_paste_back(lab):
@@ -137,6 +147,7 @@ def test_expect_cases_run_the_scene_with_other_parameters(tmp_path):
     assert (
         "case 'claims_a_slide' (mu = 0.7): dynamic-rigid: the policy ends in 'none'" in text and "expected 'goal'" in text
     )  # mu = 0.7 > tan 30
+    assert " claims_a_slide::policy[dynamic-rigid] in incline.toml " in text
     assert "expect.cases[1]: the scene with the case's parameters does not load: contact.K" in text
     again = run_pytest(tmp_path, "scenes", "-q", "--lf")
     assert again.returncode == 1 and "2 failed" in again.stdout and "passed" not in again.stdout.splitlines()[-1], again.stdout
@@ -154,3 +165,18 @@ def test_a_passing_item_whose_run_is_not_physical_says_so(tmp_path):
     assert done.returncode == 0 and "5 passed, 1 warning" in done.stdout, done.stdout + done.stderr
     text = " ".join(done.stdout.split())
     assert "ScenarioRunWarning: scenes/incline.toml::frictionless::policy[quasistatic-rigid]: block was not held in equilibrium" in text
+    strict = run_pytest(tmp_path, "scenes", "-q", "-p", "no:cacheprovider", "-W", "error::planner.pytest_plugin.ScenarioRunWarning")
+    assert strict.returncode == 1 and "1 failed, 4 passed" in strict.stdout, strict.stdout + strict.stderr  # (as the README says)
+
+
+def test_a_plan_expectation_that_fails_says_the_seed_the_budget_and_each_rung_on_a_line(tmp_path):
+    """It had been one line of every rung's reason, without the seed or the budget it ran."""
+    text = (SCENARIOS / "free_transfer.toml").read_text().replace("#:schema ./scenario.schema.json\n", "")
+    assert "plan = true" in text
+    (tmp_path / "free.toml").write_text(text.replace("plan = true", "plan = false\nplan_iterations = 2000\nseed = 3"))
+    done = run_pytest(tmp_path, "free.toml", "-q", "-k", "plan")
+    assert done.returncode == 1, done.stdout + done.stderr
+    lines = done.stdout.splitlines()
+    at = next(i for i, line in enumerate(lines) if line.startswith("___") and " plan in free.toml " in line)
+    assert lines[at + 1].endswith("free.toml: top rung holds: True, expected False (expect.plan; seed 3, 2,000 iterations a rung):")
+    assert lines[at + 2].startswith("  geometric: planned") and lines[at + 3].startswith("  kinematic: "), lines[at : at + 4]
