@@ -56,6 +56,16 @@ class _Parser(argparse.ArgumentParser):
         self._once = {}  # (what `_Once` saw in this parse)
         return super().parse_known_args(args, namespace)
 
+    def parse_args(self, args=None, namespace=None):
+        """argparse's, but an unknown argument is the command's usage error, with its usage line
+        (`ladder plan x --bogus` had printed `usage: ladder [-h] COMMAND ...`)."""
+        parsed, extras = self.parse_known_args(args, namespace)
+        if extras:
+            commands = [a for a in self._actions if isinstance(a, argparse._SubParsersAction)]  # noqa: SLF001
+            chosen = commands[0].choices.get(getattr(parsed, commands[0].dest, None)) if commands else None
+            (chosen or self).error(f"unrecognized arguments: {' '.join(extras)}")
+        return parsed
+
     def error(self, message: str):
         self.print_usage(sys.stderr)
         flag, colon, reason = message.removeprefix("argument ").partition(": ")

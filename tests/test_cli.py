@@ -172,6 +172,15 @@ def test_unknown_command_is_a_usage_error():
     assert result.returncode == 2
 
 
+def test_an_unknown_argument_prints_its_commands_usage(capsys):
+    """It had printed the top level's `usage: ladder [-h] COMMAND ...`."""
+    from planner.cli import main
+
+    assert main(["plan", str(SCENARIOS / "free_transfer.toml"), "--bogus", "x"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("usage: ladder plan [-h] ") and err.endswith("error: command line: unrecognized arguments: --bogus x\n"), err
+
+
 def test_simulate_json_on_the_paper_scene(tmp_path):
     plot = tmp_path / "fig4.png"
     result = ladder(
