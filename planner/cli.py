@@ -652,6 +652,7 @@ def _run_simulation(args: argparse.Namespace, scenario: Scenario, plan_controls,
     rung = rung_for(scenario, args.model)
     if not args.json:
         say_unlisted_rungs(scenario, [args.model], step=args.step)
+        say_velocity_dropped(scenario, [args.model])
     state = rung.initial_state(scenario)
     laws = plan_controls is None  # the policy's feedback laws (a plan's controls are open loop)
     controls, durations = plan_controls if plan_controls is not None else policy_controls(scenario, duration)
@@ -686,6 +687,23 @@ def say_unlisted_rungs(scenario: Scenario, names, step_flag: bool = True, step: 
         note = unlisted_rung_note(scenario, name, step_flag, step)
         if note:
             print(note, file=sys.stderr, flush=True)
+
+
+def say_velocity_dropped(scenario: Scenario, names) -> None:
+    """On stderr, where the scene starts moving (`task.velocity`) and a rung named runs without
+    velocity state: its run starts at rest (a trial's expectation of `none` had passed so,
+    silently, where the dynamic rungs slid)."""
+    from models.rungs import rung_for
+
+    if not any(scenario.start_velocity):
+        return
+    for name in dict.fromkeys(names):
+        if not np.any(rung_for(scenario, name).initial_state(scenario).nu):
+            print(
+                f"task.velocity: {name} has no velocity state (the initial velocities are the dynamic rungs'), so its run starts at rest",
+                file=sys.stderr,
+                flush=True,
+            )
 
 
 def unlisted_rung_note(scenario: Scenario, name: str, step_flag: bool = True, step: float | None = None) -> str | None:
@@ -1316,6 +1334,7 @@ def _run_sweep(args: argparse.Namespace, scenario: Scenario, fixed: dict, axes, 
     if not args.json:
         print(f"sweeping {runs} runs on {where} (Ctrl-C stops and keeps what is done)", file=sys.stderr, flush=True)
         say_unlisted_rungs(scenario, [m.rung for m in models], step=args.step)
+        say_velocity_dropped(scenario, [m.rung for m in models])
         announce_compile()
     try:
         with interrupt.deferred(), sw.Executor(args.workers, args.executor, notice) as executor:

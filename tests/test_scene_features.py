@@ -420,3 +420,23 @@ def test_chunked_rollout_moves_scripted_obstacles_on(tmp_path):
     assert chunked.steps == whole.steps > 100
     np.testing.assert_allclose(chunked.state.q, whole.state.q, rtol=0, atol=1e-12)
     assert whole.state.named(scenario)["puck.x"] == pytest.approx(0.5 * (0.5 - 0.1), abs=1e-3)
+
+
+def test_a_rung_with_no_velocity_state_says_its_run_starts_at_rest(tmp_path, capsys):
+    """`simulate` of a launched box under the quasistatic rung: it stays put, silently before,
+    so an expectation of `none` passed where the dynamic rungs slide."""
+    from planner.cli import main
+
+    task = 'velocity = { "box.x" = 1.0 }\n[task.policy]\ntype = "constant_speed"\nspeeds = {}\nduration = 0.1'
+    load(tmp_path, scene(SLIDER, task=task), "box.x")
+    said = {}
+    for rung in ("quasistatic-rigid", "dynamic-rigid"):
+        assert main(["simulate", str(tmp_path / "scene.toml"), "--model", rung]) in (0, 1)
+        said[rung] = [line for line in capsys.readouterr().err.splitlines() if line.startswith("task.velocity")]
+    assert said == {
+        "quasistatic-rigid": [
+            "task.velocity: quasistatic-rigid has no velocity state (the initial velocities are the dynamic rungs'), "
+            "so its run starts at rest"
+        ],
+        "dynamic-rigid": [],
+    }
