@@ -26,6 +26,7 @@ from __future__ import annotations
 import os
 import signal
 import sys
+import time
 from contextlib import contextmanager
 
 _state = {"asked": False, "deferring": 0, "shielding": 0, "held": False, "signalled": False, "compiling": 0}
@@ -114,17 +115,29 @@ def at_stop(end) -> None:
 def deferred():
     """A block whose loops check `asked()` between compiled calls: Ctrl-C only sets the flag
     (but stops at once while a kernel compiles there)."""
-    _watch_compiles()
+    watch_compiles()
     return _inside("deferring")
 
 
 _watching: list = []
+#: The seconds this process has spent compiling kernels: those of the compiles ended, and when
+#: the outermost under way started (`compile_seconds`).
+_compile_clock = {"ended": 0.0, "since": 0.0}
 
 
-def _watch_compiles() -> None:
+def compile_seconds() -> float:
+    """Seconds spent compiling kernels since `watch_compiles` (the one under way counted so far):
+    what a wall-time limit leaves out (a service job's `--max-job-seconds`), as the CLI's
+    caps do, since a first run's compile takes minutes."""
+    ended, since = _compile_clock["ended"], _compile_clock["since"]
+    return ended + (time.monotonic() - since if _state["compiling"] else 0.0)
+
+
+def watch_compiles() -> None:
     """Count the kernels compiling (numba's `numba:compile` event, which a load from the cache
-    does not fire), once per process; a compile that starts after a Ctrl-C in a deferred block
-    (not one the service's `ask` made, nor while results are written) stops the process."""
+    does not fire) and time them (`compile_seconds`), once per process; a compile that starts
+    after a Ctrl-C in a deferred block (not one the service's `ask` made, nor while results
+    are written) stops the process."""
     if _watching:
         return
     try:
@@ -134,12 +147,16 @@ def _watch_compiles() -> None:
 
     class Compiles(event.Listener):
         def on_start(self, ev) -> None:
+            if not _state["compiling"]:
+                _compile_clock["since"] = time.monotonic()
             _state["compiling"] += 1
             if _state["signalled"] and _state["deferring"] and not _state["shielding"]:
                 _stop_now()
 
         def on_end(self, ev) -> None:
             _state["compiling"] -= 1
+            if not _state["compiling"]:
+                _compile_clock["ended"] += time.monotonic() - _compile_clock["since"]
 
     listener = Compiles()
     event.register("numba:compile", listener)

@@ -656,6 +656,48 @@ def test_a_jobs_last_progress_is_not_held_back(monkeypatch):
     assert worker.execute("sweep", {}, {}, Locked()) == ("failed", None, "internal error: RuntimeError: database is locked")
 
 
+def test_the_wall_time_limit_leaves_out_compiling_kernels(monkeypatch):
+    """A first job on a cold cache compiles for minutes: `--max-job-seconds` had counted it (and
+    failed a first job that way), where the CLI's caps leave it out. Here a job compiles a
+    kernel of 300 statements (seconds), then does 0.05 s of work, under a limit of 0.4 s; the
+    same job that sleeps its compile's time instead is stopped."""
+    import numba
+
+    from planner.service import jobs, worker
+
+    class Sink:
+        def cancel_requested(self):
+            return False
+
+        def progress(self, data, event=None):
+            pass
+
+        def event(self, type_, data):
+            pass
+
+    body = "".join(f"    x = x * 1.0001 + {k}.0\n" for k in range(300))
+    namespace = {}
+    exec(f"def heavy(x):\n{body}    return x\n", namespace)  # noqa: S102 (a kernel that takes seconds to compile)
+    took = {}
+
+    def run(kind, inputs, options, *, stop, compile_it, **kwargs):
+        start = time.monotonic()
+        if compile_it:
+            numba.njit(namespace["heavy"])(1.0)
+        else:
+            time.sleep(took["compile"])
+        took["compile"] = time.monotonic() - start
+        time.sleep(0.05)
+        return "{}", not stop()
+
+    monkeypatch.setattr(jobs, "run", lambda *a, **k: run(*a, compile_it=True, **k))
+    assert worker.execute("simulate", {}, {}, Sink(), max_seconds=0.4)[0] == "succeeded"
+    assert took["compile"] > 0.8, took  # (the limit and then some: the job would have been stopped)
+    monkeypatch.setattr(jobs, "run", lambda *a, **k: run(*a, compile_it=False, **k))
+    final, _, error = worker.execute("simulate", {}, {}, Sink(), max_seconds=0.4)
+    assert (final, error) == ("failed", "stopped at the wall-time limit of 0.4 s (what was done is in the result)")
+
+
 def test_a_dask_tasks_last_progress_arrives_with_its_end():
     """Progress goes to the server as topic messages, which may arrive after the task's end
     (and are then dropped): the task's last message comes with its result when it is not kept."""
