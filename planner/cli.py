@@ -644,8 +644,9 @@ def _check_simulate_args(args: argparse.Namespace):
     return scenario, plan_controls, h, duration, total
 
 
-def _run_simulation(args: argparse.Namespace, scenario: Scenario, plan_controls, h: float, duration: float, total: int):
-    """Run the policy's (or the plan's) controls under the rung; None when Ctrl-C stopped it (said on stderr)."""
+def _run_simulation(args: argparse.Namespace, scenario: Scenario, plan_controls, h: float, duration: float, total: int, on_progress=None):
+    """Run the policy's (or the plan's) controls under the rung; None when Ctrl-C stopped it (said
+    on stderr). `on_progress(steps_done, steps)` after each chunk (a service job's progress)."""
     from models.rungs import policy_controls, rung_for
     from planner import interrupt
 
@@ -668,7 +669,7 @@ def _run_simulation(args: argparse.Namespace, scenario: Scenario, plan_controls,
             print(f"simulating {counted(total, 'step')} of {args.model} (h = {h:g}, {span}; Ctrl-C stops)", file=sys.stderr, flush=True)
         try:
             interrupt.check()
-            return run_with_progress(rung, scenario, state, controls, durations, h, live=live, laws=laws)
+            return run_with_progress(rung, scenario, state, controls, durations, h, live=live, laws=laws, on_progress=on_progress)
         except KeyboardInterrupt as stop:
             done = getattr(stop, "steps_done", 0)
             if not quiet:
@@ -985,7 +986,7 @@ def _print_plan(args: argparse.Namespace, scenario: Scenario, result, report: di
 PROGRESS_STEPS = 200_000
 
 
-def run_with_progress(rung, scenario, state, controls, durations, h, *, live: bool, laws: bool = False):
+def run_with_progress(rung, scenario, state, controls, durations, h, *, live: bool, laws: bool = False, on_progress=None):
     """The rollout in chunks of bounded wall time (`Rung.rollout_chunked`, the same result as
     one call; laws: as there): Ctrl-C stops it between chunks (KeyboardInterrupt, with
     `steps_done`), and on a terminal a long one shows steps done / total, the rate and the time left."""
@@ -1011,6 +1012,8 @@ def run_with_progress(rung, scenario, state, controls, durations, h, *, live: bo
     def progress(done: int, total: int, wall: float) -> None:
         if bar is not None:
             bar.update(task, completed=done, rate=f"steps, {done / wall:,.0f}/s" if wall > 0 else "steps")
+        if on_progress is not None:
+            on_progress(done, total)
         if interrupt.asked():
             stop = KeyboardInterrupt()
             stop.steps_done = done

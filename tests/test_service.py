@@ -350,6 +350,9 @@ def test_a_simulate_job_reports_as_ladder_simulate_json(live):
     assert job["state"] == "succeeded", job
     summary = json.loads(live.get(f"/jobs/{job['id']}/result").text)
     assert summary["model"] == "kinematic" and summary["file"] == "scenario.toml" and summary["outcome"] in ("goal", "unsafe", "none")
+    # its progress, steps done of the steps asked (a simulate job had none); it stops at its outcome
+    progress = [e["data"] for e in parse_sse(live.get(f"/jobs/{job['id']}/events").text) if e["event"] == "progress"]
+    assert progress and job["progress"] == progress[-1] == {"steps_done": summary["steps"], "steps": 500}, progress
 
 
 def test_cancelling_a_running_job_stops_it(live):
@@ -636,9 +639,9 @@ def test_a_jobs_last_progress_is_not_held_back(monkeypatch):
         def event(self, type_, data):
             self.events.append(type_)
 
-    def run(kind, inputs, options, *, sweep_progress, **kwargs):
+    def run(kind, inputs, options, *, job_progress, **kwargs):
         for done in range(1, 12):  # 11 runs of 50 in well under PROGRESS_EVERY
-            sweep_progress({"runs_done": done, "runs": 50})
+            job_progress({"runs_done": done, "runs": 50})
         return "{}", False
 
     monkeypatch.setattr(jobs, "run", run)

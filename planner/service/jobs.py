@@ -351,14 +351,15 @@ def run(
     *,
     progress=None,
     rung_done=None,
-    sweep_progress: Callable[[dict], None] | None = None,
+    job_progress: Callable[[dict], None] | None = None,
     stop: Callable[[], bool] | None = None,
 ):
     """Run a job from its inputs: (the result file's text, complete). A plan's text is plan.json
     (planner.ladder.plan_json_text, as `ladder plan` writes it); a simulation's is the JSON
     `ladder simulate --json` prints; a sweep's is the sweep.json `ladder sweep` writes.
     `progress(rung, iterations, propagations)` and `rung_done(report)` follow a plan,
-    `sweep_progress(data)` a sweep; `stop()` True ends the job, keeping what is done."""
+    `job_progress(data)` a sweep ({runs_done, runs}, {refine_step, brackets}) and a simulation
+    ({steps_done, steps}); `stop()` True ends the job, keeping what is done."""
     from planner import cli
 
     with job_folder(inputs) as path:
@@ -376,8 +377,8 @@ def run(
         if kind == "sweep":
 
             def on_progress(data: dict) -> None:
-                if sweep_progress is not None:
-                    sweep_progress(data)
+                if job_progress is not None:
+                    job_progress(data)
                 if stop is not None and stop():
                     raise KeyboardInterrupt  # the sweep stops between runs, keeping them
 
@@ -386,7 +387,8 @@ def run(
             return (args.out / "sweep.json").read_text(), not interrupted
         scenario, plan_controls, h, duration, total = checked
         with _interrupt_when(stop):
-            result = cli._run_simulation(args, scenario, plan_controls, h, duration, total)
+            steps = None if job_progress is None else (lambda done, total: job_progress({"steps_done": done, "steps": total}))
+            result = cli._run_simulation(args, scenario, plan_controls, h, duration, total, on_progress=steps)
         if result is None:
             return None, False
         summary = cli._simulation_summary(args, scenario, result, h, duration)

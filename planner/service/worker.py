@@ -89,11 +89,12 @@ def execute(
         state["pending"] = None  # (its progress held back is superseded by its end)
         sink.event("rung_ended", jobs.rung_view(report))
 
-    def sweep_progress(data: dict) -> None:
-        report(data, ("progress", data), data.get("runs_done") == data.get("runs"))
+    def job_progress(data: dict) -> None:  # (a sweep's runs or refinement step, a simulation's steps)
+        last = data["steps_done"] == data["steps"] if "steps" in data else data.get("runs_done") == data.get("runs")
+        report(data, ("progress", data), last)
 
     try:
-        text, complete = jobs.run(kind, inputs, options, progress=progress, rung_done=rung_done, sweep_progress=sweep_progress, stop=stop)
+        text, complete = jobs.run(kind, inputs, options, progress=progress, rung_done=rung_done, job_progress=job_progress, stop=stop)
         # the last progress the throttle held back (a cancelled sweep's had said 10 runs where its result kept 11)
         if state["pending"] is not None:
             sink.progress(state["pending"], ("progress", state["pending"]))
