@@ -373,13 +373,18 @@ class Executor:
                         continue
                     done, _ = wait(futures, timeout=POLL_S, return_when=FIRST_COMPLETED)
                     for f in done:
-                        if isinstance(f.exception(), BrokenProcessPool):
-                            yield from self._pool_lost(futures)
                         i = futures.pop(f)
+                        point = f.result()  # (BrokenProcessPool where its worker died)
                         if not stopping:
-                            for j, t in itertools.islice(stream, 1):
-                                futures[self._pool.submit(run_task, t)] = j
-                        yield i, f.result()
+                            try:
+                                for j, t in itertools.islice(stream, 1):
+                                    futures[self._pool.submit(run_task, t)] = j
+                            except BrokenProcessPool:  # (a worker died since: this run is done all the same)
+                                yield i, point
+                                raise
+                        yield i, point
+            except BrokenProcessPool:
+                yield from self._pool_lost(futures)
             finally:
                 for f in futures:
                     f.cancel()

@@ -243,18 +243,40 @@ _run_task = sw.run_task
 
 def _run_killing_its_worker_at_v1_1_5(task: sw.Task) -> sw.Point:
     """A run that kills its own pool worker (as the kernel's OOM killer would) at v1 = 1.5."""
-    if dict(task.parameters)["v1"] == 1.5:
+    if abs(dict(task.parameters)["v1"] - 1.5) < 1e-9:
         os.kill(os.getpid(), signal.SIGKILL)
     return _run_task(task)
 
 
+def _quick_run_killing_its_worker_at_30(task: int) -> int:
+    if task == 30:
+        os.kill(os.getpid(), signal.SIGKILL)
+    time.sleep(0.005)
+    return task
+
+
+def test_a_pool_that_breaks_while_a_run_is_read_ends_in_executor_lost(monkeypatch):
+    """The worker dies while the sweep reads a run (30 ms each, as a progress bar takes): the
+    next run's submission to the broken pool had raised BrokenProcessPool, a traceback."""
+    monkeypatch.setattr(sw, "run_task", _quick_run_killing_its_worker_at_30)
+    got = []
+    with pytest.raises(sw.ExecutorLost, match="a worker process of the local pool ended abruptly"):
+        with sw.Executor(2) as pool:
+            for i, value in pool.map(range(200)):
+                assert value == i
+                got.append(i)
+                time.sleep(0.03)
+    assert 30 not in got and 20 <= len(got) < 200
+
+
 def test_a_pool_worker_killed_ends_the_sweep_as_a_failure_that_keeps_the_runs_done(capsys, tmp_path, monkeypatch):
-    """A worker ended abruptly had raised BrokenProcessPool's traceback, and lost every run done."""
+    """A worker ended abruptly had raised BrokenProcessPool's traceback, and lost every run done.
+    More runs than the pool is fed ahead (8): a run read, then the next submitted to the broken pool."""
     from planner import cli
 
     monkeypatch.setattr(sw, "run_task", _run_killing_its_worker_at_v1_1_5)
     out = tmp_path / "sweep"
-    argv = ["sweep", TRIANGLE, "--grid", "v1=1:2:5", "--param", "v2=1", "--model", "kinematic", "--workers", "2", "--out", str(out)]
+    argv = ["sweep", TRIANGLE, "--grid", "v1=1:2:21", "--param", "v2=1", "--model", "kinematic", "--workers", "2", "--out", str(out)]
     assert cli.main(argv) == 1
     said = capsys.readouterr()
     assert "Traceback" not in said.err
@@ -264,7 +286,7 @@ def test_a_pool_worker_killed_ends_the_sweep_as_a_failure_that_keeps_the_runs_do
     data = json.loads((out / "sweep.json").read_text())
     assert data["complete"] is False and data["error"].startswith("a worker process of the local pool ended abruptly")
     kept = [p["parameters"]["v1"] for p in data["points"]]
-    assert 1.5 not in kept and len(kept) + data["missing"] == 5
+    assert 1.5 not in kept and len(kept) + data["missing"] == 21 and len(kept) >= 1
     for p in data["points"]:  # each kept run is whole
         again = _run_task(sw.Task(TRIANGLE, (("v1", p["parameters"]["v1"]), ("v2", 1.0)), sw.ModelSpec("kinematic"), None, None))
         assert (p["outcome"], p["steps"]) == (again.outcome, again.steps)
