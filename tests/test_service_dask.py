@@ -95,8 +95,21 @@ def test_a_scheduler_that_goes_away_queues_its_jobs_again_and_runs_them_when_it_
             assert wait_for(client, waiting["id"])["state"] == "succeeded"
             states = [e["data"] for e in parse_sse(client.get(f"/jobs/{job['id']}/events").text) if e["event"] == "state"]
             assert states == [{"state": "queued"}, {"state": "running"}, {"state": "queued", "requeued": True}, {"state": "running"}]
+            # a scheduler started again at once: Dask's client reconnects by itself, before the
+            # server's watch looks, without its subscription to the jobs' messages; the job lost
+            # had stayed queued for good
+            monkeypatch.setattr(remote, "WATCH_S", 120.0)  # (it looks only when a task is lost)
+            again = submit(client, stuck).json()
+            wait_for(client, again["id"], states=("running",))
+            processes[2].kill()
+            processes[2].wait(timeout=30)
+            processes += [dp.scheduler(port), dp.worker(port)]
+            ended = wait_for(client, again["id"], timeout=60)
+            assert ended["state"] == "succeeded" and ended["runs"] == 2, ended
+            assert [e["event"] for e in parse_sse(client.get(f"/jobs/{again['id']}/events").text)].count("rung_ended") >= 1
     assert said[0].startswith(f"lost the Dask scheduler at dask://127.0.0.1:{port}: the jobs under way are queued again"), said
     assert said[1] == f"connected again to the Dask scheduler at dask://127.0.0.1:{port}: 2 queued job(s) sent", said
+    assert said[2].startswith("lost the Dask scheduler") and said[3].startswith("connected again"), said
 
 
 def _with_say(init, say):

@@ -17,6 +17,7 @@ import queue
 import sys
 import threading
 import uuid
+from concurrent.futures import CancelledError
 
 from models.scenario import Problem, ScenarioError
 from planner.service.store import TERMINAL, Store
@@ -93,7 +94,9 @@ class DaskRunner:
     A scheduler that goes away (restarted, its machine down) loses the tasks it held: their
     jobs go back to queued, the server says so on stderr and connects again every WATCH_S s
     (each try up to CONNECT_TIMEOUT_S), meanwhile accepting jobs; once connected it sends
-    every queued job again, and says so. `say(text)`: the server's line on stderr."""
+    every queued job again, and says so. A lost task (its scheduler gone) makes the server
+    connect again even where Dask's client reconnected by itself, since that client's
+    subscription to TOPIC does not survive it. `say(text)`: the server's line on stderr."""
 
     def __init__(self, address: str, store: Store, max_seconds: float | None, say=None):
         try:
@@ -105,9 +108,12 @@ class DaskRunner:
         self.address, self.store, self.max_seconds = address, store, max_seconds
         self.say = say or (lambda text: print(text, file=sys.stderr, flush=True))
         self.lock = threading.Lock()  # one job's messages and its end are written in order
-        self.connection = threading.RLock()  # the client and the futures sent through it
+        self.connection = threading.RLock()  # the client, and sending through it
         self.applied: dict[tuple[str, str], int] = {}  # (job, run) -> the last message written
         self.futures: dict[str, object] = {}  # a future Dask forgets once nothing refers to it
+        self.futures_lock = threading.Lock()  # (never held across a call to Dask)
+        self.generation = 0  # the connection's: a future of an earlier one was sent before a reconnect
+        self.lost = threading.Event()  # a task was lost with its scheduler: connect again
         # the messages are written by a thread of their own: the handler runs on the Dask
         # client's event loop, which must neither block on SQLite nor call Dask synchronously
         self.inbox: queue.Queue = queue.Queue()
@@ -129,6 +135,7 @@ class DaskRunner:
 
     def close(self) -> None:
         self.closing.set()
+        self.lost.set()  # (wakes the watch)
         self.inbox.put(None)
         with self.connection:
             self._close_client()
@@ -142,14 +149,20 @@ class DaskRunner:
 
     def _watch(self) -> None:
         """A lost scheduler: its jobs queued again, and a connection made again, then every queued job sent."""
-        while not self.closing.wait(WATCH_S):
+        while not self.closing.is_set():
             if self.connected:
-                if self.client.status == "running":
+                self.lost.wait(WATCH_S)  # (a lost task wakes it at once)
+                if self.closing.is_set():
+                    return
+                if self.client.status == "running" and not self.lost.is_set():
                     continue
                 with self.connection:
                     self.connected = False
+                    self.generation += 1  # (the old client's futures, cancelled as it closes, are its: `_lost` leaves them)
                     self._close_client()  # (its futures are cancelled: `_done` queues their jobs again)
-                    self.futures.clear()
+                    with self.futures_lock:
+                        self.futures.clear()
+                    self.lost.clear()
                 self.say(
                     f"lost the Dask scheduler at {self.address}: the jobs under way are queued again and run when it is back; "
                     f"connecting again every {WATCH_S:g} s"
@@ -158,6 +171,7 @@ class DaskRunner:
             try:
                 client = self._connect()
             except (OSError, TimeoutError, ValueError):
+                self.closing.wait(WATCH_S)
                 continue
             with self.connection:
                 if self.closing.is_set():
@@ -173,13 +187,16 @@ class DaskRunner:
         while (message := self.inbox.get()) is not None:
             try:
                 self._apply(message)
-            except Exception:  # the store is closed: the service is stopping
-                return
+            except Exception:  # the store is closed (the service is stopping), or the client (a reconnect)
+                if self.closing.is_set():
+                    return
 
     def submit(self, job_id: str) -> None:
         """Send the job to the cluster (when it is connected: else it waits queued, sent on reconnecting)."""
         with self.connection:
-            if self.connected and job_id not in self.futures:
+            with self.futures_lock:
+                sent = job_id in self.futures
+            if self.connected and not sent:
                 self._submit(job_id)
 
     def _submit(self, job_id: str) -> None:
@@ -194,21 +211,24 @@ class DaskRunner:
             pure=False,
             key=f"ladder-job-{job_id}-{uuid.uuid4().hex[:8]}",
         )
-        self.futures[job_id] = future
-        future.add_done_callback(lambda f, job_id=job_id: self._done(job_id, f))
+        with self.futures_lock:
+            self.futures[job_id] = future
+        future.add_done_callback(lambda f, job_id=job_id, generation=self.generation: self._done(job_id, f, generation))
 
     def cancel(self, job_id: str) -> None:
         """Ask the job's task to stop (the store already says the job is cancelled or to be)."""
-        with self.connection:
-            if not self.connected:  # (queued again: the store's cancel is the whole of it)
-                return
-            try:
-                _cancel_event(job_id, self.client).set()
-            except (OSError, TimeoutError):  # (the scheduler went away just now: the job is queued again)
-                return
+        with self.connection:  # (the calls to Dask outside it: a scheduler that hangs holds up no submission)
+            client, connected = self.client, self.connected
+        if not connected:  # (queued again: the store's cancel is the whole of it)
+            return
+        try:
+            _cancel_event(job_id, client).set()
+        except Exception:  # (the scheduler went away just now: the job is queued again)
+            return
+        with self.futures_lock:
             future = self.futures.get(job_id)
-            if future is not None and self.store.get(job_id)["state"] == "cancelled":
-                future.cancel()  # not started: it need not start
+        if future is not None and self.store.get(job_id)["state"] == "cancelled":
+            future.cancel()  # not started: it need not start
 
     def _apply(self, message: dict) -> None:
         job_id, data = message["job"], message["data"]
@@ -220,7 +240,10 @@ class DaskRunner:
             row = self.store.get(job_id)
             if row is None or row["state"] in TERMINAL:
                 if message["type"] == "claim":
-                    _cancel_event(job_id, self.client).set()  # cancelled before it started
+                    try:
+                        _cancel_event(job_id, self.client).set()  # cancelled before it started
+                    except Exception:  # (a client closed by a reconnect: the task runs its course, unheard)
+                        pass
                 return
             if message["type"] == "claim":
                 self.store.claim(job_id)  # queued -> running (already running: Dask started it again)
@@ -229,25 +252,20 @@ class DaskRunner:
             elif message["type"] == "event":
                 self.store.add_event(job_id, data["type"], data["data"])
 
-    def _done(self, job_id: str, future) -> None:
-        current = self.futures.get(job_id)
-        if current is not None and current is not future:
-            return  # a run sent before its scheduler went away: the job has been sent again
-        self.futures.pop(job_id, None)
-        if future.cancelled():
-            # cancelled before it started, or the service is stopping (the job runs again on
-            # restart); else its scheduler went away: it runs again when one is back
-            if not self.closing.is_set():
-                try:
-                    self.store.requeue(job_id)
-                except Exception:  # the store is closed: the service is stopping
-                    pass
-            return
+    def _done(self, job_id: str, future, generation: int) -> None:
+        with self.futures_lock:
+            if self.futures.get(job_id) is future:
+                del self.futures[job_id]
         try:
             try:
-                out = future.result()
+                out = None if future.cancelled() else future.result()
+            except (OSError, CancelledError):  # its result went with the scheduler
+                out = None
             except Exception as exc:  # the task raised or its worker died
                 self.store.finish(job_id, "failed", error=f"the Dask task failed: {type(exc).__name__}: {exc}")
+                return
+            if out is None:
+                self._lost(job_id, generation)
                 return
             for message in out["messages"]:
                 self._apply(message)
@@ -257,3 +275,15 @@ class DaskRunner:
                     del self.applied[key]
         except Exception:  # the store is closed: the service is stopping (the job runs again on restart)
             pass
+
+    def _lost(self, job_id: str, generation: int) -> None:
+        """A task cancelled or its result lost: its job queued again where its scheduler went away
+        (not where its user cancelled it, or the service is stopping: it runs again on restart;
+        nor where a reconnect since has queued and sent it again), and the server connects again."""
+        if self.closing.is_set() or generation != self.generation:
+            return
+        row = self.store.get(job_id)
+        if row is None or row["state"] in TERMINAL:
+            return
+        self.store.requeue(job_id)
+        self.lost.set()
