@@ -858,7 +858,7 @@ def _run_plan(args: argparse.Namespace, scenario: Scenario, names: list[str]):
             raise ScenarioError(scenario.path, problems)
         announce_compile(planning=True)  # (after the checks: bad input is its one line)
         with announcing_search_compile():
-            result = ladder_for(scenario, names, args, progress=progress, stop=interrupt.asked)
+            result = ladder_for(scenario, names, args, progress=progress, stop=interrupt.asked, rung_done=lambda report: interrupt.keep())
     if live:
         print("\r" + " " * 78 + "\r", end="", file=sys.stderr, flush=True)
     return result
@@ -1307,6 +1307,7 @@ def _run_sweep(args: argparse.Namespace, scenario: Scenario, fixed: dict, axes, 
     from planner import interrupt
 
     def progress(done: int, total: int) -> None:
+        interrupt.keep()  # (a run done: a Ctrl-C as a later run compiles waits for it, keeping this one)
         if bar is not None:
             bar.update(task_id, completed=done, total=total)
         if on_progress is not None:
@@ -1586,14 +1587,18 @@ def cmd_serve(args: argparse.Namespace) -> int:
     from planner.service import create_app
     from planner.service.app import server_for
 
-    app = create_app(
-        args.db,
-        workers=args.workers,
-        token=args.token,
-        max_queued=args.max_queued,
-        max_job_seconds=args.max_job_seconds,
-        executor=args.executor,
-    )
+    try:
+        app = create_app(
+            args.db,
+            workers=args.workers,
+            token=args.token,
+            max_queued=args.max_queued,
+            max_job_seconds=args.max_job_seconds,
+            executor=args.executor,
+        )
+    except BaseException:  # (a database in use, a scheduler out of reach)
+        sock.close()
+        raise
     where = f"jobs on {args.executor}" if args.executor else f"{args.workers} worker process(es)"
     port = sock.getsockname()[1]  # (--port 0: the one the system chose)
     print(f"serving on http://{args.host}:{port} (jobs in {args.db}, {where}; API at /docs, viewer at /)", file=sys.stderr, flush=True)

@@ -8,8 +8,9 @@ long loops (rollout chunks, OMPL's termination condition, the sweep's runs) read
 compiled calls (`asked`, `check`) and act on: they stop, keep what is done and the command
 exits 130. A second Ctrl-C inside such a block stops the process at once (exit 130, nothing
 more written). So does a first Ctrl-C while a kernel compiles inside such a block, or one
-before a compile starts there: a compile has no check in it and takes minutes on a first run,
-which had held a first simulate's Ctrl-C for 10 minutes. Outside a deferred block Ctrl-C raises
+before a compile starts there, while the block has nothing to keep yet (`keep`: a plan's rungs
+done, a sweep's runs): a compile has no check in it and takes minutes on a first run, which had
+held a first simulate's Ctrl-C for 10 minutes. Outside a deferred block Ctrl-C raises
 KeyboardInterrupt as usual.
 
 A command's results, once computed, are written inside a `shielded()` block: a first Ctrl-C
@@ -29,7 +30,16 @@ import sys
 import time
 from contextlib import contextmanager
 
-_state = {"asked": False, "deferring": 0, "shielding": 0, "held": False, "signalled": False, "compiling": 0}
+_state = {
+    "asked": False,
+    "deferring": 0,
+    "shielding": 0,
+    "held": False,
+    "signalled": False,
+    "compiling": 0,
+    "kept": False,
+    "installed": False,
+}
 #: What a stop at once ends before the process exits (`stopped_at_once`).
 _at_stop: list = []
 
@@ -68,7 +78,7 @@ def handler(signum, frame) -> None:
         _state["held"] = True
         return
     if _state["deferring"]:
-        if _state["asked"] or _state["compiling"]:  # the second Ctrl-C, or one that a compile would hold for minutes
+        if _state["asked"] or (_state["compiling"] and not _state["kept"]):  # the second Ctrl-C, or one a compile would hold
             _stop_now()
         _state["asked"] = _state["signalled"] = True
         return
@@ -81,8 +91,20 @@ def install() -> None:
     reset()
     try:
         signal.signal(signal.SIGINT, handler)
+        _state["installed"] = True
     except ValueError:  # not the main thread
         pass
+
+
+def installed() -> bool:
+    """Whether this process's Ctrl-C is `handler`'s (the command line's; not a service worker's)."""
+    return _state["installed"]
+
+
+def keep() -> None:
+    """The deferred block under way has work to keep at a stop (a rung or a run done): a Ctrl-C
+    during a compile there waits for the compile, as for any check, rather than stop at once."""
+    _state["kept"] = True
 
 
 @contextmanager
@@ -108,15 +130,27 @@ def stopped_at_once(end):
 
 def at_stop(end) -> None:
     """`end()` before the process exits at a stop at once, from now on (an output folder made
-    empty: `end` must do no harm once the work is done)."""
-    _at_stop.append(end)
+    empty: `end` must do no harm once the work is done); only in a process whose Ctrl-C is
+    `handler`'s (a service worker's jobs, each with a folder, never stop so)."""
+    if _state["installed"]:
+        _at_stop.append(end)
 
 
 def deferred():
     """A block whose loops check `asked()` between compiled calls: Ctrl-C only sets the flag
     (but stops at once while a kernel compiles there)."""
     watch_compiles()
-    return _inside("deferring")
+    return _deferring()
+
+
+@contextmanager
+def _deferring():
+    try:
+        with _inside("deferring"):
+            yield
+    finally:
+        if not _state["deferring"]:  # (the outermost: what it saw is not the next one's)
+            _state["signalled"] = _state["kept"] = False
 
 
 _watching: list = []
@@ -150,7 +184,7 @@ def watch_compiles() -> None:
             if not _state["compiling"]:
                 _compile_clock["since"] = time.monotonic()
             _state["compiling"] += 1
-            if _state["signalled"] and _state["deferring"] and not _state["shielding"]:
+            if _state["signalled"] and _state["deferring"] and not _state["shielding"] and not _state["kept"]:
                 _stop_now()
 
         def on_end(self, ev) -> None:

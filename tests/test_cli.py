@@ -132,12 +132,11 @@ def test_serve_checks_its_options():
 
 
 def test_serve_answers_on_loopback(tmp_path):
-    import socket
     import urllib.request
 
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
+    from tests.conftest import free_port
+
+    port = free_port()
     proc = subprocess.Popen(
         [sys.executable, "-m", "planner", "serve", "--port", str(port), "--db", str(tmp_path / "jobs.sqlite"), "--token", "t"],
         cwd=ROOT,
@@ -781,6 +780,26 @@ def test_ctrl_c_as_a_kernel_compiles_stops_at_once_and_leaves_no_folder(command,
     assert (done.returncode, done.stderr.splitlines()[-1:], done.stdout) == (130, ["interrupted"], ""), done.stderr
     assert "compiled past the Ctrl-C" not in done.stderr
     assert not out.exists()
+
+
+def test_ctrl_c_as_a_kernel_compiles_waits_where_there_is_work_to_keep():
+    """Once a block has work to keep (a plan's rung, a sweep's run: `interrupt.keep`), a Ctrl-C
+    during a later compile waits for it, as for any check, and the next block starts afresh."""
+    program = (
+        "import os, signal, numba\n"
+        "from planner import interrupt\n"
+        "interrupt.install()\n"
+        "with interrupt.deferred():\n"
+        "    interrupt.keep()\n"
+        "    os.kill(os.getpid(), signal.SIGINT)\n"
+        "    numba.njit(lambda x: x + 1)(1)\n"
+        "    print('compiled past the Ctrl-C, which waits:', interrupt.asked())\n"
+        "with interrupt.deferred():\n"
+        "    print('the next block:', interrupt._state['kept'], interrupt._state['signalled'])\n"
+    )
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    done = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, cwd=ROOT, env=env, timeout=300)
+    assert (done.returncode, done.stdout) == (0, "compiled past the Ctrl-C, which waits: True\nthe next block: False False\n"), done
 
 
 def _ctrl_c_before(monkeypatch, cli, name: str) -> None:

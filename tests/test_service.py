@@ -593,8 +593,9 @@ def test_a_signal_to_the_servers_process_group_while_a_job_runs_and_restart(tmp_
             wait_for(client, job["id"], ("running",))
             follower = threading.Thread(target=follow, args=(f"{str(client.base_url).rstrip('/')}/jobs/{job['id']}/events",), daemon=True)
             follower.start()
+            deadline = time.monotonic() + JOB_TIMEOUT_S  # (a first job compiles)
             while "event: rung_started" not in followed:  # the worker is planning, and the client follows it
-                assert follower.is_alive() and proc.poll() is None
+                assert follower.is_alive() and proc.poll() is None and time.monotonic() < deadline, followed
                 time.sleep(0.1)
         finally:
             os.killpg(proc.pid, getattr(signal, signum))

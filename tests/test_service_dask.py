@@ -67,6 +67,8 @@ def test_an_unreachable_scheduler_is_bad_input(tmp_path, monkeypatch):
     monkeypatch.setattr(remote, "CONNECT_TIMEOUT_S", 1)
     with pytest.raises(ScenarioError, match="cannot reach the Dask scheduler"):
         create_app(tmp_path / "jobs.sqlite", executor="dask://127.0.0.1:9")
+    with TestClient(create_app(tmp_path / "jobs.sqlite", workers=0)) as client:  # (the failed one holds no lock on it)
+        assert client.get("/jobs").json()["jobs"] == []
 
 
 def test_a_scheduler_that_goes_away_queues_its_jobs_again_and_runs_them_when_it_is_back(tmp_path, monkeypatch):

@@ -223,7 +223,12 @@ class Service:
         if executor is not None:
             from planner.service.remote import DaskRunner
 
-            self.runner = DaskRunner(executor, self.store, max_job_seconds)
+            try:
+                self.runner = DaskRunner(executor, self.store, max_job_seconds)
+            except BaseException:  # (out of reach: the database is not this service's after all)
+                self.store.close()
+                self._owner.close()
+                raise
 
     def start(self) -> None:
         """Run the jobs a stopped service left (also when this service was stopped before: an
