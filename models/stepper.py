@@ -153,9 +153,9 @@ _STEP_MESSAGES = {
     StepStatus.SINGULAR: "the velocity system is singular (a free DOF with neither inertia nor a drive)",
     StepStatus.BLOCKED: "kinematic model: the commanded motion would penetrate something nothing can push away",
     StepStatus.CONTACT_NOT_CONVERGED: (
-        "PGS reached its sweep limit before the contact impulses met its tolerance; raise max_sweeps, "
-        "loosen the tolerance, or use the lemke (or auto) contact solver, on the polygonal cone (the exact cone is PGS's only, "
-        "and Lemke on polygons aligned with its friction did not solve it either)"
+        "PGS reached its sweep limit before the contact impulses met its tolerance; use the lemke (or auto) contact solver "
+        "(the rung's contact_solver), on the polygonal cone (the exact cone is PGS's only, and Lemke on polygons aligned with its "
+        "friction did not solve it either); from Python, a models.stepper.Solver with more max_sweeps or a looser tolerance"
     ),
 }
 
