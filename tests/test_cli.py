@@ -736,6 +736,12 @@ def test_plan_iterations_share_the_scenarios_bound():
     assert done.returncode == 2 and done.stderr.endswith(f"--iterations: must be at most 1e+09, got {10 * MAX_ITERATIONS}\n")
 
 
+def run_python(program: str, timeout: float) -> subprocess.CompletedProcess:
+    """`program` in a fresh Python process of this checkout (the place a Ctrl-C lands is set up in it)."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    return subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, cwd=ROOT, env=env, timeout=timeout)
+
+
 def test_ctrl_c_while_the_command_still_imports_is_interrupted_not_a_traceback():
     """A Ctrl-C that lands while `ladder` imports numpy (the first half second of every run) is
     "interrupted", exit 130, as later; it was a KeyboardInterrupt traceback. The interrupt is
@@ -750,8 +756,7 @@ def test_ctrl_c_while_the_command_still_imports_is_interrupted_not_a_traceback()
         "sys.meta_path.insert(0, Interrupt())\n"
         f"raise SystemExit(planner.main(['check', {TRIANGLE!r}]))\n"
     )
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
-    done = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, cwd=ROOT, env=env, timeout=120)
+    done = run_python(program, timeout=120)
     assert (done.returncode, done.stderr, done.stdout) == (130, "interrupted\n", "")
 
 
@@ -775,8 +780,7 @@ def test_ctrl_c_as_a_kernel_compiles_stops_at_once_and_leaves_no_folder(command,
         "cli.announce_compile = announce\n"
         f"raise SystemExit(planner.main({argv!r}))\n"
     )
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
-    done = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, cwd=ROOT, env=env, timeout=300)
+    done = run_python(program, timeout=300)
     assert (done.returncode, done.stderr.splitlines()[-1:], done.stdout) == (130, ["interrupted"], ""), done.stderr
     assert "compiled past the Ctrl-C" not in done.stderr
     assert not out.exists()
@@ -797,8 +801,7 @@ def test_ctrl_c_as_a_kernel_compiles_waits_where_there_is_work_to_keep():
         "with interrupt.deferred():\n"
         "    print('the next block:', interrupt._state['kept'], interrupt._state['signalled'])\n"
     )
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
-    done = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, cwd=ROOT, env=env, timeout=300)
+    done = run_python(program, timeout=300)
     assert (done.returncode, done.stdout) == (0, "compiled past the Ctrl-C, which waits: True\nthe next block: False False\n"), done
 
 
@@ -857,8 +860,7 @@ def test_a_ctrl_c_as_the_process_ends_leaves_the_commands_exit_code():
         "print(code, signal.getsignal(signal.SIGINT) is signal.SIG_IGN)\n"
         "print(planner.main(['schema', '--out', '/dev/null']), signal.getsignal(signal.SIGINT) is signal.SIG_IGN)\n"
     )
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
-    done = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, cwd=ROOT, env=env, timeout=120)
+    done = run_python(program, timeout=120)
     said = [line for line in done.stdout.splitlines() if not line.startswith("schema written")]
     assert said == ["0 True", "0 False"], done.stderr  # (a call with arguments is a library's: no)
 

@@ -29,6 +29,12 @@ def _tasks(count: int):
     return [sw.Task(TRIANGLE, (("v1", v), ("v2", 1.0)), sw.ModelSpec("dynamic-compliant"), 1e-5, 8.0) for v in values]
 
 
+def _paper_sweep(axes, executor, progress, stop=None) -> sw.SweepResult:
+    """The paper's scene swept under dynamic-compliant at h = 1e-5 (runs of seconds), v2 = 1."""
+    models = sw.parse_models("dynamic-compliant")
+    return sw.sweep(TRIANGLE, axes, models, fixed={"v2": 1.0}, h=1e-5, duration=8.0, executor=executor, progress=progress, stop=stop)
+
+
 def test_a_stopped_pool_finishes_and_keeps_the_runs_under_way_and_starts_no_other():
     tasks = _tasks(40)
     got = []
@@ -51,17 +57,7 @@ def test_a_stopped_sweep_is_incomplete_with_every_run_it_kept(monkeypatch):
         seen.append(done)
 
     with sw.Executor(2) as pool:
-        result = sw.sweep(
-            TRIANGLE,
-            axes,
-            sw.parse_models("dynamic-compliant"),
-            fixed={"v2": 1.0},
-            h=1e-5,
-            duration=8.0,
-            executor=pool,
-            progress=progress,
-            stop=lambda: bool(seen),
-        )
+        result = _paper_sweep(axes, pool, progress, stop=lambda: bool(seen))
     kept = [p for p in result.points if p is not None]
     assert not result.complete and 2 <= len(kept) <= sw.WINDOW_PER_WORKER * 2 + 1 and seen[-1] == len(kept)
     assert result.to_json()["missing"] == 40 - len(kept)
@@ -310,16 +306,7 @@ def test_a_dask_scheduler_that_dies_ends_the_sweep_as_a_failure_that_keeps_the_r
                 scheduler.kill()
 
         with sw.Executor(address=f"dask://127.0.0.1:{port}") as dask:
-            result = sw.sweep(
-                TRIANGLE,
-                [sw.parse_axis("v1=0.5:2:12")],
-                sw.parse_models("dynamic-compliant"),
-                fixed={"v2": 1.0},
-                h=1e-5,
-                duration=8.0,
-                executor=dask,
-                progress=progress,
-            )
+            result = _paper_sweep([sw.parse_axis("v1=0.5:2:12")], dask, progress)
     assert not result.complete
     assert result.error.startswith(f"lost the Dask scheduler at dask://127.0.0.1:{port}: its connection closed ("), result.error
     kept = [p for p in result.points if p is not None]
