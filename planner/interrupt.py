@@ -96,11 +96,6 @@ def install() -> None:
         pass
 
 
-def installed() -> bool:
-    """Whether this process's Ctrl-C is `handler`'s (the command line's; not a service worker's)."""
-    return _state["installed"]
-
-
 def keep() -> None:
     """The deferred block under way has work to keep at a stop (a rung or a run done): a Ctrl-C
     during a compile there waits for the compile, as for any check, rather than stop at once."""

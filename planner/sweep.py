@@ -305,7 +305,6 @@ class Executor:
         self.notice = notice or (lambda text: None)
         self._pool = None
         self._client = None
-        self._lost = False  # (the Dask scheduler went away)
         self._stack = contextlib.ExitStack()
 
     def __enter__(self) -> Executor:
@@ -333,13 +332,7 @@ class Executor:
             self._pool.shutdown(wait=exc[0] is None, cancel_futures=True)
         self._stack.close()
         if self._client is not None:
-            # a result lost with its worker leaves Dask's gather waiting; closing ends it with
-            # AllExit, which asyncio would print as a traceback ("Task exception was never retrieved")
-            loop = self._client.loop.asyncio_loop
-            loop.set_exception_handler(_quiet_all_exit)
-            # a client that lost its scheduler logs its reconnect's cancel at close as an error traceback
-            with logs_off("distributed") if self._lost else contextlib.nullcontext():
-                self._client.close()
+            close_quietly(self._client)
 
     def _kill_workers(self) -> None:
         """End the pool's worker processes now (a stop at once: they would outlive the process)."""
@@ -460,11 +453,20 @@ class Executor:
                 yield i, point
         except (OSError, CancelledError) as exc:  # (a run cancelled by anyone but this sweep: its scheduler is gone)
             inflight.clear()
-            self._lost = True
             raise ExecutorLost(f"lost the Dask scheduler at {self.address}: its connection closed ({type(exc).__name__})") from None
         finally:
             if inflight:
                 self._client.cancel(list(inflight))
+
+
+def close_quietly(client) -> None:
+    """Close a Dask client (a sweep's, the service's) without the tracebacks Dask prints then: a
+    result lost with its worker leaves Dask's gather waiting, and closing ends it with AllExit,
+    which asyncio would print ("Task exception was never retrieved"); a client that lost its
+    scheduler logs its reconnect's cancel as an error."""
+    client.loop.asyncio_loop.set_exception_handler(_quiet_all_exit)
+    with logs_off("distributed"):
+        client.close()
 
 
 @contextlib.contextmanager

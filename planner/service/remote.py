@@ -141,11 +141,9 @@ class DaskRunner:
             self._close_client()
 
     def _close_client(self) -> None:
-        from planner.sweep import logs_off
+        from planner.sweep import close_quietly
 
-        # (a client that lost its scheduler logs its reconnect's cancel at close as an error traceback)
-        with logs_off("distributed"):
-            self.client.close()
+        close_quietly(self.client)
 
     def _watch(self) -> None:
         """A lost scheduler: its jobs queued again, and a connection made again, then every queued job sent."""
