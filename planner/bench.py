@@ -888,26 +888,38 @@ def scaling(quick: bool = False) -> dict:
 
 
 #: Scenes of the planning section and their parameters (the paper's scene at v1 = 0.8, where
-#: the default plan must push the triangle). --quick leaves out the spatial scenes.
+#: the default plan must push the triangle).
 PLANNING_SCENES = ("two_finger_triangle", "four_finger_grasp", "box_push_3d", "box_rotate_3d")
-#: Seeds per planning scene (1..PLANNING_SEEDS; --quick: 3).
+#: Seeds per planning scene (1..PLANNING_SEEDS; --quick: QUICK_PLANNING_SEEDS).
 PLANNING_SEEDS = 20
-#: What `ladder bench` plans by default (as `make bench-doc`): box_push_3d's flat runs take
-#: minutes per seed, about an hour for its 10 seeds.
+QUICK_PLANNING_SEEDS = 3
+#: What `ladder bench` plans unless told (the planar scenes; `make bench-doc` plans all four:
+#: box_push_3d's and box_rotate_3d's flat runs take several minutes in all).
 DEFAULT_PLANNING_SCENES = ("two_finger_triangle", "four_finger_grasp")
 PLANNING_PARAMETERS = {"two_finger_triangle": {"v1": 0.8}}
 
 
-def planning(quick: bool = False, out: Path | None = None, scenes=PLANNING_SCENES, seeds: int = PLANNING_SEEDS, progress=None) -> dict:
+def planning_scene(name: str) -> tuple[Path, dict]:
+    """A planning scene's file and parameter overrides: a shipped scene by its name (with
+    PLANNING_PARAMETERS), or any other scenario file by its path (its own parameters)."""
+    if name in PLANNING_SCENES:
+        return SCENARIOS / f"{name}.toml", PLANNING_PARAMETERS.get(name, {})
+    return Path(name), {}
+
+
+def planning(quick: bool = False, out: Path | None = None, scenes=None, seeds: int | None = None, progress=None) -> dict:
+    """The ladder against flat on each scene (a shipped scene's name or a scenario file's path;
+    default DEFAULT_PLANNING_SCENES) over seeds 1..seeds (default PLANNING_SEEDS, --quick
+    QUICK_PLANNING_SEEDS): `planner.benchmark.ladder_vs_flat`'s result per scene, with the
+    scene's file, its parameter overrides and the section's total time."""
     from models.scenario import load_scenario
     from planner.benchmark import ladder_vs_flat
 
-    seeds = range(1, 4) if quick else range(1, seeds + 1)
+    scenes = DEFAULT_PLANNING_SCENES if scenes is None else scenes
+    seeds = range(1, (seeds or (QUICK_PLANNING_SEEDS if quick else PLANNING_SEEDS)) + 1)
     results = {}
     for name in scenes:
-        if quick and name.endswith("_3d"):
-            continue
-        params = PLANNING_PARAMETERS.get(name, {})
+        path, params = planning_scene(name)
         t0 = time.perf_counter()
         each = (
             None
@@ -918,11 +930,14 @@ def planning(quick: bool = False, out: Path | None = None, scenes=PLANNING_SCENE
                 )
             )
         )
-        result = ladder_vs_flat(load_scenario(SCENARIOS / f"{name}.toml", params), seeds, progress=each)
+        if progress is not None:
+            progress(f"bench: planning {name}: loading the kernels (an untimed run of each mode) ...")
+        result = ladder_vs_flat(load_scenario(path, params), seeds, progress=each)
+        result["parameters"] = params
         result["total_s"] = time.perf_counter() - t0
         results[name] = result
         if out is not None:
-            write_ompl_log(out / f"ladder_vs_flat.{name}.log", name, result)
+            write_ompl_log(out / f"ladder_vs_flat.{Path(name).stem}.log", name, result)
     return results
 
 
@@ -932,14 +947,17 @@ def write_ompl_log(path: Path, name: str, result: dict) -> Path:
 
     runs = result["runs"]
     seeds = sorted({r["seed"] for r in runs})
+    where = f"scenarios/{name}.toml" if name in PLANNING_SCENES else name
+    ladder = ", ".join(f"{rung} {n}" for rung, n in result["budget"]["ladder"].items())
+    flat = ", ".join(f"{rung} {n}" for rung, n in result["budget"]["flat"].items())
     lines = [
         f"OMPL version {getattr(ompl, '__version__', '2.0.1')}",
-        f"Experiment ladder_vs_flat_{name}",
+        f"Experiment ladder_vs_flat_{Path(name).stem}",
         f"Running on {socket.gethostname()}",
         f"Starting at {_dt.datetime.now().strftime('%Y-%m-%d %H:%M:%S')}",
         "<<<|",
-        f"ladder vs flat planning on scenarios/{name}.toml, iteration budget {result['iterations'] or 'the scenario default'} per rung "
-        "(flat: the whole ladder's), seeds " + ", ".join(map(str, seeds)),
+        f"ladder vs flat planning on {where}, iteration budget {ladder} (flat: {flat}, the whole ladder's), seeds "
+        + ", ".join(map(str, seeds)),
         "|>>>",
         "<<<|",
         machine()["cpu"],
@@ -979,8 +997,8 @@ def run_all(
     doc: Path | None,
     quick: bool = False,
     progress=print,
-    scenes=PLANNING_SCENES,
-    seeds: int = PLANNING_SEEDS,
+    scenes=None,
+    seeds: int | None = None,
     readme: Path | None = None,
 ) -> dict:
     out.mkdir(parents=True, exist_ok=True)
@@ -1116,6 +1134,59 @@ def scaling_markdown(s: dict) -> list[str]:
     return lines
 
 
+def planning_markdown(planning: dict) -> list[str]:
+    """The planning section: what its numbers count, then per scene each mode's success and
+    medians, the speed-up, and the budgets and parameters the runs had."""
+    seeds = sorted({len(res["runs"]) // 2 for res in planning.values()})
+    lines = [
+        "",
+        "## Planning: ladder against flat (equal budgets)",
+        "",
+        f"Each scene is planned on seeds 1 to {'/'.join(map(str, seeds))}, up the ladder and flat (the top rung alone, "
+        "with the iterations of every rung of the ladder: `ladder plan --flat`) in turns, in one process. Success is a "
+        "plan that holds at the top rung, checked by replaying it there. Wall time is a run's whole planning "
+        "(every rung, tracking and replays included); a failed run counts with the time it spent. The kernels are "
+        "loaded before the timed runs (an untimed run of each mode on seed 0); `compile s` is what the timed runs "
+        "still spent compiling or loading them. Propagations are the searches' (local repairs included); rollouts "
+        "are the control periods tracking rolled out along the previous rung's plan, which the iteration budget "
+        "does not cap.",
+        "",
+        "| scene | mode | success | median wall (s) | median wall, held (s) | median propagations | median rollouts | compile s |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    notes = []
+    for scene, res in planning.items():
+        for mode in ("ladder", "flat"):
+            x = res["summary"][mode]
+            runs = [run for run in res["runs"] if run["mode"] == mode]
+            held = x.get("median_wall_s_successful")
+            rollouts = x.get("median_rollouts", float(np.median([run["rollouts"] for run in runs])))
+            compiling = x.get("compile_s")
+            lines.append(
+                f"| {scene} | {mode} | {x['success_rate']:.0%} ({sum(run['holds'] for run in runs)} of {len(runs)}) "
+                f"| {x['median_wall_s']:.3f} | {'-' if held is None else f'{held:.3f}'} | {x['median_propagations']:g} | {rollouts:g} "
+                f"| {'-' if compiling is None else f'{compiling:.2f}'} |"
+            )
+        lines.append(f"| {scene} | speed-up (median wall, flat / ladder) | | {res['summary']['speedup_median_wall']:.2f}x | | | | |")
+        budget = res.get("budget")
+        said = (
+            "ladder "
+            + ", ".join(f"{rung} {n:,}" for rung, n in budget["ladder"].items())
+            + "; flat "
+            + ", ".join(f"{rung} {n:,}" for rung, n in budget["flat"].items())
+            if budget
+            else "not recorded"
+        )
+        params = res.get("parameters") or {}
+        notes.append(
+            f"- {scene}: iterations {said}"
+            + (f"; parameters {', '.join(f'{k} = {v:g}' for k, v in params.items())}" if params else "")
+            + (f"; {res['total_s']:.0f} s in all" if "total_s" in res else "")
+            + "."
+        )
+    return lines + ["", "Budgets and parameters, and the section's time per scene (its untimed runs included):", ""] + notes
+
+
 def markdown(r: dict, doc_dir: Path, out: Path) -> str:
     def rel(p) -> str:
         return os.path.relpath(p, doc_dir)
@@ -1168,18 +1239,7 @@ def markdown(r: dict, doc_dir: Path, out: Path) -> str:
             f"{row['largest_x_gap']:.2e} ({row['largest_x_gap_t']:.4f}) |"
         )
     lines += scaling_markdown(r["scaling"])
-    lines += [
-        "",
-        "## Planning: ladder against flat (equal budgets)",
-        "",
-        "| scene | mode | success | median wall (s) | median propagations |",
-        "|---|---|---|---|---|",
-    ]
-    for scene, res in r["planning"].items():
-        for mode in ("ladder", "flat"):
-            x = res["summary"][mode]
-            lines.append(f"| {scene} | {mode} | {x['success_rate']:.0%} | {x['median_wall_s']:.3f} | {x['median_propagations']:g} |")
-        lines.append(f"| {scene} | speed-up (median wall, flat / ladder) | | {res['summary']['speedup_median_wall']:.2f}x | |")
+    lines += planning_markdown(r["planning"])
     lines += ["", f"OMPL benchmark logs: `{rel(out)}/ladder_vs_flat.*.log` (`ompl_benchmark_statistics LOG -d bench.db`).", ""]
     return "\n".join(lines)
 

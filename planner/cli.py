@@ -265,7 +265,10 @@ def _add_bench_parser(sub: argparse._SubParsersAction) -> None:
         "docs/benchmarks.md (--doc) and the README's figures (--readme). --quick is a smoke run of every section.",
     )
     bench.add_argument(
-        "--quick", action="store_true", help="a small version of every section (a few seconds once the kernels are compiled)"
+        "--quick",
+        action="store_true",
+        help="a small version of every section (under a minute once the kernels are compiled); it plans 3 seeds "
+        "unless --seeds says otherwise, and the scenes --planning gives",
     )
     bench.add_argument("--out", type=Path, default=Path("out/bench"), help="output folder, created if missing (default out/bench)")
     bench.add_argument("--doc", type=Path, help="also write the markdown report here (make bench-doc: docs/benchmarks.md)")
@@ -287,9 +290,9 @@ def _add_bench_parser(sub: argparse._SubParsersAction) -> None:
     bench.add_argument(
         "--planning",
         metavar="SCENE,...",
-        help="scenes of the ladder-vs-flat section (default: two_finger_triangle,four_finger_grasp, "
-        "the planar scenes; make bench-doc plans all four: box_push_3d and box_rotate_3d take about two "
-        "minutes each, mostly their flat runs, up to 17 s a seed)",
+        help="scenes of the ladder-vs-flat section, shipped scenes by name or scenario files by path (default: "
+        "two_finger_triangle,four_finger_grasp, the planar scenes; make bench-doc plans all four shipped ones: "
+        "box_push_3d's and box_rotate_3d's flat runs take minutes, each scene's time is in docs/benchmarks.md)",
     )
     bench.add_argument("--seeds", type=int, default=None, metavar="N", help="seeds 1..N per planning scene (default 20; --quick: 3)")
     bench.set_defaults(handler=cmd_bench)
@@ -830,8 +833,9 @@ def _run_plan(args: argparse.Namespace, scenario: Scenario, names: list[str]):
     live = sys.stderr.isatty() and not args.json
     if not args.json:
         say_unlisted_rungs(scenario, names, step_flag=False)
-    budgets = {n: args.iterations if args.iterations is not None else scenario.rung_settings(n).iterations for n in names}
-    flat_budget = sum(budgets.values())
+    from planner.ladder import rung_budgets
+
+    budgets = rung_budgets(scenario, names, args.iterations, args.time_limit, args.flat)[0]
 
     def progress(name: str, iterations: int, propagations: int) -> None:
         """One live line on a terminal (stderr); one line per rung otherwise."""
@@ -839,8 +843,7 @@ def _run_plan(args: argparse.Namespace, scenario: Scenario, names: list[str]):
             return
         if live:
             print(
-                f"\rplanning {name}: {iterations}/{flat_budget if args.flat else budgets.get(name, 0)} iterations, "
-                f"{propagations} propagations   ",
+                f"\rplanning {name}: {iterations}/{budgets.get(name, 0)} iterations, {propagations} propagations   ",
                 end="",
                 file=sys.stderr,
                 flush=True,
@@ -924,6 +927,20 @@ def ladder_for(scenario: Scenario, names, args: argparse.Namespace, *, progress=
     )
 
 
+def budget_words(budget: dict) -> str:
+    """A plan's budget (`LadderResult.budget`) in words: "2,000 iterations a rung", "flat:
+    8,000 iterations at dynamic-rigid", or each rung's where they differ."""
+    counts = budget.get("iterations") or {}
+    if not counts:
+        return "no budget"
+    if budget.get("flat"):
+        ((rung, n),) = counts.items()
+        return f"flat: {n:,} iterations at {rung}"
+    if len(set(counts.values())) == 1:
+        return f"{next(iter(counts.values())):,} iterations a rung"
+    return "iterations " + ", ".join(f"{rung} {n:,}" for rung, n in counts.items())
+
+
 def _print_plan(args: argparse.Namespace, scenario: Scenario, result, report: dict, plots: list[str]) -> None:
     """Print the plan report: one JSON object, or a table per rung and where the plan went."""
     if args.json:
@@ -931,7 +948,7 @@ def _print_plan(args: argparse.Namespace, scenario: Scenario, result, report: di
     else:
         from rich.table import Table
 
-        table = Table(title=f"ladder on {scenario.path} (seed {result.seed})", title_justify="left")
+        table = Table(title=f"ladder on {scenario.path} (seed {result.seed}; {budget_words(result.budget)})", title_justify="left")
         for col in (
             "rung",
             "ended",
@@ -1468,7 +1485,7 @@ def _print_sweep(args: argparse.Namespace, result, data: dict, plot, interrupted
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    from planner.bench import DEFAULT_PLANNING_SCENES, PLANNING_SCENES, PLANNING_SEEDS, load_results, read_readme, run_all, write_reports
+    from planner.bench import DEFAULT_PLANNING_SCENES, PLANNING_SCENES, load_results, read_readme, run_all, write_reports
 
     problems = check_out_file("--doc", args.doc) + check_out_file("--readme", args.readme)
     if args.saved is not None:  # the reports from a saved result: nothing runs
@@ -1492,11 +1509,9 @@ def cmd_bench(args: argparse.Namespace) -> int:
         return EXIT_OK
     problems += check_out_dir("--out", args.out) + read_readme(args.readme, args.quick)[1]
     scenes = DEFAULT_PLANNING_SCENES if args.planning is None else tuple(s.strip() for s in args.planning.split(",") if s.strip())
-    unknown = [s for s in scenes if s not in PLANNING_SCENES]
-    if unknown or not scenes:
-        problems.append(
-            Problem("--planning", f"unknown scene(s) {', '.join(unknown) or '(none)'}; choose from {', '.join(PLANNING_SCENES)}")
-        )
+    if not scenes:
+        problems.append(Problem("--planning", f"no scene given; give shipped scenes ({', '.join(PLANNING_SCENES)}) or scenario files"))
+    problems += _planning_file_problems(scenes)
     if args.seeds is not None and args.seeds < 1:
         problems.append(Problem("--seeds", f"must be at least 1, got {args.seeds}"))
     problems = problems or make_out_dir("--out", args.out)
@@ -1508,8 +1523,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
         if not args.json:
             print(text, file=sys.stderr, flush=True)
 
-    seeds = PLANNING_SEEDS if args.seeds is None else args.seeds
-    results = run_all(args.out, args.doc, quick=args.quick, progress=progress, scenes=scenes, seeds=seeds, readme=args.readme)
+    results = run_all(args.out, args.doc, quick=args.quick, progress=progress, scenes=scenes, seeds=args.seeds, readme=args.readme)
     if args.json:
         print(json.dumps(results, indent=2))
     else:
@@ -1522,6 +1536,30 @@ def cmd_bench(args: argparse.Namespace) -> int:
             )
         print(f"results written to {args.out / 'bench.json'}" + "".join(f" and {p}" for p in (args.doc, args.readme) if p))
     return EXIT_OK
+
+
+def _planning_file_problems(scenes) -> list[Problem]:
+    """`bench --planning`'s scenario files (the names not of a shipped scene): each must load and
+    be one the ladder can plan (`ladder plan`'s checks of its start and task); and no two scenes
+    may share a stem (the OMPL logs' names)."""
+    from planner.bench import PLANNING_SCENES
+    from planner.ladder import check_start
+
+    problems = []
+    for name in [s for s in scenes if s not in PLANNING_SCENES]:
+        if not Path(name).suffix and not Path(name).exists():
+            problems.append(Problem("--planning", f"unknown scene {name!r}: not a shipped scene ({', '.join(PLANNING_SCENES)}) nor a file"))
+            continue
+        try:
+            check_start(load_scenario(name))
+        except ScenarioError as exc:
+            problems += [Problem(f"--planning {name}" + (f": {p.key}" if p.key else ""), p.reason) for p in exc.problems]
+    stems = [Path(n).stem for n in scenes]
+    problems += [
+        Problem("--planning", f"two files named {stem!r}: their OMPL logs would share a name")
+        for stem in sorted({s for s in stems if stems.count(s) > 1})
+    ]
+    return problems
 
 
 def _print_throughput(throughput: dict) -> None:

@@ -107,6 +107,7 @@ class LadderResult:
     rungs: list[RungReport]
     scene: dict = field(default_factory=dict)  # scene_record: what the plan is a plan of
     complete: bool = True  # False: interrupted; `rungs` are the rungs finished before that
+    budget: dict = field(default_factory=dict)  # what the rungs were given (`rung_budgets`) and whether flat
 
     @property
     def top_holds(self) -> bool:
@@ -120,6 +121,7 @@ class LadderResult:
             "scenario": self.scenario,
             "scene": self.scene,
             "seed": self.seed,
+            "budget": self.budget,
             "complete": self.complete,
             "top_holds": self.top_holds,
             "rungs": rungs,
@@ -197,6 +199,20 @@ def check_start(scenario: Scenario) -> None:
         )
 
 
+def rung_budgets(
+    scenario: Scenario, names: list[str], iterations: int | None = None, time_limit: float | None = None, flat: bool = False
+) -> tuple[dict[str, int], dict[str, float]]:
+    """Each rung's planner iterations and time limit, in the ladder's order: `iterations` and
+    `time_limit` where given, else the scenario's for the rung. Flat: the top rung alone, with
+    the sums of the ladder's (the baseline's equal budget)."""
+    settings = {name: scenario.rung_settings(name) for name in names}
+    budgets = {name: iterations if iterations is not None else settings[name].iterations for name in names}
+    limits = {name: time_limit if time_limit is not None else settings[name].time_limit for name in names}
+    if flat:
+        return {names[-1]: sum(budgets.values())}, {names[-1]: sum(limits.values())}
+    return budgets, limits
+
+
 def run_ladder(
     scenario: Scenario,
     *,
@@ -236,12 +252,8 @@ def run_ladder(
     spec = scenario.spec.ladder
     names = rungs or [r.model for r in spec.rungs]
     settings = {name: scenario.rung_settings(name) for name in names}
-    budgets = {name: iterations if iterations is not None else settings[name].iterations for name in names}
-    limits = {name: time_limit if time_limit is not None else settings[name].time_limit for name in names}
-    if flat:
-        budgets = {names[-1]: sum(budgets.values())}
-        limits = {names[-1]: sum(limits.values())}
-        names = names[-1:]
+    budgets, limits = rung_budgets(scenario, names, iterations, time_limit, flat)
+    names = list(budgets)
     seed = spec.seed if seed is None else seed
     stopped = stop or (lambda: False)
     budget = _Budget()
@@ -285,7 +297,8 @@ def run_ladder(
             previous = report if report.durations else None
         else:
             previous = report if (report.ended.holds or (report.durations and report.states)) else None
-    return LadderResult(str(scenario.path), int(seed), reports, scene_record(scenario), complete=not interrupted)
+    record = {"flat": bool(flat), "iterations": budgets, "time_limit_s": limits}
+    return LadderResult(str(scenario.path), int(seed), reports, scene_record(scenario), complete=not interrupted, budget=record)
 
 
 def _no_cheaper(scenario: Scenario, names: list[str], settings: dict) -> str:

@@ -156,7 +156,14 @@ def test_planning_section_and_ompl_logs(quick):
         )
         assert {name for name, _, _ in rows} == {"control_ladder", "control_flat"}
         assert all(count == 3 for _, count, _ in rows)
+        # the budgets the runs had: flat has the sum of the ladder's rungs' iterations, at the top rung
+        ladder, flat = res["budget"]["ladder"], res["budget"]["flat"]
+        assert list(flat) == [list(ladder)[-1]] and sum(ladder.values()) == sum(flat.values()) > 0
+        assert f"flat: {list(flat)[0]} {sum(flat.values())}, the whole ladder's" in log.read_text()
+        # the warm-up loaded every kernel the timed runs use: none of them compiles or loads one
+        assert all(run["compile_s"] == 0.0 for run in res["runs"]), res["runs"]
     text = (out / "benchmarks.md").read_text()
+    assert "| two_finger_triangle | ladder | " in text and "median rollouts" in text and "parameters v1 = 0.8" in text
     assert "## Throughput" in text and "## Work-precision" in text and "ladder against flat" in text
     assert "## Scaling" in text and "PGS us/step" in text and "Fitted growth exponent" in text and "PGS is cheaper" in text
     assert ("Peer (MuJoCo): skipped" in text) != ("### Peer: MuJoCo" in text and "### Stability over h" in text)
@@ -186,3 +193,15 @@ def test_cpu_name_tells_machines_of_one_model_name_apart():
     assert cpu_name(other) == "AMD EPYC (family 23, model 49, AVX2)"
     assert cpu_name("model name\t: Some CPU\n") == "Some CPU"
     assert cpu_name("processor\t: 0\nflags\t\t: avx2\n") == ""
+
+
+def test_planning_takes_a_scene_file_and_quick_keeps_the_seeds_given(tmp_path):
+    """`ladder bench --planning FILE`: a scenario file by its path, its own parameters; --quick
+    shrinks the seeds only where none are given (it had run 3 seeds whatever --seeds said)."""
+    from planner.bench import SCENARIOS, planning
+
+    path = str(SCENARIOS / "two_finger_triangle.toml")
+    r = planning(quick=True, out=tmp_path, scenes=[path], seeds=1)
+    assert list(r) == [path] and r[path]["parameters"] == {}
+    assert [(run["mode"], run["seed"]) for run in r[path]["runs"]] == [("ladder", 1), ("flat", 1)]
+    assert "ladder vs flat planning on " + path in (tmp_path / "ladder_vs_flat.two_finger_triangle.log").read_text()

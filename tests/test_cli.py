@@ -570,7 +570,10 @@ def test_simulate_refuses_a_step_that_skips_a_plans_controls(tmp_path):
         (["schema", "--out", "{tmp}/missing/s.json"], "--out: {tmp}/missing/s.json: the folder {tmp}/missing does not exist"),
         (["bench", "--out", "{tmp}/a_file"], "--out: {tmp}/a_file is a file, not a folder"),
         (["bench", "--doc", "{tmp}/missing/b.md"], "--doc: {tmp}/missing/b.md: the folder {tmp}/missing does not exist"),
-        (["bench", "--planning", "mars"], "--planning: unknown scene(s) mars"),
+        (["bench", "--planning", "mars"], "--planning: unknown scene 'mars': not a shipped scene (two_finger_triangle, "),
+        (["bench", "--planning", "{tmp}/mars.toml"], "--planning {tmp}/mars.toml: no such file"),
+        (["bench", "--planning", ","], "--planning: no scene given"),
+        (["bench", "--planning", f"two_finger_triangle,{TRIANGLE}"], "--planning: two files named 'two_finger_triangle': their OMPL logs"),
     ],
 )
 def test_every_argument_is_checked_before_any_work(tmp_path, args, message):
@@ -930,9 +933,9 @@ def test_bench_help_and_default_scenes():
     result = ladder("bench", "--help")
     assert result.returncode == 0
     text = " ".join(result.stdout.split())
-    assert "a few seconds" in text and "about a minute" not in text
-    assert "default: two_finger_triangle,four_finger_grasp" in text and "box_push_3d and box_rotate_3d take about two minutes each" in text
-    assert "seeds 1..N per planning scene (default 20" in text
+    assert "under a minute once the kernels are compiled" in text
+    assert "default: two_finger_triangle,four_finger_grasp" in text and "scenario files by path" in text
+    assert "seeds 1..N per planning scene (default 20; --quick: 3)" in text and "unless --seeds says otherwise" in text
     assert DEFAULT_PLANNING_SCENES == ("two_finger_triangle", "four_finger_grasp")
 
 
