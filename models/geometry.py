@@ -77,7 +77,9 @@ def convex_polygon(vertices: np.ndarray) -> np.ndarray:
 
 
 def read_obj(path: Path) -> tuple[np.ndarray, list[list[int]]]:
-    """Vertices (k, 3) and faces (0-based index lists) of a Wavefront OBJ file."""
+    """Vertices (k, 3) and faces (0-based index lists) of a Wavefront OBJ file. A vertex line
+    gives x y z (anything after them, a w or a colour, is left); a face's indices count from 1,
+    or back from the vertices read so far where negative (OBJ's relative indices)."""
     vertices: list[list[float]] = []
     faces: list[list[int]] = []
     try:
@@ -90,19 +92,34 @@ def read_obj(path: Path) -> tuple[np.ndarray, list[list[int]]]:
         parts = line.split()
         if not parts or parts[0].startswith("#"):
             continue
+        where = f"{path.name} line {number}"
         try:
             if parts[0] == "v":
+                if len(parts) < 4:
+                    raise GeometryError(f"{where}: a vertex needs three coordinates, x y z: {line.strip()!r}")
                 vertices.append([float(x) for x in parts[1:4]])
             elif parts[0] == "f":
-                faces.append([int(p.split("/")[0]) - 1 for p in parts[1:]])
-        except ValueError:
-            raise GeometryError(f"{path.name} line {number}: cannot read {line.strip()!r}") from None
+                if len(parts) < 4:
+                    raise GeometryError(f"{where}: a face needs at least three vertices: {line.strip()!r}")
+                indices = [int(p.split("/")[0]) for p in parts[1:]]
+                if any(i == 0 or i < -len(vertices) for i in indices):
+                    raise GeometryError(f"{where}: a face refers to a vertex that does not exist: {line.strip()!r}")
+                faces.append([i - 1 if i > 0 else len(vertices) + i for i in indices])
+        except GeometryError:
+            raise
+        except ValueError:  # (a number that is none)
+            raise GeometryError(f"{where}: cannot read {line.strip()!r}") from None
+    if not vertices and not faces:
+        raise GeometryError(
+            f"{path.name}: no vertex ('v') or face ('f') lines: not a Wavefront OBJ file (meshes are read from OBJ only; "
+            "convert an STL or PLY file to OBJ first)"
+        )
     v = np.array(vertices, dtype=float).reshape(-1, 3)
     if len(v) < 4 or not faces:
         raise GeometryError(f"{path.name}: a solid mesh needs at least 4 vertices and some faces")
     if not np.all(np.isfinite(v)):
         raise GeometryError(f"{path.name}: non-finite vertex coordinates")
-    if any(min(f) < 0 or max(f) >= len(v) or len(f) < 3 for f in faces):
+    if any(max(f) >= len(v) for f in faces):
         raise GeometryError(f"{path.name}: a face refers to a vertex that does not exist")
     return v, faces
 
@@ -124,6 +141,25 @@ def check_convex_mesh(v: np.ndarray, faces: list[list[int]], name: str) -> None:
             n = -n
         if np.max((v - a) @ n) > 1e-9 * scale:
             raise GeometryError(f"{name}: mesh is not convex")
+    unpaired = _unpaired_edges(v, faces, scale)
+    if unpaired:
+        raise GeometryError(
+            f"{name}: mesh is not closed: {unpaired} edge(s) border one face only, or more than two (a solid's surface "
+            "has every edge on two faces; a mesh with a hole would be taken for its convex hull)"
+        )
+
+
+def _unpaired_edges(v: np.ndarray, faces: list[list[int]], scale: float) -> int:
+    """How many edges of the mesh's faces do not border exactly two faces, its coincident
+    vertices welded first (a file that repeats a vertex for each face it is on is closed)."""
+    _, weld = np.unique(np.round(v / max(1e-9 * scale, 1e-300)), axis=0, return_inverse=True)
+    weld = weld.ravel()
+    counts: dict[tuple[int, int], int] = {}
+    for face in faces:
+        for a, b in zip(face, face[1:] + face[:1]):
+            edge = (min(weld[a], weld[b]), max(weld[a], weld[b]))
+            counts[edge] = counts.get(edge, 0) + 1
+    return sum(1 for c in counts.values() if c != 2)
 
 
 def make_geometry(shape, dimension: int, base_dir: Path | None = None, max_coordinate: float = math.inf) -> Geometry:

@@ -342,8 +342,7 @@ class Rung:
         if len(controls) != len(durations):
             raise ValueError(f"{len(controls)} controls but {len(durations)} durations")
         if record_every <= 0:
-            total = int(round(float(durations.sum()) / h))
-            record_every = max(1, total // max(max_records - 2, 1))
+            record_every = record_spacing(int(round(float(durations.sum()) / h)), max_records)
         start = time.perf_counter()
         out = self._run(scenario, state, controls, durations, h, record_every, max_records, stop_at_outcome, t0, laws)
         wall = time.perf_counter() - start
@@ -492,7 +491,7 @@ class Rung:
         controls = np.asarray(controls, float).reshape(len(durations), len(scenario.actuated))
         per_control = control_steps(durations, h)
         total = sum(per_control)
-        record_every = max(1, int(np.round(durations.sum() / h)) // max(max_records - 2, 1))
+        record_every = record_spacing(int(np.round(durations.sum() / h)), max_records)
         cold_starts = self.model is not None and self.solver.method != SOLVER_LEMKE
         warm_every = warm_period_steps(self.model.warm_period, h) if cold_starts else 0
         first_end, every = _chunk_ends(record_every, warm_every, int(np.round(t0 / h)))
@@ -555,6 +554,14 @@ class Rung:
             if psi < -tolerance:
                 return False
         return True
+
+
+def record_spacing(steps: int, max_records: int) -> int:
+    """Every how many steps a run of `steps` records its state, so that its records (the start,
+    every record_every-th step and the last state) fit in max_records and reach its end: the
+    quotient rounded up (rounded down, a run of 3,000 steps had recorded its first 1,998 and
+    then jumped to its last)."""
+    return max(1, -(-steps // max(max_records - 2, 1)))
 
 
 def _chunk_ends(record_every: int, warm_every: int, first_step: int) -> tuple[int, int]:

@@ -741,6 +741,17 @@ def _check_body(body: BodySpec, key: str, dim: int) -> list[Problem]:
             out.append(Problem(f"{key}.inertia", "a planar body's inertia is one number (about the z axis)"))
         if body.inertia is not None and dim == 3 and len(body.inertia) not in (1, 3):
             out.append(Problem(f"{key}.inertia", "a spatial body's inertia is one number or three principal moments"))
+        elif body.inertia is not None and dim == 3 and len(body.inertia) == 3:
+            # a rigid body's principal moments: each at most the sum of the other two (equal for a flat plate)
+            moments = sorted(float(i) for i in body.inertia)
+            if moments[2] > (moments[0] + moments[1]) * (1.0 + 1e-9):
+                out.append(
+                    Problem(
+                        f"{key}.inertia",
+                        f"no rigid body has these principal moments: {moments[2]:g} is more than the sum of the other two "
+                        f"({moments[0]:g} + {moments[1]:g}); each is at most the sum of the others",
+                    )
+                )
     if body.role == "object" and body.actuators:
         out.append(Problem(f"{key}.actuators", "only robots have actuators; an object's DOFs are passive"))
     if body.role == "robot" and not body.actuators:

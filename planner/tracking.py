@@ -69,7 +69,8 @@ class Tracked:
     rollouts: int = 0  # candidate rollouts (each one control period)
     fraction: float = 0.0  # of the reference's duration followed by tracking (not by repairs), at most 1
     diverged_at: float | None = None  # reference time where tracking was lost (None: it was not)
-    lost: str = ""  # why: "unsafe" (every candidate entered the unsafe set or failed), "drift" (none stayed within TRACK_TOLERANCE)
+    lost: str = ""  # why: "unsafe" (every candidate entered the unsafe set or failed), "drift" (none stayed within TRACK_TOLERANCE),
+    # "time" (the rung's time limit passed), "stopped" (Ctrl-C)
     drift: float = 0.0  # the best candidate's distance from the reference where tracking was lost, m
     repairs: int = 0  # local repair searches tried
     repaired: int = 0  # losses of tracking that a repair mended
@@ -224,10 +225,10 @@ def track(
     `iterations` search iterations in all. `free`: coordinates the distance to the reference
     leaves out (`PoseError`)."""
     rng = np.random.default_rng(seed)
-    follower = _Follower(scenario, rung, reference, h, period, rng, free)
+    deadline = None if time_limit is None else planning_clock() + time_limit
+    follower = _Follower(scenario, rung, reference, h, period, rng, free, deadline, stop)
     run = Tracked(start)
     follower.follow(run, 0.0)
-    deadline = None if time_limit is None else planning_clock() + time_limit
     while run.lost and run.repairs < repairs and not (stop and stop()):
         resumed = None
         for horizon in REPAIR_HORIZONS:
@@ -251,8 +252,9 @@ def track(
 class _Follower:
     """Tracking proper: one control period at a time from reference time t."""
 
-    def __init__(self, scenario, rung, reference, h, period, rng, free: tuple[str, ...] = ()):
+    def __init__(self, scenario, rung, reference, h, period, rng, free: tuple[str, ...] = (), deadline=None, stop=None):
         self.scenario, self.rung, self.reference, self.h, self.period, self.rng = scenario, rung, reference, h, period, rng
+        self.deadline, self.stop = deadline, stop  # (planning_clock's; a function -> True on Ctrl-C)
         self.low, self.high = control_bounds(scenario)
         self.spread = TRACK_SPREAD * (self.high - self.low) / 2.0
         self.error = PoseError(scenario, free)
@@ -265,6 +267,10 @@ class _Follower:
         cached = None
         for k in range(first, self.periods + TRACK_SETTLE):
             t = k * period
+            stopped = self.stop is not None and self.stop()
+            if stopped or (self.deadline is not None and planning_clock() > self.deadline):
+                run.diverged_at, run.lost = t, "stopped" if stopped else "time"
+                return t
             target = reference.configuration(t + period)
             base = reference.control(t) if k < self.periods else np.zeros(len(self.scenario.actuated))
             after = None

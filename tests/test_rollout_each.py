@@ -113,3 +113,25 @@ def test_the_geometric_rung_has_nothing_to_replay():
     rung = rung_for(scenario, "geometric")
     with pytest.raises(ValueError, match="geometric"):
         rung.rollout_each(scenario, rung.initial_state(scenario), [[0.0, 0.0]], [0.05], 1e-2)
+
+
+@pytest.mark.parametrize("steps", [1999, 3000, 14779])
+def test_a_long_runs_records_reach_its_end_evenly(steps):
+    """A run of more steps than DEFAULT_RECORDS records every ceil(steps / 1998)-th step, to its
+    end (rounded down, a run of 3,000 steps had recorded its first 1,998 and jumped to its last),
+    in one call and in chunks alike."""
+    from models.rungs import DEFAULT_RECORDS
+
+    scenario = load_scenario(ROOT / "scenarios" / "free_transfer.toml")
+    rung = rung_for(scenario, "dynamic-rigid")
+    start = rung.initial_state(scenario)
+    h = 1e-3
+    every = -(-steps // (DEFAULT_RECORDS - 2))
+    controls = np.zeros((1, len(scenario.actuated)))
+    for out in (
+        rung.rollout(scenario, start, controls, [steps * h], h, stop_at_outcome=False),
+        rung.rollout_chunked(scenario, start, controls, [steps * h], h, chunk_s=0.5, first_chunk=500),
+    ):
+        gaps = np.diff(out.times)
+        assert len(out.times) <= DEFAULT_RECORDS and out.times[-1] == pytest.approx(steps * h)
+        assert gaps.max() <= every * h * (1 + 1e-9), (steps, gaps.max())

@@ -200,6 +200,83 @@ def test_non_convex_mesh_is_rejected(tmp_path):
     assert "not convex" in info.value.problems[0].reason
 
 
+WEDGE_V = "v -0.1 -0.15 0.0\nv 0.1 -0.15 0.0\nv -0.1 -0.15 0.15\nv -0.1 0.15 0.0\nv 0.1 0.15 0.0\nv -0.1 0.15 0.15\n"
+WEDGE_F = "f 1 3 2\nf 4 5 6\nf 1 2 5 4\nf 2 3 6 5\nf 1 4 6 3\n"
+
+
+def _wedge_problem(tmp_path, obj: str, name: str = "wedge.obj") -> str:
+    """box_push_3d with its wedge's mesh file replaced by `obj`: the load's one problem, or "" if it loads."""
+    (tmp_path / "meshes").mkdir(exist_ok=True)
+    (tmp_path / "meshes" / name).write_text(obj)
+    path = tmp_path / "box.toml"
+    path.write_text((SCENARIOS / "box_push_3d.toml").read_text().replace("meshes/wedge.obj", f"meshes/{name}"))
+    try:
+        load_scenario(path)
+    except ScenarioError as exc:
+        assert [p.key for p in exc.problems] == ["bodies[4].shape.file"]
+        return exc.problems[0].reason
+    return ""
+
+
+@pytest.mark.parametrize(
+    ("obj", "message"),
+    [
+        # a vertex line of two numbers had been a traceback (numpy's inhomogeneous shape)
+        (
+            WEDGE_V.replace("v 0.1 -0.15 0.0", "v 0.1 -0.15") + WEDGE_F,
+            "wedge.obj line 2: a vertex needs three coordinates, x y z: 'v 0.1 -0.15'",
+        ),
+        (WEDGE_V + WEDGE_F.replace("f 1 3 2", "f 1 3"), "wedge.obj line 7: a face needs at least three vertices: 'f 1 3'"),
+        (WEDGE_V + WEDGE_F.replace("f 1 3 2", "f 1 3 0"), "wedge.obj line 7: a face refers to a vertex that does not exist: 'f 1 3 0'"),
+        (WEDGE_V + WEDGE_F.replace("f 1 3 2", "f 1 3 -7"), "line 7: a face refers to a vertex that does not exist"),
+        # a face missing: the wedge's hull, silently, had been the body
+        (WEDGE_V + WEDGE_F.replace("f 1 3 2\n", ""), "mesh is not closed: 3 edge(s) border one face only, or more than two"),
+        (WEDGE_V + "f 1 2 5 4\n", "mesh is not closed: 4 edge(s)"),
+        ("solid wedge\n facet normal 0 0 -1\n  outer loop\n   vertex 0 0 0\n  endloop\n endfacet\nendsolid\n", "not a Wavefront OBJ file"),
+    ],
+)
+def test_a_mesh_file_is_read_as_obj_says_and_must_be_closed(tmp_path, obj, message):
+    assert message in _wedge_problem(tmp_path, obj)
+
+
+def test_a_mesh_with_relative_indices_or_a_vertex_per_face_is_the_same_solid(tmp_path):
+    """OBJ's negative indices count back from the vertices read so far; a file that repeats a
+    vertex for each face it is on (as exporters write with normals) is closed once welded."""
+    assert (
+        _wedge_problem(
+            tmp_path, WEDGE_V + "".join("f " + " ".join(str(int(i) - 7) for i in line.split()[1:]) + "\n" for line in WEDGE_F.splitlines())
+        )
+        == ""
+    )
+    corners = [line for line in WEDGE_V.splitlines()]
+    unwelded = "".join("".join(corners[int(i) - 1] + "\n" for i in line.split()[1:]) for line in WEDGE_F.splitlines())
+    counts = [len(line.split()) - 1 for line in WEDGE_F.splitlines()]
+    starts = np.cumsum([0] + counts[:-1])
+    faces = "".join("f " + " ".join(str(s + k + 1) for k in range(n)) + "\n" for s, n in zip(starts, counts))
+    assert _wedge_problem(tmp_path, unwelded + faces, "split.obj") == ""
+
+
+def test_principal_moments_no_rigid_body_has_are_refused(tmp_path):
+    """Each principal moment of a rigid body is at most the sum of the other two (a flat plate's
+    equals it); [1e-4, 1e-4, 1e-2] had loaded."""
+    text = (SCENARIOS / "box_push_3d.toml").read_text().replace("meshes/wedge.obj", str(SCENARIOS / "meshes" / "wedge.obj"))
+    old = 'inertia = ["box_mass * (0.2**2 + 0.1**2) / 12", "box_mass * (0.2**2 + 0.1**2) / 12", "box_mass * (0.2**2 + 0.2**2) / 12"]'
+    assert old in text
+    path = tmp_path / "box.toml"
+    path.write_text(text.replace(old, "inertia = [1e-4, 1e-4, 1e-2]"))
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    assert [(p.key, p.reason) for p in info.value.problems] == [
+        (
+            "bodies[1].inertia",
+            "no rigid body has these principal moments: 0.01 is more than the sum of the other two (0.0001 + 0.0001); "
+            "each is at most the sum of the others",
+        )
+    ]
+    path.write_text(text.replace(old, "inertia = [0.01, 0.005, 0.005]"))  # a flat plate's: the bound itself
+    assert load_scenario(path).spec.bodies[1].inertia == (0.01, 0.005, 0.005)
+
+
 def test_spatial_pose_checks(tmp_path):
     text = (SCENARIOS / "box_push_3d.toml").read_text()
     text = text.replace("pose = { x = 0.0, y = 0.0, z = 0.05 }", "pose = { x = 0.0, y = 0.0, z = 0.05, quaternion = [1.0, 0.1, 0.0, 0.0] }")

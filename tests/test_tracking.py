@@ -65,6 +65,26 @@ def test_a_plan_tracked_under_its_own_rung_is_replayed_without_correction():
         np.testing.assert_allclose(run.states[k].q, reference.configurations[k + 1], atol=1e-12)
 
 
+def test_tracking_ends_when_the_rungs_time_is_up_or_it_is_stopped(monkeypatch):
+    """Tracking checks the rung's time limit and Ctrl-C every control period (it had checked
+    them only between its repairs, so a rung whose tracking was slow ran past `--time-limit`):
+    a clock that moves on 1 s at each look, against a limit of 2.5 s, lets it track 2 periods."""
+    from planner import tracking
+
+    scenario = load_scenario(PUSH)
+    rung = rung_for(scenario, "quasistatic-rigid")
+    start = rung.initial_state(scenario)
+    reference = Reference.of(scenario, rung, start, [[0.2, 0.0]], [3.0], 0.1, 0.1)
+    clock = iter(range(1000))
+    monkeypatch.setattr(tracking, "planning_clock", lambda: float(next(clock)))
+    run = track(scenario, rung, start, reference, 0.1, 0.1, seed=1, time_limit=2.5)
+    assert run.lost == "time" and len(run.controls) == 2 and run.diverged_at == pytest.approx(0.2)
+    monkeypatch.undo()
+    calls = iter(range(1000))
+    run = track(scenario, rung, start, reference, 0.1, 0.1, seed=1, stop=lambda: next(calls) >= 4)
+    assert run.lost == "stopped" and len(run.controls) == 4 and run.repairs == 0
+
+
 def test_tracking_carries_a_quasistatic_plan_that_open_loop_replay_loses():
     """box_push_3d, seed 2: the quasistatic rung's plan replayed open-loop under dynamic-rigid
     runs the box into the wedge; tracked, it reaches the goal, and its controls replay to the
