@@ -10,7 +10,9 @@ and the smallest psi of a pair is the pair's signed distance.
 
 - plane vs sphere / capsule / box / mesh: one contact per core point (sphere centre, capsule
   end, box corner, mesh vertex) within the margin: exact for polyhedra (a box resting flat
-  gives 4 contacts, a capsule lying flat 2);
+  gives 4 contacts, a capsule lying flat 2); a mesh with more than 9 vertices within the
+  margin keeps 9 at most, its deepest and the corners of its support polygon in 8 directions
+  (`_plane_support`);
 - sphere-sphere, sphere-capsule, capsule-capsule (closest points of the axes; nearly
   parallel overlapping axes give two contacts, at the ends of the overlap), sphere-box (the
   deepest-face rule inside);
@@ -61,6 +63,8 @@ import numba
 import numpy as np
 
 from models.kinematics import (
+    PLANE_SUPPORT_BAND,
+    PLANE_SUPPORT_DIRECTIONS,
     Q_ANGLE,
     Q_QW,
     Q_X,
@@ -512,18 +516,37 @@ def _core_point(verts, i, p, R):
 @numba.njit(cache=True)
 def _plane_shape(nh, off, kind, po, Ro, r, verts, v0, nv, flip, margin, c_psi, c_n, c_pa, c_pb, start, limit):
     """World plane n.x <= off vs the core points verts[v0:v0 + nv] of a body at (po, Ro) with
-    radius r; contacts from the plane to the body (flip: the plane is the pair's B)."""
+    radius r; contacts from the plane to the body (flip: the plane is the pair's B).
+
+    A polytope with more than `PLANE_SUPPORT_DIRECTIONS` + 1 vertices within the margin keeps
+    its deepest and, of those within `PLANE_SUPPORT_BAND` of its depth, the farthest along
+    each of the directions spaced evenly in the plane (`_plane_support`)."""
     # the plane normal in the body's frame: the height of a core point is one dot product
     nl = _rot_t(Ro, nh)
     base = nh[0] * po[0] + nh[1] * po[1] + nh[2] * po[2] - off
     capsule = kind == SHAPE_CAPSULE
+    count = np.int64(0)
+    if kind == SHAPE_MESH and nv > PLANE_SUPPORT_DIRECTIONS + 1:
+        deepest = v0
+        lowest = np.inf
+        for i in range(v0, v0 + nv):
+            height = nl[0] * verts[i, 0] + nl[1] * verts[i, 1] + nl[2] * verts[i, 2] + base
+            if height - r <= margin:
+                count += 1
+                if height < lowest:
+                    deepest, lowest = i, height
+        if count > PLANE_SUPPORT_DIRECTIONS + 1:
+            count = _plane_support(nh, nl, base, Ro, verts, v0, nv, deepest, lowest, c_psi, start, limit)
+            for k in range(start, start + count):
+                _plane_vertex(nh, nl, base, po, Ro, r, verts, np.int64(c_psi[k]), flip, c_psi, c_n, c_pa, c_pb, k)
+            return count
+        count = 0
     if capsule:
         e0 = _core_point(verts, v0, po, Ro)
         e1 = _core_point(verts, v0 + 1, po, Ro)
     else:
         e0 = e1 = nh
     down = _scale(nh, -1.0)
-    count = np.int64(0)
     for i in range(v0, v0 + nv):
         height = nl[0] * verts[i, 0] + nl[1] * verts[i, 1] + nl[2] * verts[i, 2] + base
         if capsule:
@@ -539,6 +562,60 @@ def _plane_shape(nh, off, kind, po, Ro, r, verts, v0, nv, flip, margin, c_psi, c
                 v = _rot(Ro, (verts[i, 0], verts[i, 1], verts[i, 2]))
                 v = (v[0] + po[0], v[1] + po[1], v[2] + po[2])
             _emit(c_psi, c_n, c_pa, c_pb, start + count, psi, nh, _axpy(v, -height, nh), _axpy(v, -T, nh), flip)
+            count += 1
+    return count
+
+
+@numba.njit(cache=True)
+def _plane_vertex(nh, nl, base, po, Ro, r, verts, i, flip, c_psi, c_n, c_pa, c_pb, k):
+    """Write the contact of core point verts[i] (not a capsule's) with the plane at slot k."""
+    height = nl[0] * verts[i, 0] + nl[1] * verts[i, 1] + nl[2] * verts[i, 2] + base
+    v = _rot(Ro, (verts[i, 0], verts[i, 1], verts[i, 2]))
+    v = (v[0] + po[0], v[1] + po[1], v[2] + po[2])
+    _emit(c_psi, c_n, c_pa, c_pb, k, height - r, nh, _axpy(v, -height, nh), _axpy(v, -r, nh), flip)
+
+
+@numba.njit(cache=True)
+def _plane_support(nh, nl, base, Ro, verts, v0, nv, deepest, lowest, c_psi, start, limit):
+    """The vertices a polytope bears on a plane with: the deepest (height `lowest`) and, of the
+    vertices within `PLANE_SUPPORT_BAND` of it, the farthest along each of
+    `PLANE_SUPPORT_DIRECTIONS` directions in the plane (a world basis of it, first found on
+    ties). Their indices, ascending and distinct, are left in c_psi[start:start + count] (the
+    output buffer as scratch); returns count.
+
+    A face within the band keeps the corners its support polygon has in those directions: exact
+    for a face whose interior angles are all under 135 degrees (a corner is then the farthest
+    along an open range of more than 45 degrees of directions, which holds one of them: a
+    rectangle, a regular polygon of up to 7 sides); otherwise the polygon loses at most a
+    factor cos(pi / directions) of its reach in any direction. Vertices beyond the band, which
+    the margin had kept for what a step could close, are left: one the body tilts onto is the
+    deepest of its neighbourhood at the next step."""
+    slots = min(PLANE_SUPPORT_DIRECTIONS + 1, limit)
+    t, o = _basis(nh)
+    c_psi[start] = deepest
+    for j in range(1, slots):
+        angle = 2.0 * math.pi * (j - 1) / PLANE_SUPPORT_DIRECTIONS
+        d = _rot_t(Ro, _axpy(_scale(t, math.cos(angle)), math.sin(angle), o))
+        best, score = deepest, d[0] * verts[deepest, 0] + d[1] * verts[deepest, 1] + d[2] * verts[deepest, 2]
+        for i in range(v0, v0 + nv):
+            height = nl[0] * verts[i, 0] + nl[1] * verts[i, 1] + nl[2] * verts[i, 2] + base
+            if height <= lowest + PLANE_SUPPORT_BAND:
+                s = d[0] * verts[i, 0] + d[1] * verts[i, 1] + d[2] * verts[i, 2]
+                if s > score:
+                    best, score = i, s
+        c_psi[start + j] = best
+    # ascending (insertion sort), then distinct
+    for j in range(start + 1, start + slots):
+        x = c_psi[j]
+        k = j - 1
+        while k >= start and c_psi[k] > x:
+            c_psi[k + 1] = c_psi[k]
+            k -= 1
+        c_psi[k + 1] = x
+    count = np.int64(1)
+    for j in range(start + 1, start + slots):
+        if c_psi[j] != c_psi[start + count - 1]:
+            c_psi[start + count] = c_psi[j]
             count += 1
     return count
 
