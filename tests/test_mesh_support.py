@@ -181,9 +181,8 @@ def test_the_prism_stands_below_the_tipping_slope(tmp_path, rung_name):
 @pytest.mark.parametrize("rung_name", ["quasistatic-rigid", "quasistatic-compliant"])
 def test_a_step_that_leaves_a_contact_closing_fails(tmp_path, rung_name):
     """At h = 1e-2 and the quasistatic inertia of 1e-6, the LCP's velocities are its round-off
-    times h F / 1e-6: a relative residual of 6.5e-10 left an 8-gon prism's support closing at
-    0.08 m/s, and it went 8 km through the incline in 0.3 s with status ok (this 64-gon went
-    2.6 km). Such a step now
+    times h F / 1e-6: a relative residual of 6.5e-10 left the prism's support closing at
+    0.08 m/s, and it went 8 km through the incline in 0.3 s with status ok. Such a step now
     fails (models.stepper.CLOSING_TOL) with the prism where it stood; at an inertia of 1e-2
     the same steps stand."""
     slope = math.degrees(math.atan(0.95 * math.tan(math.radians(TIP))))
