@@ -558,17 +558,18 @@ def _plane_shape(nh, off, kind, po, Ro, r, verts, v0, nv, flip, margin, c_psi, c
             T = r
         psi = height - T
         if psi <= margin and count < limit:
-            if not capsule:
-                v = _rot(Ro, (verts[i, 0], verts[i, 1], verts[i, 2]))
-                v = (v[0] + po[0], v[1] + po[1], v[2] + po[2])
-            _emit(c_psi, c_n, c_pa, c_pb, start + count, psi, nh, _axpy(v, -height, nh), _axpy(v, -T, nh), flip)
+            if capsule:
+                _emit(c_psi, c_n, c_pa, c_pb, start + count, psi, nh, _axpy(v, -height, nh), _axpy(v, -T, nh), flip)
+            else:
+                _plane_vertex(nh, nl, base, po, Ro, r, verts, i, flip, c_psi, c_n, c_pa, c_pb, start + count)
             count += 1
     return count
 
 
 @numba.njit(cache=True)
 def _plane_vertex(nh, nl, base, po, Ro, r, verts, i, flip, c_psi, c_n, c_pa, c_pb, k):
-    """Write the contact of core point verts[i] (not a capsule's) with the plane at slot k."""
+    """Write the contact of core point verts[i] (not a capsule's) with the plane at slot k: its
+    depth height - r, from the point on the plane below it to the point r below it."""
     height = nl[0] * verts[i, 0] + nl[1] * verts[i, 1] + nl[2] * verts[i, 2] + base
     v = _rot(Ro, (verts[i, 0], verts[i, 1], verts[i, 2]))
     v = (v[0] + po[0], v[1] + po[1], v[2] + po[2])

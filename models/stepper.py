@@ -108,6 +108,13 @@ QUASISTATIC_INERTIA = 1e-6
 ZERO_COLUMN = 1e-12
 #: An LCP solution is accepted while its recomputed residual is below this.
 LCP_TOLERANCE = 1e-7
+#: A contact step's solution is accepted while no active contact's normal row is short by more
+#: than this over the step (m): rigid, psi + h (W_n^T nu+ + bias) >= -CLOSING_TOL (`_closes`),
+#: the LCP's own row in lengths. Its residual is relative to its q, which a quasistatic
+#: rung's free velocity (h F over an inertia of 1e-6) makes large: a residual of 6.5e-10 had
+#: left a prism's support on an incline closing at 0.08 m/s, and the prism went 8 km through
+#: it in 0.3 s, with status ok. Healthy steps of the shipped scenes close by at most 2.5e-8 m.
+CLOSING_TOL = 1e-6
 #: A step's LCP is first tried on the previous step's complementary basis (`basis_table`); that
 #: point is accepted when its recomputed natural-map residual (on the LCP scaled to max |M| = 1)
 #: is at most this (1e3 below LCP_TOLERANCE, what the step accepts of a cold solve); else Lemke
@@ -146,7 +153,10 @@ class StepStatus(IntEnum):
 
 _STEP_MESSAGES = {
     StepStatus.OK: "ok",
-    StepStatus.LCP_FAILED: "the contact LCP could not be solved (Lemke failed or its residual is too large); try a smaller step",
+    StepStatus.LCP_FAILED: (
+        "the contact LCP could not be solved (Lemke failed, its residual is too large, or its solution leaves a contact"
+        " closing); try a smaller step or, on a quasistatic rung, a larger inertia"
+    ),
     StepStatus.NON_FINITE: "the state became non-finite",
     StepStatus.DIVERGED: "the state diverged (an entry exceeded 1e10); try a smaller step",
     StepStatus.UNSUPPORTED_PAIR: "a contact pair needs python-fcl (a mesh against a non-plane), which compiled rollouts cannot call",
@@ -2066,7 +2076,8 @@ def planar_warm_step_on(model, fixed, h, q, nu, q_ref, u, nc, delta_n, delta_t, 
     as `spatial_warm_step_on`). The LCP is solved on the previous step's basis (the usual step while
     contacts persist; a contact not in it guessed from q, `_basis_guess`) or, where that guess
     does not solve it, by Lemke from that basis (`_warm_solve`). Where the LCP is not `_planar_case`, Lemke does not solve it to
-    LCP_TOLERANCE (the general path then regularizes it) or the state leaves the finite range,
+    LCP_TOLERANCE (the general path then regularizes it), its solution leaves a contact
+    closing (`_closes`) or the state leaves the finite range,
     it returns WARM_NOT_TAKEN and the caller takes the general path, which solves the step again
     from the start. Else (WARM_DONE): q+, nu+, q_ref+, the next basis table and, with
     compliance, the deformations on side `side` of B.out (`WarmResults`; 0 or 1: not the side
@@ -2112,6 +2123,8 @@ def planar_warm_step_on(model, fixed, h, q, nu, q_ref, u, nc, delta_n, delta_t, 
         return WARM_NOT_TAKEN, n, residual, pivots
     nu_new, p_t = R.nu[side], L.p_t[:n_act]
     _impulses_into(False, n_act, m, n_act, fric, gen, cf, z, Y, R.nu_free, L.t[:ng], p_t, nu_new)
+    if _closes(h, model.compliant, active, pf, contacts.pair, contacts.slot, contacts.psi, contacts.bias, contacts.W_n, nu_new, z, delta_n):
+        return WARM_NOT_TAKEN, n, residual, pivots
     _fill_basis_kept(R.basis[side], basis, guess, active, contacts.slot, fric, n_act, 2, lim, m)
     if model.compliant:
         _deformations_into(h, pf, contacts.pair, contacts.slot, active, z, p_t, delta_n, delta_t, R.delta_n[side], R.delta_t[side])
@@ -2244,9 +2257,10 @@ def spatial_warm_step_on(model, fixed, rotating, h, q, nu, q_ref, u, nc, delta_n
     rotating: A depends on q (`has_rotations`), so the rotating bodies' blocks of A^-1 are
     refreshed here (`rotating_blocks_into`), where the general step has the rollout refresh them. Where
     there are no active contacts or more than W holds, a block of A is singular, Lemke does not
-    solve the LCP to LCP_TOLERANCE (the general path then regularizes it) or the state leaves
-    the finite range, it returns WARM_NOT_TAKEN and the caller takes the general path, which
-    solves the step again from the start. Else (WARM_DONE): q+, nu+, q_ref+, the next basis
+    solve the LCP to LCP_TOLERANCE (the general path then regularizes it), its solution leaves a
+    contact closing (`_closes`) or the state leaves the finite range, it returns
+    WARM_NOT_TAKEN and the caller takes the general path, which solves the step again from the
+    start. Else (WARM_DONE): q+, nu+, q_ref+, the next basis
     table and, with compliance, the deformations on side `side` of W.out (`WarmResults`; not
     the side the state is on), and the impulses by contact. The same operations in the same
     order as `_lemke_step`: the same bits (tests/test_warm_steps.py). part: PART_STEP, or the
@@ -2321,6 +2335,8 @@ def spatial_warm_step_on(model, fixed, rotating, h, q, nu, q_ref, u, nc, delta_n
     if not guessed:
         _generator_impulses_into(m, gen, cf, z, L.t[:ng])
     _impulses_of_t_into(True, n_act, nf, fric, Y, nu_free, L.t[:ng], p_t, nu_new, dv, guessed)
+    if _closes(h, compliant, active, pf, contacts.pair, contacts.slot, contacts.psi, contacts.bias, contacts.W_n, nu_new, z, delta_n):
+        return WARM_NOT_TAKEN, n, residual, pivots
     _fill_basis_kept(R.basis[side], basis, guess, active, contacts.slot, fric, nf, d, lim, m)
     if model.compliant:
         _deformations_into(h, pf, contacts.pair, contacts.slot, active, z, p_t, delta_n, delta_t, R.delta_n[side], R.delta_t[side])
@@ -2506,8 +2522,21 @@ def _contact_solve(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf,
     else:
         z, w, status, pivots, basic_z, _, residual = lemke_warm_kernel(Mlcp, qlcp, limit, guess, WARM_TOLERANCE, nc)
     added = 0.0
-    for k in range(LCP_REGULARIZATION_STEPS):
-        if (status == STATUS_SOLVED or status == STATUS_SOLVED_INACCURATE) and residual <= LCP_TOLERANCE:
+    p_t = np.zeros((nc, 2))
+    nu_new = np.empty(nu_free.shape[0])
+    solved = False
+    for k in range(LCP_REGULARIZATION_STEPS + 1):
+        solved = (status == STATUS_SOLVED or status == STATUS_SOLVED_INACCURATE) and residual <= LCP_TOLERANCE
+        if solved:
+            _impulses_into(spatial, nc, m, nf, fric, gen, cf, z, Y, nu_free, np.empty(Y.shape[1]), p_t, nu_new)
+            if not _closes(
+                h, model.compliant, active, pf, contacts.pair, slot, contacts.psi, contacts.bias, contacts.W_n, nu_new, z, delta_n
+            ):
+                break
+            # a contact left closing: the LCP's round-off (regularized as below) or a regularization
+            # that swamps a light row (a finger's 1/m beside a quasistatic body's 1/1e-6)
+            solved = False
+        if k == LCP_REGULARIZATION_STEPS:
             break
         # redundant rigid contacts make M singular; a tiny compliance on the contact rows
         # (relative: LCP_REGULARIZATION, then 100 times more per retry) restores a unique solution
@@ -2520,13 +2549,28 @@ def _contact_solve(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf,
         )  # (none dropped, passed: the call above's signature, not a second one with it omitted)
         pivots += more
     p_n = z[:nc]  # (a view: z is not written again)
-    p_t = np.zeros((nc, 2))
-    if (status != STATUS_SOLVED and status != STATUS_SOLVED_INACCURATE) or not (residual <= LCP_TOLERANCE):
+    if not solved:
         return nu_free, p_n, p_t, StepStatus.LCP_FAILED.value, pivots, residual, n, basis
-    nu_new = np.empty(nu_free.shape[0])
-    _impulses_into(spatial, nc, m, nf, fric, gen, cf, z, Y, nu_free, np.empty(Y.shape[1]), p_t, nu_new)
     basis_new = _basis_kept(basis, basic_z, active, slot, fric, nf, d, lim, m)
     return nu_new, p_n, p_t, StepStatus.OK.value, pivots, residual, n, basis_new
+
+
+@numba.njit(cache=True, inline="always")
+def _closes(h, compliant, active, pf, c_pair, c_slot, c_psi, c_bias, W_n, nu_new, p_n, delta_n):
+    """Whether a step's nu+ and normal impulses p_n (by active contact) leave a contact's normal
+    row short by more than CLOSING_TOL over the step: h w < -CLOSING_TOL, where the LCP asks
+    w = psi / h + W_n^T nu+ + bias (+ `_compliance` (p_n + C delta_n) with compliance) >= 0."""
+    for k in range(active.shape[0]):
+        i = active[k]
+        w = c_psi[i] / h + c_bias[i, 0]
+        for v in range(nu_new.shape[0]):
+            w += W_n[v, i] * nu_new[v]
+        if compliant:
+            K, C = pf[c_pair[i], PF_K], pf[c_pair[i], PF_C]
+            w += _compliance(h, K, C) * (p_n[k] + C * delta_n[c_slot[i]])
+        if h * w < -CLOSING_TOL:
+            return True
+    return False
 
 
 @numba.njit(cache=True, inline="always")

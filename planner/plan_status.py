@@ -22,7 +22,9 @@ class PlanStatus(Enum):
     REPLANNED = "the previous plan did not hold; a search guided by it found a plan into the goal set"
     REPLAYED = "the previous plan holds under this rung"
     TRACKED = "the previous plan, tracked in closed loop (controls corrected per control period), reaches the goal under this rung"
-    REPAIRED = "tracking the previous plan was lost; a search rooted at the tracked states found a plan into the goal set"
+    REPAIRED = (
+        "the previous plan, tracked, did not reach the goal as it was; a search rooted at the tracked states found a plan into the goal set"
+    )
     SKIPPED = "the rung computes along the plan what the rung below computed: the plan holds as it is"
     OMITTED = (
         "the rung takes more steps per control period than the rung above it, so it is no cheaper to plan with: "

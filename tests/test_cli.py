@@ -488,14 +488,28 @@ def test_simulate_says_how_many_steps_up_front():
     assert result.returncode == 0, result.stderr
     assert "simulating 300 steps of kinematic (h = 0.01, 3 s; Ctrl-C stops)" in result.stderr
     # a duration that is not a whole number of steps runs round(duration / h) of them, and says so
-    rounded = ladder("simulate", TRIANGLE, "--model", "quasistatic-rigid", "--step", "0.7")
+    rounded = ladder("simulate", TRIANGLE, "--model", "kinematic", "--step", "0.7")
     assert rounded.returncode == 0, rounded.stderr
-    assert "simulating 4 steps of quasistatic-rigid (h = 0.7, 3 s run as 2.8 s of whole steps; Ctrl-C stops)" in rounded.stderr
-    one = ladder("simulate", TRIANGLE, "--model", "quasistatic-rigid", "--step", "3.1")
-    assert "simulating 1 step of quasistatic-rigid (h = 3.1, 3 s run as 3.1 s of whole steps; Ctrl-C stops)" in one.stderr
+    assert "simulating 4 steps of kinematic (h = 0.7, 3 s run as 2.8 s of whole steps; Ctrl-C stops)" in rounded.stderr
+    one = ladder("simulate", TRIANGLE, "--model", "dynamic-rigid", "--step", "3.1")
+    assert "simulating 1 step of dynamic-rigid (h = 3.1, 3 s run as 3.1 s of whole steps; Ctrl-C stops)" in one.stderr
     # the summary counts in the same words: "1 step", "1 LCP solve" (the only step's)
     assert re.search(r"^1 step in [0-9.]+ s .*; 1 LCP solve, [0-9]+ pivots?, ", one.stdout, re.M), one.stdout
     assert re.search(r"^[0-9,]+ steps in [0-9.]+ s .*; [0-9,]+ LCP solves, ", result.stdout, re.M), result.stdout
+
+
+def test_a_quasistatic_step_too_long_for_its_finger_fails_rather_than_passing_through():
+    # at h = 0.7 the third step closes a finger on the triangle (0.056 m apart): Lemke ends on a
+    # ray, the regularization that follows (relative to the quasistatic triangle's 1/1e-6) swamps
+    # the finger's row, and each retry's solution leaves the finger closing on the triangle at
+    # about 0.5 m/s; the step fails where it had gone on to report the grasp at t = 2.1 with a
+    # contact 0.115 m deep, status ok
+    result = ladder("simulate", TRIANGLE, "--model", "quasistatic-rigid", "--step", "0.7", "--json")
+    assert result.returncode == 1, result.stderr
+    report = json.loads(result.stdout)
+    assert report["status"] == "lcp_failed" and "leaves a contact closing" in report["message"]
+    assert report["steps"] == 2 and report["t"] == pytest.approx(1.4)
+    assert report["max_penetration"] <= 1e-6
 
 
 def test_simulate_refuses_an_absurd_number_of_steps():
