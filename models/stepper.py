@@ -1728,11 +1728,17 @@ def _planar_lcp(model, h, dofs, count, inv, nu_free, active, pi, pf, contacts, d
     gen = matrix_view(I[n_int:], 2, m)
     fric = I[n_int + 2 * m : n_int + 2 * m + nc]
     _planar_lcp_into(model, h, dofs, count, inv, nu_free, active, pi, pf, contacts, delta_n, delta_t, I, F, Mlcp, qlcp, Y, gen, cf, fric)
-    fG = ng * LOCAL_DOFS  # (`_planar_lcp_into`'s layout of F and I)
+    fG = ng * LOCAL_DOFS  # (`_planar_lcp_into`'s layout of F)
+    return Mlcp, qlcp, Y, gen, cf, fric, nc, fric[:0], matrix_view(F[fG:], ng, ng), _planar_generators(I, F, ng)
+
+
+@numba.njit(cache=True, inline="always")
+def _planar_generators(I, F, ng):
+    """B = (ldof, nloc, Bl) of `contact_lcp`: the ng generators on the DOFs they touch, as
+    `_planar_lcp_into` leaves them in its scratch I and F (views)."""
     oL = 2 * ng
     oN = oL + ng * LOCAL_DOFS
-    B = (matrix_view(I[oL:], ng, LOCAL_DOFS), I[oN : oN + ng], matrix_view(F, ng, LOCAL_DOFS))
-    return Mlcp, qlcp, Y, gen, cf, fric, nc, fric[:0], matrix_view(F[fG:], ng, ng), B
+    return matrix_view(I[oL:], ng, LOCAL_DOFS), I[oN : oN + ng], matrix_view(F, ng, LOCAL_DOFS)
 
 
 @numba.njit(cache=True, inline="always")
@@ -2123,7 +2129,10 @@ def planar_warm_step_on(model, fixed, h, q, nu, q_ref, u, nc, delta_n, delta_t, 
         return WARM_NOT_TAKEN, n, residual, pivots
     nu_new, p_t = R.nu[side], L.p_t[:n_act]
     _impulses_into(False, n_act, m, n_act, fric, gen, cf, z, Y, R.nu_free, L.t[:ng], p_t, nu_new)
-    if _closes(h, model.compliant, active, pf, contacts.pair, contacts.slot, contacts.psi, contacts.bias, contacts.W_n, nu_new, z, delta_n):
+    ldof, nloc, Bl = _planar_generators(B.I, B.F, ng)
+    reg = _regularization(Y, ldof, nloc, Bl, gen, cf, n_act, model.compliant, model.regularization)
+    c_psi, c_bias = contacts.psi, contacts.bias
+    if _closes(h, model.compliant, reg, active, pf, contacts.pair, contacts.slot, c_psi, c_bias, contacts.W_n, nu_new, z, delta_n):
         return WARM_NOT_TAKEN, n, residual, pivots
     _fill_basis_kept(R.basis[side], basis, guess, active, contacts.slot, fric, n_act, 2, lim, m)
     if model.compliant:
@@ -2335,7 +2344,7 @@ def spatial_warm_step_on(model, fixed, rotating, h, q, nu, q_ref, u, nc, delta_n
     if not guessed:
         _generator_impulses_into(m, gen, cf, z, L.t[:ng])
     _impulses_of_t_into(True, n_act, nf, fric, Y, nu_free, L.t[:ng], p_t, nu_new, dv, guessed)
-    if _closes(h, compliant, active, pf, contacts.pair, contacts.slot, contacts.psi, contacts.bias, contacts.W_n, nu_new, z, delta_n):
+    if _closes(h, compliant, reg, active, pf, contacts.pair, contacts.slot, contacts.psi, contacts.bias, contacts.W_n, nu_new, z, delta_n):
         return WARM_NOT_TAKEN, n, residual, pivots
     _fill_basis_kept(R.basis[side], basis, guess, active, contacts.slot, fric, nf, d, lim, m)
     if model.compliant:
@@ -2512,6 +2521,8 @@ def _contact_solve(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf,
     reg, scale = _scale_contact_lcp(
         model, on_generators, h, Mlcp, qlcp, Y, B, gen, cf, active, fric, nf, pf, contacts.pair, m, comp, gs, gmu
     )
+    if not on_generators:  # (the builder's own, as it computed it: `_closes` reads it)
+        reg = _regularization(Y, B[0], B[1], B[2], gen, cf, nc, model.compliant, model.regularization)
     slot = contacts.slot
     guess = _basis_guess(basis, active, slot, fric, nf, d, lim, m, n, qlcp)
     limit = DEFAULT_LEMKE_PIVOTS_PER_VARIABLE * (n + 1)
@@ -2530,7 +2541,7 @@ def _contact_solve(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf,
         if solved:
             _impulses_into(spatial, nc, m, nf, fric, gen, cf, z, Y, nu_free, np.empty(Y.shape[1]), p_t, nu_new)
             if not _closes(
-                h, model.compliant, active, pf, contacts.pair, slot, contacts.psi, contacts.bias, contacts.W_n, nu_new, z, delta_n
+                h, model.compliant, reg, active, pf, contacts.pair, slot, contacts.psi, contacts.bias, contacts.W_n, nu_new, z, delta_n
             ):
                 break
             # a contact left closing: the LCP's round-off (regularized as below) or a regularization
@@ -2556,13 +2567,16 @@ def _contact_solve(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf,
 
 
 @numba.njit(cache=True, inline="always")
-def _closes(h, compliant, active, pf, c_pair, c_slot, c_psi, c_bias, W_n, nu_new, p_n, delta_n):
+def _closes(h, compliant, reg, active, pf, c_pair, c_slot, c_psi, c_bias, W_n, nu_new, p_n, delta_n):
     """Whether a step's nu+ and normal impulses p_n (by active contact) leave a contact's normal
     row short by more than CLOSING_TOL over the step: h w < -CLOSING_TOL, where the LCP asks
-    w = psi / h + W_n^T nu+ + bias (+ `_compliance` (p_n + C delta_n) with compliance) >= 0."""
+    w = psi / h + W_n^T nu+ + bias + reg p_n (+ `_compliance` (p_n + C delta_n) with compliance)
+    >= 0; reg: the rung's own regularization of rigid rows (`_regularization`, a compliance the
+    rung asks for: box_rotate_3d's quasistatic rows give by 3e-6 m a step under it), not the
+    retries' (`LCP_REGULARIZATION`), which only make Lemke's problem solvable."""
     for k in range(active.shape[0]):
         i = active[k]
-        w = c_psi[i] / h + c_bias[i, 0]
+        w = c_psi[i] / h + c_bias[i, 0] + reg * p_n[k]
         for v in range(nu_new.shape[0]):
             w += W_n[v, i] * nu_new[v]
         if compliant:

@@ -198,6 +198,58 @@ def test_a_step_that_leaves_a_contact_closing_fails(tmp_path, rung_name):
     assert tilt(scenario, result.state.q) < 1e-3
 
 
+def test_a_rungs_own_regularization_is_a_compliance_the_closing_check_allows(tmp_path):
+    """A rung's `regularization` r adds r of the largest normal diagonal to each rigid normal
+    row: a compliance it asks for. A sphere resting under quasistatic-rigid (inertia eps, step
+    h) then settles where psi / h + reg m g h = 0, reg = r / (eps m): psi = -r g h^2 / eps,
+    0.98 mm at the largest r, 1e-3, with h = 0.1 and eps = 1e-2: a row short of
+    psi + h W_n^T nu+ = 0 by that much each step. The closing check reads the row with reg p_n in it (box_rotate_3d's pushes had failed
+    at 3e-6 m short, its search's plans changed)."""
+    r, h, eps, mass, radius, g = 1e-3, 0.1, 1e-2, 0.5, 0.05, 9.81
+    (tmp_path / "rest.toml").write_text(
+        f"""version = 1
+[scenario]
+name = "regularized_rest"
+[scene]
+dimension = 3
+gravity = [0.0, 0.0, -{g}]
+[contact]
+mu = 0.5
+K = 1e6
+C = 1e3
+[[bodies]]
+name = "table"
+role = "obstacle"
+shape = {{ type = "plane", normal = [0.0, 0.0, 1.0], offset = 0.0 }}
+[[bodies]]
+name = "ball"
+role = "object"
+mass = {mass}
+shape = {{ type = "sphere", radius = {radius} }}
+pose = {{ x = 0.0, y = 0.0, z = {radius} }}
+dofs = ["z"]
+[task]
+horizon = 2.0
+goal = {{ box = {{ "ball.z" = [1.0, 2.0] }} }}
+[ladder]
+time_limit = 1.0
+control_period = 0.1
+[[ladder.rungs]]
+model = "quasistatic-rigid"
+h = {h}
+inertia = {eps}
+regularization = {r}
+"""
+    )
+    scenario = load_scenario(tmp_path / "rest.toml")
+    rung = rung_for(scenario, "quasistatic-rigid")
+    result = rung.rollout(scenario, rung.initial_state(scenario), np.zeros((1, 0)), [2.0], h)
+    assert result.status == "ok", result.message
+    z = scenario.coordinates.index("ball.z")
+    assert result.state.q[z] - radius == pytest.approx(-r * g * h**2 / eps, rel=1e-9)
+    assert result.pair_force.sum() == pytest.approx(mass * g, rel=1e-9)
+
+
 def test_the_prism_tips_past_the_tipping_slope(tmp_path):
     """At 1.05 of the tipping slope the prism's centre of mass is past its downhill corner: it
     tips over (dynamic-rigid); at 0.95 it does not move at all."""
