@@ -70,6 +70,7 @@ from models.stepper import (
     _may_take_planar_warm,
     _may_take_spatial_pgs,
     _may_take_spatial_warm,
+    actuated_dofs,
     any_limited,
     basis_table,
     contact_stage,
@@ -83,6 +84,7 @@ from models.stepper import (
     kinematic_step,
     make_system,
     mass_matrix,
+    passive_metric_inverse,
     planar_warm_buffers,
     planar_warm_fixed,
     planar_warm_step,
@@ -763,6 +765,9 @@ def rollout_kernel(
     R3, I3, block3, work3 = np.empty((3, 3)), np.empty((3, 3)), np.empty((BODY_DOFS, BODY_DOFS)), np.empty((BODY_DOFS, 2 * BODY_DOFS))
     constant_A, limited = not has_rotations(bi), any_limited(max_force)
     kinematic, eps, compliant, theta = model.kinematic, model.eps, model.compliant, model.theta
+    # the kinematic step's metric, computed once where M is constant (no rotating body; empty
+    # else, in the inverse's layout: its transpose)
+    metric = passive_metric_inverse(bi, bf, q, nv, actuated_dofs(v_index, nv)) if kinematic and constant_A else np.empty((0, 0)).T
     hd = drive_step(model, h)  # (A's drive term's step: the rotating blocks' refresh below)
     # the warm steps' arrays (planar, spatial; their results R, which the free step's scratch is
     # also) and the free step's results: each writes its results on its side, not the one its last
@@ -894,7 +899,7 @@ def rollout_kernel(
             p_t, dn2, dt2, sw = no_friction, delta_n, delta_t, 0
             if kinematic:
                 q2, nu2, q_ref2, st, piv, res = kinematic_step(
-                    bi, bf, h, q, q_ref, u, q_index, v_index, lower, upper, nc, c_psi, c_bias, W_n, nv
+                    bi, bf, h, q, q_ref, u, q_index, v_index, lower, upper, nc, c_psi, c_bias, W_n, nv, metric
                 )
                 size, p_n = nc, np.zeros(nc)
                 if nc == 0:  # a free step: runs of them tried again from here

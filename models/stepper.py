@@ -3098,6 +3098,15 @@ def _min_norm_passive(Wp, MWp, psi_h, Wa_u, alpha, nc):
 
 
 @numba.njit(cache=True, error_model="numpy")
+def actuated_dofs(v_index, nv):
+    """Whether each of the nv DOFs is a drive's (v_index: the drives' DOFs)."""
+    actuated = np.zeros(nv, np.bool_)
+    for j in range(v_index.shape[0]):
+        actuated[v_index[j]] = True
+    return actuated
+
+
+@numba.njit(cache=True, error_model="numpy")
 def passive_metric_inverse(bi, bf, q, nv, actuated):
     """The kinematic rung's metric on the passive DOFs, inverted: M(q)^-1 restricted to them
     (the identity on actuated DOFs, which W_p does not reach). M is block diagonal by body."""
@@ -3172,9 +3181,12 @@ def kinematic_free_step_into(bi, h, q, u, q_index, v_index, lower, upper, q_new,
 
 
 @numba.njit(cache=True, error_model="numpy")
-def kinematic_step(bi, bf, h, q, q_ref, u, q_index, v_index, lower, upper, nc, c_psi, c_bias, W_n, nv):
+def kinematic_step(bi, bf, h, q, q_ref, u, q_index, v_index, lower, upper, nc, c_psi, c_bias, W_n, nv, metric):
     """The paper's eq. (8) given the contacts at q. Returns (q+, nu+, q_ref+, status: a
-    StepStatus value, pivots, residual). Plain arrays, as `free_step` (a cheap step).
+    StepStatus value, pivots, residual). Plain arrays, as `free_step` (a cheap step). metric:
+    `passive_metric_inverse` at q where the rollout holds it (M constant: no rotating body;
+    the same array, in its layout, as computed here: the same bits), else empty (0 x 0), and it
+    is computed here where contacts need it.
 
     Actuated DOFs move at the commanded speed (stopping at their position limits; a kinematic
     model has no forces, so a drive's force limit does not apply); c_bias[i, 0] is contact i's
@@ -3196,11 +3208,10 @@ def kinematic_step(bi, bf, h, q, q_ref, u, q_index, v_index, lower, upper, nc, c
     na = v_index.shape[0]
     nu = np.zeros(nv)
     u_eff = np.zeros(nv)
-    actuated = np.zeros(nv, np.bool_)
+    actuated = actuated_dofs(v_index, nv)
     for j in range(na):
         target = min(max(q[q_index[j]] + h * u[j], lower[j]), upper[j])
         u_eff[v_index[j]] = (target - q[q_index[j]]) / h
-        actuated[v_index[j]] = True
     pivots = 0
     residual = 0.0
     alpha = 1.0
@@ -3208,7 +3219,10 @@ def kinematic_step(bi, bf, h, q, q_ref, u, q_index, v_index, lower, upper, nc, c
     v_passive = np.zeros(nv)
     if nc > 0:
         Wp, psi_h, Wa_u = _passive_problem(nc, h, c_psi, c_bias, W_n, u_eff, actuated, nv)
-        MWp = passive_metric_inverse(bi, bf, q, nv, actuated) @ Wp
+        if metric.shape[0] == nv:
+            MWp = metric @ Wp
+        else:
+            MWp = passive_metric_inverse(bi, bf, q, nv, actuated) @ Wp
         v_passive, ok, pivots, residual = _min_norm_passive(Wp, MWp, psi_h, Wa_u, 1.0, nc)
         if not ok:
             alpha, v_passive, feasible, more, residual = _largest_feasible(Wp, MWp, psi_h, Wa_u, nc, residual)

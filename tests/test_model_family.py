@@ -487,14 +487,49 @@ def test_the_kinematic_free_step_is_the_kinematic_step_without_contacts(name):
             q[D.q_index] += 0.3 * rng.standard_normal(na)
             q_ref = q[D.q_index] + 1e-3 * rng.standard_normal(na)
             u = 50.0 * rng.standard_normal(na)  # some past a limit within the step
-            full = kinematic_step(
-                S.bi, S.bf, h, q, q_ref, u, D.q_index, D.v_index, lower, upper, 0, np.zeros(0), np.zeros((0, 3)), np.zeros((S.nv, 0)), S.nv
-            )
+            no_metric = np.empty((0, 0)).T  # (computed in the step where contacts need it)
+            args = (S.bi, S.bf, h, q, q_ref, u, D.q_index, D.v_index, lower, upper, 0, np.zeros(0), np.zeros((0, 3)), np.zeros((S.nv, 0)))
+            full = kinematic_step(*args, S.nv, no_metric)
             q_new, nu_new, q_ref_new = np.empty(nq), np.empty(S.nv), np.empty(na)
             ok = kinematic_free_step_into(S.bi, h, q, u, D.q_index, D.v_index, lower, upper, q_new, nu_new, q_ref_new)
             assert ok and full[3] == 0
             for a, b in zip((q_new, nu_new, q_ref_new), full[:3]):
                 assert np.array_equal(a, b)
+
+
+@pytest.mark.parametrize("name", ["free_transfer", "two_finger_triangle"])
+def test_the_kinematic_step_on_the_rollouts_metric_is_the_step_that_computes_it(name):
+    """Where no body rotates in space, M is constant and the rollout computes the kinematic
+    step's metric (`passive_metric_inverse`) once, not each contact step: the step on it gives
+    the same q+, nu+, q_ref+, status, pivots and residual, bit for bit, at random states,
+    commands and contacts."""
+    from models.rungs import compiled
+    from models.stepper import actuated_dofs, has_rotations, kinematic_step, passive_metric_inverse
+
+    scenario = load_scenario(SCENARIOS / f"{name}.toml")
+    c = compiled(scenario)
+    S, D = c.scene, c.drives
+    assert not has_rotations(S.bi)
+    rng = np.random.default_rng(11)
+    na = len(D.v_index)
+    lower, upper = np.full(na, -np.inf), np.full(na, np.inf)
+    pivoted = 0
+    for h in (1e-2, 1e-3):
+        for _ in range(30):
+            q = np.array(scenario.start, float)
+            q[D.q_index] += 0.1 * rng.standard_normal(na)
+            u = rng.standard_normal(na)
+            nc = int(rng.integers(1, 4))
+            W_n = rng.standard_normal((S.nv, nc))
+            c_psi, c_bias = 1e-3 * rng.standard_normal(nc), np.zeros((nc, 3))
+            metric = passive_metric_inverse(S.bi, S.bf, q, S.nv, actuated_dofs(D.v_index, S.nv))
+            args = (S.bi, S.bf, h, q, q[D.q_index], u, D.q_index, D.v_index, lower, upper, nc, c_psi, c_bias, W_n, S.nv)
+            held, computed = kinematic_step(*args, metric), kinematic_step(*args, np.empty((0, 0)).T)
+            for a, b in zip(held[:3], computed[:3]):
+                assert np.array_equal(a, b)
+            assert held[3:] == computed[3:]
+            pivoted += held[4] > 0
+    assert pivoted > 0  # (the LCPs were solved on the metric: some pivoted)
 
 
 def test_a_rollout_and_the_planners_propagation_run_one_compiled_rollout():
