@@ -765,9 +765,9 @@ def rollout_kernel(
     R3, I3, block3, work3 = np.empty((3, 3)), np.empty((3, 3)), np.empty((BODY_DOFS, BODY_DOFS)), np.empty((BODY_DOFS, 2 * BODY_DOFS))
     constant_A, limited = not has_rotations(bi), any_limited(max_force)
     kinematic, eps, compliant, theta = model.kinematic, model.eps, model.compliant, model.theta
-    # the kinematic step's metric, computed once where M is constant (no rotating body; empty
-    # else, in the inverse's layout: its transpose)
-    metric = passive_metric_inverse(bi, bf, q, nv, actuated_dofs(v_index, nv)) if kinematic and constant_A else np.empty((0, 0)).T
+    # the kinematic step's metric where M is constant (no rotating body): computed at the first
+    # contact step and kept (empty until then, in the inverse's layout: its transpose)
+    metric = np.empty((0, 0)).T
     hd = drive_step(model, h)  # (A's drive term's step: the rotating blocks' refresh below)
     # the warm steps' arrays (planar, spatial; their results R, which the free step's scratch is
     # also) and the free step's results: each writes its results on its side, not the one its last
@@ -898,6 +898,8 @@ def rollout_kernel(
             # the general contact step is a call of `dynamics_step` (not inlined: compiled once)
             p_t, dn2, dt2, sw = no_friction, delta_n, delta_t, 0
             if kinematic:
+                if nc > 0 and constant_A and metric.shape[0] != nv:
+                    metric = passive_metric_inverse(bi, bf, q, nv, actuated_dofs(v_index, nv))
                 q2, nu2, q_ref2, st, piv, res = kinematic_step(
                     bi, bf, h, q, q_ref, u, q_index, v_index, lower, upper, nc, c_psi, c_bias, W_n, nv, metric
                 )

@@ -2521,8 +2521,6 @@ def _contact_solve(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf,
     reg, scale = _scale_contact_lcp(
         model, on_generators, h, Mlcp, qlcp, Y, B, gen, cf, active, fric, nf, pf, contacts.pair, m, comp, gs, gmu
     )
-    if not on_generators:  # (the builder's own, as it computed it: `_closes` reads it)
-        reg = _regularization(Y, B[0], B[1], B[2], gen, cf, nc, model.compliant, model.regularization)
     slot = contacts.slot
     guess = _basis_guess(basis, active, slot, fric, nf, d, lim, m, n, qlcp)
     limit = DEFAULT_LEMKE_PIVOTS_PER_VARIABLE * (n + 1)
@@ -2600,12 +2598,12 @@ def _scale_contact_lcp(model, on_generators, h, Mlcp, qlcp, Y, B, gen, cf, activ
     """Scale a built contact LCP (`_scale_lcp`): on the generators (`_on_generators`) by
     `_generator_scales_into`'s max |M|, which fills comp, gs and gmu for the guess, else by M's
     own. Y, B = (ldof, nloc, Bl): the generators' (`contact_lcp`). Returns (reg:
-    `_regularization`, where on the generators, else 0; the scale)."""
-    if not on_generators:
-        return 0.0, _scale_lcp(Mlcp, qlcp, m)
-    d = model.friction_directions
+    `_regularization`, the rigid rows' regularization the builder put in M; the scale)."""
     ldof, nloc, Bl = B
     reg = _regularization(Y, ldof, nloc, Bl, gen, cf, active.shape[0], model.compliant, model.regularization)
+    if not on_generators:
+        return reg, _scale_lcp(Mlcp, qlcp, m)
+    d = model.friction_directions
     scale = _generator_scales_into(Y, ldof, nloc, Bl, gen, cf, model.compliant, h, reg, active, fric, nf, d, pf, c_pair, comp, gs, gmu)
     _scale_lcp_by(Mlcp, qlcp, scale)
     return reg, scale
