@@ -109,9 +109,10 @@ def test_a_bad_scenario_is_422_with_the_clis_problem_lines(idle):
 
 def test_bad_options_and_parameters_are_422_named_as_in_the_request(idle):
     r = submit(idle, {"kind": "plan", "scenario": FREE, "options": {"seed": -1, "bogus": 1}})
-    assert r.status_code == 422 and [p["key"] for p in r.json()["problems"]] == ["options.bogus"]
+    assert r.status_code == 422 and [p["key"] for p in r.json()["problems"]] == ["body.options.bogus"]
     r = submit(idle, {"kind": "plan", "scenario": FREE, "options": {"seed": -1}})
-    assert r.status_code == 422 and r.json()["problems"][0]["key"] == "options.seed"
+    assert r.status_code == 422 and r.json()["problems"][0]["key"] == "body.options.seed"
+    assert r.json()["detail"] == "request: body.options.seed: must be between 0 and 1000000000, got -1"
     r = submit(idle, {"kind": "plan", "scenario": FREE, "parameters": {"nope": 1.0}})
     assert r.status_code == 422 and "nope" in r.json()["detail"]
     r = submit(idle, {"kind": "plan", "scenario": TRIANGLE, "parameters": {"mu": -1.0}})  # in range as a number, not as a friction
@@ -120,18 +121,18 @@ def test_bad_options_and_parameters_are_422_named_as_in_the_request(idle):
         "must be greater than or equal to 0, got -1 from 'mu' (parameters.mu)",
     )
     r = submit(idle, {"kind": "simulate", "scenario": FREE, "options": {}})
-    assert r.status_code == 422 and r.json()["problems"][0]["key"] == "options.model"
+    assert r.status_code == 422 and r.json()["problems"][0]["key"] == "body.options.model"
     r = submit(idle, {"kind": "simulate", "scenario": FREE, "options": {"model": "dynamic-rigid", "step": 20.0}})
     assert r.status_code == 422 and [(p["key"], p["reason"]) for p in r.json()["problems"]] == [
         (
-            "options.step",
+            "body.options.step",
             "5 s at h = 20 is no step (a run takes round(duration / h) steps); use a smaller options.step or a longer options.duration",
         )
     ]
     r = submit(idle, {"kind": "simulate", "scenario": FREE, "options": {"model": "dynamic-rigid", "step": 1e-9}})
     assert r.status_code == 422 and [(p["key"], p["reason"]) for p in r.json()["problems"]] == [
         (
-            "options.step",
+            "body.options.step",
             "5 s at h = 1e-09 is 5e+09 steps, more than the 1e+09 one run may take; "
             "use a larger options.step or a shorter options.duration",
         )
@@ -140,11 +141,51 @@ def test_bad_options_and_parameters_are_422_named_as_in_the_request(idle):
     sweep = {"grid": ["gap=0.3"], "model": "kinematic", "tolerance": 0.01}  # a tolerance with no refinement to bracket
     r = submit(idle, {"kind": "sweep", "scenario": FREE, "options": sweep})
     assert r.status_code == 422 and [(p["key"], p["reason"]) for p in r.json()["problems"]] == [
-        ("options.tolerance", "is the refinement's bracket: give it with options.refine, or leave it out")
+        ("body.options.tolerance", "is the refinement's bracket: give it with options.refine, or leave it out")
     ]
     r = submit(idle, {"kind": "bogus", "scenario": FREE, "extra": 1})  # not what the API's description allows: the same shape
     assert r.status_code == 422 and [p["key"] for p in r.json()["problems"]] == ["body.kind", "body.extra"]
     assert r.json()["file"] == "request" and r.json()["detail"].startswith("request: body.kind: Input should be 'plan'")
+
+
+@pytest.mark.parametrize(
+    ("options", "key", "reason"),
+    [
+        ({"seeed": 3}, "body.options.seeed", "unknown option for a plan job; options: seed, iterations,"),
+        ({"seed": "3"}, "body.options.seed", 'expected int, got "3"'),
+        ({"time_limit": True}, "body.options.time_limit", "expected float, got true"),
+        ({"seed": -1}, "body.options.seed", "must be between 0 and"),  # the CLI's check of --seed, in the request's words
+        ({"planner": "RRTstar"}, "body.options.planner", "unknown planner; planners:"),
+    ],
+)
+def test_a_bad_option_is_422_under_the_request_not_the_scenario_file(idle, options, key, reason):
+    """The options are the request's, as its parameters are: a misspelled or mistyped one is
+    labelled as FastAPI's checks label a parameter's type error (`request: body.parameters.mu`),
+    not with the scenario's file name."""
+    body = {"kind": "plan", "scenario": FREE, "filename": "scenarios/free_transfer.toml", "options": options}
+    r = submit(idle, body)
+    assert r.status_code == 422, r.text
+    answer = r.json()
+    assert answer["file"] == "request" and [p["key"] for p in answer["problems"]] == [key]
+    assert answer["problems"][0]["reason"].startswith(reason)
+    assert answer["detail"].startswith(f"request: {key}: {reason}")
+    assert "scenario.toml" not in answer["detail"] and "free_transfer" not in answer["detail"]
+    # as a parameter's type error is
+    mistyped = submit(idle, {**body, "options": {}, "parameters": {"mu": "x"}}).json()
+    assert mistyped["file"] == "request" and mistyped["detail"].startswith("request: body.parameters.mu: ")
+
+
+def test_a_bad_option_comes_before_the_scenarios_problems(idle):
+    """The CLI gives its flags' problems with the scenario's, under the file; a request's options
+    are checked as its other keys are, first: their problems alone, then (once they are good) the
+    scenario's under its file name."""
+    body = {"kind": "plan", "scenario": BROKEN, "filename": "broken.toml", "options": {"seed": -1}}
+    r = submit(idle, body)
+    assert r.status_code == 422 and r.json()["file"] == "request"
+    assert [p["key"] for p in r.json()["problems"]] == ["body.options.seed"]
+    r = submit(idle, {**body, "options": {"seed": 1}})
+    assert r.status_code == 422 and r.json()["file"] == "broken.toml"
+    assert r.json()["detail"].startswith("broken.toml: scenario.name:")
 
 
 @pytest.mark.parametrize("name", ["/etc/passwd", "../outside.obj", "meshes/../../x.obj", "a\\b.obj"])
@@ -435,18 +476,20 @@ def test_bad_sweep_jobs_are_422_named_as_in_the_request(idle):
         assert r.status_code == 422, r.text
         return [f"{p['key']}: {p['reason']}" for p in r.json()["problems"]]
 
-    assert problems({"model": "kinematic"}) == ["options.grid: a sweep job needs a grid"]
-    assert problems({"grid": "v1=1:2:3", "model": "kinematic"})[0].startswith("options.grid: expected a list of strings")
-    assert problems({"grid": ["bogus=1:2:3"], "model": "kinematic"})[0].startswith("options.grid bogus: not a design parameter")
-    assert problems({"grid": ["v1=1:2:3"], "model": "nope"})[0].startswith("options.model")
-    assert problems({"grid": ["v1=0.1:4:200", "mu=0:1:100"], "model": "kinematic"})[0].startswith("options.grid: 20,000 runs")
+    assert problems({"model": "kinematic"}) == ["body.options.grid: a sweep job needs a grid"]
+    assert problems({"grid": "v1=1:2:3", "model": "kinematic"})[0].startswith("body.options.grid: expected a list of strings")
+    assert problems({"grid": ["bogus=1:2:3"], "model": "kinematic"})[0].startswith("body.options.grid bogus: not a design parameter")
+    assert problems({"grid": ["v1=1:2:3"], "model": "nope"})[0].startswith("body.options.model")
+    assert problems({"grid": ["v1=0.1:4:200", "mu=0:1:100"], "model": "kinematic"})[0].startswith("body.options.grid: 20,000 runs")
     assert problems({"grid": ["v1=1:2:3"], "model": "kinematic", "step": 10.0}) == [
-        "options.step: kinematic at v1=1 and 2 more grid points: a run of 3 s at h = 10 is no step (a run takes round(duration / h) steps)"
+        "body.options.step: kinematic at v1=1 and 2 more grid points: "
+        "a run of 3 s at h = 10 is no step (a run takes round(duration / h) steps)"
     ]
     # a value out of range names the option that set it, in the request's words
     assert problems({"grid": ["mu=-1,0.5"], "model": "kinematic"})[0] == (
-        "options.grid mu=-1,0.5: kinematic at mu=-1: the scenario is invalid: contact.pairs[0].mu: must be greater than or equal to 0, "
-        "got -1 from 'mu' (options.grid mu); contact.pairs[1].mu: must be greater than or equal to 0, got -1 from 'mu' (options.grid mu)"
+        "body.options.grid mu=-1,0.5: kinematic at mu=-1: the scenario is invalid: "
+        "contact.pairs[0].mu: must be greater than or equal to 0, got -1 from 'mu' (options.grid mu); "
+        "contact.pairs[1].mu: must be greater than or equal to 0, got -1 from 'mu' (options.grid mu)"
     )
     no_policy = TRIANGLE[: TRIANGLE.index("[task.policy]")] + TRIANGLE[TRIANGLE.index("[ladder]") : TRIANGLE.index("[expect]")]
     assert problems({"grid": ["v1=1:2:3"], "model": "kinematic"}, no_policy) == [

@@ -182,12 +182,14 @@ def test_submit_refused_by_the_service_is_exit_2_with_its_reasons(idle, capsys, 
     code, out, err = submit_cli(capsys, monkeypatch, "scenarios/free_transfer.toml", "--server", idle)
     assert code == 2 and out == "" and "401" in err and "--token" in err and "Traceback" not in err
     monkeypatch.setenv("LADDER_TOKEN", "s3cret")
+    # the request's options are the request's (labelled as its body's keys), and come first; then the scenario's problems
     args = ["scenarios/free_transfer.toml", "--server", idle, "--seed", "-1", "--param", "nope=1"]
     code, out, err = submit_cli(capsys, monkeypatch, *args)
     assert code == 2 and out == "" and "Traceback" not in err
-    lines = err.splitlines()
-    assert lines[0].startswith("error: scenarios/free_transfer.toml: parameters.nope: the file has no parameter 'nope'")
-    assert lines[1] == "error: scenarios/free_transfer.toml: options.seed: must be between 0 and 1000000000, got -1"
+    assert err.splitlines() == ["error: request: body.options.seed: must be between 0 and 1000000000, got -1"]
+    code, out, err = submit_cli(capsys, monkeypatch, *args[:3], "--param", "nope=1")
+    assert code == 2 and out == "" and "Traceback" not in err
+    assert err.startswith("error: scenarios/free_transfer.toml: parameters.nope: the file has no parameter 'nope'")
     # an address past the service's root (its /jobs route) is a 405: said as a wrong address
     code, out, err = submit_cli(capsys, monkeypatch, "scenarios/free_transfer.toml", "--server", idle + "/jobs")
     assert code == 2 and out == "" and len(err.strip().splitlines()) == 1

@@ -75,7 +75,7 @@ class JobRequest(BaseModel):
 
 
 class ProblemItem(BaseModel):
-    key: str = Field(description="where: a key path of the scenario (bodies[2].pose), or of the request (options.seed)")
+    key: str = Field(description="where: a key path of the scenario (bodies[2].pose), or of the request (body.options.seed)")
     reason: str
 
 

@@ -139,6 +139,14 @@ def job_folder(inputs: dict) -> Iterator[Path]:
             os.chdir(old)
 
 
+def _in_request(problems: list[Problem]) -> ScenarioError:
+    """Problems of the request's options (keys options.seed, options.grid v1) as the service
+    labels every problem of the request itself: under `request`, keyed where they are in its body
+    as FastAPI's checks of the body key theirs (`request: body.options.seed: ...`, as
+    `request: body.parameters.mu: ...`), not under the scenario's file name."""
+    return ScenarioError("request", [Problem(f"body.{p.key}", p.reason) for p in problems])
+
+
 def _option_problems(kind: str, options: dict) -> list[Problem]:
     problems = []
     allowed = OPTIONS[kind]
@@ -263,15 +271,16 @@ def cli_args(kind: str, path: Path, parameters: dict, options: dict, out: Path) 
 def check(kind: str, path: Path, parameters: dict, options: dict, out: Path) -> tuple[SimpleNamespace, tuple]:
     """The CLI's checks of a plan / simulate command on this job (run with the job's folder as
     the working directory): (the CLI namespace, what the check returns); else ScenarioError,
-    its keys the request's (options.seed, parameters.v1)."""
+    its keys the request's (options.seed, parameters.v1): the options' problems, if any, alone
+    and under `request` (`_in_request`), else the scenario's under its file name."""
     from planner import cli
 
     problems = _option_problems(kind, options)
     if problems:
-        raise ScenarioError(str(path), problems)
+        raise _in_request(problems)
     args = cli_args(kind, path, parameters, options, out)
     if getattr(args, "planner", None) is not None and args.planner not in cli.CONTROL_PLANNERS:
-        raise ScenarioError(str(path), [Problem("options.planner", f"unknown planner; planners: {', '.join(cli.CONTROL_PLANNERS)}")])
+        raise _in_request([Problem("options.planner", f"unknown planner; planners: {', '.join(cli.CONTROL_PLANNERS)}")])
     try:
         if kind == "plan":
             from planner.ladder import check_start
@@ -283,7 +292,11 @@ def check(kind: str, path: Path, parameters: dict, options: dict, out: Path) -> 
         else:
             checked = cli._check_simulate_args(args)
     except ScenarioError as exc:
-        raise ScenarioError(exc.file, [Problem(_cli_key(p.key), _cli_reason(kind, p.reason)) for p in exc.problems]) from None
+        problems = [Problem(_cli_key(p.key), _cli_reason(kind, p.reason)) for p in exc.problems]
+        # the CLI gives its flags' problems under the scenario's file, with the file's own; a
+        # request's options are the request's, and its problems come first (as its others do)
+        options_problems = [p for p in problems if p.key.startswith("options.")]
+        raise (_in_request(options_problems) if options_problems else ScenarioError(exc.file, problems)) from None
     return args, checked
 
 
