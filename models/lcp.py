@@ -93,10 +93,10 @@ DEFAULT_TOL = 1e-9
 INACCURATE_TOL = 1e-6
 #: Default Lemke pivot limit is this times (n + 1).
 DEFAULT_LEMKE_PIVOTS_PER_VARIABLE = 50
-#: Relative diagonal added to a contact LCP's contact rows when Lemke fails on a singular
-#: (redundant) one; each further retry adds 100 times more, up to LCP_REGULARIZATION *
-#: 100**(steps - 1) = 1e-5 (`models.stepper`, and the exact cone's pivoting in
-#: `models.contact_pgs`).
+#: Diagonal added to a contact LCP's contact rows when Lemke fails on a singular (redundant)
+#: one, relative to each row's own diagonal; each further retry adds 100 times more, up to
+#: LCP_REGULARIZATION * 100**(steps - 1) = 1e-5 (`models.stepper`, and the exact cone's
+#: pivoting in `models.contact_pgs`).
 LCP_REGULARIZATION = 1e-9
 LCP_REGULARIZATION_STEPS = 3
 #: Default number of PGS sweeps.

@@ -2542,16 +2542,20 @@ def _contact_solve(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf,
                 h, model.compliant, reg, active, pf, contacts.pair, slot, contacts.psi, contacts.bias, contacts.W_n, nu_new, z, delta_n
             ):
                 break
-            # a contact left closing: the LCP's round-off (regularized as below) or a regularization
-            # that swamps a light row (a finger's 1/m beside a quasistatic body's 1/1e-6)
+            # a contact left closing: the LCP's round-off, or the retries' compliance (below) on
+            # a row that carries a large impulse
             solved = False
         if k == LCP_REGULARIZATION_STEPS:
             break
         # redundant rigid contacts make M singular; a tiny compliance on the contact rows
-        # (relative: LCP_REGULARIZATION, then 100 times more per retry) restores a unique solution
+        # restores a unique solution: relative to each row's own diagonal (LCP_REGULARIZATION,
+        # then 100 times more per retry), as the exact cone's pivoting has it. One relative to
+        # the largest diagonal swamped a light row: a finger's 1/m beside a quasistatic
+        # triangle's 1/1e-6 (the paper's scene at h = 0.7, docs/measurements.md)
         target = LCP_REGULARIZATION * 100.0**k
+        grow = (1.0 + target) / (1.0 + added)
         for r in range(nc + nd):
-            Mlcp[r, r] += target - added
+            Mlcp[r, r] *= grow
         added = target
         z, w, status, more, basic_z, _, residual = lemke_warm_kernel(
             Mlcp, qlcp, limit, guess, WARM_TOLERANCE, np.int64(0)

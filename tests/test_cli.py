@@ -499,11 +499,11 @@ def test_simulate_says_how_many_steps_up_front():
 
 
 def test_a_quasistatic_step_too_long_for_its_finger_fails_rather_than_passing_through():
-    # at h = 0.7 the third step closes a finger on the triangle (0.056 m apart): Lemke ends on a
-    # ray, the regularization that follows (relative to the quasistatic triangle's 1/1e-6) swamps
-    # the finger's row, and each retry's solution leaves the finger closing on the triangle at
-    # about 0.5 m/s; the step fails where it had gone on to report the grasp at t = 2.1 with a
-    # contact 0.115 m deep, status ok
+    # at h = 0.7 the third step closes both fingers on the triangle (0.056 m apart), a squeeze
+    # no finite impulse stops: Lemke ends on a ray, and each regularized retry's solution leaves
+    # the fingers closing on it at about 0.5 m/s (impulses 1,021, 10.5 and 0.105, their rows'
+    # own diagonal about 5e5 from the triangle's 1e-6 inertia); the step fails where it had gone
+    # on to report the grasp at t = 2.1 with a contact 0.115 m deep, status ok
     result = ladder("simulate", TRIANGLE, "--model", "quasistatic-rigid", "--step", "0.7", "--json")
     assert result.returncode == 1, result.stderr
     report = json.loads(result.stdout)
