@@ -5,7 +5,12 @@
 
 import warnings as _warnings
 
-from numba.core.errors import NumbaPerformanceWarning as _NumbaPerformanceWarning
+# The CPU the kernels are tuned for: before numba is imported.
+from models import cpu_target as _cpu_target
+
+_cpu_target.install()
+
+from numba.core.errors import NumbaPerformanceWarning as _NumbaPerformanceWarning  # noqa: E402
 
 # Small dense products on non-contiguous views are fine here; keep users' terminals clean.
 _warnings.filterwarnings("ignore", category=_NumbaPerformanceWarning)
