@@ -5,7 +5,8 @@
 
 import warnings as _warnings
 
-# The CPU the kernels are tuned for: before numba is imported.
+# The CPU the kernels are tuned for: before numba is imported here (or, where it was imported
+# before, re-reads its configuration at once).
 from models import cpu_target as _cpu_target
 
 _cpu_target.install()

@@ -10,12 +10,11 @@ multiply-add), and the planning runs are the same seed for seed.
 
 NUMBA_CPU_NAME names the CPU LLVM tunes for (its scheduling and its choice of instructions);
 the features compiled for stay the host's (numba's default where NUMBA_CPU_FEATURES is unset),
-so the code runs on the host whatever the name. `install()` (models/__init__, before numba is
-imported) sets NUMBA_CPU_NAME to the target TUNED names for the host, unless the user has set
-NUMBA_CPU_NAME or NUMBA_CPU_FEATURES. It sets nothing where numba is already imported (its code
-generator may exist, tuned for the host already), or where the host is not in TUNED: only hosts
-where the difference was measured. Child processes (the kernel-compile helper, sweep and
-service workers) inherit the setting.
+so the code runs on the host whatever the name. `install()` (models/__init__, before any kernel
+is defined) sets NUMBA_CPU_NAME to the target TUNED names for the host, unless the user has set
+NUMBA_CPU_NAME or NUMBA_CPU_FEATURES; nothing where the host is not in TUNED (only hosts where
+the difference was measured). Child processes (the kernel-compile helper, sweep and service
+workers) inherit the setting.
 """
 
 from __future__ import annotations
@@ -37,10 +36,13 @@ def target_for(host: str, environ) -> str | None:
 
 
 def install() -> str | None:
-    """Set NUMBA_CPU_NAME to `target_for` the host, if any and numba is not imported yet.
-    Returns the target set, or None."""
-    if "numba" in sys.modules:
-        return None
+    """Set NUMBA_CPU_NAME to `target_for` the host, if any: the CPU this process's kernels and
+    its children's (which inherit the variable) compile for. Where numba has already made its
+    CPU code generator (a kernel compiled before models was imported), that compiles for the
+    host, and the variable names the host, so that a child process (`kernel_cache`'s compile
+    helper) builds what this one loads. numba re-reads its configuration here, at once, where it
+    is imported already: later, it would drop settings made after this (`kernel_cache.install`).
+    Returns the name set, or None."""
     try:
         import llvmlite.binding as ll
 
@@ -48,9 +50,22 @@ def install() -> str | None:
     except Exception:  # llvmlite cannot tell: numba's default
         return None
     target = target_for(host, os.environ)
-    if target is not None:
-        os.environ["NUMBA_CPU_NAME"] = target
+    if target is None:
+        return None
+    if _generating_code():
+        target = host
+    os.environ["NUMBA_CPU_NAME"] = target
+    config = sys.modules.get("numba.core.config")
+    if config is not None:
+        config.reload_config()
     return target
+
+
+def _generating_code() -> bool:
+    """Whether numba's CPU target context, and with it the code generator tuned for a CPU name,
+    exists in this process."""
+    registry = sys.modules.get("numba.core.registry")
+    return registry is not None and "_toplevel_target_context" in vars(registry.cpu_target)
 
 
 def tuned_for() -> str:

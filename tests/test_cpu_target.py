@@ -43,7 +43,15 @@ def test_importing_models_first_tunes_the_kernels_for_the_host():
     assert compiled_for("import models; ") == [expected, expected if target_for(HOST, {}) else "None"]
 
 
-def test_the_users_setting_and_an_earlier_numba_are_left_alone():
+def test_the_users_setting_is_left_alone():
     assert compiled_for("import models; ", NUMBA_CPU_NAME="generic") == ["generic", "generic"]
-    # numba imported before models: its code generator may already exist, so nothing is set
-    assert compiled_for("import numba.core.config; import models; ") == [HOST, "None"]
+
+
+def test_numba_imported_first_is_tuned_unless_it_has_compiled_already():
+    tuned = target_for(HOST, {})
+    # numba imported, nothing compiled: its configuration re-read, the target taken
+    assert compiled_for("import numba.core.config; import numba; import models; ") == [tuned or HOST, tuned or "None"]
+    # a kernel compiled first: the code generator is the host's; the variable says so, for the
+    # child processes (kernel_cache's helper compiles what this process then loads)
+    first = "import numba; numba.njit(lambda x: x)(1); import models, os; print(os.environ.get('NUMBA_CPU_NAME')); "
+    assert compiled_for(first) == [HOST if tuned else "None", HOST, HOST if tuned else "None"]
