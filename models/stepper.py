@@ -2549,9 +2549,8 @@ def _contact_solve(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf,
             break
         # redundant rigid contacts make M singular; a tiny compliance on the contact rows
         # restores a unique solution: relative to each row's own diagonal (LCP_REGULARIZATION,
-        # then 100 times more per retry), as the exact cone's pivoting has it. One relative to
-        # the largest diagonal swamped a light row: a finger's 1/m beside a quasistatic
-        # triangle's 1/1e-6 (the paper's scene at h = 0.7, docs/measurements.md)
+        # then 100 times more per retry), as the exact cone's pivoting has it; one relative to
+        # the largest diagonal gave a light row many times its own
         target = LCP_REGULARIZATION * 100.0**k
         grow = (1.0 + target) / (1.0 + added)
         for r in range(nc + nd):
