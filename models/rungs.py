@@ -342,31 +342,36 @@ class Rung:
         if len(controls) != len(durations):
             raise ValueError(f"{len(controls)} controls but {len(durations)} durations")
         if record_every <= 0:
-            record_every = record_spacing(int(round(float(durations.sum()) / h)), max_records)
+            total = float(durations[0]) if len(durations) == 1 else float(durations.sum())  # (one control: no reduction)
+            record_every = record_spacing(int(round(total / h)), max_records)
         start = time.perf_counter()
         out = self._run(scenario, state, controls, durations, h, record_every, max_records, stop_at_outcome, t0, laws)
         wall = time.perf_counter() - start
         status, message = _STATUS_TEXT[out.status]
+        # (the kernel's scalars come back as Python's int and float; its pair buffers hold at least one pair)
+        pair_force, pair_wrench, n_pairs = out.pair_force, out.pair_wrench, len(scenario.pairs)
+        if len(pair_force) != n_pairs:
+            pair_force, pair_wrench = pair_force[:n_pairs], pair_wrench[:n_pairs]
         return RolloutResult(
             state=State(out.q, out.nu, out.q_ref, out.delta_n, out.delta_t, out.basis),
-            t=float(out.t),
+            t=out.t,
             outcome=_OUTCOME_LABEL[out.outcome],
             status=status,
             message=message,
-            steps=int(out.steps),
-            lcp_solves=int(out.lcp_solves),
-            pivots=int(out.pivots),
-            max_residual=float(out.max_residual),
-            max_lcp_size=int(out.max_lcp_size),
+            steps=out.steps,
+            lcp_solves=out.lcp_solves,
+            pivots=out.pivots,
+            max_residual=out.max_residual,
+            max_lcp_size=out.max_lcp_size,
             wall_s=wall,
             times=out.times,
             trajectory=out.trajectory,
             velocities=out.velocities,
-            pair_force=out.pair_force[: len(scenario.pairs)],
-            min_psi=float(out.min_psi),
-            force_steps=int(out.force_steps),
-            sweeps=int(out.sweeps),
-            pair_wrench=out.pair_wrench[: len(scenario.pairs)],
+            pair_force=pair_force,
+            min_psi=out.min_psi,
+            force_steps=out.force_steps,
+            sweeps=out.sweeps,
+            pair_wrench=pair_wrench,
         )
 
     def rollout_each(self, scenario: Scenario, state: State, controls, durations, h: float) -> list[ControlEnd]:
