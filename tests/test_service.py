@@ -113,8 +113,10 @@ def test_bad_options_and_parameters_are_422_named_as_in_the_request(idle):
     r = submit(idle, {"kind": "plan", "scenario": FREE, "options": {"seed": -1}})
     assert r.status_code == 422 and r.json()["problems"][0]["key"] == "body.options.seed"
     assert r.json()["detail"] == "request: body.options.seed: must be between 0 and 1000000000, got -1"
-    r = submit(idle, {"kind": "plan", "scenario": FREE, "parameters": {"nope": 1.0}})
-    assert r.status_code == 422 and "nope" in r.json()["detail"]
+    r = submit(idle, {"kind": "plan", "scenario": FREE, "parameters": {"nope": 1.0}})  # a parameter the scenario lacks
+    assert r.status_code == 422 and r.json()["file"] == "request"
+    assert [p["key"] for p in r.json()["problems"]] == ["body.parameters.nope"]
+    assert r.json()["detail"].startswith("request: body.parameters.nope: the file has no parameter 'nope' (parameters: ")
     r = submit(idle, {"kind": "plan", "scenario": TRIANGLE, "parameters": {"mu": -1.0}})  # in range as a number, not as a friction
     assert r.status_code == 422 and [(p["key"], p["reason"]) for p in r.json()["problems"]][0] == (
         "contact.pairs[0].mu",

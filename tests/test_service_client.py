@@ -112,7 +112,7 @@ def test_the_client_cancels_and_reports_refusals(idle):
         bad = job_request(FREE, parameters={"nope": 1.0})
         with pytest.raises(ServiceError) as refused:
             client.submit_request(bad)
-        assert refused.value.status == 422 and str(refused.value).startswith("free_transfer.toml: parameters.nope:")
+        assert refused.value.status == 422 and str(refused.value).startswith("request: body.parameters.nope:")
     with Client(idle) as anonymous, pytest.raises(ServiceError) as denied:
         anonymous.jobs()
     assert denied.value.status == 401 and "--token" in str(denied.value)
@@ -182,14 +182,17 @@ def test_submit_refused_by_the_service_is_exit_2_with_its_reasons(idle, capsys, 
     code, out, err = submit_cli(capsys, monkeypatch, "scenarios/free_transfer.toml", "--server", idle)
     assert code == 2 and out == "" and "401" in err and "--token" in err and "Traceback" not in err
     monkeypatch.setenv("LADDER_TOKEN", "s3cret")
-    # the request's options are the request's (labelled as its body's keys), and come first; then the scenario's problems
+    # the request's options and parameters are the request's (labelled as its body's keys), and come first
     args = ["scenarios/free_transfer.toml", "--server", idle, "--seed", "-1", "--param", "nope=1"]
     code, out, err = submit_cli(capsys, monkeypatch, *args)
     assert code == 2 and out == "" and "Traceback" not in err
-    assert err.splitlines() == ["error: request: body.options.seed: must be between 0 and 1000000000, got -1"]
+    assert sorted(err.splitlines()) == [
+        "error: request: body.options.seed: must be between 0 and 1000000000, got -1",
+        "error: request: body.parameters.nope: the file has no parameter 'nope' (parameters: gap, vx, vy)",
+    ]
     code, out, err = submit_cli(capsys, monkeypatch, *args[:3], "--param", "nope=1")
     assert code == 2 and out == "" and "Traceback" not in err
-    assert err.startswith("error: scenarios/free_transfer.toml: parameters.nope: the file has no parameter 'nope'")
+    assert err.startswith("error: request: body.parameters.nope: the file has no parameter 'nope'")  # a parameter the scenario lacks
     # an address past the service's root (its /jobs route) is a 405: said as a wrong address
     code, out, err = submit_cli(capsys, monkeypatch, "scenarios/free_transfer.toml", "--server", idle + "/jobs")
     assert code == 2 and out == "" and len(err.strip().splitlines()) == 1

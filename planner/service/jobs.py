@@ -271,8 +271,10 @@ def cli_args(kind: str, path: Path, parameters: dict, options: dict, out: Path) 
 def check(kind: str, path: Path, parameters: dict, options: dict, out: Path) -> tuple[SimpleNamespace, tuple]:
     """The CLI's checks of a plan / simulate command on this job (run with the job's folder as
     the working directory): (the CLI namespace, what the check returns); else ScenarioError,
-    its keys the request's (options.seed, parameters.v1): the options' problems, if any, alone
-    and under `request` (`_in_request`), else the scenario's under its file name."""
+    its keys the request's (options.seed, parameters.v1): the problems of the request's options
+    and parameters, if any, alone and under `request` (`_in_request`; a parameter the scenario
+    does not have), else the scenario's under its file name (a parameter's value that breaks a
+    rule of the scenario's is the scenario's: `contact.pairs[0].mu: ... from 'mu'`)."""
     from planner import cli
 
     problems = _option_problems(kind, options)
@@ -292,11 +294,12 @@ def check(kind: str, path: Path, parameters: dict, options: dict, out: Path) -> 
         else:
             checked = cli._check_simulate_args(args)
     except ScenarioError as exc:
+        # the CLI gives its flags' problems (--seed, --param v1: the request's options and
+        # parameters) under the scenario's file, with the file's own; the request's are the
+        # request's, and its problems come first (as its others do)
         problems = [Problem(_cli_key(p.key), _cli_reason(kind, p.reason)) for p in exc.problems]
-        # the CLI gives its flags' problems under the scenario's file, with the file's own; a
-        # request's options are the request's, and its problems come first (as its others do)
-        options_problems = [p for p in problems if p.key.startswith("options.")]
-        raise (_in_request(options_problems) if options_problems else ScenarioError(exc.file, problems)) from None
+        flags = [mapped for p, mapped in zip(exc.problems, problems) if p.key.startswith("--")]
+        raise (_in_request(flags) if flags else ScenarioError(exc.file, problems)) from None
     return args, checked
 
 
