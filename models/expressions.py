@@ -15,12 +15,12 @@ import operator
 import threading
 from collections.abc import Mapping
 
-_BINARY = {
-    ast.Add: operator.add,
-    ast.Sub: operator.sub,
-    ast.Mult: operator.mul,
-    ast.Div: operator.truediv,
-    ast.Pow: operator.pow,
+_BINARY = {  # (the operation, its symbol)
+    ast.Add: (operator.add, "+"),
+    ast.Sub: (operator.sub, "-"),
+    ast.Mult: (operator.mul, "*"),
+    ast.Div: (operator.truediv, "/"),
+    ast.Pow: (operator.pow, "**"),
 }
 _UNARY = {ast.USub: operator.neg, ast.UAdd: operator.pos}
 #: Functions an expression may call (one argument each).
@@ -92,9 +92,12 @@ def _eval(node: ast.AST, text: str, parameters: Mapping[str, float]) -> float:
         left = _eval(node.left, text, parameters)
         right = _eval(node.right, text, parameters)
         try:
-            value = _BINARY[type(node.op)](left, right)
-        except (ZeroDivisionError, OverflowError) as exc:
+            operation, symbol = _BINARY[type(node.op)]
+            value = operation(left, right)
+        except ZeroDivisionError as exc:
             raise ExpressionError(f"{text!r}: {exc}") from None
+        except OverflowError:  # (its text for a power is an errno tuple: (34, 'Numerical result out of range'))
+            raise ExpressionError(f"{text!r}: {left:g} {symbol} {right:g} is too large to compute with") from None
         if isinstance(value, complex):  # (-1) ** 0.5: Python's power of a negative base
             raise ExpressionError(f"{text!r}: ({left:g}) ** {right:g} is not a real number (a negative base to a fractional power)")
         return float(value)
@@ -110,7 +113,9 @@ def _eval(node: ast.AST, text: str, parameters: Mapping[str, float]) -> float:
         argument = _eval(node.args[0], text, parameters)
         try:
             return float(FUNCTIONS[node.func.id](argument))
-        except (ValueError, OverflowError) as exc:
+        except OverflowError:
+            raise ExpressionError(f"{text!r}: {node.func.id}({argument:g}) is too large to compute with") from None
+        except ValueError as exc:
             raise ExpressionError(f"{text!r}: {node.func.id}({argument:g}): {exc}") from None
     raise ExpressionError(
         f"{text!r}: only numbers, parameter names, pi, + - * / **, parentheses and "

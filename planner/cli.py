@@ -496,6 +496,36 @@ def _many_steps(count: float) -> str:
     return f"{count:.3g} steps" if count < float("inf") else "too many steps to count"
 
 
+def _plan_arrays(path: Path, rung: dict, key: str, width: int, expected: str) -> tuple[np.ndarray, np.ndarray]:
+    """A plan rung's controls (one row of `width` finite numbers per duration) and durations
+    (numbers; `read_plan` checks their values), as arrays; else bad input naming the key."""
+
+    def number(value) -> bool:
+        return isinstance(value, int | float) and not isinstance(value, bool)
+
+    raw_controls, raw_durations = rung.get("controls"), rung.get("durations")
+    if not isinstance(raw_durations, list) or not all(number(d) for d in raw_durations):
+        raise ScenarioError(path, [Problem(f"{key}.durations", f"must be a list of numbers (seconds); {expected}")])
+    if not isinstance(raw_controls, list) or len(raw_controls) != len(raw_durations):
+        count = f"{len(raw_controls)} controls" if isinstance(raw_controls, list) else "no list of controls"
+        raise ScenarioError(path, [Problem(f"{key}.controls", f"{count} for {len(raw_durations)} durations; {expected}")])
+    for k, row in enumerate(raw_controls):
+        if not isinstance(row, list) or len(row) != width or not all(number(v) for v in row):
+            raise ScenarioError(
+                path,
+                [
+                    Problem(
+                        f"{key}.controls[{k}]",
+                        f"a control is a list of {width} numbers (one per driven coordinate), got {json.dumps(row)[:80]}",
+                    )
+                ],
+            )
+        for j, value in enumerate(row):
+            if not math.isfinite(value):
+                raise ScenarioError(path, [Problem(f"{key}.controls[{k}][{j}]", f"must be a finite number, got {value}")])
+    return np.array(raw_controls, float).reshape(len(raw_durations), width), np.array(raw_durations, float)
+
+
 def read_plan(path: Path, scenario: Scenario) -> tuple[np.ndarray, np.ndarray]:
     """The last rung's controls and durations of a plan.json that has any (the top rung's, unless
     it failed with none or the plan was interrupted), which must be of this scene
@@ -513,13 +543,10 @@ def read_plan(path: Path, scenario: Scenario) -> tuple[np.ndarray, np.ndarray]:
         index = [i for i, r in enumerate(data["rungs"]) if r.get("durations")][-1]
     except (KeyError, IndexError, TypeError, AttributeError):
         raise ScenarioError(path, [Problem("rungs", f"no rung with controls; {expected}")]) from None
-    try:
-        last = data["rungs"][index]
-        controls = np.array(last["controls"], float).reshape(len(last["durations"]), -1)
-        durations = np.array(last["durations"], float)
-    except (ValueError, KeyError, TypeError) as exc:
-        problem = Problem(f"rungs[{index}]", f"its controls and durations do not make a plan ({exc}); {expected}")
-        raise ScenarioError(path, [problem]) from None
+    reasons = scene_mismatch(data.get("scene"), scenario)  # (first: another scene's controls may be of another width)
+    if reasons:
+        raise ScenarioError(path, [Problem("scene", f"not a plan of {scenario.path}: {reason}") for reason in reasons])
+    controls, durations = _plan_arrays(path, data["rungs"][index], f"rungs[{index}]", len(scenario.actuated), expected)
     bad = [k for k, d in enumerate(durations) if not (0.0 < d < float("inf"))]
     if bad:
         k = bad[0]
@@ -532,9 +559,6 @@ def read_plan(path: Path, scenario: Scenario) -> tuple[np.ndarray, np.ndarray]:
                 )
             ],
         )
-    reasons = scene_mismatch(data.get("scene"), scenario)
-    if reasons:
-        raise ScenarioError(path, [Problem("scene", f"not a plan of {scenario.path}: {reason}") for reason in reasons])
     return controls, durations
 
 
@@ -1691,7 +1715,12 @@ def cmd_submit(args: argparse.Namespace) -> int:
                 if args.json:
                     print(json.dumps(job, indent=2))
                 return EXIT_OK
-            job = client.wait(job["id"], on_event=_job_progress(live=sys.stderr.isatty()))
+            try:
+                job = client.wait(job["id"], on_event=_job_progress(live=sys.stderr.isatty()))
+            except KeyboardInterrupt:  # only the waiting stops: say where the job goes on
+                where = f"{client.url}/jobs/{job['id']}"
+                print(f"interrupted: job {job['id']} goes on at the service ({where}; DELETE {where} cancels it)", file=sys.stderr)
+                return EXIT_INTERRUPTED
             plan = json.loads(client.result(job["id"])) if job["result_available"] else None
     except ServiceError as exc:
         _print_error(exc)

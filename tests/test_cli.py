@@ -731,6 +731,34 @@ def test_a_plan_with_a_control_of_no_positive_duration_is_bad_input(tmp_path):
         )
 
 
+def test_a_plan_whose_controls_are_not_its_scene_s_is_bad_input_naming_the_key(tmp_path):
+    """A NaN control had run (exit 1, status non_finite), and a missing control or one of the
+    wrong width had been said in NumPy's words (cannot reshape array ...)."""
+    plan = _plan(tmp_path, "a")
+    data = json.loads(plan.read_text())
+    index = max(i for i, r in enumerate(data["rungs"]) if r.get("durations"))
+    rung, n = data["rungs"][index], len(data["rungs"][index]["durations"])
+    cases = [
+        (lambda r: r["controls"][2].__setitem__(0, float("nan")), f"rungs[{index}].controls[2][0]: must be a finite number, got nan"),
+        (lambda r: r["controls"].pop(), f"rungs[{index}].controls: {n - 1} controls for {n} durations"),
+        (
+            lambda r: r["controls"][1].append(0.5),
+            f"rungs[{index}].controls[1]: a control is a list of 2 numbers (one per driven coordinate), got [",
+        ),
+        (lambda r: r["controls"][0].__setitem__(1, "fast"), f"rungs[{index}].controls[0]: a control is a list of 2 numbers"),
+        (lambda r: r.__setitem__("durations", [0.05] * (n - 1) + ["0.05"]), f"rungs[{index}].durations: must be a list of numbers"),
+    ]
+    for change, message in cases:
+        bad_data = json.loads(json.dumps(data))
+        change(bad_data["rungs"][index])
+        bad = tmp_path / "bad.json"
+        bad.write_text(json.dumps(bad_data))
+        done = ladder("simulate", TRIANGLE, "--param", "v1=0.8", "--plan", str(bad), "--model", "kinematic")
+        assert done.returncode == 2 and done.stdout == "" and "Traceback" not in done.stderr, done.stderr
+        assert done.stderr.startswith(f"error: {bad}: {message}"), done.stderr
+    assert rung["controls"]  # (the plan had controls to break)
+
+
 @pytest.mark.parametrize(
     "args, message",
     [

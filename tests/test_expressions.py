@@ -1,4 +1,5 @@
 import math
+import re
 
 import pytest
 
@@ -31,13 +32,14 @@ def test_evaluates(text, value):
         ("[1]", "only numbers"),
         ("1 / 0", "division by zero"),
         ("sqrt(-1)", "domain"),
-        ("exp(1000)", "range"),
+        ("exp(1000)", "'exp(1000)': exp(1000) is too large to compute with"),
+        ("v1 ** 9999", "'v1 ** 9999': 2 ** 9999 is too large to compute with"),  # (had been an errno tuple)
         ("1e308 * 10", "not a finite number"),
         ("True", "only numbers"),
     ],
 )
 def test_rejects(text, fragment):
-    with pytest.raises(ExpressionError, match=fragment.replace("(", r"\(").replace("[", r"\[")):
+    with pytest.raises(ExpressionError, match=re.escape(fragment)):
         evaluate(text, {"v1": 2.0})
 
 

@@ -812,3 +812,37 @@ def test_a_port_in_use_or_a_database_in_use_is_bad_input_and_makes_no_database(t
         assert first.get(f"/jobs/{job['id']}").json()["state"] == "queued"
     with TestClient(create_app(db, workers=0)) as again:  # (once the first has stopped)
         assert again.get(f"/jobs/{job['id']}").json()["state"] == "queued"
+
+
+def test_a_db_that_is_not_the_jobs_database_is_bad_input_and_left_as_it_was(tmp_path, capsys):
+    """`ladder serve --db` given a file that is not a database (a scenario, by mistake), another
+    program's database, or one whose jobs table lacks the jobs' columns: exit 2 naming --db and
+    the file, the file unchanged, no lock file left beside it (it had been a traceback, exit 1)."""
+    import sqlite3
+
+    scenario = tmp_path / "scenario.toml"
+    scenario.write_text(FREE)
+    other, old = tmp_path / "other.sqlite", tmp_path / "old.sqlite"
+    for path, table in ((other, "users (name TEXT)"), (old, "jobs (id TEXT PRIMARY KEY, kind TEXT)")):
+        conn = sqlite3.connect(path)
+        conn.execute(f"CREATE TABLE {table}")
+        conn.commit()
+        conn.close()
+    reasons = {scenario: "file is not a database", other: "it holds other tables: users", old: "its jobs table has no column "}
+    for path, reason in reasons.items():
+        before = path.read_bytes()
+        assert cli_main(["serve", "--port", "0", "--db", str(path)]) == 2
+        said = capsys.readouterr().err
+        assert said.startswith(f"error: ladder serve: --db: {path}: not a ladder jobs database ({reason}"), said
+        assert "Traceback" not in said and "serving on" not in said
+        assert path.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["old.sqlite", "other.sqlite", "scenario.toml"]
+    with TestClient(create_app(tmp_path / "new.sqlite", workers=0)) as fresh:  # a new file is made the jobs' database
+        assert submit(fresh).status_code == 201
+
+
+def test_a_body_that_is_not_json_says_where_and_what(idle):
+    """FastAPI's own words had been `body.17: JSON decode error`: neither what nor where in words."""
+    r = idle.post("/jobs", content=b'{"kind": "plan", "scenario": }', headers={"Content-Type": "application/json"})
+    assert r.status_code == 422 and r.json()["file"] == "request"
+    assert r.json()["detail"] == "request: body: not valid JSON at character 29: Expecting value"

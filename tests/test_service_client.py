@@ -197,3 +197,56 @@ def test_submit_refused_by_the_service_is_exit_2_with_its_reasons(idle, capsys, 
     code, out, err = submit_cli(capsys, monkeypatch, "scenarios/free_transfer.toml", "--server", idle + "/jobs")
     assert code == 2 and out == "" and len(err.strip().splitlines()) == 1
     assert f"405 Method Not Allowed: Method Not Allowed at /jobs/jobs: is {idle} a ladder service, and the address its root?" in err
+
+
+def test_a_server_that_is_not_the_service_is_said_in_one_line(capsys, monkeypatch):
+    """Another program's web server answers a job with a page of its own: its status, and the
+    question whether the address is a ladder service, not the page's lines (they had been
+    printed one `error:` line each)."""
+    import threading
+    from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+
+    class Page(BaseHTTPRequestHandler):
+        def do_POST(self):  # noqa: N802 (http.server's name)
+            body = b"<!DOCTYPE html>\n<html>\n<body>\n<h1>Not here</h1>\n</body>\n</html>\n"
+            self.send_response(501, "Unsupported method ('POST')")
+            self.send_header("Content-Type", "text/html")
+            self.send_header("Content-Length", str(len(body)))
+            self.end_headers()
+            self.wfile.write(body)
+
+        def log_message(self, *args):  # quiet
+            pass
+
+    server = ThreadingHTTPServer(("127.0.0.1", 0), Page)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    url = f"http://127.0.0.1:{server.server_address[1]}"
+    try:
+        code, out, err = submit_cli(capsys, monkeypatch, "scenarios/free_transfer.toml", "--server", url)
+    finally:
+        server.shutdown()
+        server.server_close()
+    assert code == 2 and out == "" and "Traceback" not in err
+    assert err.splitlines() == [
+        f"error: 501 Unsupported method ('POST') at /jobs: is {url} a ladder service, and the address its root? (ladder submit: --server)"
+    ]
+
+
+def test_ctrl_c_while_waiting_says_the_job_goes_on_and_how_to_cancel_it(idle, capsys, monkeypatch):
+    """Ctrl-C stops only the waiting (it had said "interrupted" alone): the job goes on at the
+    service, which this says, with the address that cancels it."""
+
+    def interrupted(self, job_id, on_event=None):
+        raise KeyboardInterrupt
+
+    monkeypatch.setenv("LADDER_TOKEN", "s3cret")
+    monkeypatch.setattr(Client, "wait", interrupted)
+    code, out, err = submit_cli(capsys, monkeypatch, "scenarios/free_transfer.toml", "--server", idle, "--wait")
+    assert code == 130 and out == "" and "Traceback" not in err
+    job_id = err.split()[1].rstrip(":")
+    assert err.splitlines()[-1] == (
+        f"interrupted: job {job_id} goes on at the service ({idle}/jobs/{job_id}; DELETE {idle}/jobs/{job_id} cancels it)"
+    )
+    with Client(idle, "s3cret") as client:
+        assert client.get(job_id)["state"] == "queued"

@@ -18,6 +18,7 @@ import hmac
 import json
 import multiprocessing
 import re
+import sqlite3
 import threading
 import uuid
 from concurrent.futures import Future, ProcessPoolExecutor
@@ -202,6 +203,17 @@ async def _send_json(send, status: int, data: dict, headers: list | None = None)
     await send({"type": "http.response.body", "body": body})
 
 
+def _validation_problem(error: dict) -> Problem:
+    """One of FastAPI's validation errors as a problem keyed where it is in the request; a body
+    that is not JSON says where and what the parser found (FastAPI's own words: `body.17: JSON
+    decode error`)."""
+    loc = error.get("loc", ())
+    if error.get("type") == "json_invalid" and len(loc) == 2 and isinstance(loc[1], int):
+        found = (error.get("ctx") or {}).get("error", "")
+        return Problem("body", f"not valid JSON at character {loc[1]}" + (f": {found}" if found else ""))
+    return Problem(".".join(str(x) for x in loc), str(error.get("msg", "")))
+
+
 class Service:
     """The jobs' store and what runs them: a local worker pool, or a Dask cluster (`executor`,
     dask://HOST:PORT, connected at once: ScenarioError when it cannot be reached)."""
@@ -214,7 +226,7 @@ class Service:
         self.executor = executor
         self._owner = None
         self._own()
-        self.store = Store(self.db_path)
+        self.store = self._open_store()
         self.closed = False
         self.pool: ProcessPoolExecutor | None = None
         self.lock = threading.Lock()
@@ -235,7 +247,7 @@ class Service:
         app's lifespan may run more than once in tests)."""
         if self.closed:
             self._own()
-            self.store, self.closed = Store(self.db_path), False
+            self.store, self.closed = self._open_store(), False
         if self.executor is not None and self.runner is None:
             from planner.service.remote import DaskRunner
 
@@ -263,6 +275,20 @@ class Service:
         self._owner.close()  # (the lock with it)
         self._owner = None
 
+    def _open_store(self) -> Store:
+        """The jobs' store on the database this service owns (`_own`), or ScenarioError naming
+        --db where the file is not a ladder jobs database (the lock given up, and its file
+        removed where `_own` made it)."""
+        try:
+            return Store(self.db_path)
+        except sqlite3.DatabaseError as exc:
+            self._owner.close()
+            self._owner = None
+            if self._made_lock:
+                Path(f"{self.db_path}.lock").unlink(missing_ok=True)
+            problem = Problem("--db", f"{self.db_path}: not a ladder jobs database ({exc}); give the jobs' database, or a new file")
+            raise ScenarioError("ladder serve", [problem]) from None
+
     def _own(self) -> None:
         """Run the database's jobs alone, or ScenarioError: a second server on it ran them again
         (its start queues the jobs under way and runs them), beside the first. The lock is an
@@ -270,6 +296,7 @@ class Service:
         not on the database, whose SQLite locks closing another descriptor of it would release."""
         import fcntl
 
+        self._made_lock = not Path(f"{self.db_path}.lock").exists()
         owner = open(f"{self.db_path}.lock", "a")  # noqa: SIM115 (held until `stop`)
         try:
             fcntl.flock(owner, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -413,8 +440,7 @@ def create_app(
     @app.exception_handler(RequestValidationError)
     async def request_error(request: Request, exc: RequestValidationError):
         """A request that is not what the description says: 422 as every other bad input."""
-        problems = [Problem(".".join(str(x) for x in e.get("loc", ())), str(e.get("msg", ""))) for e in exc.errors()]
-        return _unprocessable(ScenarioError("request", problems))
+        return _unprocessable(ScenarioError("request", [_validation_problem(e) for e in exc.errors()]))
 
     def get_row(job_id: str):
         row = service.store.get(job_id)

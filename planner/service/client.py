@@ -105,17 +105,21 @@ def _message(response: httpx2.Response) -> str:
     """A refused request's message: the service's `detail` (FastAPI's validation errors as `where: what` lines)."""
     try:
         detail = response.json().get("detail")
+        answered = True  # JSON, as the service answers
     except (ValueError, AttributeError):
-        detail = None
+        detail, answered = None, False
     if isinstance(detail, list):  # FastAPI's own 422: [{"loc": [...], "msg": ...}]
         detail = "\n".join(f"{'.'.join(str(x) for x in d.get('loc', []))}: {d.get('msg')}" for d in detail if isinstance(d, dict))
+    root = str(response.request.url.copy_with(path="/", query=None, fragment=None)).rstrip("/")
+    not_here = f" at {response.request.url.path}: is {root} a ladder service, and the address its root? (ladder submit: --server)"
+    if not answered:  # not the service's answer (another server's page, a proxy's): its status, not its body's lines
+        return f"{response.status_code} {response.reason_phrase}{not_here}"
     if not detail:
         detail = response.text.strip() or response.reason_phrase
     if response.status_code == 401:
         detail += " (ladder submit: --token, or the LADDER_TOKEN environment variable)"
     elif response.status_code == 405 or (response.status_code == 404 and detail == "Not Found"):  # a route the service lacks
-        root = str(response.request.url.copy_with(path="/", query=None, fragment=None)).rstrip("/")
-        detail += f" at {response.request.url.path}: is {root} a ladder service, and the address its root? (ladder submit: --server)"
+        detail += not_here
     return f"{detail}" if response.status_code == 422 else f"{response.status_code} {response.reason_phrase}: {detail}"
 
 

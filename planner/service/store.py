@@ -55,19 +55,51 @@ def iso(t: float) -> str:
     return datetime.fromtimestamp(t, UTC).isoformat(timespec="milliseconds").replace("+00:00", "Z")
 
 
+def _schema_columns() -> dict[str, set[str]]:
+    """The columns SCHEMA gives each of its tables (read from SQLite, not written twice)."""
+    memory = sqlite3.connect(":memory:")
+    try:
+        memory.executescript(SCHEMA)
+        tables = [name for (name,) in memory.execute("SELECT name FROM sqlite_master WHERE type = 'table'")]
+        return {table: {row[1] for row in memory.execute(f"PRAGMA table_info({table})")} for table in tables}
+    finally:
+        memory.close()
+
+
 class Store:
-    """One connection to the service's database; safe to share between threads (a lock)."""
+    """One connection to the service's database; safe to share between threads (a lock).
+    sqlite3.DatabaseError where the file is not a database, or is one whose tables are not the
+    jobs' (another program's, or a version without some column): nothing is written to it."""
 
     def __init__(self, path: str | Path):
         self.path = str(path)
         self.conn = sqlite3.connect(self.path, timeout=30, isolation_level=None, check_same_thread=False)
         self.conn.row_factory = sqlite3.Row
         self.lock = threading.RLock()
-        with self.lock:
-            self.conn.execute("PRAGMA journal_mode=WAL")
-            self.conn.execute("PRAGMA synchronous=NORMAL")
-            self.conn.execute("PRAGMA busy_timeout=30000")
-            self.conn.executescript(SCHEMA)
+        try:
+            with self.lock:
+                self._check_tables()
+                self.conn.execute("PRAGMA journal_mode=WAL")
+                self.conn.execute("PRAGMA synchronous=NORMAL")
+                self.conn.execute("PRAGMA busy_timeout=30000")
+                self.conn.executescript(SCHEMA)
+        except BaseException:
+            self.conn.close()
+            raise
+
+    def _check_tables(self) -> None:
+        """The database is empty, or has SCHEMA's tables with their columns (reading it: a file
+        that is not a database fails here, before any write; another program's is not written)."""
+        expected = _schema_columns()
+        tables = {name for (name,) in self.conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+        if tables and not tables & expected.keys():
+            shown = ", ".join(sorted(tables)[:5]) + (", ..." if len(tables) > 5 else "")
+            raise sqlite3.DatabaseError(f"it holds other tables: {shown}")
+        for table, columns in expected.items():
+            have = {row[1] for row in self.conn.execute(f"PRAGMA table_info({table})")}
+            missing = sorted(columns - have)
+            if have and missing:
+                raise sqlite3.DatabaseError(f"its {table} table has no column {', '.join(missing)}")
 
     def close(self) -> None:
         with self.lock:
