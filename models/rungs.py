@@ -202,6 +202,8 @@ class Compiled:
     goal: Program
     unsafe: Program
     capacity: int
+    # the shapes of a state's q, nu, q_ref, delta_n and delta_t (`check_state`)
+    state_shapes: tuple
     scripted: bool  # some obstacle moves on a script (rollouts then work on a copy of the scene's pose tables)
     # the typed Lists `Rung.rollout` binds (`models.rollout.rollout_bound`), by (model, solver, laws)
     bound: dict = field(default_factory=dict)
@@ -219,6 +221,23 @@ def own_poses(scene: SceneData) -> SceneData:
     """The scene with its own copy of the pose tables the kernels move scripted obstacles in
     (`models.contact.place_scripted`: bf, base_pos, base_quat), the rest shared."""
     return scene._replace(bf=scene.bf.copy(), base_pos=scene.base_pos.copy(), base_quat=scene.base_quat.copy())
+
+
+def _state_shapes(scenario: Scenario, drives: int, capacity: int) -> tuple:
+    """The shapes of a state's q, nu, q_ref, delta_n and delta_t in this scenario."""
+    return (len(scenario.coordinates),), (len(scenario.velocities),), (drives,), (capacity,), (capacity, 2)
+
+
+def check_state(scenario: Scenario, c: Compiled, state: State) -> None:
+    """ValueError where state's arrays are not shaped as the scenario's states (c: what it
+    compiles to): the kernels index them unchecked, and a state of another scene passed to a
+    rollout had crashed the process (a segmentation fault)."""
+    arrays = (state.q, state.nu, state.q_ref, state.delta_n, state.delta_t)
+    got = tuple(getattr(a, "shape", None) for a in arrays)
+    if got != c.state_shapes:
+        names = ("q", "nu", "q_ref", "delta_n", "delta_t")
+        wrong = [f"{name} {g} (expected {e})" for name, g, e in zip(names, got, c.state_shapes) if g != e]
+        raise ValueError(f"the state is not one of {scenario.path.name}'s (a state of another scenario?): {'; '.join(wrong)}")
 
 
 def compiled(scenario: Scenario) -> Compiled:
@@ -264,13 +283,15 @@ def compiled(scenario: Scenario) -> Compiled:
         pi = S.pi.copy()
         pi[sorted(watched), PI_INERT] = 0  # predicates need these distances
         S = S._replace(pi=pi)
+    capacity = max(int(S.pair_max_contacts.sum()), 1)
     result = Compiled(
         scene=S,
         drives=drives,
         policy_drives=policy_drives(scenario, drives),
         goal=goal,
         unsafe=unsafe,
-        capacity=max(int(S.pair_max_contacts.sum()), 1),
+        capacity=capacity,
+        state_shapes=_state_shapes(scenario, len(q_index), capacity),
         scripted=bool(has_script(S.bf)),
         scene_bound=bind((S,)),
     )
@@ -384,6 +405,7 @@ class Rung:
         if self.model is None:
             raise ValueError("the geometric rung has no dynamics to roll out; use valid()")
         c = compiled(scenario)
+        check_state(scenario, c, state)
         self._compile_ahead(c, state, h)
         # scripted obstacles: this call's own pose tables (`_bound`; each control's kernel call
         # places the obstacles at its start, t0 = 0, as a separate `rollout` does)
@@ -444,6 +466,7 @@ class Rung:
         if self.model is None:
             raise ValueError("the geometric rung has no dynamics to roll out; use valid()")
         c = compiled(scenario)
+        check_state(scenario, c, state)
         self._compile_ahead(c, state, h)
         drives = c.policy_drives if laws else c.drives
         state_args = (state.q.copy(), state.nu.copy(), state.q_ref.copy(), state.delta_n.copy(), state.delta_t.copy(), _basis_of(state))
@@ -741,13 +764,25 @@ class GeometricChecker:
         return _geometric_motion_bound(self.bound, x, steered, a, b, int(nd), self._no_trace if trace is None else trace)
 
 
+def _check_configurations(scenario: Scenario, shape: tuple, ndim: int) -> None:
+    """ValueError where an array of configurations (ndim 1: one; 2: one per row) does not have the
+    scenario's coordinates (the kernels read it unchecked)."""
+    if len(shape) != ndim or shape[-1] != len(scenario.coordinates):
+        what = "a configuration" if ndim == 1 else "configurations, one per row,"
+        raise ValueError(
+            f"expected {what} of {len(scenario.coordinates)} coordinates of {scenario.path.name}, got an array of shape {shape}"
+        )
+
+
 def pair_signed_distances(scenario: Scenario, q: np.ndarray) -> np.ndarray:
     """Every contact pair's signed distance at q, m (negative: penetration depth), in
     `scenario.pairs` order: the compiled kernels, the reference geometry (`models.geometry`,
     python-fcl) only for the pairs they cannot measure (inert pairs read inf)."""
     n = len(scenario.pairs)
     out = np.empty(max(n, 1))
-    _pair_distances_bound(compiled(scenario).scene_bound, kernel_array(q), out)
+    q = kernel_array(q)
+    _check_configurations(scenario, q.shape, 1)
+    _pair_distances_bound(compiled(scenario).scene_bound, q, out)
     if np.isnan(out[:n]).any():
         _measure_missing(scenario, q, out[:n])
     return out[:n]
@@ -758,6 +793,7 @@ def pair_signed_distances_many(scenario: Scenario, Q: np.ndarray) -> np.ndarray:
     row the same numbers as one call at that q gives (the goal sampler's finite differences)."""
     n = len(scenario.pairs)
     Q = kernel_array(np.atleast_2d(Q))
+    _check_configurations(scenario, Q.shape, 2)
     out = np.empty((len(Q), max(n, 1)))
     _pair_distances_many_bound(compiled(scenario).scene_bound, Q, out)
     if np.isnan(out[:, :n]).any():

@@ -1,0 +1,51 @@
+"""A state or configuration of another scene is refused before the compiled kernels read it.
+
+The kernels index their arrays unchecked: a state of free_transfer (2 coordinates) rolled out in
+box_push_3d (9) had crashed the Python process with a segmentation fault. `Rung.rollout` (and
+`step`, `rollout_chunked`, which call it), `Rung.rollout_each` and the pair distances now raise
+ValueError naming what is wrong; a state of the scene itself runs as before.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from models.rungs import pair_signed_distances, pair_signed_distances_many, rung_for
+from models.scenario import load_scenario
+from tests.conftest import SCENARIOS
+
+
+@pytest.fixture(scope="module")
+def scenes():
+    return load_scenario(SCENARIOS / "free_transfer.toml"), load_scenario(SCENARIOS / "box_push_3d.toml")
+
+
+def test_a_state_of_another_scene_is_refused_by_every_rollout(scenes):
+    small, box = scenes
+    rung = rung_for(box, "dynamic-rigid")
+    other = rung_for(small, "dynamic-rigid").initial_state(small)
+    u, h = np.zeros((1, len(box.actuated))), box.rung_settings("dynamic-rigid").h
+    expected = "the state is not one of box_push_3d.toml's (a state of another scenario?): q (2,) (expected (9,)); nu (2,) (expected (8,))"
+    calls = [
+        lambda: rung.rollout(box, other, u, [0.1], h),
+        lambda: rung.step(box, other, u[0], h),
+        lambda: rung.rollout_each(box, other, u, [0.1], h),
+        lambda: rung.rollout_chunked(box, other, u, [0.1], h),
+    ]
+    for call in calls:
+        with pytest.raises(ValueError) as refused:
+            call()
+        assert str(refused.value).startswith(expected)
+    own = rung.rollout(box, rung.initial_state(box), u, [0.1], h)  # its own state runs
+    assert own.ok and own.steps == 100
+
+
+def test_a_configuration_of_another_scene_is_refused_by_the_pair_distances(scenes):
+    small, box = scenes
+    with pytest.raises(ValueError, match=r"expected a configuration of 9 coordinates of box_push_3d.toml, got an array of shape \(2,\)"):
+        pair_signed_distances(box, small.start)
+    with pytest.raises(ValueError, match=r"one per row, of 9 coordinates of box_push_3d.toml, got an array of shape \(3, 2\)"):
+        pair_signed_distances_many(box, np.zeros((3, 2)))
+    d = pair_signed_distances(box, box.start)
+    np.testing.assert_array_equal(pair_signed_distances_many(box, np.array([box.start]))[0], d)
