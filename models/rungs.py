@@ -54,6 +54,9 @@ from models.task import Outcome
 GEOMETRIC_TOLERANCE = 1e-9
 #: Default number of states kept in a rollout's trajectory.
 DEFAULT_RECORDS = 2000
+#: The most steps one control of a rollout may take: the kernels count a control's steps in an
+#: int64 from round(duration / h), exact up to here (a step h of 1e-300 had run on for ever).
+MAX_CONTROL_STEPS = 2**53
 
 
 def _no_basis() -> np.ndarray:
@@ -228,6 +231,22 @@ def _state_shapes(scenario: Scenario, drives: int, capacity: int) -> tuple:
     return (len(scenario.coordinates),), (len(scenario.velocities),), (drives,), (capacity,), (capacity, 2)
 
 
+def check_run(durations: np.ndarray, h: float) -> None:
+    """ValueError unless h is a positive number of seconds and every duration a finite one of
+    no less than zero, of at most MAX_CONTROL_STEPS steps (h = 0 had been a ZeroDivisionError,
+    a negative h a run of no steps, status ok; a NaN duration an undefined step count)."""
+    if not (h > 0.0 and math.isfinite(h)):
+        raise ValueError(f"the step h must be a positive number of seconds, got {h}")
+    if len(durations) == 0:
+        return
+    lo, hi = (float(durations[0]),) * 2 if len(durations) == 1 else (float(durations.min()), float(durations.max()))
+    if not (lo >= 0.0 and hi < math.inf):  # (a NaN fails both)
+        bad = next(float(d) for d in durations if not 0.0 <= d < math.inf)
+        raise ValueError(f"a control's duration must be a finite number of seconds, no less than 0, got {bad}")
+    if hi / h > MAX_CONTROL_STEPS:
+        raise ValueError(f"a control of {hi:g} s at h = {h:g} is {hi / h:.3g} steps, more than a rollout counts ({MAX_CONTROL_STEPS:.3g})")
+
+
 def check_state(scenario: Scenario, c: Compiled, state: State) -> None:
     """ValueError where state's arrays are not shaped as the scenario's states (c: what it
     compiles to): the kernels index them unchecked, and a state of another scene passed to a
@@ -362,6 +381,7 @@ class Rung:
         controls = np.array(controls, dtype=float).reshape(len(durations), len(scenario.actuated))
         if len(controls) != len(durations):
             raise ValueError(f"{len(controls)} controls but {len(durations)} durations")
+        check_run(durations, h)
         if record_every <= 0:
             total = float(durations[0]) if len(durations) == 1 else float(durations.sum())  # (one control: no reduction)
             record_every = record_spacing(int(round(total / h)), max_records)
@@ -406,6 +426,7 @@ class Rung:
             raise ValueError("the geometric rung has no dynamics to roll out; use valid()")
         c = compiled(scenario)
         check_state(scenario, c, state)
+        check_run(durations, h)
         self._compile_ahead(c, state, h)
         # scripted obstacles: this call's own pose tables (`_bound`; each control's kernel call
         # places the obstacles at its start, t0 = 0, as a separate `rollout` does)
@@ -517,6 +538,7 @@ class Rung:
         where the time has got to, so scripted obstacles move on)."""
         durations = np.atleast_1d(np.asarray(durations, float))
         controls = np.asarray(controls, float).reshape(len(durations), len(scenario.actuated))
+        check_run(durations, h)
         per_control = control_steps(durations, h)
         total = sum(per_control)
         record_every = record_spacing(int(np.round(durations.sum() / h)), max_records)

@@ -1,4 +1,5 @@
-"""A state or configuration of another scene is refused before the compiled kernels read it.
+"""A state or configuration of another scene, or a step or duration no rollout can take, is refused
+before the compiled kernels read it.
 
 The kernels index their arrays unchecked: a state of free_transfer (2 coordinates) rolled out in
 box_push_3d (9) had crashed the Python process with a segmentation fault. `Rung.rollout` (and
@@ -49,3 +50,24 @@ def test_a_configuration_of_another_scene_is_refused_by_the_pair_distances(scene
         pair_signed_distances_many(box, np.zeros((3, 2)))
     d = pair_signed_distances(box, box.start)
     np.testing.assert_array_equal(pair_signed_distances_many(box, np.array([box.start]))[0], d)
+
+
+@pytest.mark.parametrize(
+    ("h", "durations", "message"),
+    [
+        (0.0, [0.1], "the step h must be a positive number of seconds, got 0.0"),  # (a ZeroDivisionError)
+        (-1e-3, [0.1], "the step h must be a positive number of seconds, got -0.001"),  # (had run no step, status ok)
+        (float("nan"), [0.1], "the step h must be a positive number of seconds, got nan"),
+        (1e-3, [0.1, float("nan")], "a control's duration must be a finite number of seconds, no less than 0, got nan"),
+        (1e-3, [0.1, -0.2], "a control's duration must be a finite number of seconds, no less than 0, got -0.2"),
+        (1e-300, [0.1], "a control of 0.1 s at h = 1e-300 is 1e+299 steps, more than a rollout counts"),  # (had run on for ever)
+    ],
+)
+def test_a_step_or_duration_no_rollout_can_take_is_refused(scenes, h, durations, message):
+    small, _ = scenes
+    rung = rung_for(small, "dynamic-rigid")
+    start, u = rung.initial_state(small), np.zeros((len(durations), len(small.actuated)))
+    for call in (rung.rollout, rung.rollout_each, rung.rollout_chunked):
+        with pytest.raises(ValueError) as refused:
+            call(small, start, u, durations, h)
+        assert str(refused.value).startswith(message)
