@@ -14,6 +14,7 @@ import importlib.util
 import json
 import math
 import os
+import re
 import socket
 import stat
 import sys
@@ -1723,7 +1724,7 @@ def cmd_submit(args: argparse.Namespace) -> int:
                 return EXIT_INTERRUPTED
             plan = json.loads(client.result(job["id"])) if job["result_available"] else None
     except ServiceError as exc:
-        _print_error(exc)
+        _print_error(_in_submit_words(exc, args.file))
         return EXIT_BAD_INPUT
     if args.json:
         print(json.dumps(job, indent=2))
@@ -1737,6 +1738,26 @@ def cmd_submit(args: argparse.Namespace) -> int:
         if job["result_available"]:
             print(f"plan.json: {args.server.rstrip('/')}/jobs/{job['id']}/result")
     return EXIT_OK if job["state"] == "succeeded" and plan is not None and plan.get("top_holds") else EXIT_FAILED
+
+
+#: A refused request's line about a key `ladder submit` set from its flags (the service names
+#: the request's keys: `request: body.parameters.nope: ...`).
+_SUBMITTED_KEY = re.compile(r"^request: body\.(?:options\.(?P<option>seed|flat)|parameters\.(?P<param>[^:]+)): ")
+
+
+def _in_submit_words(exc: Exception, file: Path) -> str:
+    """The service's refusal of what `ladder submit` sent, with the lines about its flags in
+    the command line's words, as `ladder plan` words them (`FILE: --param nope: ...`,
+    `FILE: --seed: ...`); every other line as the service said it."""
+
+    def line(text: str) -> str:
+        found = _SUBMITTED_KEY.match(text)
+        if found is None:
+            return text
+        flag = f"--{found['option']}" if found["option"] else f"--param {found['param']}"
+        return f"{file}: {flag}: {text[found.end() :]}"
+
+    return "\n".join(line(text) for text in str(exc).splitlines())
 
 
 def _job_progress(live: bool):

@@ -5,6 +5,8 @@ errors a user sees (one line, exit 2, no traceback)."""
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 
 import pytest
 
@@ -182,17 +184,23 @@ def test_submit_refused_by_the_service_is_exit_2_with_its_reasons(idle, capsys, 
     code, out, err = submit_cli(capsys, monkeypatch, "scenarios/free_transfer.toml", "--server", idle)
     assert code == 2 and out == "" and "401" in err and "--token" in err and "Traceback" not in err
     monkeypatch.setenv("LADDER_TOKEN", "s3cret")
-    # the request's options and parameters are the request's (labelled as its body's keys), and come first
+    # the request's options and parameters are the request's (the service names its body's keys),
+    # and `ladder submit` says them as the flags that set them, as `ladder plan` does
     args = ["scenarios/free_transfer.toml", "--server", idle, "--seed", "-1", "--param", "nope=1"]
-    code, out, err = submit_cli(capsys, monkeypatch, *args)
-    assert code == 2 and out == "" and "Traceback" not in err
-    assert sorted(err.splitlines()) == [
-        "error: request: body.options.seed: must be between 0 and 1000000000, got -1",
-        "error: request: body.parameters.nope: the file has no parameter 'nope' (parameters: gap, vx, vy)",
+    code, out, both = submit_cli(capsys, monkeypatch, *args)
+    assert code == 2 and out == "" and "Traceback" not in both
+    assert sorted(both.splitlines()) == [
+        "error: scenarios/free_transfer.toml: --param nope: the file has no parameter 'nope' (parameters: gap, vx, vy)",
+        "error: scenarios/free_transfer.toml: --seed: must be between 0 and 1000000000, got -1",
     ]
     code, out, err = submit_cli(capsys, monkeypatch, *args[:3], "--param", "nope=1")
     assert code == 2 and out == "" and "Traceback" not in err
-    assert err.startswith("error: request: body.parameters.nope: the file has no parameter 'nope'")  # a parameter the scenario lacks
+    assert err.startswith("error: scenarios/free_transfer.toml: --param nope: the file has no parameter 'nope'")  # (alone)
+    plan = subprocess.run(
+        [sys.executable, "-m", "planner", "plan", "scenarios/free_transfer.toml", "--param", "nope=1", "--seed", "-1"],
+        cwd=ROOT, capture_output=True, text=True, check=False,
+    )  # fmt: skip
+    assert plan.returncode == 2 and sorted(plan.stderr.splitlines()) == sorted(both.splitlines())  # the same words as `ladder plan`'s
     # an address past the service's root (its /jobs route) is a 405: said as a wrong address
     code, out, err = submit_cli(capsys, monkeypatch, "scenarios/free_transfer.toml", "--server", idle + "/jobs")
     assert code == 2 and out == "" and len(err.strip().splitlines()) == 1
