@@ -509,7 +509,9 @@ COARSE_ROUNDS = 6
 #: re-plans had spent the whole budget: box_push_3d seed 5, box_rotate_3d seed 25 and
 #: push_past_post seed 25 failed with no iteration left to search, and hold so (seeds 1-40 of
 #: these, of two_finger_triangle and four_finger_grasp, and strike's 1-20: no other seed's
-#: outcome changed; docs/measurements.md, sixtieth session).
+#: outcome changed; docs/measurements.md, sixtieth session). A coarse plan that tracking loses in
+#: its first period ends the rounds at once (the coarse step disagrees with the rung's there):
+#: push_past_post seeds 16 and 17 then hold too.
 COARSE_SHARE = 0.5
 
 
@@ -517,8 +519,8 @@ def _track_rounds(step: _Step, stage: RungReport, h: float) -> Tracked:
     """Track the coarse stage's plan at the rung's own step; where tracking is lost, plan
     again with the coarse step from the last tracked state (guided by the rest of the plan
     being tracked) and track that, up to COARSE_ROUNDS plans in all, within the rung's
-    iterations (at most COARSE_SHARE of them). One run: the tracked controls of every round,
-    from the start."""
+    iterations (at most COARSE_SHARE of them), and no more once a plan is lost in its first
+    period. One run: the tracked controls of every round, from the start."""
     scenario, rung, period = step.scenario, step.rung, step.period
     start = step.start()
     run = Tracked(start)
@@ -532,6 +534,8 @@ def _track_rounds(step: _Step, stage: RungReport, h: float) -> Tracked:
         run.extend(part, first=k == 0)
         left -= part.repair_iterations
         if part.outcome == GOAL or step.stopped() or left <= 0 or k + 1 == COARSE_ROUNDS:
+            break
+        if len(part.controls) == 0:  # lost in its first period: the coarse step disagrees with the rung's here
             break
         t = part.diverged_at if part.diverged_at is not None else len(part.controls) * period
         before = len(run.controls) - len(part.controls)  # the rounds before this one's

@@ -1051,6 +1051,25 @@ def test_a_coarse_replan_starts_where_the_horizon_leaves_it_time(monkeypatch):
     assert run.outcome == "goal" and run.status == "ok"
 
 
+def test_coarse_rounds_leave_the_rungs_own_search_half_its_budget():
+    """box_push_3d, seed 5: the top rung lost its coarse stage's plan at 2.6 s; a coarse re-plan
+    from there was lost again in its first period, yet the rounds went on re-planning at the
+    coarse step and spent all 7,584 iterations, and the search at the rung's own step had none:
+    the top rung failed. The rounds now stop at a plan lost in its first period and spend at most
+    COARSE_SHARE of the budget, and the rung's own search finds the plan."""
+    from planner.ladder import COARSE_SHARE
+
+    scenario = load_scenario(SCENARIOS / "box_push_3d.toml")
+    result = run_ladder(scenario, seed=5)
+    stage, top = result.rungs[-2], result.rungs[-1]
+    assert stage.stage == "coarse" and stage.ended.holds
+    assert result.top_holds and top.ended is PlanStatus.REPAIRED, top.reason
+    assert COARSE_SHARE == 0.5 and "then a search from tracked state" in top.reason
+    rung = rung_for(scenario, top.rung)
+    run = rung.rollout(scenario, rung.initial_state(scenario), np.array(top.controls), np.array(top.durations), top.h)
+    assert run.outcome == "goal" and run.status == "ok"
+
+
 def test_time_left_for_search_keeps_the_controls_that_end_before_the_horizon_less_search_time(tmp_path):
     from types import SimpleNamespace
 
