@@ -179,7 +179,7 @@ def _model_specs(text: str) -> list[ModelSpec]:
         if not m or m.group(2) not in PROPAGATING_RUNGS:
             raise ScenarioError(
                 Path("--model"),
-                [Problem(f"--model {item}", f"expected [LABEL=]RUNG[NAME=VALUE;...], RUNG one of {', '.join(PROPAGATING_RUNGS)}")],
+                [Problem(f"--model {item}", f"expected {syntax}; RUNG one of {', '.join(PROPAGATING_RUNGS)}")],
             )
         overrides, policy = [], None
         for part in re.split(r"[;,]", m.group(3) or ""):

@@ -301,6 +301,11 @@ def test_sweep_names_the_defaults_of_a_rung_the_ladder_does_not_list(tmp_path):
             "--model dynamic-compliant[C=0: a '[' is not closed; expected [LABEL=]RUNG[NAME=VALUE,...]",
         ),
         (["--grid", "v1=1:2:3", "--model", "dynamic-compliant]C=0["], "--model dynamic-compliant]C=0[: unbalanced ']'"),
+        (  # an unknown rung: the syntax as the other messages and --help give it (commas; it had said semicolons)
+            ["--grid", "v1=1:2:3", "--model", "kinematic,nope"],
+            "--model nope: expected [LABEL=]RUNG[NAME=VALUE,...], e.g. elastic=dynamic-compliant[C=0,finger_mass=1e3]; RUNG one of "
+            "kinematic, quasistatic-rigid",
+        ),
         (
             ["--grid", "v1=1:2:3", "--model", "a=kinematic,a=dynamic-compliant"],
             "--model a=kinematic,a=dynamic-compliant: the label 'a' names two models",
