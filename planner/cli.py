@@ -14,7 +14,6 @@ import importlib.util
 import json
 import math
 import os
-import re
 import socket
 import stat
 import sys
@@ -1740,22 +1739,16 @@ def cmd_submit(args: argparse.Namespace) -> int:
     return EXIT_OK if job["state"] == "succeeded" and plan is not None and plan.get("top_holds") else EXIT_FAILED
 
 
-#: A refused request's line about a key `ladder submit` set from its flags (the service names
-#: the request's keys: `request: body.parameters.nope: ...`).
-_SUBMITTED_KEY = re.compile(r"^request: body\.(?:options\.(?P<option>seed|flat)|parameters\.(?P<param>[^:]+)): ")
-
-
 def _in_submit_words(exc: Exception, file: Path) -> str:
     """The service's refusal of what `ladder submit` sent, with the lines about its flags in
     the command line's words, as `ladder plan` words them (`FILE: --param nope: ...`,
-    `FILE: --seed: ...`); every other line as the service said it."""
+    `FILE: --seed: ...`; `planner.service.jobs.cli_flag`); every other line as the service said it."""
+    from planner.service.jobs import cli_flag
 
     def line(text: str) -> str:
-        found = _SUBMITTED_KEY.match(text)
-        if found is None:
-            return text
-        flag = f"--{found['option']}" if found["option"] else f"--param {found['param']}"
-        return f"{file}: {flag}: {text[found.end() :]}"
+        key, sep, reason = text.removeprefix("request: ").partition(": ")
+        flag = cli_flag(key) if text.startswith("request: ") and sep else None
+        return f"{file}: {flag}: {reason}" if flag else text
 
     return "\n".join(line(text) for text in str(exc).splitlines())
 

@@ -258,3 +258,13 @@ def test_ctrl_c_while_waiting_says_the_job_goes_on_and_how_to_cancel_it(idle, ca
     )
     with Client(idle, "s3cret") as client:
         assert client.get(job_id)["state"] == "queued"
+
+
+def test_a_request_key_goes_back_to_the_flag_it_came_from():
+    """`ladder submit`'s words (`cli_flag`) are the service's (`_cli_key`) read the other way."""
+    from planner.service.jobs import _cli_key, cli_flag
+
+    for flag in ("--param v1", "--seed", "--flat", "--time-limit", "--grid v1"):
+        assert cli_flag("body." + _cli_key(flag)) == flag
+    # keys no flag sets, and an option only a negative flag sets: left in the request's words
+    assert [cli_flag(k) for k in ("body", "body.scenario", "body.options.guide")] == [None, None, None]

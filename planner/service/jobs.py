@@ -193,6 +193,10 @@ def _sweep_size_problems(options: dict) -> list[Problem]:
     return []
 
 
+#: The CLI's negative flags, as the request's options they set (--no-guide -> options.guide).
+_NEGATED = {"no_seed_roots": "seed_roots", "no_guide": "guide"}
+
+
 def _cli_key(key: str) -> str:
     """The CLI's option names in problems, as the request's keys: --time-limit -> options.time_limit,
     --grid v1 -> options.grid v1."""
@@ -201,8 +205,21 @@ def _cli_key(key: str) -> str:
     if key.startswith("--"):  # --grid v1 (an axis), --model plastic (a model's label): the rest is kept
         name, space, rest = key[2:].partition(" ")
         name = name.replace("-", "_")
-        return "options." + {"no_seed_roots": "seed_roots", "no_guide": "guide"}.get(name, name) + space + rest
+        return "options." + _NEGATED.get(name, name) + space + rest
     return key
+
+
+def cli_flag(key: str) -> str | None:
+    """`_cli_key` the other way (`ladder submit`'s words for the service's refusals): a request's
+    key, with or without its `body.`, as the CLI's flag (parameters.v1 -> --param v1,
+    options.seed -> --seed); None for a key that is no flag's, or an option a negative flag sets."""
+    key = key.removeprefix("body.")
+    if key.startswith("parameters."):
+        return "--param " + key.removeprefix("parameters.")
+    if key.startswith("options.") and key.removeprefix("options.").partition(" ")[0] not in _NEGATED.values():
+        name, space, rest = key.removeprefix("options.").partition(" ")
+        return "--" + name.replace("_", "-") + space + rest
+    return None
 
 
 def _cli_reason(kind: str, reason: str) -> str:
