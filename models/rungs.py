@@ -254,6 +254,28 @@ def _state_shapes(scenario: Scenario, drives: int, capacity: int) -> tuple:
     return (len(scenario.coordinates),), (len(scenario.velocities),), (drives,), (capacity,), (capacity, 2)
 
 
+def run_arrays(scenario: Scenario, controls, durations) -> tuple[np.ndarray, np.ndarray]:
+    """A run's controls and durations as the kernels take them, copies (contiguous; the caller's
+    stay theirs): durations a 1-d float array, controls a (len(durations), drives) one, also
+    given flat where that reads one way only (one control, or one drive). ValueError, in the run's words, where the shapes do not match
+    (numpy's reshape had said "cannot reshape array of size 6 into shape (2,2)", and 3 controls
+    of 2 drives for 2 durations of 3 drives had been reshaped into other controls, silently)."""
+    durations = np.array(durations, dtype=float, ndmin=1)
+    controls = np.array(controls, dtype=float)
+    k, drives = len(durations), len(scenario.actuated)
+    if controls.shape == (k, drives) and durations.ndim == 1:
+        return controls, durations
+    if durations.ndim == 1 and controls.ndim == 1 and (k == 1 and len(controls) == drives or drives == 1 and len(controls) == k):
+        return controls.reshape(k, drives), durations  # (flat where it reads one way only)
+    if durations.ndim != 1:
+        raise ValueError(f"durations must be a list of seconds, one per control, got an array of shape {durations.shape}")
+    names = ", ".join(scenario.actuated) or "none"
+    raise ValueError(
+        f"controls of shape {controls.shape} for {k} duration(s): a run takes one control per duration, "
+        f"each of {drives} commanded speed(s) ({names}), shape ({k}, {drives})"
+    )
+
+
 def check_run(durations: np.ndarray, h: float) -> None:
     """ValueError unless h is a positive number of seconds and every duration a finite one of
     no less than zero, of at most MAX_CONTROL_STEPS steps (h = 0 had been a ZeroDivisionError,
@@ -402,10 +424,7 @@ class Rung:
         obstacles are); the result's times count from the start of this rollout. laws: the
         drives follow the feedback laws of the scenario's policy (`policy_drives`; the controls
         are `policy_controls`)."""
-        durations = np.array(durations, dtype=float, ndmin=1)  # copies: contiguous, the caller's stays theirs
-        controls = np.array(controls, dtype=float).reshape(len(durations), len(scenario.actuated))
-        if len(controls) != len(durations):
-            raise ValueError(f"{len(controls)} controls but {len(durations)} durations")
+        controls, durations = run_arrays(scenario, controls, durations)
         check_run(durations, h)
         if record_every <= 0:
             total = float(durations[0]) if len(durations) == 1 else float(durations.sum())  # (one control: no reduction)
@@ -446,8 +465,7 @@ class Rung:
         (stopping at an outcome, from t0 = 0) would run them, with the same bits, until one
         ends in an outcome or a failure: the end of each control run, in one compiled call
         (`models.rollout.rollout_each`, which copies the state it starts from)."""
-        durations = np.array(durations, dtype=float, ndmin=1)
-        controls = np.array(controls, dtype=float).reshape(len(durations), len(scenario.actuated))
+        controls, durations = run_arrays(scenario, controls, durations)
         if self.model is None:
             raise ValueError("the geometric rung has no dynamics to roll out; use valid()")
         c = compiled(scenario)
@@ -562,8 +580,7 @@ class Rung:
         of a chunk found is left to the next chunk's first step (as one call would do), and the
         records are joined and capped as one call's. t0: as in `rollout` (each chunk starts
         where the time has got to, so scripted obstacles move on)."""
-        durations = np.atleast_1d(np.asarray(durations, float))
-        controls = np.asarray(controls, float).reshape(len(durations), len(scenario.actuated))
+        controls, durations = run_arrays(scenario, controls, durations)
         check_run(durations, h)
         per_control = control_steps(durations, h)
         total = sum(per_control)

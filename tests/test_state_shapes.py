@@ -4,7 +4,9 @@ before the compiled kernels read it.
 The kernels index their arrays unchecked: a state of free_transfer (2 coordinates) rolled out in
 box_push_3d (9) had crashed the Python process with a segmentation fault. `Rung.rollout` (and
 `step`, `rollout_chunked`, which call it), `Rung.rollout_each` and the pair distances now raise
-ValueError naming what is wrong; a state of the scene itself runs as before.
+ValueError naming what is wrong; a state of the scene itself runs as before. So do controls not
+shaped one per duration (`models.rungs.run_arrays`), which numpy's reshape had refused in its own
+words, or reshaped into other controls.
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ import pytest
 
 from models.rungs import pair_signed_distances, pair_signed_distances_many, rung_for
 from models.scenario import load_scenario
-from tests.conftest import SCENARIOS
+from tests.conftest import DATA, SCENARIOS
 
 
 @pytest.fixture(scope="module")
@@ -71,3 +73,44 @@ def test_a_step_or_duration_no_rollout_can_take_is_refused(scenes, h, durations,
         with pytest.raises(ValueError) as refused:
             call(small, start, u, durations, h)
         assert str(refused.value).startswith(message)
+
+
+@pytest.mark.parametrize(
+    ("controls", "durations", "message"),
+    [
+        # (numpy's reshape had said "cannot reshape array of size 6 into shape (2,2)")
+        (np.ones((3, 2)), [0.1, 0.1], "controls of shape (3, 2) for 2 duration(s): a run takes one control per duration, "),
+        # (had been reshaped into two other controls of three drives, silently)
+        (np.ones((2, 3)), [0.1, 0.1, 0.1], "each of 2 commanded speed(s) (pusher.x, pusher.y), shape (3, 2)"),
+        (np.ones(6), [0.1, 0.1, 0.1], "controls of shape (6,) for 3 duration(s)"),  # (flat, with more than one drive)
+        (np.ones((1, 2)), [[0.1]], "durations must be a list of seconds, one per control, got an array of shape (1, 1)"),
+    ],
+)
+def test_controls_not_shaped_one_per_duration_are_refused_in_the_runs_words(scenes, controls, durations, message):
+    _, box = scenes
+    assert box.actuated == ("pusher.x", "pusher.y")
+    rung = rung_for(box, "dynamic-rigid")
+    start, h = rung.initial_state(box), box.rung_settings("dynamic-rigid").h
+    for call in (rung.rollout, rung.rollout_each, rung.rollout_chunked):
+        with pytest.raises(ValueError) as refused:
+            call(box, start, controls, durations, h)
+        assert message in str(refused.value)
+
+
+def test_flat_controls_run_where_they_read_one_way_only(scenes):
+    _, box = scenes
+    rung = rung_for(box, "dynamic-rigid")
+    start, h = rung.initial_state(box), box.rung_settings("dynamic-rigid").h
+    u = np.array([0.1, 0.0])
+    flat = rung.rollout(box, start, u, [0.05], h)  # one control given flat
+    shaped = rung.rollout(box, start, u.reshape(1, 2), [0.05], h)
+    np.testing.assert_array_equal(flat.state.q, shaped.state.q)
+    assert flat.ok and flat.steps == 50
+    strike = load_scenario(DATA / "strike.toml")
+    assert strike.actuated == ("pusher.x",)
+    one = rung_for(strike, "dynamic-rigid")  # one drive: a control per duration, given flat
+    s0 = one.initial_state(strike)
+    a = one.rollout(strike, s0, np.array([0.2, -0.1]), [0.05, 0.05], 1e-3)
+    b = one.rollout(strike, s0, np.array([[0.2], [-0.1]]), [0.05, 0.05], 1e-3)
+    np.testing.assert_array_equal(a.state.q, b.state.q)
+    assert a.ok and a.steps == b.steps > 0
