@@ -4,8 +4,12 @@ numba compiles for the host CPU under LLVM's name for it, and the name picks LLV
 an AMD EPYC of family 26 (Zen 5, LLVM's `znver5`) the kernels tuned for the generic `x86-64-v3`
 ran faster than tuned for `znver5`: box_push_3d's push 5-7% a step, the exact cone's 12%, the
 paper's squeeze 8-10%, each against MuJoCo timed in turns (docs/measurements.md, fifty-eighth
-session). AVX-512 is not the cause: tuned for `znver5` without it they ran as with it. The
-results are the same bits (numba compiles without fast-math: no reassociation, no fused
+session); tuned for the generic `x86-64-v2` faster again, in 13 alternated runs of
+`planner.bench.contact_steps`: the squeeze 3.6-4.5% (13 of 13 runs), the 8-sided push 4.8% as
+the planners call it (11 of 13) and 1.4% through `Rung.rollout` (9 of 13), the exact cone 1.0%
+(7 of 13); `x86-64`, `znver2`, `znver3`, `znver4` and `x86-64-v4` no faster than `x86-64-v3`
+(sixty-first session). AVX-512 is not the cause: tuned for `znver5` without it they ran as with
+it. The results are the same bits (numba compiles without fast-math: no reassociation, no fused
 multiply-add), and the planning runs are the same seed for seed.
 
 NUMBA_CPU_NAME names the CPU LLVM tunes for (its scheduling and its choice of instructions);
@@ -23,7 +27,7 @@ import os
 import sys
 
 #: LLVM's name for a host CPU -> the target its kernels compile for, where measured faster.
-TUNED = {"znver5": "x86-64-v3"}
+TUNED = {"znver5": "x86-64-v2"}
 
 
 def target_for(host: str, environ) -> str | None:
