@@ -257,9 +257,10 @@ def _state_shapes(scenario: Scenario, drives: int, capacity: int) -> tuple:
 def run_arrays(scenario: Scenario, controls, durations) -> tuple[np.ndarray, np.ndarray]:
     """A run's controls and durations as the kernels take them, copies (contiguous; the caller's
     stay theirs): durations a 1-d float array, controls a (len(durations), drives) one, also
-    given flat where that reads one way only (one control, or one drive). ValueError, in the run's words, where the shapes do not match
-    (numpy's reshape had said "cannot reshape array of size 6 into shape (2,2)", and 3 controls
-    of 2 drives for 2 durations of 3 drives had been reshaped into other controls, silently)."""
+    given flat where that reads one way only (one control, or one drive). ValueError, in the
+    run's words, where the shapes do not match (numpy's reshape had said "cannot reshape array
+    of size 6 into shape (2,2)", and had made 2 controls of 3 values, for 3 durations of a
+    2-drive scene, into 3 other controls, silently)."""
     durations = np.array(durations, dtype=float, ndmin=1)
     controls = np.array(controls, dtype=float)
     k, drives = len(durations), len(scenario.actuated)
