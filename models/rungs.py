@@ -262,14 +262,14 @@ def run_arrays(scenario: Scenario, controls, durations) -> tuple[np.ndarray, np.
     of size 6 into shape (2,2)", and had made 2 controls of 3 values, for 3 durations of a
     2-drive scene, into 3 other controls, silently)."""
     durations = np.array(durations, dtype=float, ndmin=1)
-    controls = np.array(controls, dtype=float)
-    k, drives = len(durations), len(scenario.actuated)
-    if controls.shape == (k, drives) and durations.ndim == 1:
-        return controls, durations
-    if durations.ndim == 1 and controls.ndim == 1 and (k == 1 and len(controls) == drives or drives == 1 and len(controls) == k):
-        return controls.reshape(k, drives), durations  # (flat where it reads one way only)
     if durations.ndim != 1:
         raise ValueError(f"durations must be a list of seconds, one per control, got an array of shape {durations.shape}")
+    controls = np.array(controls, dtype=float)
+    k, drives = len(durations), len(scenario.actuated)
+    if controls.shape == (k, drives):
+        return controls, durations
+    if controls.ndim == 1 and (k == 1 and len(controls) == drives or drives == 1 and len(controls) == k):
+        return controls.reshape(k, drives), durations  # (flat where it reads one way only)
     names = ", ".join(scenario.actuated) or "none"
     raise ValueError(
         f"controls of shape {controls.shape} for {k} duration(s): a run takes one control per duration, "

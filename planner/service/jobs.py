@@ -216,8 +216,8 @@ def cli_flag(key: str) -> str | None:
     key = key.removeprefix("body.")
     if key.startswith("parameters."):
         return "--param " + key.removeprefix("parameters.")
-    if key.startswith("options.") and key.removeprefix("options.").partition(" ")[0] not in _NEGATED.values():
-        name, space, rest = key.removeprefix("options.").partition(" ")
+    name, space, rest = key.removeprefix("options.").partition(" ")
+    if key.startswith("options.") and name not in _NEGATED.values():
         return "--" + name.replace("_", "-") + space + rest
     return None
 
