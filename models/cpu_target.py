@@ -5,10 +5,11 @@ an AMD EPYC of family 26 (Zen 5, LLVM's `znver5`) the kernels tuned for the gene
 ran faster than tuned for `znver5`: box_push_3d's push 5-7% a step, the exact cone's 12%, the
 paper's squeeze 8-10%, each against MuJoCo timed in turns (docs/measurements.md, fifty-eighth
 session); tuned for the generic `x86-64-v2` faster again, in 13 alternated runs of
-`planner.bench.contact_steps`: the squeeze 3.6-4.5% (13 of 13 runs), the 8-sided push 4.8% as
+`planner.bench.contact_steps`: the squeeze 3.6-4.5% (12 or 13 of 13 runs), the 8-sided push 4.8% as
 the planners call it (11 of 13) and 1.4% through `Rung.rollout` (9 of 13), the exact cone 1.0%
-(7 of 13); `x86-64`, `znver2`, `znver3`, `znver4` and `x86-64-v4` no faster than `x86-64-v3`
-(sixty-first session). AVX-512 is not the cause: tuned for `znver5` without it they ran as with
+(7 of 13); `x86-64`, `znver2`, `znver4` and `x86-64-v4` no faster than `x86-64-v2` on the
+squeeze and the 8-sided push, in 3-4 runs each (`znver3` was compiled but not timed in turns;
+sixty-first session). AVX-512 is not the cause: tuned for `znver5` without it they ran as with
 it. The results are the same bits (numba compiles without fast-math: no reassociation, no fused
 multiply-add), and the planning runs are the same seed for seed.
 
