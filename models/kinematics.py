@@ -26,7 +26,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from models.scenario import Scenario
+from models.scenario import Scenario, principal_inertia
 
 SHAPE_HALFSPACE = 0  # half-plane / plane: hs_normal, hs_offset (body frame)
 SHAPE_POINTS = 1  # planar rounded convex core: point, segment or CCW polygon, plus radius
@@ -44,7 +44,12 @@ BF_RADIUS, BF_HALF, BF_HSN, BF_HSO, BF_POS, BF_QUAT, BF_MASS, BF_INERTIA, BF_BOU
 # scripted obstacles: pose at t = 0 (x, y, z, angle about z) and constant velocity (vx, vy, vz,
 # angular rate about z); zeros for every other body. BF_SPEED bounds the speed of any of the
 # body's points (a scripted body's broadphase reach grows with it).
-BF_SCRIPT, BF_SCRIPT_V, BF_SPEED, BF_COLUMNS = 20, 24, 28, 29
+BF_SCRIPT, BF_SCRIPT_V, BF_SPEED = 20, 24, 28
+# a spatial body whose principal axes are not its own (`inertia_products`): the rotation from its
+# axes to its principal ones (3 x 3, by rows; its columns the principal axes), and 1.0 in
+# BF_TILTED (0.0 and zeros for every other body, whose inertia is about its own axes); the
+# moments in BF_INERTIA are then the principal ones
+BF_AXES, BF_TILTED, BF_COLUMNS = 29, 38, 39
 PI_A, PI_B, PI_MAX, PI_INERT = 0, 1, 2, 3
 PF_MU, PF_K, PF_C = 0, 1, 2
 
@@ -88,7 +93,7 @@ class SceneData(NamedTuple):
     # a tuple that crosses a function boundary, so hot code passes these few instead of S.
     bi: np.ndarray  # int64[nb, BI_COLUMNS]: kind, vstart, vcount, qmap (8), vmap (7)
     bf: np.ndarray  # float64[nb, BF_COLUMNS]: radius, half extents, hs normal, hs offset, base pos, base quat, mass, inertia, bound,
-    #                 scripted pose at t = 0 and velocity, speed bound of a scripted body
+    #                 scripted pose at t = 0 and velocity, speed bound of a scripted body, principal axes and their flag
     pi: np.ndarray  # int64[np, 4]: a, b, max contacts, inert (1: the pair can never matter; see inert_pairs)
     pf: np.ndarray  # float64[np, 3]: mu, K, C
 
@@ -288,7 +293,8 @@ def _index_maps(scenario: Scenario):
 def _poses_and_inertia(scenario: Scenario, bound):
     """Per-body poses and mass properties: base pose (position, quaternion), the scripted
     motion of moving obstacles (pose at t = 0, velocity, speed bound from the bounding radius),
-    mass and principal moments of inertia (zero for bodies without DOFs)."""
+    mass and principal moments of inertia (zero for bodies without DOFs) and, for a body whose
+    principal axes are not its own, those axes (`principal_inertia`; BF_AXES, BF_TILTED)."""
     dim = scenario.dimension
     bodies = scenario.spec.bodies
     nb = len(bodies)
@@ -296,6 +302,7 @@ def _poses_and_inertia(scenario: Scenario, bound):
     base_quat = np.zeros((nb, 4))
     mass = np.zeros(nb)
     inertia = np.zeros((nb, 3))
+    axes = np.zeros((nb, BF_COLUMNS - BF_AXES))
     script = np.zeros((nb, 9))
     for b, body in enumerate(bodies):
         placement = scenario.base_placements[body.name]
@@ -313,9 +320,13 @@ def _poses_and_inertia(scenario: Scenario, bound):
             script[b, 8] = float(np.linalg.norm(script[b, 4:7])) + (omega * bound[b] if omega > 0.0 else 0.0)
         if body.dofs:
             mass[b] = body.mass
-            if body.inertia is not None:
-                inertia[b] = [0.0, 0.0, body.inertia[0]] if dim == 2 else (body.inertia * 3 if len(body.inertia) == 1 else body.inertia)
-    return base_pos, base_quat, mass, inertia, script
+            if body.inertia is not None and dim == 2:
+                inertia[b] = [0.0, 0.0, body.inertia[0]]
+            elif body.inertia is not None:
+                inertia[b], principal = principal_inertia(body)
+                if principal is not None:
+                    axes[b, :9], axes[b, 9] = principal.ravel(), 1.0
+    return base_pos, base_quat, mass, inertia, script, axes
 
 
 def _pair_tables(scenario: Scenario, kind, vcount):
@@ -346,14 +357,15 @@ def compile_scene(scenario: Scenario) -> SceneData:
     kind, vstart, vcount, verts, radius, half_extents, hs_normal, hs_offset, bound = _shape_tables(scenario)
     hull, planes, face_verts, edges, edge_dirs = _scene_hulls(scenario, kind, vstart)
     qmap, vmap = _index_maps(scenario)
-    base_pos, base_quat, mass, inertia, script = _poses_and_inertia(scenario, bound)
+    base_pos, base_quat, mass, inertia, script, axes = _poses_and_inertia(scenario, bound)
     pairs = scenario.pairs
     pair_a, pair_b, max_contacts, pf = _pair_tables(scenario, kind, vcount)
     bi = np.concatenate([kind[:, None], vstart[:, None], vcount[:, None], qmap, vmap], axis=1).astype(np.int64)
     normals3 = np.zeros((nb, 3))
     normals3[:, :dim] = hs_normal
     bf = np.concatenate(
-        [radius[:, None], half_extents, normals3, hs_offset[:, None], base_pos, base_quat, mass[:, None], inertia, bound[:, None], script],
+        [radius[:, None], half_extents, normals3, hs_offset[:, None], base_pos, base_quat, mass[:, None], inertia, bound[:, None]]
+        + [script, axes],
         axis=1,
     )
     assert bi.shape[1] == BI_COLUMNS and bf.shape[1] == BF_COLUMNS

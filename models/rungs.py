@@ -30,7 +30,7 @@ from models.kernel_cache import compile_ahead
 from models.kinematics import PI_INERT, SceneData, compile_scene, kernel_array
 from models.predicates import OP_TOUCH, Program, compile_predicate, evaluate_with
 from models.rollout import bind, general_step_types, propagate_kernel, rollout_bound, rollout_each, rollout_kernel, warm_period_steps
-from models.scenario import TRANSLATIONAL_DOFS, Scenario, penetration_warning
+from models.scenario import TRANSLATIONAL_DOFS, Scenario, penetration_warning, principal_inertia
 from models.stepper import (
     LAW_ACTIVE,
     LAW_AXIS,
@@ -1038,7 +1038,8 @@ def _passive_speeds(scenario: Scenario, result: RolloutResult):
         if not passive or not body.mass:
             continue
         turns = any(scenario.velocities[i].rpartition(".")[2] not in TRANSLATIONAL_DOFS for i in passive)
-        gyration = min(body.inertia) / body.mass if turns and body.inertia else 0.0
+        least = (min(principal_inertia(body)[0]) if scenario.dimension == 3 else body.inertia[0]) if turns and body.inertia else 0.0
+        gyration = least / body.mass
         yield body, _peak_speed(scenario, result, passive, gyration)
 
 

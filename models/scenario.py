@@ -741,17 +741,29 @@ def _check_body(body: BodySpec, key: str, dim: int) -> list[Problem]:
             out.append(Problem(f"{key}.inertia", "a planar body's inertia is one number (about the z axis)"))
         if body.inertia is not None and dim == 3 and len(body.inertia) not in (1, 3):
             out.append(Problem(f"{key}.inertia", "a spatial body's inertia is one number or three principal moments"))
-        elif body.inertia is not None and dim == 3 and len(body.inertia) == 3:
+        elif body.inertia is not None and dim == 3 and len(body.inertia) == 3 and body.inertia_products is None:
             # a rigid body's principal moments: each at most the sum of the other two (equal for a flat plate)
-            moments = sorted(float(i) for i in body.inertia)
-            if moments[2] > (moments[0] + moments[1]) * (1.0 + 1e-9):
-                out.append(
-                    Problem(
-                        f"{key}.inertia",
-                        f"no rigid body has these principal moments: {moments[2]:g} is more than the sum of the other two "
-                        f"({moments[0]:g} + {moments[1]:g}); each is at most the sum of the others",
+            problem = _moments_problem(sorted(float(i) for i in body.inertia))
+            if problem:
+                out.append(Problem(f"{key}.inertia", f"no rigid body has these principal moments: {problem}"))
+        if body.inertia_products is not None:
+            if dim == 2:
+                out.append(Problem(f"{key}.inertia_products", "a planar body has no products of inertia (its inertia is about z alone)"))
+            elif body.inertia is None:
+                out.append(Problem(f"{key}.inertia_products", "needs inertia, the tensor's diagonal (Ixx, Iyy, Izz)"))
+            elif len(body.inertia) in (1, 3):
+                moments, _ = principal_inertia(body)
+                tensor = ", ".join(f"{v:g}" for v in (*inertia_tensor(body).diagonal(), *body.inertia_products))
+                listed = ", ".join(f"{m:.6g}" for m in moments)
+                problem = "it is not positive definite" if not moments[0] > 0.0 else _moments_problem(list(moments))
+                if problem:
+                    out.append(
+                        Problem(
+                            f"{key}.inertia_products",
+                            f"no rigid body has the inertia tensor (Ixx, Iyy, Izz, Ixy, Ixz, Iyz) = ({tensor}): its principal "
+                            f"moments are {listed}, and {problem}",
+                        )
                     )
-                )
     if body.role == "object" and body.actuators:
         out.append(Problem(f"{key}.actuators", "only robots have actuators; an object's DOFs are passive"))
     if body.role == "robot" and not body.actuators:
@@ -1209,3 +1221,39 @@ def _check_penetration(scenario: Scenario, start_overridden: set[str]) -> list[P
             key = "task.start" if mover in start_overridden else f"bodies[{index[mover]}].pose"
             out.append(Problem(key, f"{pair.body_a!r} and {pair.body_b!r} start in penetration (depth {-psi:.6g} m)"))
     return out
+
+
+def _moments_problem(moments: list[float]) -> str | None:
+    """What is wrong with a rigid body's principal moments (ascending): each is at most the sum of
+    the other two (equal for a flat plate); None where none is."""
+    if moments[2] > (moments[0] + moments[1]) * (1.0 + 1e-9):
+        return (
+            f"{moments[2]:g} is more than the sum of the other two ({moments[0]:g} + {moments[1]:g}); each is at most the sum of the others"
+        )
+    return None
+
+
+def inertia_tensor(body) -> np.ndarray:
+    """A spatial body's inertia tensor about its centre of mass in its own axes (3 x 3): the
+    diagonal `inertia` (one number: the same three) and the off-diagonal `inertia_products`
+    (Ixy, Ixz, Iyz; none: zero)."""
+    diagonal = body.inertia * 3 if len(body.inertia) == 1 else body.inertia
+    tensor = np.diag(np.array(diagonal, dtype=float))
+    if body.inertia_products is not None:
+        xy, xz, yz = (float(v) for v in body.inertia_products)
+        tensor[0, 1], tensor[0, 2], tensor[1, 2] = xy, xz, yz
+        tensor[1, 0], tensor[2, 0], tensor[2, 1] = xy, xz, yz
+    return tensor
+
+
+def principal_inertia(body) -> tuple[np.ndarray, np.ndarray | None]:
+    """A spatial body's principal moments and axes: (moments (3,), axes) where axes (3 x 3, a
+    rotation: its columns the principal axes in the body's own) turns the body's axes into its
+    principal ones, I = axes diag(moments) axes^T; axes None where they are the body's own (no
+    `inertia_products`), the moments then `inertia` as given (in its order, not sorted)."""
+    if body.inertia_products is None:
+        return np.array(body.inertia * 3 if len(body.inertia) == 1 else body.inertia, dtype=float), None
+    moments, axes = np.linalg.eigh(inertia_tensor(body))
+    if np.linalg.det(axes) < 0.0:  # (a rotation, not a reflection)
+        axes[:, 2] = -axes[:, 2]
+    return moments, axes

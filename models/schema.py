@@ -83,6 +83,7 @@ LIMITS = {
     "acceleration": Limit("accelerations", "m/s^2", 1e6),
     "mass": Limit("masses", "kg", 1e6, low=1e-6),
     "inertia": Limit("inertias", "kg m^2", 1e6, low=1e-12),
+    "inertia_product": Limit("products of inertia", "kg m^2", 1e6),
     "gain": Limit("gains, stiffnesses, dampings and forces", "", 1e12),
     "time": Limit("times", "s", 1e6, low=1e-9),  # (a step below a nanosecond is a typo: 1 s of it overflows a count)
     "ratio": Limit("friction coefficients, scales and quaternion components", "", 1e6),
@@ -172,6 +173,8 @@ Inertia = Annotated[
     BeforeValidator(_as_tuple),
     WithJsonSchema({"anyOf": [_NUMBER_SCHEMA, {"type": "array", "items": _NUMBER_SCHEMA, "minItems": 3, "maxItems": 3}]}),
 ]
+#: A spatial inertia tensor's off-diagonal entries (Ixy, Ixz, Iyz), of either sign.
+InertiaProducts = tuple[_bounded(Num, "inertia_product"), _bounded(Num, "inertia_product"), _bounded(Num, "inertia_product")]
 Name = Annotated[str, Field(pattern=IDENTIFIER)]
 
 
@@ -317,7 +320,14 @@ class BodySpec(Strict):
     inertia: Inertia | None = Field(
         None,
         description="rotational inertia about the centre of mass (planar: scalar; spatial: "
-        "scalar or principal moments); required when a rotation is free",
+        "scalar or three moments about the body's axes: its principal moments, or with inertia_products the "
+        "tensor's diagonal Ixx, Iyy, Izz); required when a rotation is free",
+    )
+    inertia_products: InertiaProducts | None = Field(
+        None,
+        description="spatial: the inertia tensor's off-diagonal entries (Ixy, Ixz, Iyz), kg m^2, about the centre "
+        "of mass in the body's axes, as URDF's ixy, ixz, iyz and MuJoCo's fullinertia give them (Ixy = -sum m x y); "
+        "for a body whose principal axes are not its own (a CAD mesh's frame); none: the axes are principal",
     )
     actuators: dict[str, Drive] = Field(default_factory=dict, description="robots only: the drive of each actuated DOF")
     velocity: dict[str, Speed] = Field(

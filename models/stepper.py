@@ -69,8 +69,10 @@ from models.contact_pgs import (
     contact_pgs_into,
 )
 from models.kinematics import (
+    BF_AXES,
     BF_INERTIA,
     BF_MASS,
+    BF_TILTED,
     BI_QMAP,
     BI_VMAP,
     PF_C,
@@ -410,6 +412,21 @@ def body_rotation(bi, q, b):
 
 
 @numba.njit(cache=True, inline="always")
+def _principal_axes_into(bi, bf, q, b, R):
+    """Body b's principal axes in world axes into the caller's R (3, 3): its rotation
+    (`_rotation_into`), times the rotation to its principal axes where they are not its own
+    (`inertia_products`: BF_TILTED, BF_AXES), so that its inertia in world axes is
+    R diag(BF_INERTIA's moments) R^T. (A body without products of inertia takes its rotation
+    alone: the same operations as before the axes were kept.)"""
+    _rotation_into(bi, q, b, R)
+    if bf[b, BF_TILTED] != 0.0:
+        for r in range(3):
+            a0, a1, a2 = R[r, 0], R[r, 1], R[r, 2]
+            for c in range(3):
+                R[r, c] = a0 * bf[b, BF_AXES + c] + a1 * bf[b, BF_AXES + 3 + c] + a2 * bf[b, BF_AXES + 6 + c]
+
+
+@numba.njit(cache=True, inline="always")
 def _rotation_into(bi, q, b, R):
     """`body_rotation` into the caller's R (3, 3)."""
     w, x, y, z = q[bi[b, BI_QMAP + Q_QW]], q[bi[b, BI_QMAP + Q_QW + 1]], q[bi[b, BI_QMAP + Q_QW + 2]], q[bi[b, BI_QMAP + Q_QW + 3]]
@@ -419,7 +436,8 @@ def _rotation_into(bi, q, b, R):
 
 @numba.njit(cache=True, error_model="numpy")
 def world_inertia(bi, bf, q, b):
-    """Body b's inertia about its centre in world axes: R diag(I) R^T."""
+    """Body b's inertia about its centre in world axes: R diag(I) R^T (R: its principal axes in
+    world axes, `_principal_axes_into`)."""
     I = np.empty((3, 3))
     _world_inertia_into(bi, bf, q, b, np.empty((3, 3)), I)
     return I
@@ -428,7 +446,7 @@ def world_inertia(bi, bf, q, b):
 @numba.njit(cache=True, inline="always")
 def _world_inertia_into(bi, bf, q, b, R, I):
     """`world_inertia` into the caller's I (3, 3), with R (3, 3) scratch."""
-    _rotation_into(bi, q, b, R)
+    _principal_axes_into(bi, bf, q, b, R)
     for r in range(3):
         for c in range(3):
             s = 0.0
@@ -523,7 +541,7 @@ def _mass_times_gyro_into(bi, bf, q, nu, mass_nu, gyro, R):
         _diagonal_momentum_into(bi, bf, nu, b, mass_nu)
         if bi[b, BI_VMAP + V_WX] < 0:
             continue
-        _rotation_into(bi, q, b, R)
+        _principal_axes_into(bi, bf, q, b, R)
         i0, i1, i2 = bi[b, BI_VMAP + V_WX], bi[b, BI_VMAP + V_WX + 1], bi[b, BI_VMAP + V_WX + 2]
         w0, w1, w2 = nu[i0], nu[i1], nu[i2]
         L0, L1, L2 = _angular_momentum(bf, b, R, w0, w1, w2)
@@ -554,7 +572,8 @@ def gravity_force(bi, bf, gravity, nv):
 
 @numba.njit(cache=True, inline="always")
 def _angular_momentum(bf, b, R, w0, w1, w2):
-    """Body b's angular momentum L = R diag(I) R^T w in world axes (R: its rotation, w its
+    """Body b's angular momentum L = R diag(I) R^T w in world axes (R: its principal axes,
+    `_principal_axes_into`; w its
     angular velocity), written out: numba's @ calls BLAS, whose overhead dwarfs a 3 x 3."""
     l0 = bf[b, BF_INERTIA] * (R[0, 0] * w0 + R[1, 0] * w1 + R[2, 0] * w2)
     l1 = bf[b, BF_INERTIA + 1] * (R[0, 1] * w0 + R[1, 1] * w1 + R[2, 1] * w2)
@@ -574,7 +593,7 @@ def _gyroscopic_into(bi, bf, q, nu, f, R):
     for b in range(bi.shape[0]):
         if bi[b, BI_VMAP + V_WX] < 0:
             continue
-        _rotation_into(bi, q, b, R)
+        _principal_axes_into(bi, bf, q, b, R)
         w0, w1, w2 = nu[bi[b, BI_VMAP + V_WX]], nu[bi[b, BI_VMAP + V_WX + 1]], nu[bi[b, BI_VMAP + V_WX + 2]]
         L0, L1, L2 = _angular_momentum(bf, b, R, w0, w1, w2)
         f[bi[b, BI_VMAP + V_WX]] -= w1 * L2 - w2 * L1

@@ -77,7 +77,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from models.scenario import Scenario
+from models.scenario import Scenario, inertia_tensor
 
 #: Constant impedance d of the ``force`` contact mapping: the static force is K r (1 - O(d)).
 FORCE_IMPEDANCE = 1e-3
@@ -392,15 +392,19 @@ def mjcf_spatial(scenario: Scenario, h: float) -> str:
         if "rotation" in body.dofs:
             joints = f'<freejoint name="{body.name}"/>'
             pos, quat = place.translation, _quaternion(place.rotation)
-            inertia = body.inertia if isinstance(body.inertia, tuple | list) else (body.inertia,) * 3
+            # with products of inertia MuJoCo's fullinertia (the tensor's diagonal, then Ixy, Ixz, Iyz)
+            tensor = inertia_tensor(body)
+            inertial = f'diaginertia="{_n(*tensor.diagonal())}"'
+            if body.inertia_products is not None:
+                inertial = f'fullinertia="{_n(*tensor.diagonal(), *body.inertia_products)}"'
         else:  # slides along the world axes: the body sits at its pose off its DOFs' axes
             joints = "".join(_joint(body, dof, _AXES_3D) for dof in ("x", "y", "z") if dof in body.dofs)
             pos = [0.0 if axis in body.dofs else value for axis, value in zip("xyz", place.translation)]
             quat = _quaternion(place.rotation)
-            inertia = (PLACEHOLDER_INERTIA * body.mass,) * 3
+            inertial = f'diaginertia="{_n(*(PLACEHOLDER_INERTIA * body.mass,) * 3)}"'
         world.append(
             f'    <body name="{body.name}" pos="{_n(*pos)}" quat="{_n(*quat)}">{joints}'
-            f'<inertial pos="0 0 0" mass="{_n(body.mass)}" diaginertia="{_n(*inertia)}"/>{geom}</body>'
+            f'<inertial pos="0 0 0" mass="{_n(body.mass)}" {inertial}/>{geom}</body>'
         )
     actuators = _actuators(scenario)
     pairs = [

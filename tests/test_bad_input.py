@@ -37,6 +37,7 @@ FILES = [
     "huge_horizon",
     "huge_mesh",
     "zero_quaternion",
+    "inertia_not_positive_definite",
     "predicate_two_keys",
     "start_above_limit",
     "pose_below_limit",
