@@ -170,9 +170,10 @@ def test_a_torque_free_tumble_with_products_keeps_its_angular_momentum_to_first_
     assert 1.8 < drift[0] / drift[1] < 2.2, f"halving h divided the drift by {drift[0] / drift[1]}, not 2"
 
 
-def test_a_body_without_products_keeps_its_bits(tmp_path):
-    """Zero products are a body given its principal axes: the kernels take the rotation alone
-    (BF_TILTED 0), not a product with the identity."""
+def test_zero_products_move_the_body_as_none(tmp_path):
+    """A body without products is not tilted (BF_TILTED 0: the kernels take its rotation alone,
+    as before products existed); zero products (axes found by eigh: the identity up to order and
+    sign) move it the same way."""
     plain = load_scenario(_scene(tmp_path, "plain", MOMENTS))
     zero = load_scenario(_scene(tmp_path, "zero", MOMENTS, (0.0, 0.0, 0.0)))
     S = compiled(plain).scene
