@@ -1038,8 +1038,7 @@ def _passive_speeds(scenario: Scenario, result: RolloutResult):
         if not passive or not body.mass:
             continue
         turns = any(scenario.velocities[i].rpartition(".")[2] not in TRANSLATIONAL_DOFS for i in passive)
-        least = (min(principal_inertia(body)[0]) if scenario.dimension == 3 else body.inertia[0]) if turns and body.inertia else 0.0
-        gyration = least / body.mass
+        gyration = min(principal_inertia(body)[0]) / body.mass if turns and body.inertia else 0.0
         yield body, _peak_speed(scenario, result, passive, gyration)
 
 

@@ -1250,10 +1250,12 @@ def principal_inertia(body) -> tuple[np.ndarray, np.ndarray | None]:
     """A spatial body's principal moments and axes: (moments (3,), axes) where axes (3 x 3, a
     rotation: its columns the principal axes in the body's own) turns the body's axes into its
     principal ones, I = axes diag(moments) axes^T; axes None where they are the body's own (no
-    `inertia_products`), the moments then `inertia` as given (in its order, not sorted)."""
+    `inertia_products`), the moments then `inertia` as given (in its order, not sorted; a planar
+    body's one moment three times)."""
+    tensor = inertia_tensor(body)
     if body.inertia_products is None:
-        return np.array(body.inertia * 3 if len(body.inertia) == 1 else body.inertia, dtype=float), None
-    moments, axes = np.linalg.eigh(inertia_tensor(body))
+        return tensor.diagonal().copy(), None
+    moments, axes = np.linalg.eigh(tensor)
     if np.linalg.det(axes) < 0.0:  # (a rotation, not a reflection)
         axes[:, 2] = -axes[:, 2]
     return moments, axes
