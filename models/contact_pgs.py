@@ -535,7 +535,7 @@ class PgsWork(NamedTuple):
     Jacobian rows jn, jt, jo; y = A^-1 J^T rows yn, yt, yo; the Delassus blocks gnn, g00, g01,
     g11, compliance comp; the constant terms bn, bt; mu; whether it has friction), its
     impulses p_n, f and the directions' cosines and sines. Made per call by `contact_pgs`,
-    once per rollout for `models.stepper.spatial_pgs_step`."""
+    once per rollout for `models.stepper.pgs_warm_step`."""
 
     cosines: np.ndarray  # (d,)
     sines: np.ndarray  # (d,)

@@ -67,8 +67,8 @@ from models.stepper import (
     SceneTables,
     Solver,
     StepStatus,
+    _may_take_pgs_warm,
     _may_take_planar_warm,
-    _may_take_spatial_pgs,
     _may_take_spatial_warm,
     actuated_dofs,
     any_limited,
@@ -85,14 +85,14 @@ from models.stepper import (
     make_system,
     mass_matrix,
     passive_metric_inverse,
+    pgs_warm_fixed,
+    pgs_warm_step,
+    pgs_warm_step_on,
     planar_warm_buffers,
     planar_warm_fixed,
     planar_warm_step,
     planar_warm_step_on,
     rotating_blocks_into,
-    spatial_pgs_fixed,
-    spatial_pgs_step,
-    spatial_pgs_step_on,
     spatial_warm_buffers,
     spatial_warm_fixed,
     spatial_warm_step,
@@ -599,9 +599,9 @@ def _contact_run(
     rec_t, rec_q, rec_nu, n_rec, record_every, max_records, steps, t, t0, outcome, stop_at_outcome, warm_every, n_left, min_psi,
     force_steps, sweeps, lcp_solves, max_size, pivots, max_residual, moved,
 ):  # fmt: skip
-    """Up to n_left of `rollout_kernel`'s contact steps while a warm step takes them (in space
-    `models.stepper.spatial_pgs_step`, `models.stepper.spatial_warm_step`; in the plane
-    `models.stepper.planar_warm_step`), in one call compiled without numba's runtime: the same
+    """Up to n_left of `rollout_kernel`'s contact steps while a warm step takes them (PGS's
+    `models.stepper.pgs_warm_step`; Lemke's `models.stepper.spatial_warm_step` in space,
+    `models.stepper.planar_warm_step` in the plane), in one call compiled without numba's runtime: the same
     stages in the same order as the kernel's loop (the warm period's drop, detection,
     distances, classification, assembly, the warm start in the frames, the warm step, auto's
     switch, the warm start kept, the tally, the forces' and the state's records), the same
@@ -630,7 +630,7 @@ def _contact_run(
     basis_from, taken, nc, n_unsupported = BASIS_PASSED, 0, np.int64(0), 0
     # the steps' fixed arguments by reference, made once (`models.reference`, `spatial_warm_fixed`)
     warm_fixed = spatial_warm_fixed(D, tables, system, contacts, W)
-    pgs_fixed = spatial_pgs_fixed(D, tables, system, contacts, warm_n, warm_t, W, P)
+    pgs_fixed = pgs_warm_fixed(D, tables, system, contacts, warm_n, warm_t, W, P)
     planar_fixed = planar_warm_fixed(D, tables, system, contacts, B)
     while taken < n_left:
         if warm_every > 0 and int(np.round((t0 + t) / h)) % warm_every == 0:
@@ -653,9 +653,9 @@ def _contact_run(
         if keep_warm and spatial:
             _warm_in_frames(nc, c_slot, c_t, c_o, warm_w, warm_t)
         warm, pgs, sw, warm_pivots, size, res = WARM_NOT_TAKEN, False, 0, 0, 0, 0.0
-        if _may_take_spatial_pgs(spatial, limited, model, step_solver, nc):
+        if _may_take_pgs_warm(limited, model, step_solver, nc):
             pgs = True
-            warm, size, res, sw = spatial_pgs_step_on(
+            warm, size, res, sw = pgs_warm_step_on(
                 model, step_solver, pgs_fixed, rotating, h, q, nu, q_ref, u, nc, delta_n, delta_t, side, whole
             )
         elif _may_take_spatial_warm(spatial, limited, model, step_solver, nc):
@@ -777,17 +777,17 @@ def rollout_kernel(
     # the warm steps' arrays (planar, spatial; their results R, which the free step's scratch is
     # also) and the free step's results: each writes its results on its side, not the one its last
     # results (which the state may be) are on; buffers for contacts only where that warm step can
-    # run (`_may_take_planar_warm`, `_may_take_spatial_warm`, `_may_take_spatial_pgs`)
+    # run (`_may_take_planar_warm`, `_may_take_spatial_warm`, `_may_take_pgs_warm`)
     planar_cap = slots if dimension == 2 and constant_A and not limited and not kinematic else 0
     spatial_cap = min(slots, SPATIAL_WARM_CONTACTS) if dimension == 3 and not limited and not kinematic else 0
-    pgs_cap = slots if _may_take_spatial_pgs(dimension == 3, limited, model, solver, slots) else 0
+    pgs_cap = slots if _may_take_pgs_warm(limited, model, solver, slots) else 0
     R = warm_results(max(planar_cap, spatial_cap, pgs_cap), nv, q.shape[0], v_index.shape[0], basis, delta_n.shape[0])
     B, W = planar_warm_buffers(planar_cap, R), spatial_warm_buffers(spatial_cap, directions, bi.shape[0], R)
     # the side and the whole step (PART_STEP) as int64s, not literals: the warm steps compile once
     # for this kernel, stage_loop and Python's calls (a literal argument is a specialization of its
     # own, compiled even where it is only the type inference's first guess at a loop's variable)
     side, whole = np.int64(0), np.int64(PART_STEP)
-    P = pgs_work(pgs_cap, _pgs_directions(model, True))
+    P = pgs_work(pgs_cap, _pgs_directions(model, dimension == 3))
     free_q, free_nu, free_q_ref, free_side = np.empty((2, q.shape[0])), np.empty((2, nv)), np.empty((2, q_ref.shape[0])), np.int64(0)
     eps_eff = model.quasistatic_inertia if eps == 0.0 else eps
     total_steps = 0
@@ -803,8 +803,8 @@ def rollout_kernel(
     # WIDEN_TRIES times, where that detection finds more (a memoryless or kinematic step's
     # velocity is not the last one's: a pusher started at 0.5 m/s moves 5 cm in a 0.1 s step)
     widen, moved, probe = 0, np.empty(bi.shape[0]), np.empty(nv)
-    # runs of contact steps in one call (`_contact_run`), where a warm step takes them (in the
-    # plane Lemke's: PGS's steps there are the general step's, which the run would hand back)
+    # runs of contact steps in one call (`_contact_run`), where a warm step takes them (PGS's,
+    # or Lemke's where its buffers are made)
     planar_run = planar_cap > 0 and solver.method == SOLVER_LEMKE
     try_contact = not kinematic and not limited and not scripted and not has_law and (pgs_cap > 0 or spatial_cap > 0 or planar_run)
     t, steps, lcp_solves, pivots, max_residual, max_size, min_psi, force_steps, sweeps = (
@@ -931,16 +931,16 @@ def rollout_kernel(
                     dn2, dt2 = np.zeros_like(delta_n), np.zeros_like(delta_t)
                 piv, res, size, p_n = 0, 0.0, 0, no_impulse
             else:
-                # the usual step, without numba's runtime: in space PGS's (`spatial_pgs_step`) or,
-                # while contacts persist, a warm step (`spatial_warm_step`, `planar_warm_step`);
+                # the usual step, without numba's runtime: PGS's (`pgs_warm_step`) or, while
+                # contacts persist, Lemke's warm step (`spatial_warm_step`, `planar_warm_step`);
                 # else the general one
                 warm, pgs, warm_pivots = WARM_NOT_TAKEN, False, 0
                 if keep_warm and dimension == 3:
                     _warm_in_frames(nc, c_slot, c_t, c_o, warm_w, warm_t)
                 # (not where `_contact_run` tried the warm step at this state: it did not take it)
-                if not tried and _may_take_spatial_pgs(dimension == 3, limited, model, step_solver, nc):
+                if not tried and _may_take_pgs_warm(limited, model, step_solver, nc):
                     pgs = True
-                    warm, size, res, sw = spatial_pgs_step(
+                    warm, size, res, sw = pgs_warm_step(
                         model, step_solver, D, tables, system, not constant_A, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t,
                         warm_n, warm_t, W, P, side, whole,
                     )  # fmt: skip
@@ -1246,16 +1246,16 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
     spatial_cap = min(c_psi.shape[0], SPATIAL_WARM_CONTACTS) if dimension == 3 else 0
     R = warm_results(c_psi.shape[0], nv, q.shape[0], D.v_index.shape[0], basis, delta_n.shape[0])
     B, W = planar_warm_buffers(planar_cap, R), spatial_warm_buffers(spatial_cap, directions, bi.shape[0], R)
-    P = pgs_work(c_psi.shape[0] if dimension == 3 else 0, _pgs_directions(model, True))
+    P = pgs_work(c_psi.shape[0], _pgs_directions(model, dimension == 3))
     # side 0 of R, the whole step and _assemble's flags as runtime values, not literals: the warm
     # steps and _assemble compile once, for this loop, rollout_kernel and Python's calls alike
     side, whole, scripted, with_friction = np.int64(0), np.int64(PART_STEP), np.bool_(False), np.bool_(True)
     warm = False  # whether the rollout takes the planar warm step at the state (as rollout_kernel)
     warm3 = False  # the spatial warm step
-    warm_pgs = False  # the spatial PGS step
+    warm_pgs = False  # the PGS step
     # the spatial steps' fixed arguments by reference, as `_contact_run` passes them
     warm_fixed = spatial_warm_fixed(D, tables, system, contacts, W)
-    pgs_fixed = spatial_pgs_fixed(D, tables, system, contacts, warm_n, warm_t, W, P)
+    pgs_fixed = pgs_warm_fixed(D, tables, system, contacts, warm_n, warm_t, W, P)
     planar_fixed = planar_warm_fixed(D, tables, system, contacts, B)
     for k in range(repeats + 1):
         if k == 0 or stage == STAGE_DETECT:
@@ -1280,7 +1280,7 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
             elif warm3:
                 spatial_warm_step_on(model, warm_fixed, rotating, h, q, nu, q_ref, u, nc, delta_n, delta_t, basis, side, part)
             elif warm_pgs:
-                spatial_pgs_step_on(model, solver, pgs_fixed, rotating, h, q, nu, q_ref, u, nc, delta_n, delta_t, side, part)
+                pgs_warm_step_on(model, solver, pgs_fixed, rotating, h, q, nu, q_ref, u, nc, delta_n, delta_t, side, part)
             else:
                 contact_stage(
                     part, model, solver, D, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis
@@ -1294,7 +1294,7 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
             pivots = spatial_warm_step_on(model, warm_fixed, rotating, h, q, nu, q_ref, u, nc, delta_n, delta_t, basis, side, whole)[3]
             sweeps = 0
         elif k > 0 and stage == STAGE_SOLVE and warm_pgs:
-            sweeps = spatial_pgs_step_on(model, solver, pgs_fixed, rotating, h, q, nu, q_ref, u, nc, delta_n, delta_t, side, whole)[3]
+            sweeps = pgs_warm_step_on(model, solver, pgs_fixed, rotating, h, q, nu, q_ref, u, nc, delta_n, delta_t, side, whole)[3]
             pivots = 0
         elif k == 0 or stage == STAGE_SOLVE:
             r = dynamics_step(model, solver, D, tables, system, h, q, nu, q_ref, delta_n, delta_t, u, contacts, nc, warm_n, warm_t, basis)
@@ -1307,9 +1307,9 @@ def stage_loop(stage, S, D, model, solver, goal, unsafe, q, nu, q_ref, delta_n, 
                 if _may_take_spatial_warm(dimension == 3, limited, model, solver, nc):
                     args3 = (model, D, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, basis, W, side, whole)
                     warm3 = spatial_warm_step(*args3)[0] == WARM_DONE
-                if _may_take_spatial_pgs(dimension == 3, limited, model, solver, nc):
+                if _may_take_pgs_warm(limited, model, solver, nc):
                     argsp = (model, solver, D, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t)
-                    warm_pgs = spatial_pgs_step(*argsp, warm_n, warm_t, W, P, side, whole)[0] == WARM_DONE
+                    warm_pgs = pgs_warm_step(*argsp, warm_n, warm_t, W, P, side, whole)[0] == WARM_DONE
             else:
                 pivots, sweeps = r.pivots, r.sweeps
         if stage == STAGE_SETUP:

@@ -857,10 +857,10 @@ def _may_take_spatial_warm(spatial, limited, model, solver, nc):
 
 
 @numba.njit(cache=True, inline="always")
-def _may_take_spatial_pgs(spatial, limited, model, solver, nc):
-    """Whether a step with nc contacts may go to `spatial_pgs_step`: in space, not kinematic, a
-    PGS step (`_uses_pgs`)."""
-    return spatial and not model.kinematic and _uses_pgs(model, solver, nc, limited)
+def _may_take_pgs_warm(limited, model, solver, nc):
+    """Whether a step with nc contacts may go to `pgs_warm_step` (in the plane or in space): not
+    kinematic, a PGS step (`_uses_pgs`)."""
+    return not model.kinematic and _uses_pgs(model, solver, nc, limited)
 
 
 @numba.njit(cache=True, inline="always")
@@ -2256,8 +2256,8 @@ def spatial_warm_fixed(drives, tables, system, contacts, W):
 
 
 @numba.njit(cache=True, inline="always")
-def spatial_pgs_fixed(drives, tables, system, contacts, warm_n, warm_t, W, P):
-    """The reference `spatial_pgs_step_on` takes, as `spatial_warm_fixed` makes its own."""
+def pgs_warm_fixed(drives, tables, system, contacts, warm_n, warm_t, W, P):
+    """The reference `pgs_warm_step_on` takes, as `spatial_warm_fixed` makes its own."""
     return reference((drives, tables, system, contacts, warm_n, warm_t, W, P))
 
 
@@ -2301,7 +2301,7 @@ def spatial_warm_step_on(model, fixed, rotating, h, q, nu, q_ref, u, nc, delta_n
     L, R = W.lcp, W.out
     if not tables.spatial or nc > L.active.shape[0] or any_limited(drives.max_force):
         return WARM_NOT_TAKEN, 0, 0.0, 0
-    ok, dofs, count, inv = _spatial_free_velocity_into(model, drives, tables, system, rotating, h, q, nu, q_ref, u, W, side, True)
+    ok, dofs, count, inv = _warm_free_velocity_into(model, drives, tables, system, True, rotating, h, q, nu, q_ref, u, W, side, True)
     if not ok:
         return WARM_NOT_TAKEN, 0, 0.0, 0
     nu_free = R.nu_free
@@ -2379,12 +2379,12 @@ def spatial_warm_step_on(model, fixed, rotating, h, q, nu, q_ref, u, nc, delta_n
 
 
 @numba.njit(cache=True, inline="always")
-def _spatial_free_velocity_into(model, drives, tables, system, rotating, h, q, nu, q_ref, u, W, side, held):
-    """The free velocity of a step in space on W's arrays (`SpatialWarm`): A^-1's body blocks
-    (the System's, the rotating bodies' refreshed at q where rotating: `rotating_blocks_into`),
-    and into W.out nu_free, q_ref+ on side `side` and the drives' a
-    (`_free_velocity_by_body_into`; held as there). Returns (ok: A's blocks are not singular,
-    dofs, count, inv)."""
+def _warm_free_velocity_into(model, drives, tables, system, spatial, rotating, h, q, nu, q_ref, u, W, side, held):
+    """The free velocity of a warm step (in space, or PGS's in the plane: spatial False) on W's
+    arrays (`SpatialWarm`): A^-1's body blocks (the System's, the rotating bodies' refreshed at q
+    where rotating: `rotating_blocks_into`), and into W.out nu_free, q_ref+ on side `side` and
+    the drives' a (`_free_velocity_by_body_into`; held and spatial as there). Returns (ok: A's
+    blocks are not singular, dofs, count, inv)."""
     bi, bf, R = tables.bi, tables.bf, W.out
     eps = model.quasistatic_inertia if model.eps == 0.0 else model.eps
     dofs, count, inv = system.dofs, system.count, system.inv
@@ -2396,7 +2396,7 @@ def _spatial_free_velocity_into(model, drives, tables, system, rotating, h, q, n
     ):  # fmt: skip
         return False, dofs, count, inv
     _free_velocity_by_body_into(
-        model, drives, bi, bf, True, system, held, h, q, nu, q_ref, u, dofs, count, inv, R.rhs, R.nu_free, R.q_ref[side], R.drive_a,
+        model, drives, bi, bf, spatial, system, held, h, q, nu, q_ref, u, dofs, count, inv, R.rhs, R.nu_free, R.q_ref[side], R.drive_a,
         W.mass_nu, W.gyro, W.R, W.I,
     )  # fmt: skip
     return True, dofs, count, inv
@@ -2443,24 +2443,25 @@ def _free_velocity_by_body_into(
 
 
 @numba.njit(cache=True, _nrt=False, error_model="numpy")
-def spatial_pgs_step(
+def pgs_warm_step(
     model, solver, drives, tables, system, rotating, h, q, nu, q_ref, u, contacts, nc, delta_n, delta_t, warm_n, warm_t, W, P, side,
     part,
 ):  # fmt: skip
-    """`spatial_pgs_step_on` with its arguments by value: its fixed ones (drives, tables, system,
+    """`pgs_warm_step_on` with its arguments by value: its fixed ones (drives, tables, system,
     contacts, the warm starts warm_n and warm_t, W, P) passed on by reference
     (`models.reference`), as `spatial_warm_step` passes its own."""
-    fixed = spatial_pgs_fixed(drives, tables, system, contacts, warm_n, warm_t, W, P)
-    return spatial_pgs_step_on(model, solver, fixed, rotating, h, q, nu, q_ref, u, nc, delta_n, delta_t, side, part)
+    fixed = pgs_warm_fixed(drives, tables, system, contacts, warm_n, warm_t, W, P)
+    return pgs_warm_step_on(model, solver, fixed, rotating, h, q, nu, q_ref, u, nc, delta_n, delta_t, side, part)
 
 
 @numba.njit(cache=True, _nrt=False, error_model="numpy")
 @nonnegative_indices
-def spatial_pgs_step_on(model, solver, fixed, rotating, h, q, nu, q_ref, u, nc, delta_n, delta_t, side, part):
-    """`_pgs_step` in space (PGS on the polygon or the exact cone), compiled without numba's
+def pgs_warm_step_on(model, solver, fixed, rotating, h, q, nu, q_ref, u, nc, delta_n, delta_t, side, part):
+    """`_pgs_step` (in space on the polygon or the exact cone, in the plane on its two
+    directions), compiled without numba's
     runtime and without its wraparound of negative indices (`nonnegative_indices`): no reference
     counts, no allocation; the free velocity's arrays and the results
-    are W's (`SpatialWarm`, as `spatial_warm_step`'s), the contacts' rows P's
+    are W's (`SpatialWarm`, as `spatial_warm_step`'s; in the plane W holds no contact), the contacts' rows P's
     (`models.contact_pgs.PgsWork`). Where nc exceeds P, a block of A is singular, PGS does not
     converge or the state leaves the finite range, it returns WARM_NOT_TAKEN and the caller
     takes the general path, which solves the step again from the start (and returns its
@@ -2469,12 +2470,13 @@ def spatial_pgs_step_on(model, solver, fixed, rotating, h, q, nu, q_ref, u, nc, 
     operations in the same order as `_pgs_step`: the same bits (tests/test_warm_steps.py).
     part: PART_STEP, or the first parts only, for the cost split (as `contact_stage`). Returns
     (outcome, unknowns, residual, sweeps). fixed: a reference (`models.reference`) to (drives,
-    tables, system, contacts, warm_n, warm_t, W, P), read once here (`spatial_pgs_fixed`)."""
+    tables, system, contacts, warm_n, warm_t, W, P), read once here (`pgs_warm_fixed`)."""
     drives, tables, system, contacts, warm_n, warm_t, W, P = referent(fixed)
     R = W.out
-    if not tables.spatial or nc > P.active.shape[0] or any_limited(drives.max_force):
+    spatial = tables.spatial
+    if nc > P.active.shape[0] or any_limited(drives.max_force):
         return WARM_NOT_TAKEN, 0, 0.0, 0
-    ok, dofs, count, inv = _spatial_free_velocity_into(model, drives, tables, system, rotating, h, q, nu, q_ref, u, W, side, False)
+    ok, dofs, count, inv = _warm_free_velocity_into(model, drives, tables, system, spatial, rotating, h, q, nu, q_ref, u, W, side, False)
     if not ok:
         return WARM_NOT_TAKEN, 0, 0.0, 0
     if part == PART_ASSEMBLY:
@@ -2482,8 +2484,8 @@ def spatial_pgs_step_on(model, solver, fixed, rotating, h, q, nu, q_ref, u, nc, 
     nu_new = R.nu[side]
     tolerance = _pgs_tolerance(model, solver)
     status, sweeps, residual, unknowns, n = contact_pgs_into(
-        model, True, h, tables.pi, tables.pf, contacts, nc, delta_n, delta_t, dofs, count, inv, R.nu_free, warm_n, warm_t, ZERO_COLUMN,
-        tolerance, solver.max_sweeps, P, nu_new,
+        model, spatial, h, tables.pi, tables.pf, contacts, nc, delta_n, delta_t, dofs, count, inv, R.nu_free, warm_n, warm_t,
+        ZERO_COLUMN, tolerance, solver.max_sweeps, P, nu_new,
     )  # fmt: skip
     if status != PgsStatus.CONVERGED:
         return WARM_NOT_TAKEN, unknowns, residual, sweeps

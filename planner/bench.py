@@ -12,7 +12,8 @@ Sections (each a function returning a JSON-able dict; `run_all` runs them and wr
   same scene, steps and h (`planner.peers`), with the ratio, where MuJoCo's run ends, and a
   stability sweep (h = 1e-4 to 1e-3, the policy's full 3 s) of ours and MuJoCo's;
 - scaling: cost per step against the number of contacts for Lemke and PGS (a row of boxes
-  resting on a plane, 2 contacts each, up to 64 contacts; a short stack), with the fitted
+  resting on a plane, 2 contacts each, up to 64 contacts; a short stack; a row in space, 4
+  contacts each, up to 32), with the fitted
   growth exponent per solver and the contact count from which PGS is cheaper;
 - planning: the ladder against planning flat at the top rung over seeds (success rate,
   median wall time), also written as OMPL benchmark logs (``ompl_benchmark_statistics
@@ -462,7 +463,7 @@ def _cost_split(scene: str, scenario, rung, state, u: np.ndarray, h: float, quic
     the pair distances and the task's predicates, the contact Jacobians, and the dynamics step in
     its three parts (`models.stepper.contact_stage`, or the step the rollout takes at the state:
     `models.stepper.planar_warm_step`, `models.stepper.spatial_warm_step`,
-    `models.stepper.spatial_pgs_step`): the free velocity and the LCP's assembly, the warm-started
+    `models.stepper.pgs_warm_step`): the free velocity and the LCP's assembly, the warm-started
     contact solve, and the rest (the impulses' velocity update, the integration), in us per call.
     Each round runs every stage SPLIT_REPEATS times, the stages in turns, so that a busy spell of
     the machine falls on a round's stages alike; a stage's time in a round is its run's less the
@@ -721,8 +722,8 @@ version = 1
 [scenario]
 name = "box_row"
 [scene]
-dimension = 2
-gravity = [0.0, -9.81]
+dimension = {dimension}
+gravity = {gravity}
 [contact]
 mu = 0.5
 K = 1e6
@@ -730,7 +731,7 @@ C = 1e4
 [[bodies]]
 name = "floor"
 role = "obstacle"
-shape = {{ type = "halfplane", normal = [0.0, 1.0] }}
+shape = {floor}
 {boxes}
 [task]
 horizon = 10.0
@@ -746,11 +747,23 @@ BOX = """[[bodies]]
 name = "b{i}"
 role = "object"
 mass = 1.0
-inertia = 0.0017
-shape = {{ type = "box", size = [0.1, 0.1] }}
-pose = {{ x = {x}, y = {y} }}
-dofs = ["x", "y", "theta"]
+inertia = {inertia}
+shape = {{ type = "box", size = {size} }}
+pose = {pose}
+dofs = {dofs}
 """
+
+#: The scaling scenes' floor and boxes (0.1 m, 1 kg) by dimension: (gravity, floor, inertia, size, dofs).
+BOX_SCENES = {
+    2: ("[0.0, -9.81]", '{ type = "halfplane", normal = [0.0, 1.0] }', "0.0017", "[0.1, 0.1]", '["x", "y", "theta"]'),
+    3: (
+        "[0.0, 0.0, -9.81]",
+        '{ type = "plane", normal = [0.0, 0.0, 1.0], offset = 0.0 }',
+        "[0.0017, 0.0017, 0.0017]",
+        "[0.1, 0.1, 0.1]",
+        '["x", "y", "z", "rotation"]',
+    ),
+}
 
 SCALING_RUNGS = ("dynamic-rigid", "dynamic-compliant")
 SCALING_SOLVERS = ("lemke", "pgs")
@@ -759,16 +772,21 @@ SCALING_SOLVERS = ("lemke", "pgs")
 SCALING_REPEATS = 3
 
 
-def box_scene(folder: Path, arrangement: str, n: int):
-    """n boxes (0.1 m, 1 kg) resting on a plane: apart in a row, or in a stack (2 contacts each)."""
+def box_scene(folder: Path, arrangement: str, n: int, dimension: int = 2):
+    """n boxes (0.1 m, 1 kg) resting on a plane: apart in a row, or in a stack (in the plane 2
+    contacts each, in space 4)."""
     from models.scenario import load_scenario
 
-    if arrangement == "row":
-        boxes = "".join(BOX.format(i=i, x=0.3 * i, y=0.05) for i in range(n))
-    else:
-        boxes = "".join(BOX.format(i=i, x=0.0, y=0.05 + 0.1 * i) for i in range(n))
-    path = Path(folder) / f"{arrangement}{n}.toml"
-    path.write_text(ROW_TEMPLATE.format(boxes=boxes))
+    gravity, floor, inertia, size, dofs = BOX_SCENES[dimension]
+    up = "y" if dimension == 2 else "z"
+
+    def pose(x, height):
+        return f"{{ x = {x}, {up} = {height} }}"
+
+    poses = [pose(0.3 * i, 0.05) if arrangement == "row" else pose(0.0, 0.05 + 0.1 * i) for i in range(n)]
+    boxes = "".join(BOX.format(i=i, inertia=inertia, size=size, pose=p, dofs=dofs) for i, p in enumerate(poses))
+    path = Path(folder) / f"{arrangement}{n}_{dimension}d.toml"
+    path.write_text(ROW_TEMPLATE.format(dimension=dimension, gravity=gravity, floor=floor, boxes=boxes))
     return load_scenario(path)
 
 
@@ -830,16 +848,21 @@ def _scaling(quick: bool) -> dict:
 
     counts = [1, 2, 4, 8, 16] if quick else [1, 2, 4, 8, 16, 32]
     stack_counts = [1, 2, 4] if quick else [1, 2, 4, 8]
+    spatial_counts = [1, 2, 4] if quick else [1, 2, 4, 8]
     steps = 200 if quick else 1000
-    rows, stack_rows = [], []
+    rows, stack_rows, spatial_rows = [], [], []
     with tempfile.TemporaryDirectory() as tmp:
-        for arrangement, sizes, out in (("row", counts, rows), ("stack", stack_counts, stack_rows)):
+        for arrangement, dimension, sizes, out in (
+            ("row", 2, counts, rows),
+            ("stack", 2, stack_counts, stack_rows),
+            ("row", 3, spatial_counts, spatial_rows),
+        ):
             for n in sizes:
-                scene = box_scene(Path(tmp), arrangement, n)
+                scene = box_scene(Path(tmp), arrangement, n, dimension)
                 for rung in SCALING_RUNGS:
                     for solver in SCALING_SOLVERS:
                         row = _per_step(scene, rung, solver, steps if arrangement == "row" else steps // 2)
-                        out.append({**row, "boxes": n, "contacts": 2 * n})
+                        out.append({**row, "boxes": n, "contacts": 2 * n if dimension == 2 else 4 * n})
     exponents = {
         rung: {solver: _growth_exponent([r for r in rows if r["rung"] == rung and r["solver"] == solver]) for solver in SCALING_SOLVERS}
         for rung in SCALING_RUNGS
@@ -850,11 +873,14 @@ def _scaling(quick: bool) -> dict:
         "growth_exponent": exponents,
         "crossover_contacts": {rung: _cheaper_from(rows, rung, "pgs") for rung in SCALING_RUNGS},
         "stack_lemke_cheaper_from": {rung: _cheaper_from(stack_rows, rung, "lemke") for rung in SCALING_RUNGS},
+        "spatial_rows": spatial_rows,
+        "spatial_crossover_contacts": {rung: _cheaper_from(spatial_rows, rung, "pgs") for rung in SCALING_RUNGS},
         "auto_pgs_contacts": AUTO_PGS_CONTACTS,
         "blas_threads": os.environ.get("OPENBLAS_NUM_THREADS", "default"),
         "note": "contact detection (all n (n + 1) / 2 body pairs), Jacobians and the contact solve of a rollout from rest at h = 1e-3 "
-        f"(best of {SCALING_REPEATS} rollouts). Lemke solves the dense Stewart-Trinkle LCP (8 unknowns per box: "
-        "normal, 2 friction directions and a sliding speed per contact); PGS iterates on the contact impulses "
+        f"(best of {SCALING_REPEATS} rollouts). Lemke solves the dense Stewart-Trinkle LCP (in the plane 8 unknowns per box: "
+        "normal, 2 friction directions and a sliding speed per contact; in space 24: 4 contacts with 4 directions each, "
+        "the scenario format's default); PGS iterates on the contact impulses "
         "body by body (models.contact_pgs) to a relative residual of 1e-6, warm-started from the previous step",
     }
 
@@ -864,10 +890,12 @@ def scaling(quick: bool = False) -> dict:
 
     Row: n boxes resting apart on a plane, 2 contacts each, n up to 32 (64 contacts; --quick: 16).
     Stack: n boxes stacked on the plane, n up to 8 (--quick: 4): coupled contacts, where PGS needs
-    many sweeps. Per rung, solver and n: us/step, PGS sweeps per step, status. growth_exponent
+    many sweeps. Spatial rows: n boxes apart on a plane in space, 4 contacts each, n up to 8
+    (--quick: 4). Per rung, solver and n: us/step, PGS sweeps per step, status. growth_exponent
     [rung][solver]: slope of log(us/step) against log(contacts) on the row from 4 contacts on;
     crossover_contacts[rung]: the smallest count from which PGS is cheaper at every larger count
-    (None: never); stack_lemke_cheaper_from[rung]: the same for Lemke on the stack.
+    (None: never); stack_lemke_cheaper_from[rung]: the same for Lemke on the stack;
+    spatial_crossover_contacts[rung]: crossover_contacts on the spatial rows.
 
     Timed in a child process with one OpenBLAS thread (OPENBLAS_NUM_THREADS=1): numba's matrix
     products call OpenBLAS, whose worker threads on a machine with other work add waiting many
@@ -1111,7 +1139,7 @@ def scaling_markdown(s: dict) -> list[str]:
         "",
         f"Cost per step: {s['note']}. OpenBLAS threads: {s['blas_threads']}.",
         "",
-        "Boxes apart in a row:",
+        "Boxes apart in a row in the plane:",
         "",
     ]
     lines += table(s["rows"])
@@ -1120,9 +1148,7 @@ def scaling_markdown(s: dict) -> list[str]:
         "Fitted growth exponent of cost per step in the number of contacts (4 and more): "
         + "; ".join(f"{rung}: Lemke {e['lemke']:.2f}, PGS {e['pgs']:.2f}" for rung, e in s["growth_exponent"].items())
         + ".",
-        "PGS is cheaper per step than Lemke "
-        + "; ".join(f"{count(c)} ({rung})" for rung, c in s["crossover_contacts"].items())
-        + f". The `auto` contact solver switches to PGS from {s['auto_pgs_contacts']} contacts (a fixed rule, not this run's crossover).",
+        "PGS is cheaper per step than Lemke " + "; ".join(f"{count(c)} ({rung})" for rung, c in s["crossover_contacts"].items()) + ".",
         "",
         "A stack of boxes (every contact coupled to the ones above and below; `-`: the first step did not converge):",
         "",
@@ -1134,6 +1160,17 @@ def scaling_markdown(s: dict) -> list[str]:
         + "; ".join(f"{count(c)} ({rung})" for rung, c in s["stack_lemke_cheaper_from"].items())
         + ".",
     ]
+    if s.get("spatial_rows"):  # (a result saved before they were measured has none)
+        lines += ["", "Boxes apart in a row in space (4 contacts each, 4 friction directions):", ""]
+        lines += table(s["spatial_rows"])
+        lines += [
+            "",
+            "In space PGS is cheaper per step than Lemke "
+            + "; ".join(f"{count(c)} ({rung})" for rung, c in s["spatial_crossover_contacts"].items())
+            + ".",
+        ]
+    auto = s["auto_pgs_contacts"]
+    lines += ["", f"The `auto` contact solver switches to PGS from {auto} contacts (a fixed rule, not this run's crossovers)."]
     return lines
 
 
@@ -1458,7 +1495,7 @@ def contact_markdown(contact: dict | None) -> list[str]:
             "the same round; the step's parts: differences, within a round, of runs that stop after each); the dynamics step "
             "in its three parts (`models.stepper.contact_stage`; on a state whose LCP the previous basis solves, the "
             "warm step the rollout takes there, `models.stepper.planar_warm_step` in the plane, "
-            "`models.stepper.spatial_warm_step` in space; with PGS in space, `models.stepper.spatial_pgs_step`): A^-1's "
+            "`models.stepper.spatial_warm_step` in space; with PGS, `models.stepper.pgs_warm_step`): A^-1's "
             "rotating bodies' blocks where A depends on q, the free "
             "velocity and the LCP's assembly (PGS "
             "assembles its blocks in its solve), the warm-started contact solve, the impulses' velocity update and the "

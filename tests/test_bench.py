@@ -134,6 +134,14 @@ def test_throughput_and_scaling_report_every_rung(quick):
         assert row["status"] in ("ok", "contact_not_converged")
         assert (row["us_per_step"] is None) == (row["steps"] == 0)
     assert {(row["solver"], row["status"]) for row in s["stack_rows"] if row["solver"] == "lemke"} == {("lemke", "ok")}
+    spatial = s["spatial_rows"]  # boxes apart in space: 4 contacts each, at rest under both solvers
+    assert all(row["status"] == "ok" and row["max_drift"] < 1e-3 for row in spatial)
+    for rung in ("dynamic-rigid", "dynamic-compliant"):
+        for solver in ("lemke", "pgs"):
+            mine = [row for row in spatial if row["rung"] == rung and row["solver"] == solver]
+            assert [row["contacts"] for row in mine] == [4, 8, 16]
+            assert all((row["sweeps_per_step"] >= 1) == (solver == "pgs") for row in mine)
+        assert s["spatial_crossover_contacts"][rung] in (None, 4, 8, 16)
 
 
 def test_planning_section_and_ompl_logs(quick):

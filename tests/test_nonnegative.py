@@ -56,10 +56,10 @@ def test_a_marked_kernel_keeps_numba_s_slices():
 
 def test_the_warm_steps_are_marked():
     # the steps' bodies (their arguments by reference); their by-value wrappers index nothing
-    for name in ("spatial_warm_step_on", "spatial_pgs_step_on", "planar_warm_step_on"):
+    for name in ("spatial_warm_step_on", "pgs_warm_step_on", "planar_warm_step_on"):
         assert _prefix(f"models.stepper.{name}") in nonnegative._MARKED
         assert callable(getattr(stepper, name))
-    for name in ("spatial_warm_step", "spatial_pgs_step", "planar_warm_step"):
+    for name in ("spatial_warm_step", "pgs_warm_step", "planar_warm_step"):
         assert _prefix(f"models.stepper.{name}") not in nonnegative._MARKED
 
 

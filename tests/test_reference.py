@@ -67,7 +67,7 @@ def test_the_flag_reads_back_as_it_was_written():
 def test_the_warm_steps_take_their_fixed_arguments_by_reference():
     # the bodies the runs call take one reference where their wrappers take the arrays
     assert "fixed" in stepper.spatial_warm_step_on.py_func.__code__.co_varnames[:3]
-    assert "fixed" in stepper.spatial_pgs_step_on.py_func.__code__.co_varnames[:3]
+    assert "fixed" in stepper.pgs_warm_step_on.py_func.__code__.co_varnames[:3]
     assert "fixed" in stepper.planar_warm_step_on.py_func.__code__.co_varnames[:3]
     assert stepper.spatial_warm_step_on.py_func.__code__.co_argcount < stepper.spatial_warm_step.py_func.__code__.co_argcount
     assert stepper.planar_warm_step_on.py_func.__code__.co_argcount < stepper.planar_warm_step.py_func.__code__.co_argcount

@@ -1,5 +1,5 @@
 """The warm steps (`planar_warm_step`, `spatial_warm_step`) against the general Lemke step
-(`dynamics_step`), and the PGS step in space (`spatial_pgs_step`) against the general PGS step.
+(`dynamics_step`), and the PGS step (`pgs_warm_step`) against the general PGS step.
 
 While contacts persist, a step's LCP is solved by the previous step's basis, and the rollout
 takes that step in `planar_warm_step` (in the plane) or `spatial_warm_step` (in space): compiled
@@ -13,8 +13,8 @@ Lemke from scratch, which the warm steps run on their own arrays. Checked at
 states of every rung that solves an LCP, on the planar scenarios with friction and the spatial
 ones, with random commands (fixed seeds).
 
-The PGS step in space (`spatial_pgs_step`, PGS on the polygon and on the exact cone) is held to
-the general PGS step likewise, and is taken exactly where that converges.
+The PGS step (`pgs_warm_step`: in the plane, and in space on the polygon and on the exact cone)
+is held to the general PGS step likewise, and is taken exactly where that converges.
 """
 
 from __future__ import annotations
@@ -53,9 +53,9 @@ from models.stepper import (
     contact_lcp,
     dynamics_step,
     has_rotations,
+    pgs_warm_step,
     planar_warm_buffers,
     planar_warm_step,
-    spatial_pgs_step,
     spatial_warm_buffers,
     spatial_warm_step,
     warm_results,
@@ -281,23 +281,24 @@ def _held_bit_for_bit(states, both, which):
 
 def _both_pgs_steps(sc, model, solver, state, u, h, t):
     """(general, pgs) at the state: the general PGS step (`dynamics_step`) and
-    `spatial_pgs_step`'s result fields (None where it was not taken), both warm-started from the
+    `pgs_warm_step`'s result fields (None where it was not taken), both warm-started from the
     impulses of a first general step at the state (by contact slot, as the rollout keeps them).
     None where no contact is detected."""
     at = _at(sc, model, state, h, t)
     if at is None:
         return None
-    S, D, system, tables, contacts, nc, cap, _ = at
+    S, D, system, tables, contacts, nc, cap, spatial = at
     u = np.asarray(u, dtype=float)
-    basis = basis_table(cap, D.v_index.shape[0], model.friction_directions)
+    directions = model.friction_directions if spatial else 2
+    basis = basis_table(cap, D.v_index.shape[0], directions)
     warm_n, warm_t = np.zeros(cap), np.zeros((cap, 2))
     args = (h, state.q, state.nu, state.q_ref, state.delta_n, state.delta_t, u, contacts, nc)
     first = dynamics_step(model, solver, D, tables, system, *args, warm_n, warm_t, basis)
     warm_n[contacts.slot[:nc]], warm_t[contacts.slot[:nc]] = first.p_n, first.p_t
     general = dynamics_step(model, solver, D, tables, system, *args, warm_n, warm_t, basis)
     R = warm_results(cap, S.nv, state.q.shape[0], D.v_index.shape[0], basis, state.delta_n.shape[0])
-    W = spatial_warm_buffers(0, model.friction_directions, S.bi.shape[0], R)
-    P = pgs_work(cap, _pgs_directions(model, True))
+    W = spatial_warm_buffers(0, directions, S.bi.shape[0], R)
+    P = pgs_work(cap, _pgs_directions(model, spatial))
     for a in P:  # NaN in every float entry: the step reads only what it set (`_gather_contacts_into`)
         if a.dtype.kind == "f":
             a[...] = np.nan
@@ -305,7 +306,7 @@ def _both_pgs_steps(sc, model, solver, state, u, h, t):
     for a in (R.q, R.nu, R.q_ref, R.delta_n, R.delta_t):
         a[...] = 7
     step = (h, state.q, state.nu, state.q_ref, u, contacts, nc, state.delta_n, state.delta_t, warm_n, warm_t, W, P, side, PART_STEP)
-    outcome, unknowns, residual, sweeps = spatial_pgs_step(model, solver, D, tables, system, has_rotations(S.bi), *step)
+    outcome, unknowns, residual, sweeps = pgs_warm_step(model, solver, D, tables, system, has_rotations(S.bi), *step)
     for a in (R.q, R.nu, R.q_ref, R.delta_n, R.delta_t):
         assert np.all(a[1 - side] == 7), "the PGS step wrote the other side"
     if outcome != WARM_DONE:
@@ -317,14 +318,19 @@ def _both_pgs_steps(sc, model, solver, state, u, h, t):
 #: converge on these scenes in its 1000 sweeps (`models.contact_pgs`'s known limits), which
 #: comes back as a status, so the PGS step is never taken there.
 PGS_RUNGS = ("quasistatic-rigid", "dynamic-rigid", "dynamic-compliant")
+#: Of those, where PGS converges at too few of the sampled states to hold the step to half of
+#: them: the paper's scene under quasistatic-rigid (1 of 30; the step is still taken exactly there).
+PGS_FEW = {("two_finger_triangle", "quasistatic-rigid")}
 
 
 @pytest.mark.parametrize(
-    "name, rung_name, exact", [(n, r, e) for n in ("box_push_3d", "box_rotate_3d") for r in PGS_RUNGS for e in (False, True)]
+    "name, rung_name, exact",
+    [(n, r, e) for n in SCENES for r in PGS_RUNGS for e in ((False, True) if n in SPATIAL_SCENES else (False,)) if (n, r) not in PGS_FEW],
 )
-def test_the_spatial_pgs_step_is_the_general_one_bit_for_bit(name, rung_name, exact):
-    """`spatial_pgs_step` is `dynamics_step` with PGS (on the polygon and on the exact cone) bit
-    for bit wherever it is taken, and is taken exactly where the general step converges."""
+def test_the_pgs_step_is_the_general_one_bit_for_bit(name, rung_name, exact):
+    """`pgs_warm_step` is `dynamics_step` with PGS (in the plane on its two directions; in space
+    on the polygon and on the exact cone) bit for bit wherever it is taken, and is taken exactly
+    where the general step converges."""
     sc = load_scenario(SCENARIOS / f"{name}.toml")
     rung = rung_for(sc, rung_name)
     model = rung.model._replace(exact_cone=exact)
