@@ -237,11 +237,14 @@ SOLVER_METHODS = {"lemke": SOLVER_LEMKE, "pgs": SOLVER_PGS, "auto": SOLVER_AUTO}
 PGS_TOLERANCE = 1e-6
 #: PGS: sweeps before the step reports StepStatus.CONTACT_NOT_CONVERGED.
 PGS_MAX_SWEEPS = 1000
-#: auto: PGS from this many detected contacts on. Measured by `ladder bench` (scaling): the
-#: smallest count from which PGS is cheaper per step than Lemke on rigid boxes resting on a
-#: plane (2 contacts: 6.1 us Lemke, 7.2 us PGS; 4: 9.4 against 5.7; 64: 1361 against 57).
-#: On a rigid stack Lemke is cheaper again from 8 contacts: where PGS does not converge there,
-#: auto pays its sweeps and Lemke's step once, and the rest of the rollout solves with Lemke.
+#: auto: PGS from this many detected contacts on. A count does not see what decides, the
+#: contacts' coupling (`ladder bench`, scaling; dynamic-rigid, us/step, Lemke against PGS): on
+#: boxes apart PGS is the cheaper from the first contact in either dimension (in the plane 2
+#: contacts 1.1 against 0.8, 4: 1.5 against 1.1, 32: 33.9 against 5.5; in space 4: 1.9
+#: against 1.5), on a stack Lemke is (in the plane 4 contacts 2.3 against 2.5, 8: 5.2 against
+#: 17.2; in space 8: 4.0 against 6.3). Below 4 contacts PGS saves under 0.5 us a step and
+#: Lemke is exact. Where PGS does not converge, auto pays its sweeps and Lemke's step once, and
+#: the rest of the rollout solves with Lemke.
 AUTO_PGS_CONTACTS = 4
 
 
