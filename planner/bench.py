@@ -1133,6 +1133,9 @@ def scaling_markdown(s: dict) -> list[str]:
         # None: at no count does it stay so through the largest measured (it may be at some: the table has each)
         return "from no count on through the largest measured" if c is None else f"from {c} contacts on"
 
+    def cheaper(lead: str, by_rung: dict) -> str:
+        return lead + "; ".join(f"{count(c)} ({rung})" for rung, c in by_rung.items()) + "."
+
     lines = [
         "",
         "## Scaling with the number of contacts (boxes resting on a plane, h = 1e-3)",
@@ -1148,7 +1151,7 @@ def scaling_markdown(s: dict) -> list[str]:
         "Fitted growth exponent of cost per step in the number of contacts (4 and more): "
         + "; ".join(f"{rung}: Lemke {e['lemke']:.2f}, PGS {e['pgs']:.2f}" for rung, e in s["growth_exponent"].items())
         + ".",
-        "PGS is cheaper per step than Lemke " + "; ".join(f"{count(c)} ({rung})" for rung, c in s["crossover_contacts"].items()) + ".",
+        cheaper("PGS is cheaper per step than Lemke ", s["crossover_contacts"]),
         "",
         "A stack of boxes (every contact coupled to the ones above and below; `-`: the first step did not converge):",
         "",
@@ -1156,19 +1159,12 @@ def scaling_markdown(s: dict) -> list[str]:
     lines += table(s["stack_rows"])
     lines += [
         "",
-        "On the stack Lemke is cheaper (or PGS fails) "
-        + "; ".join(f"{count(c)} ({rung})" for rung, c in s["stack_lemke_cheaper_from"].items())
-        + ".",
+        cheaper("On the stack Lemke is cheaper (or PGS fails) ", s["stack_lemke_cheaper_from"]),
     ]
     if s.get("spatial_rows"):  # (a result saved before they were measured has none)
         lines += ["", "Boxes apart in a row in space (4 contacts each, 4 friction directions):", ""]
         lines += table(s["spatial_rows"])
-        lines += [
-            "",
-            "In space PGS is cheaper per step than Lemke "
-            + "; ".join(f"{count(c)} ({rung})" for rung, c in s["spatial_crossover_contacts"].items())
-            + ".",
-        ]
+        lines += ["", cheaper("In space PGS is cheaper per step than Lemke ", s["spatial_crossover_contacts"])]
     auto = s["auto_pgs_contacts"]
     lines += ["", f"The `auto` contact solver switches to PGS from {auto} contacts (a fixed rule, not this run's crossovers)."]
     return lines
