@@ -255,6 +255,34 @@ def natural_map_residual(z, w, q):
 
 
 @numba.njit(cache=True, error_model="numpy")
+def refined_on_basis(M, q, z, basic_z):
+    """One step of iterative refinement of an LCP solution z on its basis: the basic unknowns
+    (basic_z) corrected by the least-squares solution dz of M[J, J] dz = -(M z + q)[J] (numpy's
+    lstsq: a statically indeterminate contact set makes M[J, J] singular, and there Lemke's z
+    solves its rows only to round-off times M's conditioning). Returns (z + dz, w = M (z + dz) +
+    q, the natural-map residual; +inf where a corrected unknown goes below 0)."""
+    n = q.shape[0]
+    J = np.flatnonzero(basic_z[:n])
+    k = J.shape[0]
+    A, r = np.empty((k, k)), np.empty(k)
+    for a in range(k):
+        row = q[J[a]]
+        for j in range(n):
+            row += M[J[a], j] * z[j]
+        r[a] = -row
+        for b in range(k):
+            A[a, b] = M[J[a], J[b]]
+    dz = np.linalg.lstsq(A, r)[0]
+    out = z.copy()
+    for a in range(k):
+        out[J[a]] += dz[a]
+        if out[J[a]] < 0.0:
+            return out, out, np.inf
+    w = _matvec_plus(M, out, q)
+    return out, w, _natural_map_residual(out, w, q)
+
+
+@numba.njit(cache=True, error_model="numpy")
 def complementarity_residual(M, q, z):
     """Natural-map residual ``||min(z, M z + q)||_inf / (1 + ||q||_inf)``.
 

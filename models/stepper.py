@@ -99,6 +99,7 @@ from models.lcp import (
     lemke_warm_kernel,
     lemke_work,
     matrix_view,
+    refined_on_basis,
     warm_guess_dropping_into,
 )
 from models.nonnegative import nonnegative_indices
@@ -2566,8 +2567,18 @@ def _contact_solve(model, spatial, h, dofs, count, inv, nu_free, active, pi, pf,
                 h, model.compliant, reg, active, pf, contacts.pair, slot, contacts.psi, contacts.bias, contacts.W_n, nu_new, z, delta_n
             ):
                 break
-            # a contact left closing: the LCP's round-off, or the retries' compliance (below) on
+            # a contact left closing: the LCP's round-off (a statically indeterminate contact set:
+            # z refined on its basis, `refined_on_basis`), or the retries' compliance (below) on
             # a row that carries a large impulse
+            z2, w2, residual2 = refined_on_basis(Mlcp, qlcp, z, basic_z)
+            if residual2 <= LCP_TOLERANCE:
+                _impulses_into(spatial, nc, m, nf, fric, gen, cf, z2, Y, nu_free, np.empty(Y.shape[1]), p_t, nu_new)
+                if not _closes(
+                    h, model.compliant, reg, active, pf, contacts.pair, slot, contacts.psi, contacts.bias, contacts.W_n, nu_new, z2,
+                    delta_n,
+                ):  # fmt: skip
+                    z, w, residual = z2, w2, residual2
+                    break
             solved = False
         if k == LCP_REGULARIZATION_STEPS:
             break

@@ -998,3 +998,24 @@ def test_matrix_view_takes_integer_sizes_only():
     """A float size is refused when the kernel is typed, not truncated to an integer."""
     with pytest.raises(numba.core.errors.TypingError):
         _view_too_big(np.zeros(12), 3.0, 4)
+
+
+def test_refinement_on_a_singular_basis_solves_its_rows():
+    """Two identical contacts (a statically indeterminate pair) make M[J, J] singular, and there
+    a z off by 1e-6 on one of them leaves its rows 3 short. `refined_on_basis` corrects the
+    basic unknowns by least squares: the rows solved to round-off, the pair's total kept, the
+    non-basic unknown untouched; a correction that would take an unknown below 0 is refused."""
+    a, b = 3.0e6, 9.8e3
+    M = np.array([[a, a, 0.0], [a, a, 0.0], [0.0, 0.0, 1.0]])
+    q = np.array([-b, -b, 1.0])
+    basic = np.array([True, True, False])
+    z = np.array([b / a / 2 + 1e-6, b / a / 2, 0.0])
+    assert np.allclose(M @ z + q, [3.0, 3.0, 1.0])
+    out, w, residual = lcp.refined_on_basis(M, q, z, basic)
+    np.testing.assert_allclose(w, M @ out + q, rtol=0, atol=0)
+    assert np.abs(w[:2]).max() < 1e-9 and w[2] == 1.0
+    assert out[0] + out[1] == pytest.approx(b / a, rel=1e-14) and out[2] == 0.0
+    assert residual < 1e-15 and residual == lcp.complementarity_residual(M, q, out)
+    # a correction past 0: the least-squares step splits 3000 of excess over both, one goes negative
+    _, _, refused = lcp.refined_on_basis(M, q, np.array([b / a + 1e-3, 0.0, 0.0]), basic)
+    assert refused == np.inf

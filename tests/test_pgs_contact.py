@@ -598,3 +598,23 @@ def test_auto_solves_the_rest_of_a_rollout_with_lemke_once_pgs_does_not_converge
     assert a.sweeps == 50  # one step's worth
     assert a.pivots == b.pivots
     np.testing.assert_array_equal(a.state.q, b.state.q)
+
+
+def test_auto_holds_on_a_statically_indeterminate_grasp_where_lemke_does():
+    """four_finger_grasp under quasistatic-compliant: PGS solves auto's steps of 4 contacts until it
+    meets its sweep limit, then Lemke, and auto's run stays within 1e-9 of Lemke's own. At 2.95 s
+    Lemke's solution of that state's LCP (its basic block singular: the grasp's two symmetric
+    pairs) had left a contact closing by 8e-5 m in the step, and the run ended lcp_failed;
+    refined on its basis (`models.lcp.refined_on_basis`) it closes by under 1e-10 m. Both runs
+    reach the policy's end."""
+    sc = load_scenario(SCENARIOS / "four_finger_grasp.toml")
+    controls, durations = policy_controls(sc)
+    h = sc.rung_settings("quasistatic-compliant").h
+    runs = {}
+    for solver in ("lemke", "auto"):
+        rung = with_solver(sc, "quasistatic-compliant", solver)
+        runs[solver] = rung.rollout(sc, rung.initial_state(sc), controls, durations, h, stop_at_outcome=False)
+    lemke, auto = runs["lemke"], runs["auto"]
+    assert lemke.status == auto.status == "ok" and lemke.steps == auto.steps == round(durations.sum() / h)
+    assert auto.sweeps > 0  # PGS solved steps of the run
+    np.testing.assert_allclose(auto.state.q, lemke.state.q, rtol=0, atol=1e-9)
