@@ -259,8 +259,9 @@ def refined_on_basis(M, q, z, basic_z):
     """One step of iterative refinement of an LCP solution z on its basis: the basic unknowns
     (basic_z) corrected by the least-squares solution dz of M[J, J] dz = -(M z + q)[J] (numpy's
     lstsq: a statically indeterminate contact set makes M[J, J] singular, and there Lemke's z
-    solves its rows only to round-off times M's conditioning). Returns (z + dz, w = M (z + dz) +
-    q, the natural-map residual; +inf where a corrected unknown goes below 0)."""
+    solves its rows only to round-off times M's conditioning), a corrected unknown below 0 set
+    to 0. Returns (the corrected z, its w = M z + q, its natural-map residual), which the
+    caller judges as any solution's."""
     n = q.shape[0]
     J = np.flatnonzero(basic_z[:n])
     k = J.shape[0]
@@ -275,9 +276,7 @@ def refined_on_basis(M, q, z, basic_z):
     dz = np.linalg.lstsq(A, r)[0]
     out = z.copy()
     for a in range(k):
-        out[J[a]] += dz[a]
-        if out[J[a]] < 0.0:
-            return out, out, np.inf
+        out[J[a]] = max(out[J[a]] + dz[a], 0.0)
     w = _matvec_plus(M, out, q)
     return out, w, _natural_map_residual(out, w, q)
 

@@ -1004,7 +1004,10 @@ def test_refinement_on_a_singular_basis_solves_its_rows():
     """Two identical contacts (a statically indeterminate pair) make M[J, J] singular, and there
     a z off by 1e-6 on one of them leaves its rows 3 short. `refined_on_basis` corrects the
     basic unknowns by least squares: the rows solved to round-off, the pair's total kept, the
-    non-basic unknown untouched; a correction that would take an unknown below 0 is refused."""
+    non-basic unknown untouched. A correction that would take an unknown below 0 stops it at 0,
+    and the residual says what is left."""
+    from models.stepper import LCP_TOLERANCE
+
     a, b = 3.0e6, 9.8e3
     M = np.array([[a, a, 0.0], [a, a, 0.0], [0.0, 0.0, 1.0]])
     q = np.array([-b, -b, 1.0])
@@ -1016,6 +1019,8 @@ def test_refinement_on_a_singular_basis_solves_its_rows():
     assert np.abs(w[:2]).max() < 1e-9 and w[2] == 1.0
     assert out[0] + out[1] == pytest.approx(b / a, rel=1e-14) and out[2] == 0.0
     assert residual < 1e-15 and residual == lcp.complementarity_residual(M, q, out)
-    # a correction past 0: the least-squares step splits 3000 of excess over both, one goes negative
-    _, _, refused = lcp.refined_on_basis(M, q, np.array([b / a + 1e-3, 0.0, 0.0]), basic)
-    assert refused == np.inf
+    # a correction past 0: the least-squares step splits the excess (3000 a row) over both, and the
+    # second would go to -5e-4; stopped at 0, the rows are 1500 long and the residual says so
+    past, w, residual = lcp.refined_on_basis(M, q, np.array([b / a + 1e-3, 0.0, 0.0]), basic)
+    assert past[1] == 0.0 and past[0] == pytest.approx(b / a + 5e-4, rel=1e-12)
+    assert w[:2] == pytest.approx([1500.0, 1500.0], rel=1e-9) and residual > LCP_TOLERANCE
