@@ -265,12 +265,10 @@ def refined_on_basis(M, q, z, basic_z):
     n = q.shape[0]
     J = np.flatnonzero(basic_z[:n])
     k = J.shape[0]
+    short = _matvec_plus(M, z, q)
     A, r = np.empty((k, k)), np.empty(k)
     for a in range(k):
-        row = q[J[a]]
-        for j in range(n):
-            row += M[J[a], j] * z[j]
-        r[a] = -row
+        r[a] = -short[J[a]]
         for b in range(k):
             A[a, b] = M[J[a], J[b]]
     dz = np.linalg.lstsq(A, r)[0]

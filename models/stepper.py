@@ -2387,8 +2387,10 @@ def _warm_free_velocity_into(model, drives, tables, system, spatial, rotating, h
     """The free velocity of a warm step (in space, or PGS's in the plane: spatial False) on W's
     arrays (`SpatialWarm`): A^-1's body blocks (the System's, the rotating bodies' refreshed at q
     where rotating: `rotating_blocks_into`), and into W.out nu_free, q_ref+ on side `side` and
-    the drives' a (`_free_velocity_by_body_into`; held and spatial as there). Returns (ok: A's
-    blocks are not singular, dofs, count, inv)."""
+    the drives' a (`_free_velocity_by_body_into`; held and spatial as there). spatial is
+    tables.spatial, passed as a value so that Lemke's spatial warm step gives it as the literal
+    True and its planar branches fold away. Returns (ok: A's blocks are not singular, dofs,
+    count, inv)."""
     bi, bf, R = tables.bi, tables.bf, W.out
     eps = model.quasistatic_inertia if model.eps == 0.0 else model.eps
     dofs, count, inv = system.dofs, system.count, system.inv
